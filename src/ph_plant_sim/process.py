@@ -1,0 +1,73 @@
+"""The plant as the rest of the loop sees it: tank, feeds and sensors.
+
+:class:`PlantProcess` is what the plant node wraps and what the in-process
+simulation steps: ``measure`` the sample at t_k, then ``advance`` to t_k+1
+with the valve flows of sample k.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+from phfdi.blocks import Chain, Injected
+from phfdi.profiles import Profile
+
+from .plant import CstrPlant
+
+
+@dataclass
+class Measurement:
+    t_s: float
+    ph_true: float
+    ph_measured: float
+    level_true_cm: float
+    level_measured_cm: float
+    sensor_fault_severity: float = 0.0
+
+
+@dataclass
+class PlantProcess:
+    """Tank plus sensors plus the schedule of the feeds no valve manipulates.
+
+    ``feed_schedules`` maps a feed name to its flow profile (mL/s); feeds
+    driven by a valve get their flow from :meth:`advance`.
+    """
+
+    plant: CstrPlant
+    ph_sensor: Chain = field(default_factory=Chain)
+    level_sensor: Chain = field(default_factory=Chain)
+    feed_schedules: dict[str, Profile] = field(default_factory=dict)
+    dt_s: float = 1.0
+
+    def feed_flows(self, t_s: float, valve_flows: Mapping[str, float]) -> list[float]:
+        flows = []
+        for feed in self.plant.feeds:
+            if feed.name in valve_flows:
+                flows.append(valve_flows[feed.name])
+            elif feed.name in self.feed_schedules:
+                flows.append(self.feed_schedules[feed.name].value(t_s))
+            else:
+                flows.append(feed.flow_ml_s)
+        return flows
+
+    def __post_init__(self) -> None:
+        self._sensor_faults = [b for b in self.ph_sensor.blocks + self.level_sensor.blocks if isinstance(b, Injected)]
+
+    def reset_sensors(self) -> None:
+        self.ph_sensor.reset(self.plant.ph)
+        self.level_sensor.reset(self.plant.level_cm)
+
+    def measure(self, t_s: float) -> Measurement:
+        """Sample the sensors at t_s (call exactly once per sample)."""
+        ph = self.plant.ph
+        level = self.plant.level_cm
+        sev = max(b.severity_at(t_s) for b in self._sensor_faults) if self._sensor_faults else 0.0
+        return Measurement(t_s, ph, self.ph_sensor.step(ph, t_s), level,
+                           self.level_sensor.step(level, t_s), sev)
+
+    def advance(self, t_s: float, valve_flows: Mapping[str, float], outlet_opening: float) -> list[float]:
+        """Integrate from t_s to t_s + dt_s; returns the feed flows applied (mL/s)."""
+        flows = self.feed_flows(t_s, valve_flows)
+        self.plant.step(flows, outlet_opening, self.dt_s)
+        return flows

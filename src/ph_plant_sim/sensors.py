@@ -1,0 +1,169 @@
+"""Sensor effects as blocks (see :mod:`phfdi.blocks`), stepped once per sample.
+
+A sensor is a :class:`~phfdi.blocks.Chain` of these, applied to the true
+value: for example transport delay, then first-order probe lag, then noise.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from phfdi.blocks import register_block
+
+
+def _check(name: str, value: float, positive: bool = False) -> None:
+    if not math.isfinite(value) or value < 0 or (positive and value == 0):
+        raise ValueError(f"{name} must be {'positive' if positive else 'non-negative'} and finite, got {value}")
+
+
+@register_block("sensor_delay")
+@dataclass
+class TransportDelay:
+    """Pure transport delay: y(t) = x(t - delay_s).
+
+    Delays that are not a multiple of the sample time interpolate linearly
+    between the two neighbouring samples. Before enough history exists the
+    output holds the first input (the loop starts at rest). With severity s
+    the delay is s * delay_s.
+    """
+
+    delay_s: float
+    dt_s: float = 1.0
+    severity: float = 1.0
+    _buf: deque = field(default_factory=deque, repr=False)
+
+    def __post_init__(self) -> None:
+        _check("delay_s", self.delay_s)
+        _check("dt_s", self.dt_s, positive=True)
+        self._n = int(math.ceil(self.delay_s / self.dt_s - 1e-12)) + 1
+
+    def reset(self, x0: float) -> None:
+        self._buf = deque([x0] * (self._n + 1), maxlen=self._n + 1)
+
+    def step(self, x: float, t_s: float) -> float:
+        if not self._buf:
+            self.reset(x)
+        self._buf.append(x)
+        lag = self.severity * self.delay_s / self.dt_s  # in samples
+        k = int(lag)
+        frac = lag - k
+        newest = len(self._buf) - 1
+        y = self._buf[newest - k]
+        if frac > 1e-12:
+            y = (1.0 - frac) * y + frac * self._buf[newest - k - 1]
+        return y
+
+
+@register_block("sensor_lag")
+@dataclass
+class FirstOrderLag:
+    """First-order lag tau dy/dt = x - y, exact for an input held over each sample:
+
+        y_k = y_{k-1} + (1 - exp(-dt/tau)) (x_k - y_{k-1})
+    """
+
+    tau_s: float
+    dt_s: float = 1.0
+    severity: float = 1.0
+    _y: float | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        _check("tau_s", self.tau_s)
+        _check("dt_s", self.dt_s, positive=True)
+
+    def reset(self, x0: float) -> None:
+        self._y = x0
+
+    def step(self, x: float, t_s: float) -> float:
+        tau = self.tau_s * self.severity
+        if self._y is None or tau <= 0.0:
+            self._y = x
+            return x
+        self._y += (1.0 - math.exp(-self.dt_s / tau)) * (x - self._y)
+        return self._y
+
+
+@register_block("sensor_noise")
+@dataclass
+class GaussianNoise:
+    """Additive white Gaussian noise of standard deviation ``std`` (units of the signal).
+
+    Seeded, so a run is reproducible; the draws depend only on the seed and
+    the sample count, never on other blocks.
+    """
+
+    std: float
+    seed: int = 0
+    severity: float = 1.0
+    _rng: np.random.Generator | None = field(default=None, repr=False)
+    _block: np.ndarray | None = field(default=None, repr=False)
+    _i: int = field(default=0, repr=False)
+
+    def __post_init__(self) -> None:
+        _check("std", self.std)
+        self._rng = np.random.default_rng(self.seed)
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        if self._block is None or self._i >= len(self._block):
+            self._block = self._rng.standard_normal(4096)
+            self._i = 0
+        e = self._block[self._i]
+        self._i += 1
+        return x + self.severity * self.std * float(e)
+
+
+@register_block("sensor_bias")
+@dataclass
+class Bias:
+    """Constant offset: y = x + bias."""
+
+    bias: float
+    severity: float = 1.0
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        return x + self.severity * self.bias
+
+
+@register_block("sensor_drift")
+@dataclass
+class Drift:
+    """Linear drift from the moment the block comes to rest: y = x + rate (t - t0)."""
+
+    rate_per_s: float
+    severity: float = 1.0
+    _t0: float | None = field(default=None, repr=False)
+
+    def reset(self, x0: float) -> None:
+        self._t0 = None
+
+    def step(self, x: float, t_s: float) -> float:
+        if self._t0 is None:
+            self._t0 = t_s
+        return x + self.severity * self.rate_per_s * (t_s - self._t0)
+
+
+@register_block("sensor_gain")
+@dataclass
+class Gain:
+    """Span error about a reference point: y = ref + gain (x - ref) (pH probe slope error about pH 7)."""
+
+    gain: float
+    reference: float = 7.0
+    severity: float = 1.0
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        g = 1.0 + self.severity * (self.gain - 1.0)
+        return self.reference + g * (x - self.reference)

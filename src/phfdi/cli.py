@@ -1,0 +1,64 @@
+"""The ``phfdi`` command line: one entry point, one module per subcommand.
+
+Each module in :mod:`phfdi.commands` defines ``register(subparsers)`` that
+adds its parser and sets ``func`` (called with the parsed arguments, returns
+an exit status). A :class:`~phfdi.errors.UserError` anywhere becomes one line
+on stderr and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+from . import __version__
+from .errors import UserError
+
+#: subcommand modules, in the order ``phfdi --help`` lists them
+COMMANDS = [
+    "demo",
+    "simulate",
+    "scenarios",
+    "paper_runs",
+]
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2 (argparse's convention)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="phfdi",
+        description="Online fault detection for pH control loops: simulate the loop, run it as a ROS 2 "
+        "graph, detect and diagnose valve faults.",
+    )
+    parser.add_argument("--version", action="version", version=f"phfdi {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name in COMMANDS:
+        importlib.import_module(f"phfdi.commands.{name}").register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except UserError as exc:
+        print(f"phfdi {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"phfdi {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

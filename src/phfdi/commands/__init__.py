@@ -1,0 +1,1 @@
+"""Subcommands of ``phfdi``; see :mod:`phfdi.cli`."""

@@ -1,0 +1,364 @@
+"""The closed loop in one process, composed from the four cores.
+
+One tick k (time t_k = k * dt), the same order the ROS node graph follows:
+
+1. the plant's sensors measure the state at t_k;
+2. the controllers compute their outputs for t_k from the measurements;
+3. the valves move for the commands of t_k;
+4. the plant integrates from t_k to t_k+1 with those flows held.
+
+:func:`build_parts` makes each part from a scenario; the plant, valve and
+controller nodes each call it and keep their own part, so the node graph and
+:func:`simulate` run the same code.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import ph_plant_sim.sensors  # noqa: F401  (registers sensor blocks)
+import valve_actuator.blocks as vblocks
+from ph_plant_sim.chemistry import Chemistry, Component
+from ph_plant_sim.plant import CstrPlant, Feed, GravityOutlet, Tank
+from ph_plant_sim.process import PlantProcess
+from pi_controllers.loops import ControllerBank
+from pi_controllers.pi import PIController
+from valve_actuator.valve import Valve, inherent_characteristic
+
+from . import __version__
+from .blocks import Chain, Injected, make_block
+from .errors import UserError
+from .profiles import Change, Profile
+from .run import Run, RunRecorder
+from .scenario import PlantModelSpec, ProfileSpec, ScenarioSpec, SensorSpec, ValveSpec, load_plant_model
+
+
+# ---- construction -----------------------------------------------------------------
+def build_plant(model: PlantModelSpec) -> CstrPlant:
+    chem_spec = model.chemistry
+    try:
+        chemistry = Chemistry.for_streams(
+            [f.recipe for f in model.feeds.values()],
+            extra_components=[Component(c.name, c.charge, tuple(c.pka)) for c in chem_spec.components],
+            extra_compounds=chem_spec.compounds,
+            pkw=chem_spec.pkw,
+        )
+    except ValueError as exc:
+        raise UserError(f"plant model {model.name!r}: {exc}") from None
+    feeds = [Feed(name, dict(f.recipe), f.flow_ml_s) for name, f in model.feeds.items()]
+    t = model.tank
+    outlet = GravityOutlet(t.outlet.cv, t.outlet.z_cm, t.outlet.n) if t.outlet else None
+    return CstrPlant(chemistry, feeds, Tank(t.area_cm2, outlet, t.overflow, t.volume_ml))
+
+
+def profile(spec: ProfileSpec) -> Profile:
+    return Profile(spec.initial, [Change(c.at_s, c.value, c.ramp_s) for c in spec.changes])
+
+
+def position_for_opening(opening: float, valve: ValveSpec) -> float:
+    """Inverse inherent characteristic: stem position (%) giving a flow fraction."""
+    if valve.characteristic == "linear":
+        return 100.0 * opening
+    return 100.0 * (1.0 + math.log(opening) / math.log(valve.rangeability))
+
+
+def _block(kind: str, params: dict, where: str, dt_s: float, max_flow: float | None):
+    try:
+        return make_block(kind, params, dt_s=dt_s, max_flow_ml_s=max_flow or 1.0)
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"{where}: {exc}") from None
+
+
+def sensor_chain(spec: SensorSpec, dt_s: float, seed: int, where: str, faults: list) -> Chain:
+    """delay -> lag -> extra effects -> injected faults -> noise."""
+    blocks: list = []
+    if spec.delay_s > 0:
+        blocks.append(_block("sensor_delay", {"delay_s": spec.delay_s}, f"sensors.{where}", dt_s, None))
+    if spec.lag_s > 0:
+        blocks.append(_block("sensor_lag", {"tau_s": spec.lag_s}, f"sensors.{where}", dt_s, None))
+    for i, b in enumerate(spec.extra):
+        blocks.append(_block(b.type, b.params, f"sensors.{where}.extra.{i}", dt_s, None))
+    blocks.extend(faults)
+    if spec.noise_std > 0:
+        blocks.append(_block("sensor_noise", {"std": spec.noise_std, "seed": seed}, f"sensors.{where}", dt_s, None))
+    return Chain(blocks)
+
+
+@dataclass
+class OperatingPoint:
+    """Steady state the loop starts from (at the t=0 setpoints)."""
+
+    valve_command_pct: float
+    outlet_command_pct: float
+    outlet_opening: float
+    flows_ml_s: list[float]
+
+
+def operating_point(spec: ScenarioSpec, plant: CstrPlant, ph_target: float | None = None) -> OperatingPoint:
+    """Valve positions that hold the plant at the pH (default: initial setpoint) and level setpoint."""
+    vspec = spec.valves.ph
+    names = [f.name for f in plant.feeds]
+    if vspec.feed not in names:
+        raise UserError(f"valves.ph.feed: plant has no feed {vspec.feed!r} (feeds: {', '.join(names)})")
+    k = names.index(vspec.feed)
+    flows = [profile(spec.feeds[n]).value(0.0) if n in spec.feeds else f.flow_ml_s
+             for n, f in zip(names, plant.feeds)]
+    target = spec.setpoints.ph.initial if ph_target is None else ph_target
+    try:
+        q = plant.flow_for_ph(target, k, flows, vspec.max_flow_ml_s)
+    except ValueError as exc:
+        raise UserError(f"setpoints.ph: {exc}") from None
+    flows[k] = q
+    cmd = position_for_opening(q / vspec.max_flow_ml_s, vspec)
+    opening, outlet_cmd = 1.0, 100.0
+    if spec.setpoints.level_cm is not None and not plant.tank.overflow:
+        outlet = plant.tank.outlet
+        level = spec.setpoints.level_cm.initial
+        opening = sum(flows) / outlet.flow(level, 1.0)
+        if not 0.0 < opening <= 1.0:
+            raise UserError(f"setpoints.level_cm: level {level} cm needs an outlet opening of "
+                            f"{100 * opening:.0f} % of full flow, outside 0..100 %")
+        outlet_cmd = position_for_opening(opening, spec.valves.outlet)
+    return OperatingPoint(cmd, outlet_cmd, opening, flows)
+
+
+def check_reachable(spec: ScenarioSpec, plant: CstrPlant) -> None:
+    """Every pH setpoint must be reachable by the healthy valve within the stated margin."""
+    margin = spec.min_actuator_margin_pct
+    for value in profile(spec.setpoints.ph).values():
+        op = operating_point(spec, plant, value)
+        if not margin <= op.valve_command_pct <= 100.0 - margin:
+            raise UserError(f"setpoints.ph: pH {value} needs the valve at {op.valve_command_pct:.1f} %, "
+                            f"outside the reachable range {margin:.0f}..{100 - margin:.0f} %")
+
+
+@dataclass
+class LoopParts:
+    spec: ScenarioSpec
+    process: PlantProcess
+    valve: Valve
+    outlet_valve: Valve | None
+    controllers: ControllerBank
+    start: OperatingPoint
+
+    @property
+    def dt_s(self) -> float:
+        return self.spec.sample_time_s
+
+    @property
+    def n_samples(self) -> int:
+        return int(math.floor(self.spec.duration_s / self.spec.sample_time_s + 1e-9)) + 1
+
+
+def _faults(spec: ScenarioSpec, site: str, max_flow: float | None) -> list:
+    out = []
+    for i, f in enumerate(spec.faults):
+        f_site = f.where
+        if f.type in vblocks.FLOW_BLOCKS and f_site == "valve":
+            f_site = "valve_flow"
+        if f_site == site:
+            block = _block(f.type, f.params, f"faults.{i}", spec.sample_time_s, max_flow)
+            out.append(Injected(block, f.onset_s, f.ramp_s))
+    return out
+
+
+def _valve(vspec: ValveSpec, spec: ScenarioSpec, site: str) -> Valve:
+    max_flow = vspec.max_flow_ml_s or 1.0
+    return Valve(max_flow, vspec.characteristic, vspec.rangeability,
+                 Chain(_faults(spec, site, max_flow)), Chain(_faults(spec, site + "_flow", max_flow)))
+
+
+def build_parts(spec: ScenarioSpec) -> LoopParts:
+    """Plant, valves and controllers for a scenario, at its initial steady state."""
+    plant = build_plant(load_plant_model(spec.plant))
+    check_reachable(spec, plant)
+    start = operating_point(spec, plant)
+    plant.set_steady_state(start.flows_ml_s, start.outlet_opening)
+    dt = spec.sample_time_s
+    # independent noise streams per sensor, derived from the scenario seed
+    process = PlantProcess(
+        plant,
+        sensor_chain(spec.sensors.ph, dt, spec.seed * 2 + 0, "ph", _faults(spec, "ph_sensor", None)),
+        sensor_chain(spec.sensors.level, dt, spec.seed * 2 + 1, "level", _faults(spec, "level_sensor", None)),
+        {name: profile(p) for name, p in spec.feeds.items()},
+        dt,
+    )
+    process.reset_sensors()
+    valve = _valve(spec.valves.ph, spec, "valve")
+    valve.reset(start.valve_command_pct)
+    outlet_valve = None
+    if spec.valves.outlet is not None:
+        outlet_valve = _valve(spec.valves.outlet, spec, "outlet_valve")
+        outlet_valve.reset(start.outlet_command_pct)
+
+    def pi(p) -> PIController:
+        return PIController(p.kp, p.ti_s, dt, p.u_min, p.u_max, p.action, p.antiwindup, p.tt_s, p.setpoint_weight)
+
+    c = spec.controllers
+    bank = ControllerBank(pi(c.ph), profile(spec.setpoints.ph),
+                          pi(c.level) if c.level else None,
+                          profile(spec.setpoints.level_cm) if spec.setpoints.level_cm else None,
+                          fixed_level_output_pct=start.outlet_command_pct)
+    bank.reset(start.valve_command_pct, plant.ph, start.outlet_command_pct, plant.level_cm)
+    return LoopParts(spec, process, valve, outlet_valve, bank, start)
+
+
+# ---- running ----------------------------------------------------------------------
+def signal_names(parts: LoopParts) -> list[str]:
+    from .run import SIGNALS
+
+    names = [s.name for s in SIGNALS]
+    i = names.index("outlet_valve_position_pct")
+    feeds = [f"{f.name}_flow_ml_s" for f in parts.process.plant.feeds]
+    return names[:i] + feeds + names[i:]
+
+
+def tick(parts: LoopParts, k: int) -> dict[str, float]:
+    """One sample of the closed loop; returns the run's row for t_k."""
+    t = k * parts.dt_s
+    proc = parts.process
+    m = proc.measure(t)
+    c = parts.controllers.compute(t, m.ph_measured, m.level_measured_cm)
+    v = parts.valve.step(c.ph_output_pct, t)
+    if parts.outlet_valve is not None:
+        o = parts.outlet_valve.step(c.level_output_pct, t)
+        outlet_pos, opening = o.position_pct, o.opening
+    else:
+        outlet_pos, opening = c.level_output_pct, parts.start.outlet_opening
+    feed = parts.spec.valves.ph.feed
+    flows = proc.feed_flows(t, {feed: v.flow_ml_s})
+    row = {
+        "time_s": t,
+        "ph_setpoint": c.ph_setpoint,
+        "level_setpoint_cm": c.level_setpoint_cm,
+        "ph_controller_output_pct": c.ph_output_pct,
+        "level_controller_output_pct": c.level_output_pct,
+        "valve_command_pct": c.ph_output_pct,
+        "valve_position_pct": v.position_pct,
+        "outlet_valve_position_pct": outlet_pos,
+        "outlet_flow_ml_s": proc.plant.outlet_flow(flows, opening),
+        "ph_true": m.ph_true,
+        "ph_measured": m.ph_measured,
+        "level_true_cm": m.level_true_cm,
+        "level_measured_cm": m.level_measured_cm,
+        "fault_severity": max(v.fault_severity, m.sensor_fault_severity),
+    }
+    for f, q in zip(proc.plant.feeds, flows):
+        row[f"{f.name}_flow_ml_s"] = q
+    proc.plant.step(flows, opening, parts.dt_s)
+    return row
+
+
+def run_metadata(spec: ScenarioSpec, mode: str) -> dict:
+    return {
+        "scenario": spec.name,
+        "mode": mode,
+        "seed": spec.seed,
+        "sample_time_s": spec.sample_time_s,
+        "valve_feed": spec.valves.ph.feed,
+        "faults": [f.model_dump() for f in spec.faults],
+        "spec": spec.model_dump(mode="json"),
+        "producer": f"phfdi {__version__}",
+    }
+
+
+def simulate(spec: ScenarioSpec, progress: Callable[[float], None] | None = None) -> Run:
+    """Run a scenario's closed loop in this process."""
+    parts = build_parts(spec)
+    n = parts.n_samples
+    rec = RunRecorder(signal_names(parts), n)
+    report_every = max(1, n // 20)
+    try:
+        for k in range(n):
+            rec.append(tick(parts, k))
+            if progress is not None and k % report_every == 0:
+                progress(k / n)
+    except FloatingPointError as exc:
+        raise UserError(f"scenario {spec.name}: simulation stopped at t = {k * parts.dt_s:g} s: {exc}") from None
+    if progress is not None:
+        progress(1.0)
+    return rec.run(run_metadata(spec, "closed_loop"))
+
+
+def simulate_open_loop(spec: ScenarioSpec, inputs: Run) -> Run:
+    """Plant, valves and sensors driven by recorded inputs instead of the controllers.
+
+    ``inputs`` needs ``time_s`` (uniform) and, for the manipulated feed, either
+    ``valve_command_pct`` (through the scenario's valve and its faults) or
+    ``<feed>_flow_ml_s``. Other feeds take ``<feed>_flow_ml_s`` if present,
+    else their schedule. The outlet takes ``level_controller_output_pct`` if
+    present, else holds its initial position. The plant starts at the steady
+    state of the first sample's inputs.
+    """
+    t = inputs.time_s
+    if len(t) < 2:
+        raise UserError("open-loop inputs need at least two samples")
+    dt = float(t[1] - t[0])
+    if dt <= 0 or not all(abs(d - dt) <= 1e-6 * dt for d in (t[1:] - t[:-1])):
+        raise UserError("open-loop inputs must be uniformly sampled with increasing time_s (resample first)")
+    spec = spec.model_copy(update={"sample_time_s": dt, "duration_s": float(t[-1] - t[0]) or dt})
+    parts = build_parts(spec)
+    plant = parts.process.plant
+    feed = spec.valves.ph.feed
+    names = [f.name for f in plant.feeds]
+    has_cmd = "valve_command_pct" in inputs
+    if not has_cmd and f"{feed}_flow_ml_s" not in inputs:
+        raise UserError(f"open-loop inputs need valve_command_pct or {feed}_flow_ml_s")
+    outlet_cmd = inputs["level_controller_output_pct"] if "level_controller_output_pct" in inputs else None
+
+    def flows_at(k: int, valve_flow: float) -> list[float]:
+        out = []
+        for name in names:
+            col = f"{name}_flow_ml_s"
+            if name == feed and has_cmd:
+                out.append(valve_flow)
+            elif col in inputs:
+                out.append(float(inputs[col][k]))
+            else:
+                out.append(parts.process.feed_flows(float(t[k] - t[0]), {})[names.index(name)])
+        return out
+
+    # start at the steady state of the first inputs
+    v0 = parts.valve.reset(float(inputs["valve_command_pct"][0])) if has_cmd else None
+    o_cmd0 = float(outlet_cmd[0]) if outlet_cmd is not None else parts.start.outlet_command_pct
+    o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
+    opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
+    plant.set_steady_state(flows_at(0, v0.flow_ml_s if v0 else 0.0), opening0)
+    parts.process.reset_sensors()
+
+    rec = RunRecorder(signal_names(parts), len(t))
+    for k in range(len(t)):
+        tk = float(t[k] - t[0])
+        m = parts.process.measure(tk)
+        if has_cmd:
+            cmd = float(inputs["valve_command_pct"][k])
+            v = parts.valve.step(cmd, tk)
+            pos, vflow, sev = v.position_pct, v.flow_ml_s, v.fault_severity
+        else:
+            cmd, pos, vflow, sev = math.nan, math.nan, float(inputs[f"{feed}_flow_ml_s"][k]), 0.0
+        if parts.outlet_valve is not None:
+            oc = float(outlet_cmd[k]) if outlet_cmd is not None else parts.start.outlet_command_pct
+            o = parts.outlet_valve.step(oc, tk)
+            opos, opening = o.position_pct, o.opening
+        else:
+            oc, opos, opening = math.nan, math.nan, parts.start.outlet_opening
+        flows = flows_at(k, vflow)
+        row = {
+            "time_s": float(t[k]), "ph_setpoint": math.nan, "level_setpoint_cm": math.nan,
+            "ph_controller_output_pct": cmd, "level_controller_output_pct": oc,
+            "valve_command_pct": cmd, "valve_position_pct": pos, "outlet_valve_position_pct": opos,
+            "outlet_flow_ml_s": plant.outlet_flow(flows, opening),
+            "ph_true": m.ph_true, "ph_measured": m.ph_measured,
+            "level_true_cm": m.level_true_cm, "level_measured_cm": m.level_measured_cm,
+            "fault_severity": max(sev, m.sensor_fault_severity),
+        }
+        for name, q in zip(names, flows):
+            row[f"{name}_flow_ml_s"] = q
+        rec.append(row)
+        try:
+            plant.step(flows, opening, dt)
+        except FloatingPointError as exc:
+            raise UserError(f"open-loop simulation stopped at t = {t[k]:g} s: {exc}") from None
+    return rec.run(run_metadata(spec, "open_loop"))

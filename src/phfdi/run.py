@@ -1,0 +1,212 @@
+"""One description of a run: signals, units and the time base.
+
+Shared by the simulator's output, the recorder (topic <-> signal), replay,
+analysis and diagnosis. A run is a uniform time base ``time_s`` plus named
+signals of the same length; names carry their unit as a suffix
+(``_pct``, ``_ml_s``, ``_cm``, ``_s``) and pH signals start with ``ph``.
+
+Files: CSV (one header line of signal names, then one row per sample) and
+Parquet (columnar; units and run metadata in the schema's metadata).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from .errors import UserError
+
+
+@dataclass(frozen=True)
+class Signal:
+    name: str
+    unit: str
+    description: str
+
+
+#: Signals of a closed-loop run, in file column order. Feed flows are added
+#: per feed of the plant model as ``<feed>_flow_ml_s``.
+SIGNALS: tuple[Signal, ...] = (
+    Signal("time_s", "s", "simulated time of the sample"),
+    Signal("ph_setpoint", "pH", "pH setpoint"),
+    Signal("level_setpoint_cm", "cm", "level setpoint"),
+    Signal("ph_controller_output_pct", "%", "pH controller output (the valve command)"),
+    Signal("level_controller_output_pct", "%", "level controller output (outlet valve command)"),
+    Signal("valve_command_pct", "%", "command received by the pH loop's valve"),
+    Signal("valve_position_pct", "%", "stem position of the pH loop's valve"),
+    Signal("outlet_valve_position_pct", "%", "stem position of the outlet valve"),
+    Signal("outlet_flow_ml_s", "mL/s", "outlet flow"),
+    Signal("ph_true", "pH", "true pH in the tank"),
+    Signal("ph_measured", "pH", "pH probe reading"),
+    Signal("level_true_cm", "cm", "true liquid level"),
+    Signal("level_measured_cm", "cm", "level sensor reading"),
+    Signal("fault_severity", "1", "injected fault's severity, 0 = healthy, 1 = full"),
+)
+
+_CATALOGUE = {s.name: s for s in SIGNALS}
+
+
+def unit_of(name: str) -> str:
+    """Unit of a signal from the catalogue, else from its name's suffix."""
+    if name in _CATALOGUE:
+        return _CATALOGUE[name].unit
+    for suffix, unit in (("_ml_s", "mL/s"), ("_pct", "%"), ("_cm", "cm"), ("_s", "s"), ("_ml", "mL")):
+        if name.endswith(suffix):
+            return unit
+    if name.startswith("ph"):
+        return "pH"
+    return "1"
+
+
+def label(name: str) -> str:
+    """Axis label with unit, e.g. 'valve position (%)'."""
+    base = name
+    for suffix in ("_ml_s", "_pct", "_cm", "_s"):
+        if base.endswith(suffix):
+            base = base[: -len(suffix)]
+            break
+    return f"{base.replace('_', ' ')} ({unit_of(name)})"
+
+
+@dataclass
+class Run:
+    """Signals sampled on a common uniform time base.
+
+    ``signals`` maps names to 1-D float arrays of equal length (``time_s``
+    included). ``metadata`` holds the scenario, seed, sample time and what
+    produced the run.
+    """
+
+    signals: dict[str, np.ndarray]
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if "time_s" not in self.signals:
+            raise UserError("a run needs a time_s signal")
+        n = len(self.signals["time_s"])
+        for name, values in self.signals.items():
+            if len(values) != n:
+                raise UserError(f"signal {name!r} has {len(values)} samples, time_s has {n}")
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.signals[name]
+        except KeyError:
+            raise KeyError(f"run has no signal {name!r}; it has: {', '.join(self.signals)}") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.signals
+
+    def __len__(self) -> int:
+        return len(self.signals["time_s"])
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.signals)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return self.signals["time_s"]
+
+    @property
+    def dt_s(self) -> float:
+        t = self.time_s
+        return float(t[1] - t[0]) if len(t) > 1 else float(self.metadata.get("sample_time_s", 1.0))
+
+    def units(self) -> dict[str, str]:
+        return {n: unit_of(n) for n in self.signals}
+
+    def segment(self, t0_s: float, t1_s: float) -> "Run":
+        """Samples with t0 <= t < t1."""
+        m = (self.time_s >= t0_s) & (self.time_s < t1_s)
+        return Run({k: v[m] for k, v in self.signals.items()}, dict(self.metadata))
+
+    # ---- files ---------------------------------------------------------------
+    def to_csv(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        names = self.names
+        data = np.column_stack([self.signals[n] for n in names])
+        np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        return path
+
+    def to_parquet(self, path: str | Path) -> Path:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fields = [pa.field(n, pa.float64(), metadata={"unit": unit_of(n)}) for n in self.names]
+        schema = pa.schema(fields, metadata={"phfdi_run": json.dumps(self.metadata, default=str)})
+        table = pa.table({n: np.asarray(self.signals[n], dtype=float) for n in self.names}, schema=schema)
+        pq.write_table(table, path)
+        return path
+
+    def save(self, path: str | Path) -> Path:
+        """Write by extension: .csv or .parquet."""
+        suffix = Path(path).suffix.lower()
+        if suffix == ".csv":
+            return self.to_csv(path)
+        if suffix in (".parquet", ".pq"):
+            return self.to_parquet(path)
+        raise UserError(f"cannot write a run to {path}: use a .csv or .parquet file name")
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Run":
+        path = Path(path)
+        if not path.exists():
+            raise UserError(f"no such file: {path}")
+        suffix = path.suffix.lower()
+        if suffix in (".parquet", ".pq"):
+            return cls.from_parquet(path)
+        if suffix == ".csv":
+            return cls.from_csv(path)
+        raise UserError(f"cannot read a run from {path}: expected .csv or .parquet")
+
+    @classmethod
+    def from_parquet(cls, path: str | Path) -> "Run":
+        import pyarrow.parquet as pq
+
+        table = pq.read_table(path)
+        meta = table.schema.metadata or {}
+        metadata = json.loads(meta.get(b"phfdi_run", b"{}"))
+        return cls({n: table.column(n).to_numpy().astype(float) for n in table.column_names}, metadata)
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> "Run":
+        path = Path(path)
+        with open(path, encoding="utf-8") as fh:
+            header = fh.readline().strip().split(",")
+        try:
+            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        except ValueError as exc:
+            raise UserError(f"{path}: not a numeric run CSV ({exc})") from None
+        if data.shape[1] != len(header):
+            raise UserError(f"{path}: header has {len(header)} columns, rows have {data.shape[1]}")
+        return cls({n: data[:, i].copy() for i, n in enumerate(header)}, {"source": str(path)})
+
+
+class RunRecorder:
+    """Rows collected one sample at a time, turned into columns at the end."""
+
+    def __init__(self, names: Iterable[str], n_samples: int = 0) -> None:
+        self.names = list(names)
+        self.rows: list[Mapping[str, float]] = []
+
+    def append(self, row: Mapping[str, float]) -> None:
+        self.rows.append(row)
+
+    @property
+    def n(self) -> int:
+        return len(self.rows)
+
+    def run(self, metadata: dict) -> Run:
+        rows = self.rows
+        signals = {n: np.fromiter((r.get(n, math.nan) for r in rows), dtype=float, count=len(rows))
+                   for n in self.names}
+        return Run(signals, metadata)

@@ -1,0 +1,316 @@
+"""Control valve nonlinearities as blocks (see :mod:`phfdi.blocks`).
+
+Position blocks take the valve command and return the stem position, both in
+% of span; they are stepped once per sample. Terms follow ANSI/ISA-S51.1 as
+quoted by the paper (Section 2) and Choudhury, Shah & Thornhill (2008).
+
+Where the paper's Simulink values act (its units are not stated) is decided
+in each docstring; ``severity`` in [0, 1] scales the fault's magnitude so a
+fault can develop gradually (incipient faults).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from phfdi.blocks import register_block
+
+
+def _positive(name: str, value: float, allow_zero: bool = True) -> None:
+    if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+        raise ValueError(f"{name} must be {'non-negative' if allow_zero else 'positive'} and finite, got {value}")
+
+
+@register_block("backlash")
+@dataclass
+class Backlash:
+    """Backlash (dead-band) of total width ``width_pct``.
+
+    Textbook (ISA dead-band; Simulink Backlash block): the output does not
+    move until the input has travelled the dead-band after a reversal, then
+    follows it lagging by half the width:
+
+        y_k = y_{k-1}                       if |x_k - y_{k-1}| <= d/2
+        y_k = x_k - sign(x_k - y_{k-1}) d/2  otherwise
+
+    so reversals smaller than d leave the output unchanged. Acts on the stem
+    (looseness in the linkage between actuator and plug).
+    """
+
+    width_pct: float
+    severity: float = 1.0
+    _y: float = field(default=0.0, repr=False)
+
+    def __post_init__(self) -> None:
+        _positive("width_pct", self.width_pct)
+
+    def reset(self, x0: float) -> None:
+        self._y = x0
+
+    def step(self, x: float, t_s: float) -> float:
+        half = 0.5 * self.width_pct * self.severity
+        e = x - self._y
+        if e > half:
+            self._y = x - half
+        elif e < -half:
+            self._y = x + half
+        return self._y
+
+
+@register_block("deadzone")
+@dataclass
+class DeadZone:
+    """Dead-zone of width ``width_pct`` around ``center_pct``.
+
+    Textbook (ISA): a range of input through which the output stays unchanged
+    whatever the direction of change (Simulink Dead Zone block, shifted):
+
+        y = c                     if |x - c| <= w/2
+        y = x - sign(x - c) w/2   otherwise
+
+    Static, so no input-output phase lag, unlike backlash. ``center_pct``
+    None means the command at which the block comes to rest (at the fault's
+    onset: the operating point), which is how the paper's Simulink dead zone
+    acts on its controller's deviation signal: small corrections around the
+    operating point do not move the valve, so the loop turns sluggish.
+    """
+
+    width_pct: float
+    center_pct: float | None = None
+    severity: float = 1.0
+    _c: float = field(default=0.0, repr=False)
+
+    def __post_init__(self) -> None:
+        _positive("width_pct", self.width_pct)
+        if self.center_pct is not None:
+            self._c = self.center_pct
+
+    def reset(self, x0: float) -> None:
+        if self.center_pct is None:
+            self._c = x0
+
+    def step(self, x: float, t_s: float) -> float:
+        half = 0.5 * self.width_pct * self.severity
+        e = x - self._c
+        if e > half:
+            return x - half
+        if e < -half:
+            return x + half
+        return self._c
+
+
+@register_block("saturation")
+@dataclass
+class Saturation:
+    """Saturation: the stem cannot travel below ``low_pct`` or above ``high_pct``.
+
+        y = min(max(x, low), high)
+
+    The paper's limits 0 and 0.5 are read as fractions of span: a stem that
+    cannot open past 50 % (an obstruction or a failing actuator supply).
+    With severity s the limits move linearly from [0, 100] to [low, high].
+    """
+
+    low_pct: float = 0.0
+    high_pct: float = 100.0
+    severity: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.low_pct < self.high_pct <= 100.0):
+            raise ValueError(f"saturation limits need 0 <= low_pct < high_pct <= 100, got {self.low_pct}, {self.high_pct}")
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        s = self.severity
+        lo = s * self.low_pct
+        hi = 100.0 + s * (self.high_pct - 100.0)
+        return min(max(x, lo), hi)
+
+
+@register_block("coulomb_viscous_friction")
+@dataclass
+class CoulombViscousFriction:
+    """Coulomb plus viscous friction on the stem.
+
+    The paper's Simulink "Coulomb & Viscous Friction" block is the friction
+    law F(v) = sign(v) (c + b |v|) with offset c = 1 and gain b = 0.1. We put
+    it where friction acts: in the force balance of a stem driven by a
+    positioner whose force is proportional to the error (command - position),
+    normalised so forces read in % of span (massless stem):
+
+        |x - y| <= c            ->  stem at rest (Coulomb friction holds it)
+        otherwise                   dy/dt = (x - y - sign(x - y) c) * mobility
+
+    with ``coulomb_pct`` = c (1 % of span) and ``mobility_per_s`` = 0.1 1/s
+    (the inverse viscous coefficient: the stem creeps towards the command with
+    a 10 s time constant and stops c short of it). Solved exactly over each
+    sample with the command held. Effects: a dead-band of width 2c and a lag.
+    """
+
+    coulomb_pct: float = 1.0
+    mobility_per_s: float = 0.1
+    dt_s: float = 1.0
+    severity: float = 1.0
+    _y: float = field(default=0.0, repr=False)
+
+    def __post_init__(self) -> None:
+        _positive("coulomb_pct", self.coulomb_pct)
+        _positive("mobility_per_s", self.mobility_per_s, allow_zero=False)
+        _positive("dt_s", self.dt_s, allow_zero=False)
+
+    def reset(self, x0: float) -> None:
+        self._y = x0
+
+    def step(self, x: float, t_s: float) -> float:
+        s = self.severity
+        c = s * self.coulomb_pct
+        # severity 0 -> a stiff, frictionless stem that follows the command
+        if s <= 0.0:
+            self._y = x
+            return x
+        mobility = self.mobility_per_s / s
+        e = x - self._y
+        if abs(e) <= c:
+            return self._y
+        target = x - math.copysign(c, e)
+        self._y = target + (self._y - target) * math.exp(-mobility * self.dt_s)
+        return self._y
+
+
+@register_block("stiction")
+@dataclass
+class Stiction:
+    """Valve stiction, the two-parameter data-driven model of Kano et al. (2004).
+
+    S = dead-band + stick-band, J = slip jump, both in % of span. A moving
+    valve sticks when its command stops or reverses (stem held at y, command
+    remembered as u_s). A stuck valve slips when the command has moved away
+    from u_s by more than S against the previous direction of motion, or by
+    more than J along it (stick-band only); it then jumps to
+
+        y = u - d (S - J) / 2,     d = direction of motion,
+
+    and follows the command with that offset while the command keeps moving
+    the same way. J = 0: pure dead-band (backlash of width S); J < S:
+    undershoot; J = S: no offset; J > S: overshoot.
+    """
+
+    s_pct: float
+    j_pct: float
+    severity: float = 1.0
+    _y: float = field(default=0.0, repr=False)
+    _u_prev: float = field(default=0.0, repr=False)
+    _u_s: float = field(default=0.0, repr=False)
+    _d: int = field(default=0, repr=False)
+    _stuck: bool = field(default=True, repr=False)
+
+    def __post_init__(self) -> None:
+        _positive("s_pct", self.s_pct)
+        _positive("j_pct", self.j_pct)
+
+    def reset(self, x0: float) -> None:
+        self._y = self._u_prev = self._u_s = x0
+        self._d = 0
+        self._stuck = True
+
+    def step(self, x: float, t_s: float) -> float:
+        big_s = self.s_pct * self.severity
+        big_j = self.j_pct * self.severity
+        du = x - self._u_prev
+        if not self._stuck:
+            if du * self._d > 0.0:
+                self._y = x - self._d * 0.5 * (big_s - big_j)
+                self._u_prev = x
+                return self._y
+            # command stopped or reversed: the valve sticks where it is
+            self._stuck = True
+            self._u_s = self._u_prev
+        e = x - self._u_s
+        if e != 0.0:
+            direction = 1 if e > 0.0 else -1
+            same = direction == self._d
+            threshold = big_j if same else big_s
+            if abs(e) > threshold:
+                self._d = direction
+                self._stuck = False
+                self._y = x - direction * 0.5 * (big_s - big_j)
+        self._u_prev = x
+        return self._y
+
+
+@register_block("blocking")
+@dataclass
+class Blocking:
+    """Blocked (seized) stem: the position freezes at ``position_pct``.
+
+    None freezes it where it was when the fault struck. ``severity`` > 0 is
+    fully blocked; a seizure has no partial state.
+    """
+
+    position_pct: float | None = None
+    severity: float = 1.0
+    _y: float = field(default=0.0, repr=False)
+
+    def reset(self, x0: float) -> None:
+        self._y = x0 if self.position_pct is None else self.position_pct
+
+    def step(self, x: float, t_s: float) -> float:
+        return self._y if self.severity > 0.0 else x
+
+
+@register_block("quantization")
+@dataclass
+class Quantization:
+    """Position resolution: the stem settles on multiples of ``step_pct``.
+
+        y = step * round(x / step)
+
+    (a stepper-driven actuator, or a positioner's resolution).
+    """
+
+    step_pct: float
+    severity: float = 1.0
+
+    def __post_init__(self) -> None:
+        _positive("step_pct", self.step_pct, allow_zero=False)
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        q = self.step_pct * self.severity
+        return q * round(x / q) if q > 0.0 else x
+
+
+@register_block("leakage")
+@dataclass
+class Leakage:
+    """Seat leakage: the valve passes ``flow_ml_s`` even when shut.
+
+    A flow block (acts on the valve's flow in mL/s, not on its position):
+
+        q = q_valve + leak * (1 - q_valve / q_max)
+
+    so a shut valve passes ``leak`` and a fully open one its rated maximum.
+    """
+
+    flow_ml_s: float
+    max_flow_ml_s: float = 1.0
+    severity: float = 1.0
+
+    def __post_init__(self) -> None:
+        _positive("flow_ml_s", self.flow_ml_s)
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        leak = self.flow_ml_s * self.severity
+        return x + leak * max(0.0, 1.0 - x / self.max_flow_ml_s)
+
+
+#: blocks that act on the valve's flow rather than its stem position
+FLOW_BLOCKS = {"leakage"}
