@@ -32,7 +32,8 @@ from .blocks import Chain, Injected, make_block
 from .errors import UserError
 from .profiles import Change, Profile
 from .run import Run, RunRecorder
-from .scenario import PlantModelSpec, ProfileSpec, ScenarioSpec, SensorSpec, ValveSpec, load_plant_model
+from .scenario import (PlantModelSpec, ProfileSpec, ScenarioSpec, SensorSpec, ValveSpec, load_plant_model,
+                       load_plugins)
 
 
 # ---- construction -----------------------------------------------------------------
@@ -68,7 +69,7 @@ def _block(kind: str, params: dict, where: str, dt_s: float, max_flow: float | N
     try:
         return make_block(kind, params, dt_s=dt_s, max_flow_ml_s=max_flow or 1.0)
     except (TypeError, ValueError) as exc:
-        raise UserError(f"{where}: {exc}") from None
+        raise UserError(f"{where}: {kind}: {exc}") from None
 
 
 def sensor_chain(spec: SensorSpec, dt_s: float, seed: int, where: str, faults: list) -> Chain:
@@ -172,6 +173,7 @@ def _valve(vspec: ValveSpec, spec: ScenarioSpec, site: str) -> Valve:
 
 def build_parts(spec: ScenarioSpec) -> LoopParts:
     """Plant, valves and controllers for a scenario, at its initial steady state."""
+    load_plugins(spec.plugins)
     plant = build_plant(load_plant_model(spec.plant))
     check_reachable(spec, plant)
     start = operating_point(spec, plant)
@@ -282,7 +284,7 @@ def simulate(spec: ScenarioSpec, progress: Callable[[float], None] | None = None
     return rec.run(run_metadata(spec, "closed_loop"))
 
 
-def simulate_open_loop(spec: ScenarioSpec, inputs: Run) -> Run:
+def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inputs") -> Run:
     """Plant, valves and sensors driven by recorded inputs instead of the controllers.
 
     ``inputs`` needs ``time_s`` (uniform) and, for the manipulated feed, either
@@ -290,8 +292,11 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run) -> Run:
     ``<feed>_flow_ml_s``. Other feeds take ``<feed>_flow_ml_s`` if present,
     else their schedule. The outlet takes ``level_controller_output_pct`` if
     present, else holds its initial position. The plant starts at the steady
-    state of the first sample's inputs.
+    state of the first sample's inputs (``start="first_inputs"``) or at the
+    scenario's own operating point, as the closed loop does (``"scenario"``).
     """
+    if start not in ("first_inputs", "scenario"):
+        raise UserError(f"open-loop start must be 'first_inputs' or 'scenario', got {start!r}")
     t = inputs.time_s
     if len(t) < 2:
         raise UserError("open-loop inputs need at least two samples")
@@ -320,13 +325,13 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run) -> Run:
                 out.append(parts.process.feed_flows(float(t[k] - t[0]), {})[names.index(name)])
         return out
 
-    # start at the steady state of the first inputs
-    v0 = parts.valve.reset(float(inputs["valve_command_pct"][0])) if has_cmd else None
-    o_cmd0 = float(outlet_cmd[0]) if outlet_cmd is not None else parts.start.outlet_command_pct
-    o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
-    opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
-    plant.set_steady_state(flows_at(0, v0.flow_ml_s if v0 else 0.0), opening0)
-    parts.process.reset_sensors()
+    if start == "first_inputs":
+        v0 = parts.valve.reset(float(inputs["valve_command_pct"][0])) if has_cmd else None
+        o_cmd0 = float(outlet_cmd[0]) if outlet_cmd is not None else parts.start.outlet_command_pct
+        o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
+        opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
+        plant.set_steady_state(flows_at(0, v0.flow_ml_s if v0 else 0.0), opening0)
+        parts.process.reset_sensors()
 
     rec = RunRecorder(signal_names(parts), len(t))
     for k in range(len(t)):

@@ -170,6 +170,8 @@ class ScenarioSpec(Strict):
     sensors: SensorsSpec = SensorsSpec()
     feeds: dict[str, ProfileSpec] = Field({}, description="flow schedules (mL/s) of feeds no valve drives")
     faults: list[FaultSpec] = []
+    plugins: list[str] = Field([], description=(
+        "modules or .py files (relative to the scenario file) that register user blocks before the loop is built"))
     min_actuator_margin_pct: float = Field(0.0, ge=0.0, lt=50.0, description=(
         "each pH setpoint must be reachable with the valve between margin and 100 - margin %"))
 
@@ -208,7 +210,10 @@ def _read_yaml(path: Path) -> dict:
     except FileNotFoundError:
         raise UserError(f"no such file: {path}") from None
     except yaml.YAMLError as exc:
-        raise UserError(f"{path}: not valid YAML ({exc})") from None
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or "parse error"
+        raise UserError(f"{path}: not valid YAML{where} ({problem})") from None
     if not isinstance(data, dict):
         raise UserError(f"{path}: expected a mapping at the top level")
     return data
@@ -251,10 +256,50 @@ def _resolve(name_or_path: str, directory: Path, kind: str) -> Path:
     return candidate
 
 
+def _absolutise(data: dict, base: Path) -> None:
+    """Relative file references in a scenario are relative to the scenario file."""
+
+    def fix(ref):
+        if isinstance(ref, str) and ref.endswith((".yaml", ".yml", ".py")) and not Path(ref).is_absolute():
+            return str((base / ref).resolve())
+        return ref
+
+    for key in ("extends", "plant"):
+        if key in data:
+            data[key] = fix(data[key])
+    if isinstance(data.get("plugins"), list):
+        data["plugins"] = [fix(p) for p in data["plugins"]]
+
+
+def load_plugins(plugins: list[str]) -> None:
+    """Import user modules (dotted names or .py files) so their blocks register."""
+    import importlib
+    import importlib.util
+    import sys
+
+    for ref in plugins:
+        try:
+            if ref.endswith(".py"):
+                name = f"phfdi_plugin_{Path(ref).stem}"
+                if name in sys.modules:
+                    continue
+                spec = importlib.util.spec_from_file_location(name, ref)
+                if spec is None or not Path(ref).exists():
+                    raise FileNotFoundError(ref)
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[name] = module
+                spec.loader.exec_module(module)
+            else:
+                importlib.import_module(ref)
+        except Exception as exc:  # a user's plugin: report it as bad input, whatever it raised
+            raise UserError(f"plugins: cannot load {ref!r}: {type(exc).__name__}: {exc}") from None
+
+
 def raw_scenario(name_or_path: str, _seen: tuple = ()) -> dict:
     """Scenario mapping with ``extends`` resolved (not yet validated)."""
     path = _resolve(name_or_path, SCENARIO_DIR, "scenario")
     data = _read_yaml(path)
+    _absolutise(data, path.parent)
     parent = data.pop("extends", None)
     if parent:
         if parent in _seen:

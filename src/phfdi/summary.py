@@ -88,7 +88,7 @@ def format_summary(s: dict) -> str:
             f"max |error| {seg['max_abs_error_ph']:.3f}, IAE {seg['iae_ph_s']:.1f} pH.s, "
             f"2nd-half std {seg['second_half_std_ph']:.4f}")
     lines.append(f"  valve: travel {s['valve_travel_pct']:.1f} % of span, {s['valve_reversals']} reversals")
-    if "fault_onset_s" in s and s["ph_error_std_after_onset"] is not None:
+    if s.get("ph_error_std_before_onset") is not None and s.get("ph_error_std_after_onset") is not None:
         lines.append(f"  pH error std: {s['ph_error_std_before_onset']:.4f} in the 1000 s before the onset, "
                      f"{s['ph_error_std_after_onset']:.4f} after (mean {s['ph_mean_error_after_onset']:+.3f})")
     return "\n".join(lines)

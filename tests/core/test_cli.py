@@ -1,0 +1,113 @@
+"""The command line: simulate, scenarios, paper-runs; bad scenarios get one clear line and exit 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from phfdi.cli import main
+from phfdi.run import Run
+
+SHORT = ["--set", "duration_s=1200", "--set", "setpoints.ph.changes.0.at_s=600"]
+
+
+def run_cli(args, capsys):
+    code = main(args)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def write(tmp_path: Path, text: str) -> str:
+    p = tmp_path / "scenario.yaml"
+    p.write_text(text)
+    return str(p)
+
+
+BAD_SCENARIOS = [
+    ("unknown key", "extends: paper\nnoise_level: 3\n", "noise_level: unknown key"),
+    ("negative width", "extends: paper\nfaults: [{type: backlash, params: {width_pct: -0.5}, onset_s: 7000}]\n",
+     "faults.0: backlash: width_pct must be non-negative"),
+    ("unreachable setpoint", "extends: paper\nsetpoints: {ph: {initial: 12.0, changes: [{at_s: 5000, value: 2.0}]}}\n",
+     "setpoints.ph: pH 2.0 is not reachable"),
+    ("setpoint inside the valve's range but outside the 20 % margin",
+     "extends: paper\nsetpoints: {ph: {initial: 12.5}}\n", "pH 12.5 needs the valve at 7.2 %, outside the reachable range 20..80 %"),
+    ("onset after the end", "extends: paper\nfaults: [{type: backlash, params: {width_pct: 0.7}, onset_s: 20000}]\n",
+     "onset_s = 20000.0 s is not before the end of the run"),
+    ("negative noise", "extends: paper\nsensors: {ph: {noise_std: -1}}\n", "sensors.ph.noise_std"),
+    ("unknown block", "extends: paper\nfaults: [{type: rust, onset_s: 10}]\n", "unknown block type 'rust'"),
+    ("not yaml", "extends: paper\n  : [\n", "not valid YAML"),
+]
+
+
+@pytest.mark.parametrize("name,text,message", BAD_SCENARIOS, ids=[b[0] for b in BAD_SCENARIOS])
+def test_bad_scenario_one_line_exit_2(tmp_path, capsys, name, text, message):
+    code, out, err = run_cli(["simulate", "--scenario", write(tmp_path, text)], capsys)
+    assert code == 2
+    assert message in err
+    assert len(err.strip().splitlines()) == 1
+    assert "Traceback" not in err
+
+
+def test_bad_input_through_the_real_entry_point_has_no_traceback(tmp_path):
+    exe = Path(sys.executable).parent / "phfdi"
+    proc = subprocess.run([str(exe), "simulate", "--fault", "rusty_valve"], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "unknown fault 'rusty_valve'" in proc.stderr and "Traceback" not in proc.stderr
+    proc = subprocess.run([str(exe), "simulate", "--set", "duration_s=-5"], capture_output=True, text=True)
+    assert proc.returncode == 2 and "duration_s" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_simulate_writes_csv_and_parquet_with_the_same_signals(tmp_path, capsys):
+    csv, pq = tmp_path / "r.csv", tmp_path / "r.parquet"
+    code, out, _ = run_cli(["simulate", "--fault", "backlash", "--onset", "800", *SHORT, "--out", str(csv)], capsys)
+    assert code == 0 and "fault: backlash" in out
+    run_cli(["simulate", "--fault", "backlash", "--onset", "800", *SHORT, "--out", str(pq)], capsys)
+    a, b = Run.load(csv), Run.load(pq)
+    assert a.names == b.names
+    for n in a.names:
+        assert np.allclose(a[n], b[n], equal_nan=True, rtol=0, atol=0), n
+    assert b.metadata["scenario"] == "paper-backlash"
+    assert len(a) == 1201 and a.dt_s == 1.0
+
+
+def test_simulate_json_summary(capsys):
+    code, out, _ = run_cli(["simulate", "--fault", "saturation", "--onset", "700", *SHORT, "--json"], capsys)
+    s = json.loads(out)
+    assert code == 0 and s["faults"][0]["type"] == "saturation"
+    assert [seg["setpoint_ph"] for seg in s["segments"]] == [12.0, 8.0]
+
+
+def test_scenarios_lists_presets(capsys):
+    code, out, _ = run_cli(["scenarios"], capsys)
+    assert code == 0
+    for word in ("paper", "henson_seborg", "rig_flask", "backlash", "probe_delay"):
+        assert word in out
+
+
+def test_every_subcommand_help_has_an_example(capsys):
+    from phfdi.cli import COMMANDS
+
+    for name in COMMANDS:
+        cmd = name.replace("_", "-")
+        with pytest.raises(SystemExit) as exc:
+            main([cmd, "--help"])
+        assert exc.value.code == 0
+        assert "example" in capsys.readouterr().out.lower(), cmd
+
+
+def test_paper_runs_writes_runs_and_labelled_figures(tmp_path, capsys):
+    # a shortened paper-runs: same command on a scenario file with a shorter horizon
+    scen = write(tmp_path, "extends: paper\nduration_s: 1500\nsetpoints: {ph: {initial: 12.0, changes: "
+                           "[{at_s: 600, value: 8.0}]}, level_cm: {initial: 14.0}}\n")
+    code, out, _ = run_cli(["paper-runs", "--scenario", scen, "--out", str(tmp_path / "pr")], capsys)
+    assert code == 0
+    for f in ("healthy", "backlash", "friction", "deadzone", "saturation", "stiction", "probe_delay"):
+        assert (tmp_path / "pr" / f"{f}.csv").exists() and (tmp_path / "pr" / f"{f}.png").stat().st_size > 10000
+    assert (tmp_path / "pr" / "overview.png").exists() and (tmp_path / "pr" / "overview_3d.png").exists()
+    summary = json.loads((tmp_path / "pr" / "summary.json").read_text())
+    assert set(summary) >= {"healthy", "saturation"}
