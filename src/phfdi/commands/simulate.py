@@ -11,6 +11,7 @@ EXAMPLES = """examples:
   phfdi simulate --scenario paper --fault backlash --out runs/backlash.csv
   phfdi simulate --fault stiction --set duration_s=3000 --out runs/stiction.parquet --figure runs/stiction.png
   phfdi simulate --scenario my_loop.yaml --json
+  phfdi simulate --fault friction --inputs recorded.csv --out replayed.csv   # open loop from recorded inputs
 """
 
 
@@ -23,15 +24,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default=None, help="run file to write (.csv or .parquet)")
     p.add_argument("--figure", default=None, help="PNG figure of the run (pH, controller effort, level)")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")
+    p.add_argument("--inputs", default=None, metavar="RUN",
+                   help="open loop: drive plant, valve and sensors from this run file's time_s and "
+                        "valve_command_pct (or <feed>_flow_ml_s), instead of the controllers")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.loop import simulate
+    from phfdi.loop import simulate, simulate_open_loop
+    from phfdi.run import Run
     from phfdi.summary import format_summary, summarize
 
     spec = scenario_from_args(args)
-    result = simulate(spec, progress=Progress(f"simulate {spec.name}"))
+    if args.inputs:
+        result = simulate_open_loop(spec, Run.load(args.inputs))
+    else:
+        result = simulate(spec, progress=Progress(f"simulate {spec.name}"))
     summary = summarize(result)
     if args.out:
         summary["run_file"] = str(result.save(args.out))
