@@ -122,6 +122,6 @@ def test_simulate_open_loop_from_recorded_inputs(tmp_path, capsys):
     # the same valve commands drive the same plant; it starts at the first inputs' steady state, not the
     # closed loop's, and that small difference fades (compare away from the steep setpoint transition)
     t = a.time_s
-    steady = ((t > 300) & (t < 500)) | (t > 900)
+    steady = ((t > 300) & (t < 600)) | (t > 1100)
     assert np.max(np.abs(a["ph_true"][steady] - b["ph_true"][steady])) < 1e-3
     assert np.all(np.isnan(b["ph_setpoint"]))
