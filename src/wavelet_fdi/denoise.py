@@ -22,7 +22,10 @@ As in MATLAB's wden, n for ``universal`` and ``minimax`` is the number of
 coefficients of the whole decomposition of a row, and ``sure``/``heursure``
 use each level's own coefficients. Noise scaling: ``level`` (MATLAB
 ``'mln'``, one sigma per level, for coloured noise), ``first`` (``'sln'``,
-sigma of level 1 for all levels) or ``none`` (``'one'``).
+sigma of level 1 for all levels) or ``none`` (``'one'``). Shrinkage is
+:func:`pywt.threshold`: hard thresholding keeps a coefficient equal to the
+threshold (MATLAB's wthresh zeroes it; it matters for the one coefficient a
+SURE threshold is taken from).
 """
 
 from __future__ import annotations

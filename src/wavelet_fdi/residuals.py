@@ -32,34 +32,55 @@ from .multisignal import pywt_mode
 BANDS = ("D1", "D2", "D3", "A3")
 
 
-def coefficient_times(n_samples: int, wavelet: str, level: int, mode: str = "symmetric",
-                      dt_s: float = 1.0, t0_s: float = 0.0, anchor: str = "centre") -> dict[str, np.ndarray]:
-    """Time (s) each coefficient stands for, per band ('D1'.. 'Dlevel', 'Alevel').
+def _band_geometry(n_samples: int, wavelet: str, level: int, mode: str) -> dict[str, tuple[float, int, int, int]]:
+    """Per band: (energy centre, first and last sample of the support) of coefficient 0, and the band length.
 
-    Measured, not assumed, from the reconstruction of a unit coefficient in
-    the middle of the band: ``anchor='centre'`` gives the centre of its
-    energy (where the coefficient looks; for plots), ``'end'`` the last
-    sample it depends on (when it can first be computed; for alarm times).
-    Consecutive coefficients are 2**j samples apart.
+    Measured from the reconstruction of a unit coefficient in the middle of
+    the band; coefficient k sits 2**j k samples further.
     """
-    if anchor not in ("centre", "end"):
-        raise ValueError(f"anchor must be 'centre' or 'end', got {anchor!r}")
-    mode = pywt_mode(mode)
     coeffs = pywt.wavedec(np.zeros(n_samples), wavelet, mode=mode, level=level)
     names = [f"A{level}"] + [f"D{j}" for j in range(level, 0, -1)]
-    out = {}
     samples = np.arange(n_samples)
+    out = {}
     for b, name in enumerate(names):
         j = level if name.startswith("A") else int(name[1:])
         k0 = len(coeffs[b]) // 2
         unit = [np.zeros_like(c) for c in coeffs]
         unit[b][k0] = 1.0
         r = pywt.waverec(unit, wavelet, mode=mode)[:n_samples]
-        if anchor == "centre":
-            at = float(np.sum(samples * r * r) / np.sum(r * r))
-        else:
-            at = float(np.nonzero(np.abs(r) > 1e-12 * np.max(np.abs(r)))[0][-1])
-        out[name] = t0_s + dt_s * (at - k0 * 2 ** j + 2 ** j * np.arange(len(coeffs[b])))
+        support = np.nonzero(np.abs(r) > 1e-12 * np.max(np.abs(r)))[0]
+        shift = k0 * 2 ** j
+        centre = float(np.sum(samples * r * r) / np.sum(r * r))
+        out[name] = (centre - shift, int(support[0]) - shift, int(support[-1]) - shift, len(coeffs[b]))
+    return out
+
+
+def coefficient_times(n_samples: int, wavelet: str, level: int, mode: str = "symmetric",
+                      dt_s: float = 1.0, t0_s: float = 0.0, anchor: str = "centre") -> dict[str, np.ndarray]:
+    """Time (s) each coefficient stands for, per band ('D1'.. 'Dlevel', 'Alevel').
+
+    ``anchor='centre'``: the centre of energy of its synthesis function
+    (where the coefficient looks; for plots); ``'end'``: the last sample it
+    depends on (when it can first be computed; for alarm times).
+    Consecutive coefficients are 2**j samples apart.
+    """
+    if anchor not in ("centre", "end"):
+        raise ValueError(f"anchor must be 'centre' or 'end', got {anchor!r}")
+    out = {}
+    for name, (centre, _, last, n_c) in _band_geometry(n_samples, wavelet, level, pywt_mode(mode)).items():
+        j = level if name.startswith("A") else int(name[1:])
+        at = centre if anchor == "centre" else last
+        out[name] = t0_s + dt_s * (at + 2 ** j * np.arange(n_c))
+    return out
+
+
+def interior(n_samples: int, wavelet: str, level: int, mode: str = "symmetric") -> dict[str, np.ndarray]:
+    """Per band, which coefficients depend on recorded samples only (not on the boundary extension)."""
+    out = {}
+    for name, (_, first, last, n_c) in _band_geometry(n_samples, wavelet, level, pywt_mode(mode)).items():
+        j = level if name.startswith("A") else int(name[1:])
+        k = 2 ** j * np.arange(n_c)
+        out[name] = (k + first >= 0) & (k + last <= n_samples - 1)
     return out
 
 
@@ -89,6 +110,8 @@ class ResidualSet:
     #: centre of each coefficient (plots) and when it can first be computed (alarms), s
     times_s: dict[str, np.ndarray]
     available_s: dict[str, np.ndarray]
+    #: coefficients that do not lean on the boundary extension (the only ones alarms use)
+    interior: dict[str, np.ndarray]
     healthy: dict[str, np.ndarray]
     faulty: dict[str, np.ndarray]
     residual: dict[str, np.ndarray]
@@ -106,13 +129,12 @@ def residuals(healthy: np.ndarray, faulty: np.ndarray, wavelet: str = "sym4", le
     h = band_coefficients(healthy, wavelet, level, mode)
     f = band_coefficients(faulty, wavelet, level, mode)
     times = coefficient_times(len(faulty), wavelet, level, mode, dt_s, t0_s)
-    # boundary coefficients that lean on the extension past the end are computable at the last sample
-    available = {b: np.minimum(t, t0_s + dt_s * (len(faulty) - 1))
-                 for b, t in coefficient_times(len(faulty), wavelet, level, mode, dt_s, t0_s, anchor="end").items()}
+    available = coefficient_times(len(faulty), wavelet, level, mode, dt_s, t0_s, anchor="end")
+    inside = interior(len(faulty), wavelet, level, mode)
     res = {b: f[b] - h[b] for b in f}
     coeffs = [f[f"A{level}"]] + [f[f"D{j}"] for j in range(level, 0, -1)]
     rec = pywt.waverec(coeffs, wavelet, mode=pywt_mode(mode))[: len(faulty)]
-    return ResidualSet(pywt.Wavelet(wavelet).name, level, pywt_mode(mode), times, available, h, f, res,
+    return ResidualSet(pywt.Wavelet(wavelet).name, level, pywt_mode(mode), times, available, inside, h, f, res,
                        [len(c) for c in coeffs] + [len(faulty)], float(np.max(np.abs(rec - faulty))))
 
 
@@ -141,7 +163,7 @@ def detect(res: ResidualSet, thresholds: dict[str, float], window: int = 1,
     for band, r in res.residual.items():
         stat = np.abs(r) if window <= 1 else moving_rms(r, window)
         t = res.available_s[band]
-        alarm = stat > thresholds[band]
+        alarm = (stat > thresholds[band]) & res.interior[band]
         first = float(t[np.argmax(alarm)]) if alarm.any() else None
         det = Detection(band, thresholds[band], first)
         if onset_s is not None:
@@ -157,5 +179,5 @@ def calibrate(res: ResidualSet, window: int = 1, margin: float = 1.2) -> dict[st
     out = {}
     for band, r in res.residual.items():
         stat = np.abs(r) if window <= 1 else moving_rms(r, window)
-        out[band] = float(margin * np.max(stat))
+        out[band] = float(margin * np.max(stat[res.interior[band]]))
     return out
