@@ -283,17 +283,29 @@ def reconstruction(pair: Any, wavelet: str, unit: str, path: Path) -> Path:
 
 
 def band_panels(rs: Any, which: str, title: str, unit: str, path: Path, onset_s: float | None = None,
-                thresholds: dict[str, float] | None = None) -> Path:
-    """Figures 50, 51, 57 (coefficients D1, D2, D3, A3) and 52-55, 58-61 (their residuals)."""
+                thresholds: dict[str, float] | None = None, window: int = 1,
+                alarms: dict[str, float | None] | None = None) -> Path:
+    """Figures 50, 51, 57 (coefficients D1, D2, D3, A3) and 52-55, 58-61 (their residuals).
+
+    With ``thresholds`` the detector's statistic (trailing RMS over ``window``
+    coefficients) is drawn over the residual, with its threshold and first alarm.
+    """
+    from .residuals import moving_rms
+
     data = getattr(rs, which)
     bands = [f"D{j}" for j in range(1, rs.level + 1)] + [f"A{rs.level}"]
     fig, axes = plt.subplots(len(bands), 1, figsize=(10, 2.1 * len(bands) + 0.6), sharex=True)
     for ax, b in zip(axes, bands):
-        ax.plot(rs.times_s[b], data[b], color="k", lw=0.5)
+        ax.plot(rs.times_s[b], data[b], color="0.55" if thresholds else "k", lw=0.5,
+                label="residual" if thresholds else None)
         _onset(ax, onset_s)
         if thresholds is not None:
-            ax.axhline(thresholds[b], color="tab:orange", ls="--", lw=0.8, label="alarm threshold (RMS)")
-            ax.axhline(-thresholds[b], color="tab:orange", ls="--", lw=0.8)
+            stat = np.abs(data[b]) if window <= 1 else moving_rms(data[b], window)
+            ax.plot(rs.available_s[b], stat, color="tab:blue", lw=0.8, label=f"trailing RMS ({window} coefficients)")
+            ax.axhline(thresholds[b], color="tab:orange", ls="--", lw=1, label="alarm threshold")
+            if alarms and alarms.get(b) is not None:
+                ax.axvline(alarms[b], color="tab:orange", lw=1.5, label="first alarm")
+            ax.legend(fontsize=6, loc="upper left")
         name = f"Res{b[1:]}{b[0]}" if which == "residual" else b
         ax.set_ylabel(f"{name} ({unit})")
         ax.grid(alpha=0.3)

@@ -64,3 +64,13 @@ def test_contingency_and_canonical_labels():
     assert classes == ["a", "b"] and table.tolist() == [[1, 1], [0, 2]]
     with pytest.raises(ValueError):
         cluster.cluster(np.zeros((3, 2)), 4)
+
+
+def test_spearman_hand_cases():
+    from wavelet_fdi.analysis import spearman
+
+    # ranks (0,1,2,3) vs (0,1,3,2): rho = 1 - 6 * 2 / (4 * 15) = 0.8
+    assert spearman([1, 2, 3, 4], [10, 20, 40, 30]) == pytest.approx(0.8)
+    assert spearman([1, 2, 3], [3, 2, 1]) == pytest.approx(-1.0)
+    # ties share their mean rank: y ranks (0.5, 0.5, 2) -> Pearson with (0, 1, 2) = 0.866
+    assert spearman([1, 2, 3], [5, 5, 9]) == pytest.approx(np.sqrt(3) / 2)
