@@ -274,10 +274,7 @@ def change_points_in_band(x: np.ndarray, time_s: np.ndarray, band: str = "D1", w
         return list(_CP_CACHE[key])
     level = int(band[1:])
     coeffs = residuals.band_coefficients(x, wavelet, level, opts.mode)[band]
-    c = coeffs - coeffs.mean()
-    if trim > 0:
-        cut = np.quantile(np.abs(c), 1.0 - trim)
-        c = np.where(np.abs(c) > cut, c[np.abs(c) <= cut].mean(), c)
+    c = changepoint.trim_largest(coeffs - coeffs.mean(), trim)
     r = changepoint.variance_change_points(c, opts.max_changes, opts.min_distance)
     dt = float(time_s[1] - time_s[0])
     t = residuals.coefficient_times(len(x), wavelet, level, opts.mode, dt, float(time_s[0]))[band]

@@ -56,11 +56,16 @@ def level1_details(x: np.ndarray, wavelet: str = "db3", mode: str = "symmetric",
         det = pywt.idwt(None, d, wavelet, mode=mode)[: len(x)]
     else:
         det = pywt.dwt(x, wavelet, mode=mode)[1]
-    det = det - det.mean()
-    if trim > 0:
-        cut = np.quantile(np.abs(det), 1.0 - trim)
-        det = np.where(np.abs(det) > cut, det[np.abs(det) <= cut].mean(), det)
-    return det
+    return trim_largest(det - det.mean(), trim)
+
+
+def trim_largest(c: np.ndarray, trim: float) -> np.ndarray:
+    """Replace the ``trim`` fraction of largest magnitudes by the mean of the rest (isolated spikes such as a
+    setpoint step must not read as a change of variance)."""
+    if trim <= 0:
+        return c
+    cut = np.quantile(np.abs(c), 1.0 - trim)
+    return np.where(np.abs(c) > cut, c[np.abs(c) <= cut].mean(), c)
 
 
 def variance_change_points(y: np.ndarray, max_changes: int = 6, min_distance: int = 10,
@@ -152,8 +157,7 @@ def select_n_changes(contrast: np.ndarray, penalty: str | float = "interval", n:
 
     ``"interval"``: the K (other than 0 and the largest on the hull) whose
     range of penalties is widest, if wider than the largest K's range, else
-    0 - the penalty-stability rule MATLAB's wvarchg documents as
-    "penalization". A number: minimise ``J_K + penalty * K``.
+    0 - the penalty-stability rule MATLAB's wvarchg applies. A number: minimise ``J_K + penalty * K``.
     """
     contrast = np.asarray(contrast, dtype=float)
     if not isinstance(penalty, str):

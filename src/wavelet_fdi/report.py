@@ -188,7 +188,7 @@ def section7_claims(pairs: Sequence[PairResult], opts: Options) -> list[Claim]:
     per_len = len(pywt.wavedec(np.zeros(n), w, mode="periodization", level=rs.level)[0])
     claims.append(Claim(
         "7, text after Fig. 48",
-        f"[C,L] = wavedec(x, 3, 'sym4'): the first element of L (scaling coefficients at level 3) is 256",
+        "[C,L] = wavedec(x, 3, 'sym4'): the first element of L (scaling coefficients at level 3) is 256",
         f"L = [{', '.join(map(str, rs.lengths))}] for our {n}-sample run ({per_len} with periodization)",
         "differs, as it must: 256 = 2048 / 2^3 is a 2048-sample signal under periodization; the paper's code "
         "line decomposes `wecg`, MATLAB's example ECG, not a pH run"))
