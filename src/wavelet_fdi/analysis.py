@@ -46,6 +46,8 @@ class Options:
     #: trailing window (coefficients) of the realistic residual detector, and its threshold margin
     detect_window: int = 8
     detect_margin: float = 1.2
+    #: a variance change point this close to the fault onset (s) counts as finding it
+    onset_tolerance_s: float = 200.0
 
 
 def _rms(x: np.ndarray, axis: int | None = None) -> np.ndarray:
@@ -295,7 +297,7 @@ def _score(cp: ChangePoints, onset_s: float | None, tolerance_s: float) -> Chang
 
 def analyze_pair(fault: str, healthy: Any, faulty: Any, onset_s: float | None = None,
                  reference: Any = None, calibration: Any = None, signal: str = "ph_measured",
-                 opts: Options | None = None, tolerance_s: float = 200.0) -> PairResult:
+                 opts: Options | None = None) -> PairResult:
     """Section 7 on one fault, from runs (anything with ``time_s`` and ``run[name]``).
 
     ``healthy`` is the faulty run's twin (same noise) for the paper's
@@ -336,5 +338,5 @@ def analyze_pair(fault: str, healthy: Any, faulty: Any, onset_s: float | None = 
         cps.append(ChangePoints(f"{signal} residual vs healthy reference: {band} ({opts.wavelet})",
                                 change_points_in_band(xf - xr, t, band, opts.wavelet, opts, trim=0.0),
                                 change_points_in_band(xc - xr, t, band, opts.wavelet, opts, trim=0.0)))
-    out.change_points = [_score(cp, onset_s, tolerance_s) for cp in cps]
+    out.change_points = [_score(cp, onset_s, opts.onset_tolerance_s) for cp in cps]
     return out

@@ -108,7 +108,9 @@ def approximations(ms: Multisignal, approx: np.ndarray, level: int, path: Path) 
 def approximation_groups(ms: Multisignal, approx: np.ndarray, level: int, groups: Sequence[Sequence[str]],
                          path: Path) -> Path:
     """Figure 31: signals and approximations, one column per group of classes."""
-    groups = [g for g in groups if any(lab in ms.labels for lab in g)] or [ms.classes]
+    groups = [list(g) for g in groups if any(lab in ms.labels for lab in g)]
+    rest = [c for c in ms.classes if not any(c in g for g in groups)]
+    groups = groups + [rest] if rest else groups
     fig, axes = plt.subplots(2, len(groups), figsize=(5 * len(groups), 6.5), sharex=True, squeeze=False)
     for c, group in enumerate(groups):
         idx = [i for i, lab in enumerate(ms.labels) if lab in group]

@@ -133,3 +133,27 @@ def test_every_figure_axis_has_a_label_with_units(small_analysis, tmp_path, monk
     result = report.write_all(ms, pairs, tmp_path, opts, {}, PAPER_GROUPING)
     assert len(checked) >= 20 and len(result["files"]) == len(checked)
     assert "fig52_55_residuals_backlash.png" in checked and "fig35_clusters_energy.png" in checked
+
+
+def test_run_files_without_metadata_or_truth(tmp_path, capsys):
+    """CSV runs (no metadata, no ph_true): labels from file names, Section 7 said to be skipped."""
+    t = np.arange(0.0, 2000.0)
+    rng = np.random.default_rng(0)
+    paths = []
+    for i, label in enumerate(["healthy", "healthy", "cycling", "cycling"]):
+        ph = 8 + 0.01 * rng.normal(size=t.size) + (0.3 * np.sin(t / 20.0) if label == "cycling" else 0.0)
+        path = tmp_path / f"{label}_{i}.csv"
+        np.savetxt(path, np.column_stack([t, ph]), delimiter=",", header="time_s,ph_measured", comments="")
+        paths.append(str(path))
+    out = tmp_path / "out"
+    assert main(["analyze", "--out", str(out), "--bags", *paths, "--samples", "512", "--level", "6", "--clusters", "2",
+                 "--no-figures", "--json"]) == 0
+    claims = json.loads(capsys.readouterr().out)
+    assert any(c["verdict"] == "not checked" for c in claims)
+    report = (out / "REPORT.md").read_text()
+    assert "Not run: it needs a faulty run" in report
+    assert "healthy (2), cycling (2)" in report
+    results = json.loads((out / "results.json").read_text())
+    runs = results["section6"]["clustering"]["runs"]
+    energy = [r for r in runs if r["features"].startswith("detail energies") and r["k_source"] == "given"]
+    assert all(r["ari_classes"] == pytest.approx(1.0) for r in energy)
