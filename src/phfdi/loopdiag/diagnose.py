@@ -14,9 +14,9 @@ Order of work (docs/loop_diagnosis.md has the reasoning and the measured results
    (:mod:`.hammerstein`) and ranked on the held-out third;
 6. the verdict: an actuator cause when the best one beats the nominal model by
    at least ``gain_threshold_percent`` on held-out data; otherwise, for an
-   oscillating loop, a loop cause (aggressive tuning when the identified linear
-   loop itself is nearly unstable at the observed period, else an external
-   disturbance); otherwise none.
+   oscillating loop, a loop cause (aggressive tuning when the loop answers
+   setpoint changes poorly damped at the period it oscillates at, else an
+   external disturbance; undecided without setpoint changes); otherwise none.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.signal import lfilter
 from scipy.stats import skew
 
 from phfdi.run import Run
@@ -39,8 +40,10 @@ from .oscillation import Oscillation, detect_oscillation, period_regularity
 GAIN_THRESHOLD_PERCENT = 10.0
 #: extended models within this relative NRMSE of the best count as tied; the simplest wins
 TIE_TOLERANCE = 0.01
-#: closed-loop damping ratio below which the identified linear loop itself oscillates
-AGGRESSIVE_DAMPING = 0.2
+#: closed-loop damping ratio (from setpoint responses) below which the loop itself oscillates
+AGGRESSIVE_DAMPING = 0.25
+#: share of PV's variance the setpoint-response model must explain to be trusted
+MIN_SP_R2 = 0.3
 #: OP must move by more than this share of its mean level (or 0.05 % of span) to identify anything
 MIN_OP_MOVEMENT = 1e-3
 
@@ -126,7 +129,7 @@ def gather_evidence(run: Run, settings: Settings | None = None) -> Evidence:
     ev = Evidence(osc, ctrl, linear, causes, {}, {}, baselines, notes,
                   n_eff=effective_samples(pv, linear[0].y_model, split))
     ev.symptoms = symptoms(op, pv, linear[0], osc, dt, ev.chosen())
-    ev.closed_loop = closed_loop_damping(linear, ctrl, dt, integrating)
+    ev.closed_loop = setpoint_response(pv, sp, dt) if osc.oscillating else {}
     return ev
 
 
@@ -175,69 +178,84 @@ def _f(v: float):
     return float(f"{v:.4g}") if isinstance(v, float) and math.isfinite(v) else None
 
 
-# ---- closed-loop damping of the identified linear loop ---------------------------------------
-def closed_loop_damping(linear: list[LinearModel], ctrl: ControllerEstimate, dt_s: float,
-                        integrating: bool) -> dict:
-    """Poles of the identified PI + lag model loop: the least damped pair's damping and period.
+# ---- the closed loop's own damping, from its response to setpoint changes --------------------
+def setpoint_response(pv: np.ndarray, sp: np.ndarray | None, dt_s: float) -> dict:
+    """Second-order closed-loop model SP -> PV fitted to the setpoint changes (output error).
 
-    Only with a trusted controller estimate and a lag (FOPTD or integrating) model.
+    ``PV = c + g T(q) (SP - SP(0))``, T the zero-order-hold discretisation of
+    ``w^2 / (s^2 + 2 zeta w s + w^2)`` delayed by d samples, on a grid of zeta, w and d with c, g
+    by least squares. Setpoint changes are an input the disturbances do not drive, so unlike
+    OP -> PV this fit is not biased by the feedback (indirect identification, Ljung 1999,
+    ch. 13). Empty when SP does not move by more than 3 noise levels, or the fit explains less
+    than :data:`MIN_SP_R2` of PV's variance.
     """
-    lag = next((m for m in linear if m.structure in ("foptd", "integrating")), None)
-    if lag is None or ctrl.action == "unknown" or not math.isfinite(ctrl.kc):
+    if sp is None:
         return {}
-    p = lag.params
-    tau, d, k = p["time_constant_s"], int(round(p["dead_time_s"] / dt_s)), p["gain"]
-    if k == 0:
+    d1 = np.diff(pv)
+    noise = 1.4826 * float(np.median(np.abs(d1 - np.median(d1)))) / math.sqrt(2.0)
+    if np.ptp(sp) <= 3 * max(noise, 1e-12):
         return {}
-    a = math.exp(-dt_s / tau) if tau > 0 else 0.0
-    # process G(z) = k (1 - a) z^-(1 + d) / (1 - a z^-1), times 1 / (1 - z^-1) when integrating
-    num = np.concatenate((np.zeros(1 + max(d, 0) - (1 if p.get("same_sample_response") else 0)), [k * (1 - a)]))
-    den = np.array([1.0, -a])
-    if integrating:
-        num = num * dt_s
-        den = np.convolve(den, [1.0, -1.0])
-    # PI (velocity form of the estimate): C(z) = (Kc (1 - z^-1) + Ki dt (1 + z^-1) / 2) / (1 - z^-1)
-    ki = ctrl.kc / ctrl.ti_s if math.isfinite(ctrl.ti_s) and ctrl.ti_s > 0 else 0.0
-    c_num = np.array([ctrl.kc + ki * dt_s / 2, -ctrl.kc + ki * dt_s / 2])
-    c_den = np.array([1.0, -1.0])
-    ln = np.convolve(num, c_num)
-    ld = np.convolve(den, c_den)
-    m = max(len(ln), len(ld))
-    char = np.pad(ld, (0, m - len(ld))) + np.pad(ln, (0, m - len(ln)))
-    poles = np.roots(char)
-    poles = poles[np.abs(poles) > 1e-9]
-    if len(poles) == 0:
-        return {}
-    s = np.log(poles.astype(complex)) / dt_s
-    osc_poles = s[np.abs(s.imag) > 1e-12]
-    if len(osc_poles) == 0:
-        return {"damping": 1.0, "period_s": None, "stable": bool(np.all(np.abs(poles) < 1))}
-    zeta = -osc_poles.real / np.abs(osc_poles)
-    i = int(np.argmin(zeta))
-    return {"damping": _f(float(zeta[i])), "period_s": _f(float(2 * math.pi / abs(osc_poles[i].imag))),
-            "stable": bool(np.all(np.abs(poles) < 1))}
+    n = len(pv)
+    u = sp - sp[0]
+    best = (math.inf, 0.0, 0.0, 0)
+    y = pv - np.mean(pv)
+    syy = float(y @ y)
+    for zeta in (0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.55, 0.7, 0.9, 1.2):
+        for period_n in np.geomspace(4 * dt_s, n * dt_s / 4, 16):
+            den_d = _second_order_poles(zeta, 2 * math.pi / period_n, dt_s)
+            resp = lfilter([0.0, float(np.sum(den_d))], den_d, u)  # unit DC gain, one-sample lag
+            for d in (0, 1, 2, 4, 8):
+                x = np.concatenate((np.zeros(d), resp[: n - d])) if d else resp
+                xc = x - np.mean(x)
+                sxx = float(xc @ xc)
+                if sxx <= 0:
+                    continue
+                sse = syy - float(xc @ y) ** 2 / sxx
+                if sse < best[0]:
+                    best = (sse, zeta, period_n, d)
+    sse, zeta, period_n, d = best
+    r2 = 1.0 - sse / syy if syy > 0 else 0.0
+    if r2 < MIN_SP_R2:
+        return {"r2": _f(r2)}
+    damped = period_n / math.sqrt(1 - zeta ** 2) if zeta < 1 else None
+    return {"damping": zeta, "period_s": _f(damped) if damped else None, "r2": _f(r2), "delay_s": d * dt_s}
+
+
+def _second_order_poles(zeta: float, w: float, dt_s: float) -> np.ndarray:
+    """Denominator in z of the poles exp(s dt) of s^2 + 2 zeta w s + w^2."""
+    if zeta < 1.0:
+        r = math.exp(-zeta * w * dt_s)
+        return np.array([1.0, -2.0 * r * math.cos(w * math.sqrt(1 - zeta ** 2) * dt_s), r * r])
+    root = w * math.sqrt(zeta ** 2 - 1)
+    p1, p2 = math.exp((-zeta * w + root) * dt_s), math.exp((-zeta * w - root) * dt_s)
+    return np.array([1.0, -(p1 + p2), p1 * p2])
 
 
 # ---- the verdict ---------------------------------------------------------------------------
-def loop_cause(ev: Evidence) -> tuple[str, str]:
-    """For an oscillating loop without an actuator cause: (cause, reason)."""
+def loop_cause(ev: Evidence) -> tuple[str, str, str]:
+    """For an oscillating loop without an actuator cause: (cause, verdict, reason).
+
+    At the oscillation's frequency OP and PV always stand in the controller's ratio, whatever
+    drives them, so OP and PV alone cannot tell an aggressive tuning from an external
+    disturbance. Setpoint changes can: the loop's damping from its setpoint responses.
+    """
     cl = ev.closed_loop
     period = ev.oscillation.period_s
-    if cl.get("damping") is not None and cl.get("period_s") and period:
-        near = abs(cl["period_s"] - period) <= 0.4 * period
-        if cl["damping"] < AGGRESSIVE_DAMPING and near:
-            return "aggressive_tuning", (f"the identified PI and process form a loop with damping "
-                                         f"{cl['damping']:.2f} at period {cl['period_s']:.0f} s (observed "
-                                         f"{period:.0f} s): the tuning makes the loop oscillate")
-        return "external_disturbance", (f"the identified loop is damped ({cl['damping']:.2f}, period "
-                                        f"{cl['period_s']:.0f} s) yet PV oscillates at {period:.0f} s: "
-                                        "the oscillation comes from outside the loop")
-    nom = ev.nrmse_nominal
-    if nom <= 0.5:
-        return "aggressive_tuning", (f"OP explains PV's oscillation (held-out NRMSE {nom:.2f}) with a linear "
-                                     "model: the loop generates it")
-    return "external_disturbance", (f"OP explains little of PV's oscillation (held-out NRMSE {nom:.2f}): "
-                                    "it enters from outside the loop")
+    if cl.get("damping") is None:
+        return "none", "not_identifiable", (
+            "no valve nonlinearity explains the oscillation; telling aggressive tuning from an external "
+            "disturbance needs setpoint changes the loop responds to (or a process model), and this record "
+            "has none that explain PV")
+    zeta, p_cl = cl["damping"], cl.get("period_s")
+    near = p_cl is not None and period is not None and abs(p_cl - period) <= 0.4 * period
+    if zeta < AGGRESSIVE_DAMPING and near:
+        return "aggressive_tuning", "explained", (
+            f"the loop answers setpoint changes with damping {zeta:.2f} and period {p_cl:.0f} s, the period "
+            f"it oscillates at ({period:.0f} s): the tuning makes it oscillate")
+    return "external_disturbance", "explained", (
+        f"the loop answers setpoint changes with damping {zeta:.2f}"
+        + (f" and period {p_cl:.0f} s" if p_cl else "") + f", yet PV oscillates at {period:.0f} s: "
+        "the oscillation enters from outside the loop")
 
 
 def decide(ev: Evidence, gain_threshold_percent: float = GAIN_THRESHOLD_PERCENT) -> dict:
@@ -257,9 +275,10 @@ def decide(ev: Evidence, gain_threshold_percent: float = GAIN_THRESHOLD_PERCENT)
                            f"{ev.nrmse_nominal:.3f} to {chosen.model.nrmse_validation:.3f} "
                            f"({gain:.0f} %)")}
     if ev.oscillation.oscillating:
-        cause, reason = loop_cause(ev)
-        return {"cause": cause, "family": "loop", "parameters": {}, "verdict": "explained",
-                "confidence": _f(weights.get("nominal", 0.0)), "reason": reason}
+        cause, verdict, reason = loop_cause(ev)
+        conf = weights.get("nominal", 0.0) if verdict == "explained" else 0.0
+        return {"cause": cause, "family": "loop", "parameters": {}, "verdict": verdict,
+                "confidence": _f(conf), "reason": reason}
     return {"cause": "none", "family": "none", "parameters": {}, "verdict": "none",
             "confidence": _f(weights.get("nominal", 0.0)),
             "reason": (f"the loop does not oscillate and no valve nonlinearity improves the held-out fit by "
@@ -343,7 +362,7 @@ def report(run: Run, ev: Evidence, settings: Settings | None = None) -> dict:
         out["ranking"] = [c.entry() for c in sorted(ev.causes, key=lambda c: c.model.nrmse_validation)]
         out["missed_by_linear_model"] = ev.symptoms
         out["controller"] = ev.controller.to_dict()
-        out["closed_loop"] = ev.closed_loop
+        out["setpoint_response"] = ev.closed_loop
     else:
         out.update(nrmse_nominal=None, nrmse_extended=None, gain_percent=None, extended_cause=None, ranking=[])
         out["controller"] = ev.controller.to_dict()

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
@@ -166,6 +167,25 @@ def _response(du: np.ndarray, tau_s: float, dt_s: float, integrating: bool) -> n
     return np.cumsum(x) * dt_s if integrating else x
 
 
+@lru_cache(maxsize=16)
+def _lag_spectra(poles: tuple[float, ...], n: int, nfft: int) -> np.ndarray:
+    """Spectra of the unit-gain lags' impulse responses h[k] = (1 - a) a^(k-1), k >= 1, truncated at n."""
+    k = np.arange(n, dtype=float)
+    a = np.asarray(poles)[:, None]
+    h = np.where(k[None, :] >= 1, (1.0 - a) * a ** np.maximum(k[None, :] - 1, 0), 0.0)
+    return np.fft.rfft(h, nfft, axis=1)
+
+
+def _responses(du: np.ndarray, taus_s: np.ndarray, dt_s: float, integrating: bool) -> np.ndarray:
+    """:func:`_response` for many time constants at once (one FFT convolution, exact for the record)."""
+    n = len(du)
+    nfft = 1 << (2 * n - 1).bit_length()
+    poles = tuple(math.exp(-dt_s / t) if t > 0 else 0.0 for t in taus_s)
+    x = np.fft.irfft(np.fft.rfft(du - du[0], nfft)[None, :] * _lag_spectra(poles, n, nfft), nfft, axis=1)[:, :n]
+    x += du[0]
+    return np.cumsum(x, axis=1) * dt_s if integrating else x
+
+
 def _shift(x: np.ndarray, d: int) -> np.ndarray:
     idx = np.clip(np.arange(len(x)) - d, 0, len(x) - 1)
     return x[idx]
@@ -173,52 +193,71 @@ def _shift(x: np.ndarray, d: int) -> np.ndarray:
 
 def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
                   gain_sign: int = 0, delays: np.ndarray = DELAYS,
-                  tau_factors: np.ndarray = TAU_FACTORS) -> LinearModel:
+                  tau_factors: np.ndarray = TAU_FACTORS, sse_only: bool = False) -> LinearModel | float:
     """FOPTD (or integrating with lag) from u to y, minimising the pooled h-step prediction error.
 
     Self-regulating: dy_h = K dx_h.  Integrating: dy_h = K dz_h + b h dt (z = dt cumsum x).
-    ``gain_sign`` +1 / -1 admits only gains of that sign (0: either).
+    ``gain_sign`` +1 / -1 admits only gains of that sign (0: either). ``sse_only``: return the
+    training criterion alone (the nonlinearity search calls this thousands of times).
+
+    The increments of the training part from sample ``max(delays)`` on are the residuals for
+    every delay alike; for each horizon the cross products with all delays come from one
+    correlation and one cumulative sum.
     """
     n_tr = split.n_train
     du = u - float(np.mean(u[split.train]))
     hs = split.horizons
-    delays = delays[delays < n_tr // 4]
-    idx = np.clip(np.arange(n_tr)[None, :] - delays[:, None], 0, len(u) - 1)
-    yt = y[:n_tr]
-    dys = [yt[h:] - yt[:-h] for h in hs]
+    delays = np.asarray(delays)[np.asarray(delays) < n_tr // 4]
+    d_max = max(int(delays.max()), 0)
+    starts = d_max - delays  # where delay d's window starts in the response's increments
+    # targets: dy_h[k] for k in [h + d_max, n_tr)
+    dys = [y[h + d_max:n_tr] - y[d_max:n_tr - h] for h in hs]
     if integrating:
-        # project the drift column (h dt in block h) out of the targets and regressors
-        norm = math.sqrt(sum((n_tr - h) * (h * dt_s) ** 2 for h in hs))
+        # project the drift column (h dt in horizon h's block) out of targets and regressors
+        norm = math.sqrt(sum(len(d) * (h * dt_s) ** 2 for d, h in zip(dys, hs)))
         w = [h * dt_s / norm for h in hs]
         c_y = sum(wi * float(d.sum()) for wi, d in zip(w, dys))
         dys = [d - c_y * wi for d, wi in zip(dys, w)]
     syy = float(sum(d @ d for d in dys))
-    best = (syy, 0.0, 0, 0.0)  # sse, tau, d, gain
-    for factor in tau_factors:
-        tau_s = float(factor * dt_s)
-        rows = _response(du, tau_s, dt_s, integrating)[idx]
-        sxx = np.zeros(len(delays))
-        sxy = np.zeros(len(delays))
-        drs = []
-        for h, d in zip(hs, dys):
-            dr = rows[:, h:] - rows[:, :-h]
-            drs.append(dr)
-            sxx += np.einsum("ij,ij->i", dr, dr)
-            sxy += dr @ d
+    taus = np.asarray(tau_factors, float) * dt_s
+    resp = _responses(du, taus, dt_s, integrating)  # (n_tau, n)
+    n_off = int(starts.max()) + 1
+    sxx = np.zeros((len(taus), len(delays)))
+    sxy = np.zeros_like(sxx)
+    sdr = np.zeros_like(sxx)
+    for h, dy, wi in zip(hs, dys, w if integrating else [0.0] * len(hs)):
+        # target i (sample k = i + h + d_max) meets, for delay d, the response increment
+        # D[i + s_d] with D[j] = r[j + h] - r[j] and s_d = d_max - d
+        n_dy = len(dy)
+        span = n_dy + n_off - 1
+        inc = resp[:, h:h + span] - resp[:, :span]
+        sxy += (inc @ _shifted(dy, n_off).T)[:, starts]
+        c2 = np.concatenate((np.zeros((len(taus), 1)), np.cumsum(inc * inc, axis=1)), axis=1)
+        sxx += c2[:, starts + n_dy] - c2[:, starts]
         if integrating:
-            c_r = sum(wi * dr.sum(axis=1) for wi, dr in zip(w, drs))
-            sxx -= c_r ** 2
-            # targets were projected already, so the cross term needs no correction
-        ok = sxx > 1e-12 * max(1e-300, float(sxx.max()))
-        gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
-        if gain_sign:
-            gain = np.where(gain * gain_sign > 0, gain, 0.0)
-        sse = syy - 2 * gain * sxy + gain ** 2 * sxx
-        i = int(np.argmin(sse))
-        if sse[i] < best[0] - 1e-12 * syy:
-            best = (float(sse[i]), tau_s, int(delays[i]), float(gain[i]))
-    n_res = sum(n_tr - h for h in hs)
-    return _finish_lag_model(du, y, dt_s, split, integrating, best, n_res)
+            c1 = np.concatenate((np.zeros((len(taus), 1)), np.cumsum(inc, axis=1)), axis=1)
+            sdr += wi * (c1[:, starts + n_dy] - c1[:, starts])
+    if integrating:
+        sxx = sxx - sdr ** 2
+    ok = sxx > 1e-12 * max(1e-300, float(sxx.max()))
+    gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
+    if gain_sign:
+        gain = np.where(gain * gain_sign > 0, gain, 0.0)
+    sse = syy - 2 * gain * sxy + gain ** 2 * sxx
+    it, idl = np.unravel_index(int(np.argmin(sse)), sse.shape)
+    best = (float(sse[it, idl]), float(taus[it]), int(delays[idl]), float(gain[it, idl]))
+    if best[0] > syy:
+        best = (syy, 0.0, 0, 0.0)
+    if sse_only:
+        return best[0]
+    return _finish_lag_model(du, y, dt_s, split, integrating, best, sum(len(d) for d in dys))
+
+
+def _shifted(dy: np.ndarray, n_off: int) -> np.ndarray:
+    """Rows m[o] = dy placed at offset o in a vector of length len(dy) + n_off - 1 (zeros elsewhere)."""
+    pad = np.zeros(n_off - 1)
+    zp = np.concatenate((pad, dy, pad))
+    return np.lib.stride_tricks.sliding_window_view(zp, len(dy) + n_off - 1)[::-1]
 
 
 def _finish_lag_model(du: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
