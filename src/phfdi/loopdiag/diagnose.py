@@ -68,7 +68,7 @@ class Evidence:
     linear: list[LinearModel]
     causes: list[CauseFit]
     symptoms: dict
-    closed_loop: dict
+    setpoint_response: dict
     baselines: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     identifiable: bool = True
@@ -129,7 +129,7 @@ def gather_evidence(run: Run, settings: Settings | None = None) -> Evidence:
     ev = Evidence(osc, ctrl, linear, causes, {}, {}, baselines, notes,
                   n_eff=effective_samples(pv, linear[0].y_model, split))
     ev.symptoms = symptoms(op, pv, linear[0], osc, dt, ev.chosen())
-    ev.closed_loop = setpoint_response(pv, sp, dt) if osc.oscillating else {}
+    ev.setpoint_response = setpoint_response(pv, sp, dt) if osc.oscillating else {}
     return ev
 
 
@@ -239,13 +239,18 @@ def loop_cause(ev: Evidence) -> tuple[str, str, str]:
     drives them, so OP and PV alone cannot tell an aggressive tuning from an external
     disturbance. Setpoint changes can: the loop's damping from its setpoint responses.
     """
-    cl = ev.closed_loop
+    cl = ev.setpoint_response
     period = ev.oscillation.period_s
-    if cl.get("damping") is None:
+    if not cl:
         return "none", "not_identifiable", (
             "no valve nonlinearity explains the oscillation; telling aggressive tuning from an external "
-            "disturbance needs setpoint changes the loop responds to (or a process model), and this record "
-            "has none that explain PV")
+            "disturbance needs setpoint changes the loop responds to (or a process model), and SP does not "
+            "move in this record")
+    if cl.get("damping") is None:
+        return "none", "not_explained", (
+            f"no valve nonlinearity explains the oscillation, and the setpoint changes explain only "
+            f"{100 * max(cl.get('r2') or 0.0, 0.0):.0f} % of PV: neither a tuning nor an external disturbance "
+            "can be shown")
     zeta, p_cl = cl["damping"], cl.get("period_s")
     near = p_cl is not None and period is not None and abs(p_cl - period) <= 0.4 * period
     if zeta < AGGRESSIVE_DAMPING and near:
@@ -362,7 +367,7 @@ def report(run: Run, ev: Evidence, settings: Settings | None = None) -> dict:
         out["ranking"] = [c.entry() for c in sorted(ev.causes, key=lambda c: c.model.nrmse_validation)]
         out["missed_by_linear_model"] = ev.symptoms
         out["controller"] = ev.controller.to_dict()
-        out["setpoint_response"] = ev.closed_loop
+        out["setpoint_response"] = ev.setpoint_response
     else:
         out.update(nrmse_nominal=None, nrmse_extended=None, gain_percent=None, extended_cause=None, ranking=[])
         out["controller"] = ev.controller.to_dict()

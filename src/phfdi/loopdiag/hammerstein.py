@@ -153,20 +153,21 @@ def fit_backlash(p: Problem) -> CauseFit:
 
 
 def fit_stiction(p: Problem, backlash: CauseFit | None = None) -> CauseFit:
-    """Kano S on a log grid and J as a fraction of S in [0, 1.2]; the three best grid points
+    """Kano S on a log grid and J as a fraction of S in [0, 1.2]; the two best grid points
     are refined on finer local grids (the error surface is rugged: a slip one sample earlier
     or later changes the fit).
 
-    Kano's model with J = 0 is a backlash of width S: the backlash optimum, when given, is a
-    starting point too, so the two-parameter model never fits the training data worse than
-    its special case.
+    Kano's model with J = 0 is a dead-band of width S, like a backlash, except at the start of
+    the record: the Kano block starts stuck and needs a full S to move either way, the backlash
+    block starts centred and needs half its width. The backlash optimum, when given, is a
+    starting point of the refinement too.
     """
     f = lambda z: p.sse(Stiction(s_pct=10.0 ** z[0], j_pct=10.0 ** z[0] * z[1]))  # noqa: E731
     lw = _widths(p, 16)
     step = float(lw[1] - lw[0])
     _, _, grid, values = brute(f, (slice(lw[0], lw[-1] + 0.5 * step, step), slice(0.0, 1.21, 0.2)),
                                finish=None, full_output=True)
-    flat = np.argsort(values, axis=None)[:3]
+    flat = np.argsort(values, axis=None)[:2]
     starts = [grid[:, *np.unravel_index(i, values.shape)] for i in flat]
     if backlash is not None:
         starts.append(np.array([math.log10(backlash.parameters["width_pct"]), 0.0]))
@@ -243,17 +244,17 @@ def fit_quantization(p: Problem) -> CauseFit:
 
     Parametrised by the boundary, not by the levels' offset: a loop hunts across one boundary,
     so with b right the error changes smoothly with q, while with the offset as parameter the
-    optimum is a needle no grid finds. b runs over OP's quantiles, q over a log grid; the three
+    optimum is a needle no grid finds. b runs over OP's quantiles, q over a log grid; the two
     best points are refined locally.
     """
-    qs = _widths(p, 10)
+    qs = _widths(p, 8)
     step = float(qs[1] - qs[0])
-    bs = np.quantile(p.op_train, np.linspace(0.05, 0.95, 19))
+    bs = np.quantile(p.op_train, np.linspace(0.05, 0.95, 13))
     b_step = float(np.median(np.diff(bs))) if len(bs) > 1 else 0.1
     f = lambda z: p.sse(_quantizer(z[0], z[1]))  # noqa: E731
     scores = [(f((lq, b)), lq, b) for lq in qs for b in bs]
     best = min(scores)
-    for _, lq0, b0 in sorted(scores)[:3]:
+    for _, lq0, b0 in sorted(scores)[:2]:
         z, fz, *_ = brute(f, (slice(lq0 - step / 2, lq0 + step * 0.51, step / 4),
                               slice(b0 - b_step / 2, b0 + b_step * 0.51, b_step / 4)), finish=None, full_output=True)
         if fz < best[0]:

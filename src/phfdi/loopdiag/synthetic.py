@@ -101,3 +101,58 @@ def steps_every(period_s: float, duration_s: float, center: float, size: float) 
         t += period_s
         up = not up
     return out
+
+
+@dataclass(frozen=True)
+class Case:
+    """A synthetic loop and what the diagnosis must say about it."""
+
+    loop: SyntheticLoop
+    cause: str
+    parameters: dict = field(default_factory=dict)
+
+
+def acceptance_cases(duration_s: float = 3000.0) -> dict[str, Case]:
+    """The loops of the acceptance tests and of docs/loop_diagnosis.md (FOPTD K 1.5, tau 60 s,
+    dead time 8 s, PI Kp 0.8 %/unit, Ti 60 s, sampled at 4 s, PV noise 0.05 unless stated)."""
+    d = duration_s
+    sp_steps = steps_every(500, d, 50, 3)
+    return {
+        "stiction": Case(SyntheticLoop(valve=("stiction", {"s_pct": 3.0, "j_pct": 1.0}), ti_s=30,
+                                       setpoint_steps=[(100, 52), (1500, 49)], loop_tag="SYN_STICTION"),
+                         "stiction", {"s_pct": 3.0, "j_pct": 1.0}),
+        "stiction_no_offset": Case(SyntheticLoop(valve=("stiction", {"s_pct": 2.0, "j_pct": 2.0}), ti_s=30,
+                                                 setpoint_steps=[(100, 52), (1500, 49)],
+                                                 loop_tag="SYN_STICTION_J_EQ_S"),
+                                   "stiction", {"s_pct": 2.0, "j_pct": 2.0}),
+        "stiction_level": Case(SyntheticLoop(process="integrating", gain=0.02, time_constant_s=20.0, kp=3.0,
+                                             ti_s=300.0, valve=("stiction", {"s_pct": 2.0, "j_pct": 0.5}),
+                                             setpoint_steps=[(100, 51)], loop_tag="SYN_LIC_STICTION"),
+                               "stiction", {"s_pct": 2.0, "j_pct": 0.5}),
+        "backlash": Case(SyntheticLoop(valve=("backlash", {"width_pct": 2.0}), setpoint_steps=sp_steps,
+                                       loop_tag="SYN_BACKLASH"), "backlash", {"width_pct": 2.0}),
+        "deadzone": Case(SyntheticLoop(valve=("deadzone", {"width_pct": 3.0}), setpoint_steps=sp_steps,
+                                       loop_tag="SYN_DEADZONE"), "deadzone", {"width_pct": 3.0, "center_pct": 50.0}),
+        "saturation": Case(SyntheticLoop(valve=("saturation", {"low_pct": 0.0, "high_pct": 54.0}),
+                                         setpoint_steps=steps_every(500, d, 50, 8), loop_tag="SYN_SATURATION"),
+                           "saturation", {"high_pct": 54.0}),
+        "quantization": Case(SyntheticLoop(valve=("quantization", {"step_pct": 1.5}), setpoint_steps=sp_steps,
+                                           loop_tag="SYN_QUANTIZATION"), "quantization", {"step_pct": 1.5}),
+        "external_disturbance": Case(SyntheticLoop(disturbance_amplitude=1.0, disturbance_period_s=200,
+                                                   setpoint_steps=steps_every(1000, d, 50, 2),
+                                                   loop_tag="SYN_EXTERNAL"), "external_disturbance"),
+        "aggressive_tuning": Case(SyntheticLoop(kp=2.6, ti_s=20, load_walk_std=0.2,
+                                                setpoint_steps=steps_every(1000, d, 50, 2),
+                                                loop_tag="SYN_AGGRESSIVE"), "aggressive_tuning"),
+        "healthy": Case(SyntheticLoop(setpoint_steps=sp_steps, loop_tag="SYN_HEALTHY"), "none"),
+    }
+
+
+def weakness_cases(duration_s: float = 3000.0) -> dict[str, Case]:
+    """Loops the diagnosis is known to get wrong (docs/loop_diagnosis.md, Limitations): a healthy
+    valve whose OP keeps compensating a random-walk load looks like a dead-band, because the
+    load cancels the effect of OP's small moves on PV."""
+    return {
+        "healthy_with_load_walk": Case(SyntheticLoop(setpoint_steps=steps_every(500, duration_s, 50, 3),
+                                                     load_walk_std=0.05, loop_tag="SYN_HEALTHY_LOAD"), "none"),
+    }
