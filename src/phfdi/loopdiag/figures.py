@@ -29,8 +29,9 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
         ax_pv.plot(t_min, run["sp"], color="0.5", ls="--", lw=0.8, label="SP")
     if ev.identifiable:
         nom = ev.nominal
+        worse = ", worse than 'PV stays' (1.00)" if nom.nrmse_validation > 1.0 else ""
         ax_pv.plot(t_min, nom.y_model, color="tab:blue", lw=0.9,
-                   label=f"linear {nom.structure} (held-out NRMSE {ev.nrmse_nominal:.2f})")
+                   label=f"linear {nom.structure} (held-out NRMSE {nom.nrmse_validation:.2f}{worse})")
         chosen = ev.chosen()
         if chosen is not None:
             ax_pv.plot(t_min, chosen.model.y_model, color="tab:red", lw=0.9,
