@@ -23,6 +23,7 @@ COMMANDS = [
     "scenarios",
     "paper_runs",
     "analyze",
+    "loop_diagnose",
 ]
 
 

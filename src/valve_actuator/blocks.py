@@ -264,25 +264,30 @@ class Blocking:
 @register_block("quantization")
 @dataclass
 class Quantization:
-    """Position resolution: the stem settles on multiples of ``step_pct``.
+    """Position resolution: the stem settles on levels ``step_pct`` apart.
 
-        y = step * round(x / step)
+        y = offset + step * round((x - offset) / step)
 
-    (a stepper-driven actuator, or a positioner's resolution).
+    (a stepper-driven actuator, or a positioner's resolution). The levels sit at
+    multiples of the step from ``offset_pct`` (default 0: multiples of the step).
     """
 
     step_pct: float
     severity: float = 1.0
+    offset_pct: float = 0.0
 
     def __post_init__(self) -> None:
         _positive("step_pct", self.step_pct, allow_zero=False)
+        if not math.isfinite(self.offset_pct):
+            raise ValueError(f"offset_pct must be finite, got {self.offset_pct}")
 
     def reset(self, x0: float) -> None:
         pass
 
     def step(self, x: float, t_s: float) -> float:
         q = self.step_pct * self.severity
-        return q * round(x / q) if q > 0.0 else x
+        c = self.offset_pct
+        return c + q * round((x - c) / q) if q > 0.0 else x
 
 
 @register_block("leakage")

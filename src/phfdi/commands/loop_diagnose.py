@@ -1,0 +1,92 @@
+"""phfdi loop-diagnose: valve stiction and friends from historian OP, PV and SP."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .common import EPILOG_FORMAT
+
+EXAMPLES = """examples:
+  phfdi loop-diagnose ../shared/data/plant_loops/stiction/stic_2111FIC46005_0614_0003.txt
+  phfdi loop-diagnose ../shared/data/plant_loops/*/*.txt --json > loops.json
+  phfdi loop-diagnose export.csv --columns op=FIC101.OP,pv=FIC101.PV,sp=FIC101.SP,time=Timestamp
+  phfdi loop-diagnose export.csv --columns mapping.yaml --process integrating --figure figs/
+
+file formats: the tab-separated historian export of ../shared/data/plant_loops (detected by its
+'PROCESSDATA' title line) and CSV with a header line. CSV columns are guessed from names (time_s,
+op_pct, pv, sp; or tags ending .OP/.MV, .PV, .SP/.SV) unless --columns maps them; a YAML mapping is
+
+  columns: {time: Timestamp, op: FIC101.OP, pv: FIC101.PV, sp: FIC101.SP}
+  loop_tag: FIC101          # optional
+  sample_time_s: 10         # when there is no time column
+
+exit status: 0 when at least one file was diagnosed (a file that cannot be read gets one line on
+stderr and the batch goes on), 2 when every file failed or the arguments are wrong.
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("loop-diagnose", help="diagnose valve stiction and friends from historian OP, PV and SP",
+                       description="Diagnose control loops from historian records of OP, PV and SP alone: "
+                                   "detect an oscillation, identify a linear OP -> PV model, show what it "
+                                   "misses, fit valve nonlinearities (stiction with Kano's S and J, backlash, "
+                                   "dead-zone, saturation, quantisation) jointly with the linear part, rank them "
+                                   "on held-out data and name the cause.",
+                       epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
+    p.add_argument("files", nargs="+", metavar="FILE", help="loop records (plant_loops export or CSV)")
+    p.add_argument("--columns", default=None, metavar="MAP",
+                   help="CSV column mapping: op=NAME,pv=NAME[,sp=NAME][,time=NAME] or a .yaml file")
+    p.add_argument("--process", choices=("auto", "self_regulating", "integrating"), default="auto",
+                   help="process type (default auto: level loops, tags with LIC, integrate)")
+    p.add_argument("--gain-threshold", type=float, default=None, metavar="PCT",
+                   help="held-out NRMSE gain (%%) a valve model needs to be named the cause (default 10)")
+    p.add_argument("--causes", default=None, metavar="LIST",
+                   help="actuator causes to fit, comma separated (default: all of "
+                        "backlash,deadzone,saturation,quantization,stiction)")
+    p.add_argument("--no-baselines", action="store_true", help="skip the Horch and He et al. stiction tests")
+    p.add_argument("--workers", type=int, default=None, help="processes for a batch (default: 2)")
+    p.add_argument("--figure", default=None, metavar="DIR", help="write one PNG per loop into DIR")
+    p.add_argument("--json", action="store_true", help="print the reports as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from phfdi.errors import UserError
+    from phfdi.loopdiag.batch import diagnose_files, stderr_progress
+    from phfdi.loopdiag.diagnose import Settings
+    from phfdi.loopdiag.hammerstein import ACTUATOR_CAUSES
+    from phfdi.loopdiag.readers import ColumnMap
+    from phfdi.loopdiag.report import format_report, format_summary, to_json
+
+    columns = ColumnMap.parse(args.columns) if args.columns else None
+    settings = Settings(baselines=not args.no_baselines,
+                        process_type=None if args.process == "auto" else args.process)
+    if args.gain_threshold is not None:
+        if not args.gain_threshold >= 0:
+            raise UserError(f"--gain-threshold must be a percentage >= 0, got {args.gain_threshold}")
+        settings.gain_threshold_percent = args.gain_threshold
+    if args.causes:
+        causes = tuple(c.strip() for c in args.causes.split(",") if c.strip())
+        unknown = [c for c in causes if c not in ACTUATOR_CAUSES]
+        if unknown or not causes:
+            raise UserError(f"--causes: unknown cause {unknown[0] if unknown else '(none)'!r}; "
+                            f"known: {', '.join(ACTUATOR_CAUSES)}")
+        settings.causes = causes
+    if args.workers is not None and args.workers < 1:
+        raise UserError(f"--workers must be at least 1, got {args.workers}")
+    reports = diagnose_files(args.files, columns, settings, args.workers, stderr_progress(),
+                             figure_dir=args.figure)
+    for r in reports:
+        if "error" in r:
+            print(f"phfdi loop-diagnose: {r['error']}", file=sys.stderr)
+    if args.json:
+        print(to_json(reports))
+    else:
+        good = [r for r in reports if "error" not in r]
+        for r in good:
+            print(format_report(r))
+            print()
+        if len(reports) > 1:
+            print(format_summary(reports))
+    return 0 if any("error" not in r for r in reports) else 2

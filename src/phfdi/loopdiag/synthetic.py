@@ -1,0 +1,158 @@
+"""Closed loops with known faults: a PI controller, a valve block, a FOPTD or integrating process.
+
+The acceptance tests and docs/loop_diagnosis.md diagnose these runs and compare with the truth.
+The controller is :class:`pi_controllers.pi.PIController` and the valve nonlinearities are the
+blocks of :mod:`valve_actuator.blocks` (the same code the pH simulator runs). The process is
+simulated exactly for a piecewise-constant stem position (zero-order hold):
+
+    FOPTD:        x(k+1) = a x(k) + K (1 - a) (v(k - d) - v0),   a = exp(-dt / tau)
+    integrating:  x(k+1) = x(k) + K dt (v(k - d) - v0)
+    PV(k) = pv0 + x(k) + disturbance(k) + noise(k)
+
+with d the dead time in samples and v0 the stem position at the start (the loop starts at rest).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from phfdi.blocks import make_block
+from phfdi.run import Run
+from pi_controllers.pi import PIController
+
+import valve_actuator.blocks  # noqa: F401  (registers the valve blocks)
+
+
+@dataclass
+class SyntheticLoop:
+    """One closed loop; ``valve`` is ``(block name, params)`` of :mod:`valve_actuator.blocks` or None."""
+
+    process: str = "foptd"  # or "integrating"
+    gain: float = 1.5  # PV units per % of stem travel (per % per s when integrating)
+    time_constant_s: float = 60.0
+    dead_time_s: float = 8.0
+    dt_s: float = 4.0
+    duration_s: float = 3000.0
+    kp: float = 0.8  # % per PV unit
+    ti_s: float = 60.0
+    valve: tuple[str, dict] | None = None
+    op0_pct: float = 50.0
+    pv0: float = 50.0
+    setpoint_steps: list[tuple[float, float]] = field(default_factory=list)  # (time s, setpoint)
+    disturbance_amplitude: float = 0.0  # sinusoid added to PV
+    disturbance_period_s: float = 300.0
+    load_walk_std: float = 0.0  # random-walk load at the process input (% per sample)
+    noise_std: float = 0.05
+    seed: int = 1
+    loop_tag: str = "SYN"
+
+
+def simulate_loop(spec: SyntheticLoop) -> Run:
+    """The closed loop's historian record: time_s, op_pct, pv, sp, and the truth stem_pct."""
+    rng = np.random.default_rng(spec.seed)
+    n = int(round(spec.duration_s / spec.dt_s))
+    d = int(round(spec.dead_time_s / spec.dt_s))
+    a = math.exp(-spec.dt_s / spec.time_constant_s) if spec.time_constant_s > 0 else 0.0
+    valve = make_block(spec.valve[0], spec.valve[1]) if spec.valve else None
+    pi = PIController(kp=spec.kp, ti_s=spec.ti_s, dt_s=spec.dt_s,
+                      action="reverse" if spec.gain > 0 else "direct")
+    sp_now = spec.pv0
+    pi.reset(spec.op0_pct, sp_now, spec.pv0)
+    if valve is not None:
+        valve.reset(spec.op0_pct)
+    steps = sorted(spec.setpoint_steps)
+    v_hist = [spec.op0_pct] * (d + 1)
+    x = 0.0
+    load = 0.0
+    out = {k: np.empty(n) for k in ("time_s", "op_pct", "pv", "sp", "stem_pct")}
+    for k in range(n):
+        t = k * spec.dt_s
+        while steps and steps[0][0] <= t:
+            sp_now = steps.pop(0)[1]
+        dist = spec.disturbance_amplitude * math.sin(2 * math.pi * t / spec.disturbance_period_s)
+        pv = spec.pv0 + x + dist + spec.noise_std * rng.standard_normal()
+        op = pi.step(sp_now, pv)
+        v = valve.step(op, t) if valve is not None else op
+        v_hist.append(v)
+        v_in = v_hist[-1 - d] + load
+        load += spec.load_walk_std * rng.standard_normal()
+        if spec.process == "integrating":
+            x = x + spec.gain * spec.dt_s * (v_in - spec.op0_pct)
+        else:
+            x = a * x + spec.gain * (1 - a) * (v_in - spec.op0_pct)
+        for key, val in (("time_s", t), ("op_pct", op), ("pv", pv), ("sp", sp_now), ("stem_pct", v)):
+            out[key][k] = val
+    meta = {"loop_tag": spec.loop_tag, "file": f"synthetic:{spec.loop_tag}", "sample_time_s": spec.dt_s,
+            "units": {"op_pct": "%", "pv": "PV units", "sp": "PV units"},
+            "process_type": "integrating" if spec.process == "integrating" else "self_regulating",
+            "synthetic": {"valve": spec.valve, "kp": spec.kp, "ti_s": spec.ti_s}, "notes": []}
+    return Run(out, meta)
+
+
+def steps_every(period_s: float, duration_s: float, center: float, size: float) -> list[tuple[float, float]]:
+    """Setpoint up and down by ``size`` around ``center`` every ``period_s`` (first step after one period)."""
+    out = []
+    t, up = period_s, True
+    while t < duration_s:
+        out.append((t, center + (size if up else -size)))
+        t += period_s
+        up = not up
+    return out
+
+
+@dataclass(frozen=True)
+class Case:
+    """A synthetic loop and what the diagnosis must say about it."""
+
+    loop: SyntheticLoop
+    cause: str
+    parameters: dict = field(default_factory=dict)
+
+
+def acceptance_cases(duration_s: float = 3000.0) -> dict[str, Case]:
+    """The loops of the acceptance tests and of docs/loop_diagnosis.md (FOPTD K 1.5, tau 60 s,
+    dead time 8 s, PI Kp 0.8 %/unit, Ti 60 s, sampled at 4 s, PV noise 0.05 unless stated)."""
+    d = duration_s
+    sp_steps = steps_every(500, d, 50, 3)
+    return {
+        "stiction": Case(SyntheticLoop(valve=("stiction", {"s_pct": 3.0, "j_pct": 1.0}), ti_s=30,
+                                       setpoint_steps=[(100, 52), (1500, 49)], loop_tag="SYN_STICTION"),
+                         "stiction", {"s_pct": 3.0, "j_pct": 1.0}),
+        "stiction_no_offset": Case(SyntheticLoop(valve=("stiction", {"s_pct": 2.0, "j_pct": 2.0}), ti_s=30,
+                                                 setpoint_steps=[(100, 52), (1500, 49)],
+                                                 loop_tag="SYN_STICTION_J_EQ_S"),
+                                   "stiction", {"s_pct": 2.0, "j_pct": 2.0}),
+        "stiction_level": Case(SyntheticLoop(process="integrating", gain=0.02, time_constant_s=20.0, kp=3.0,
+                                             ti_s=300.0, valve=("stiction", {"s_pct": 2.0, "j_pct": 0.5}),
+                                             setpoint_steps=[(100, 51)], loop_tag="SYN_LIC_STICTION"),
+                               "stiction", {"s_pct": 2.0, "j_pct": 0.5}),
+        "backlash": Case(SyntheticLoop(valve=("backlash", {"width_pct": 2.0}), setpoint_steps=sp_steps,
+                                       loop_tag="SYN_BACKLASH"), "backlash", {"width_pct": 2.0}),
+        "deadzone": Case(SyntheticLoop(valve=("deadzone", {"width_pct": 3.0}), setpoint_steps=sp_steps,
+                                       loop_tag="SYN_DEADZONE"), "deadzone", {"width_pct": 3.0, "center_pct": 50.0}),
+        "saturation": Case(SyntheticLoop(valve=("saturation", {"low_pct": 0.0, "high_pct": 54.0}),
+                                         setpoint_steps=steps_every(500, d, 50, 8), loop_tag="SYN_SATURATION"),
+                           "saturation", {"high_pct": 54.0}),
+        "quantization": Case(SyntheticLoop(valve=("quantization", {"step_pct": 1.5}), setpoint_steps=sp_steps,
+                                           loop_tag="SYN_QUANTIZATION"), "quantization", {"step_pct": 1.5}),
+        "external_disturbance": Case(SyntheticLoop(disturbance_amplitude=1.0, disturbance_period_s=200,
+                                                   setpoint_steps=steps_every(1000, d, 50, 2),
+                                                   loop_tag="SYN_EXTERNAL"), "external_disturbance"),
+        "aggressive_tuning": Case(SyntheticLoop(kp=2.6, ti_s=20, load_walk_std=0.2,
+                                                setpoint_steps=steps_every(1000, d, 50, 2),
+                                                loop_tag="SYN_AGGRESSIVE"), "aggressive_tuning"),
+        "healthy": Case(SyntheticLoop(setpoint_steps=sp_steps, loop_tag="SYN_HEALTHY"), "none"),
+    }
+
+
+def weakness_cases(duration_s: float = 3000.0) -> dict[str, Case]:
+    """Loops the diagnosis is known to get wrong (docs/loop_diagnosis.md, Limitations): a healthy
+    valve whose OP keeps compensating a random-walk load looks like a dead-band, because the
+    load cancels the effect of OP's small moves on PV."""
+    return {
+        "healthy_with_load_walk": Case(SyntheticLoop(setpoint_steps=steps_every(500, duration_s, 50, 3),
+                                                     load_walk_std=0.05, loop_tag="SYN_HEALTHY_LOAD"), "none"),
+    }

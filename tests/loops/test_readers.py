@@ -1,0 +1,112 @@
+"""Readers: the plant_loops export, CSV with a column mapping, and one clear message per bad file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phfdi.loopdiag.readers import ColumnMap, LoopDataError, guess_columns, process_type_for, read_loop
+
+
+def simple_export(path, n=150, pv=None, dt=10):
+    """A file in the plant_loops layout (CRLF, 5 header lines, then rows) with a sine PV."""
+    t = np.arange(n)
+    pv = 100 + np.sin(2 * np.pi * t / 30) if pv is None else pv
+    op = 40 + 0.5 * np.cos(2 * np.pi * t / 30)
+    lines = ["PROCESSDATA\tX1LIC7 Data\tyyyy-MM-dd HH:mm:ss", f"8\t{dt}\t2024-01-01 00:00:00\t{n}",
+             "tagname\tX1LIC7.MV\tX1LIC7.PV\tX1LIC7.SV\tX1LIC7.MODE\tbOpOFL\tbPvOFL\tbSpOFL\tbAutOFL",
+             "desc\ta\tb\tc\tAut\tf1\tf2\tf3\tf4", "settings"]
+    for k in range(n):
+        secs = k * dt
+        lines.append(f"2024-01-01 {secs // 3600:02d}:{secs // 60 % 60:02d}:{secs % 60:02d}\t{float(op[k])!r}\t"
+                     f"{float(pv[k])!r}\t100\t1\t0\t0\t0\t0")
+    path.write_bytes(("\r\n".join(lines) + "\r\n").encode("utf-8"))
+    return path
+
+
+def test_plant_export_becomes_a_run(tmp_path):
+    run = read_loop(simple_export(tmp_path / "a.txt"))
+    assert run.names == ["time_s", "op_pct", "pv", "sp", "mode"]
+    assert run.metadata["loop_tag"] == "X1LIC7"
+    assert run.metadata["process_type"] == "integrating"  # a level loop
+    assert run.dt_s == 10.0 and len(run) == 150
+    assert run["pv"][0] == pytest.approx(100.0) and run["op_pct"][0] == pytest.approx(40.5)
+    assert run.metadata["descriptions"]["pv"] == "b"
+
+
+def test_csv_with_mapping_string_and_yaml(tmp_path):
+    t = np.arange(200) * 5.0
+    rows = ["Timestamp;FIC1.OUT;FIC1.MEAS;FIC1.SET"] + [f"{ti};{50 + np.sin(ti / 40)};{3 + np.cos(ti / 40)};3"
+                                                         for ti in t]
+    path = tmp_path / "x.csv"
+    path.write_text("\n".join(rows))
+    cmap = ColumnMap.parse("op=FIC1.OUT,pv=FIC1.MEAS,sp=FIC1.SET,time=Timestamp")
+    run = read_loop(path, cmap)
+    assert run.dt_s == 5.0 and run["sp"][3] == 3.0 and run["pv"][0] == pytest.approx(4.0)
+    yml = tmp_path / "map.yaml"
+    yml.write_text("columns: {op: FIC1.OUT, pv: FIC1.MEAS}\nloop_tag: FIC1\nsample_time_s: 5\n")
+    run2 = read_loop(path, ColumnMap.parse(str(yml)))
+    assert run2.metadata["loop_tag"] == "FIC1" and "sp" not in run2
+    assert np.allclose(run2["op_pct"], run["op_pct"])
+
+
+def test_csv_columns_guessed_from_tags_and_iso_time(tmp_path):
+    rows = ["time,TIC5.OP,TIC5.PV,TIC5.SP"] + [f"2024-01-01T00:{k // 60:02d}:{k % 60:02d},{50 + k % 7},{(k // 5) % 5},2"
+                                             for k in range(0, 600, 5)]
+    path = tmp_path / "t.csv"
+    path.write_text("\n".join(rows))
+    run = read_loop(path)
+    assert run.metadata["loop_tag"] == "TIC5" and run.dt_s == 5.0
+    assert guess_columns(["a", "b"]) is None
+
+
+@pytest.mark.parametrize("problem, expected", [
+    ("constant", "PV is constant"),
+    ("short", "too short"),
+    ("nan", "missing for 20 samples"),
+])
+def test_bad_files_get_one_clear_message(tmp_path, problem, expected):
+    n = 40 if problem == "short" else 150
+    pv = np.full(n, 5.0) if problem == "constant" else 100 + np.sin(np.arange(n) / 3)
+    if problem == "nan":
+        pv[50:70] = np.nan
+    path = simple_export(tmp_path / f"{problem}.txt", n=n, pv=pv)
+    with pytest.raises(LoopDataError, match=expected) as err:
+        read_loop(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_short_gaps_are_filled_and_noted(tmp_path):
+    pv = 100 + np.sin(np.arange(150) / 3)
+    pv[10:12] = np.nan
+    run = read_loop(simple_export(tmp_path / "gap.txt", pv=pv))
+    assert np.all(np.isfinite(run["pv"]))
+    assert any("filled 2 missing pv" in note for note in run.metadata["notes"])
+
+
+def test_wrong_columns_and_uneven_time(tmp_path):
+    path = tmp_path / "w.csv"
+    path.write_text("a,b,c\n" + "\n".join(f"{k},{k},{k}" for k in range(200)))
+    with pytest.raises(LoopDataError, match="cannot tell the OP and PV"):
+        read_loop(path)
+    with pytest.raises(LoopDataError, match="no column 'zz'"):
+        read_loop(path, ColumnMap.parse("op=zz,pv=b,time=a"))
+    uneven = tmp_path / "u.csv"
+    uneven.write_text("time_s,op_pct,pv\n" + "\n".join(f"{k + (5 if k > 100 else 0)},{k % 9},{k % 4}"
+                                                       for k in range(200)))
+    with pytest.raises(LoopDataError, match="not evenly spaced"):
+        read_loop(uneven)
+
+
+def test_mapping_errors_name_the_key():
+    with pytest.raises(Exception, match="unknown key 'opp'"):
+        ColumnMap.parse("opp=a,pv=b")
+    with pytest.raises(Exception, match="needs op"):
+        ColumnMap.parse("pv=b")
+
+
+def test_process_type_from_tag():
+    assert process_type_for("2111LIC31102B") == "integrating"
+    assert process_type_for("2#CDU.7040-312_LIC63001") == "integrating"
+    assert process_type_for("2111FIC46005") == "self_regulating"
+    assert process_type_for("2111PIC10201") == "self_regulating"
