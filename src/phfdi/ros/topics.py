@@ -1,0 +1,81 @@
+"""The graph's topics: one table for the nodes, the recorder, the bag tools and the docs.
+
+Every data message starts with its simulated time stamp (``header.stamp``, or
+``clock`` for /clock): the stamp of sample k is k * sample_time_s. Lock-step
+order of one sample (as :func:`phfdi.loop.tick`):
+
+    plant        /clock, /plant/measurement (k)
+    controllers  /controller/ph/output, /controller/level/output (k)
+    valve        /valve/ph/state, /valve/outlet/state (k)
+    plant        /plant/state (k), integrates to k + 1
+
+No rclpy import here: the bag tools use this table without ROS.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+# node names (the ROS node name and the launcher's label)
+PLANT = "plant"
+CONTROLLERS = "controllers"
+VALVE = "valve"
+RECORDER = "recorder"
+DETECTOR = "detector"
+
+#: nodes a lock-step graph cannot run without
+LOOP_NODES = (PLANT, CONTROLLERS, VALVE)
+
+
+@dataclass(frozen=True)
+class Topic:
+    name: str
+    type: str  # "package/msg/Type"
+    publisher: str
+    per_sample: bool  # one message per simulated sample
+    description: str
+
+
+CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", PLANT, True,
+              "simulated time; one message per sample, before the measurement")
+MEASUREMENT = Topic("/plant/measurement", "phfdi_interfaces/msg/Measurement", PLANT, True,
+                    "pH probe and level transmitter readings (pH, cm)")
+CONTROLLER_PH = Topic("/controller/ph/output", "phfdi_interfaces/msg/ControllerOutput", CONTROLLERS, True,
+                      "pH loop: setpoint (pH), measurement used (pH), output = acid valve command (%)")
+CONTROLLER_LEVEL = Topic("/controller/level/output", "phfdi_interfaces/msg/ControllerOutput", CONTROLLERS, True,
+                         "level loop: setpoint (cm), measurement used (cm), output = outlet valve command (%)")
+VALVE_PH = Topic("/valve/ph/state", "phfdi_interfaces/msg/ValveState", VALVE, True,
+                 "the pH loop's valve: command, stem position (%), opening, flow (mL/s), fault severity")
+VALVE_OUTLET = Topic("/valve/outlet/state", "phfdi_interfaces/msg/ValveState", VALVE, True,
+                     "outlet valve: command, stem position (%), opening (flow depends on the level)")
+PLANT_STATE = Topic("/plant/state", "phfdi_interfaces/msg/PlantState", PLANT, True,
+                    "simulation ground truth: true pH and level, feed and outlet flows (mL/s), sensor fault")
+DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", VALVE, False,
+                    "valve health: commands held (not finite / out of range), active fault")
+FAULT_ALARM = Topic("/fault_alarm", "phfdi_interfaces/msg/FaultAlarm", DETECTOR, False,
+                    "the detector's alarm (next issue); recorded when present")
+
+#: what the recorder writes, in lock-step order
+RECORDED: tuple[Topic, ...] = (CLOCK, MEASUREMENT, CONTROLLER_PH, CONTROLLER_LEVEL, VALVE_PH, VALVE_OUTLET,
+                               PLANT_STATE, DIAGNOSTICS, FAULT_ALARM)
+BY_NAME = {t.name: t for t in RECORDED}
+
+#: where nodes announce that their endpoints are up and matched (not recorded)
+GRAPH_READY = "/graph/ready"
+
+#: QoS of every data topic, as written to the bag's channel metadata. Reliable and
+#: keep-all: nothing is lost, a slow reliable reader slows the writer down.
+DATA_QOS = {"history": "keep_all", "depth": 0, "reliability": "reliable", "durability": "volatile"}
+
+
+def stamp_ns(k: int, dt_ns: int) -> int:
+    """Stamp (ns) of sample k."""
+    return k * dt_ns
+
+
+def sample_period_ns(sample_time_s: float) -> int:
+    """The sample time as whole nanoseconds (stamps are exact multiples of it)."""
+    dt_ns = round(sample_time_s * 1e9)
+    if dt_ns <= 0 or abs(dt_ns - sample_time_s * 1e9) > 1e-3:
+        raise ValueError(f"sample_time_s = {sample_time_s} s is not a whole number of nanoseconds")
+    return dt_ns

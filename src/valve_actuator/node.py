@@ -1,0 +1,226 @@
+"""ROS 2 node of the loop's valves (thin wrapper of :class:`Valve`): the pH valve and the outlet valve.
+
+When both controller outputs of sample k are in, it calls
+:func:`phfdi.loop.step_valves` (the same call the in-process simulation
+makes) and answers with /valve/ph/state and /valve/outlet/state stamped k.
+
+Bad commands never crash it: a command that is not finite, or outside
+[command_min_pct, command_max_pct] (default -2.5..106.25 %, the NAMUR NE 43
+failure limits of a 4-20 mA signal), is not applied; the valve holds its last
+position, counts it and reports it on /diagnostics.
+
+Faults: ``fault`` / ``fault_onset_s`` at launch, and changed at runtime by a
+parameter set (bumpless: the new fault blocks start from the current stem
+position).
+
+    python -m valve_actuator.node --ros-args -p scenario:=paper -p fault:=stiction
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main
+from phfdi.ros.topics import CONTROLLER_LEVEL, CONTROLLER_PH, DIAGNOSTICS, VALVE, VALVE_OUTLET, VALVE_PH
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from phfdi_interfaces.msg import ControllerOutput, ValveState
+
+#: fault sites this node owns (sensor faults belong to the plant node)
+VALVE_SITES = ("valve", "valve_flow", "outlet_valve", "outlet_valve_flow")
+
+PARAMS = (
+    ParamSpec("command_min_pct", -2.5, "commands below this are rejected and the valve holds (% of span)",
+              range=(-100.0, 0.0), runtime=True),
+    ParamSpec("command_max_pct", 106.25, "commands above this are rejected and the valve holds (% of span)",
+              range=(100.0, 200.0), runtime=True),
+    ParamSpec("diagnostics_period_s", 60.0, "publish /diagnostics every this many s of simulated time "
+                                            "(and whenever a command is rejected); 0: only then",
+              range=(0.0, 1e9), runtime=True),
+)
+
+
+class _Held:
+    """Counts of commands one valve did not apply."""
+
+    def __init__(self) -> None:
+        self.not_finite = 0
+        self.out_of_range = 0
+        self.last_rejected = math.nan
+
+    @property
+    def total(self) -> int:
+        return self.not_finite + self.out_of_range
+
+
+class ValveNode(GraphNode):
+    PARAMS = PARAMS
+    RUNTIME_COMMON = ("fault", "fault_onset_s")
+
+    def __init__(self) -> None:
+        super().__init__(VALVE)
+        try:
+            self._install_valves(self._build_valves(self.spec))
+        except ValueError as exc:
+            raise NodeStartError(str(exc)) from None
+        self.held = {"ph": _Held(), "outlet": _Held()}
+        self.pub_ph = self.data_publisher(ValveState, VALVE_PH.name)
+        self.pub_outlet = self.data_publisher(ValveState, VALVE_OUTLET.name)
+        self.pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
+        self.data_subscription(ControllerOutput, CONTROLLER_PH.name, self._on_ph_output)
+        self.data_subscription(ControllerOutput, CONTROLLER_LEVEL.name, self._on_level_output)
+        self._pending: dict[int, dict[str, ControllerOutput]] = {}
+        self._last_k = -1
+        self._last_report_k: int | None = None
+        self._reported_total = 0
+        self._pending_change = None
+        self.start_barrier()
+
+    # ---- valves from the scenario ---------------------------------------------------------
+    def _build_valves(self, spec):
+        from phfdi.loop import build_parts
+
+        for f in spec.faults:
+            if f.where not in VALVE_SITES:
+                raise ValueError(f"fault {f.type} acts on the {f.where.replace('_', ' ')}, not on a valve: "
+                                 f"set it on the plant node at launch")
+        parts = build_parts(spec)  # keep the valves only
+        return spec, parts.valve, parts.outlet_valve, parts.start
+
+    def _install_valves(self, built) -> None:
+        spec, self.valve, self.outlet_valve, start = built
+        self.fixed_outlet_opening = start.outlet_opening
+        if not hasattr(self, "position"):  # stem positions (%) the valves rest at before sample 0
+            self.position = {"ph": min(max(start.valve_command_pct, 0.0), 100.0),
+                             "outlet": min(max(start.outlet_command_pct, 0.0), 100.0)}
+        self.faults = [f"{f.type}@{f.where} from {f.onset_s:g} s" for f in spec.faults] or ["none"]
+        self.rated = {"ph": spec.valves.ph.max_flow_ml_s,
+                      "outlet": spec.valves.outlet.max_flow_ml_s if spec.valves.outlet else None}
+
+    def check_parameters(self, params) -> str | None:
+        self._pending_change = None
+        names = {p.name for p in params}
+        if not names & {"fault", "fault_onset_s"}:
+            return None
+        from phfdi.scenario import load_scenario
+
+        value = {p.name: p.value for p in params}
+        fault = value.get("fault", self.param("fault")) or None
+        onset = value.get("fault_onset_s", self.param("fault_onset_s"))
+        try:
+            spec = load_scenario(self.param("scenario"), fault=fault, overrides=list(self.param("overrides")),
+                                 onset_s=None if onset < 0 else onset)
+            self._pending_change = self._build_valves(spec)
+        except Exception as exc:  # noqa: BLE001 - UserError or ValueError: the reason goes back to the caller
+            return str(exc)
+        return None
+
+    def apply_parameters(self, params) -> None:
+        if self._pending_change is None:
+            return
+        old = {"ph": self.valve, "outlet": self.outlet_valve}
+        self._install_valves(self._pending_change)
+        self._pending_change = None
+        # bumpless: the new fault blocks start at rest at the current stem positions
+        for key, new in (("ph", self.valve), ("outlet", self.outlet_valve)):
+            if new is not None and old[key] is not None:
+                new.reset(self.position[key])
+                new.rejected_commands = old[key].rejected_commands
+        self.get_logger().info("valve faults now: " + "; ".join(self.faults))
+        self._report(self._last_k, force=True)
+
+    # ---- one sample -------------------------------------------------------------------
+    def _on_ph_output(self, msg: ControllerOutput) -> None:
+        self._collect("ph", msg)
+
+    def _on_level_output(self, msg: ControllerOutput) -> None:
+        self._collect("outlet", msg)
+
+    def _collect(self, which: str, msg: ControllerOutput) -> None:
+        k = self.sample_of(msg.header.stamp)
+        if k is None or k <= self._last_k:
+            self.get_logger().warning(f"ignored a command stamped {msg.header.stamp} (last sample {self._last_k})")
+            return
+        got = self._pending.setdefault(k, {})
+        got[which] = msg
+        if len(got) == 2:
+            del self._pending[k]
+            self._step(k, got["ph"], got["outlet"])
+
+    def _admit(self, which: str, command_pct: float) -> float:
+        """The command to apply, or NaN (the core Valve then holds and counts it)."""
+        held = self.held[which]
+        if not math.isfinite(command_pct):
+            held.not_finite += 1
+        elif not self.param("command_min_pct") <= command_pct <= self.param("command_max_pct"):
+            held.out_of_range += 1
+        else:
+            return command_pct
+        held.last_rejected = command_pct
+        return math.nan
+
+    def _step(self, k: int, ph: ControllerOutput, level: ControllerOutput) -> None:
+        from phfdi.loop import step_valves
+
+        self._last_k = k
+        ph_cmd = self._admit("ph", ph.output_pct)
+        level_cmd = self._admit("outlet", level.output_pct) if self.outlet_valve is not None else level.output_pct
+        vs = step_valves(self.valve, self.outlet_valve, self.fixed_outlet_opening, k * self.dt_s, ph_cmd, level_cmd)
+        v = vs.valve
+        self.position = {"ph": v.position_pct, "outlet": vs.outlet_position_pct}
+        msg = ValveState(command_pct=ph.output_pct, position_pct=v.position_pct, opening=v.opening,
+                         flow_ml_s=v.flow_ml_s, fault_severity=v.fault_severity,
+                         rejected_commands=self.valve.rejected_commands)
+        msg.header.stamp = ph.header.stamp
+        self.pub_ph.publish(msg)
+        if vs.outlet is not None:
+            o = vs.outlet
+            msg = ValveState(command_pct=level.output_pct, position_pct=o.position_pct, opening=o.opening,
+                             flow_ml_s=o.flow_ml_s if self.rated["outlet"] else math.nan,
+                             fault_severity=o.fault_severity, rejected_commands=self.outlet_valve.rejected_commands)
+        else:  # no outlet valve in the scenario: the outlet stays at its fixed opening
+            msg = ValveState(command_pct=level.output_pct, position_pct=vs.outlet_position_pct,
+                             opening=vs.outlet_opening, flow_ml_s=math.nan, fault_severity=0.0, rejected_commands=0)
+        msg.header.stamp = ph.header.stamp
+        self.pub_outlet.publish(msg)
+        self._report(k)
+
+    # ---- diagnostics -------------------------------------------------------------------
+    def _report(self, k: int, force: bool = False) -> None:
+        total = sum(h.total for h in self.held.values())
+        period = self.param("diagnostics_period_s")
+        due = (self._last_report_k is None
+               or (period > 0 and (k - self._last_report_k) * self.dt_s >= period))
+        if not (force or due or total != self._reported_total):
+            return
+        array = DiagnosticArray()
+        array.header.stamp = self.stamp(max(k, 0))
+        for which, valve in (("ph", self.valve), ("outlet", self.outlet_valve)):
+            if valve is None:
+                continue
+            held = self.held[which]
+            new = held.total > 0 and total != self._reported_total
+            status = DiagnosticStatus(
+                level=DiagnosticStatus.WARN if new else DiagnosticStatus.OK,
+                name=f"{self.get_name()}: {which} valve", hardware_id=f"{which}_valve",
+                message=(f"{held.total} command(s) held so far ({held.not_finite} not finite, "
+                         f"{held.out_of_range} out of range)" if held.total else "commands applied"),
+                values=[KeyValue(key="commands_held", value=str(held.total)),
+                        KeyValue(key="not_finite", value=str(held.not_finite)),
+                        KeyValue(key="out_of_range", value=str(held.out_of_range)),
+                        KeyValue(key="last_rejected_command_pct", value=repr(held.last_rejected)),
+                        KeyValue(key="position_pct", value=repr(self.position[which])),
+                        KeyValue(key="faults", value="; ".join(self.faults) if which == "ph" else "")])
+            array.status.append(status)
+        self.pub_diag.publish(array)
+        self._last_report_k = k
+        self._reported_total = total
+
+
+def run() -> int:
+    return main(ValveNode, "valve_actuator.node", __doc__.strip().splitlines()[0], PARAMS)
+
+
+if __name__ == "__main__":
+    sys.exit(run())
