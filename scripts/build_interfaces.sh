@@ -27,6 +27,7 @@ command -v ninja >/dev/null || generator="Unix Makefiles"
 
 build=build/phfdi_interfaces
 log=build/phfdi_interfaces.log
+manifest="$VENV/.phfdi-interfaces-manifest"
 rm -rf "$build"
 mkdir -p build
 echo "setup: building the message package phfdi_interfaces (about a minute; log: $log) ..."
@@ -38,7 +39,9 @@ if ! {
     -DPython3_EXECUTABLE="$PY" -DPython3_FIND_VIRTUALENV=ONLY -DBUILD_TESTING=OFF \
     -DPHFDI_PYTHON_INCLUDE="$py_include" -DPHFDI_NUMPY_INCLUDE="$np_include" &&
   AMENT_PREFIX_PATH="$VENV" cmake --build "$build" &&
-  cmake --install "$build"
+  { [ ! -f "$manifest" ] || xargs -d '\n' rm -f < "$manifest"; } &&  # files of the previous build
+  cmake --install "$build" &&
+  cp "$build/install_manifest.txt" "$manifest"
 } >"$log" 2>&1; then
   tail -n 30 "$log" >&2
   echo "setup: building phfdi_interfaces failed (full log: $log)" >&2

@@ -1,9 +1,9 @@
 """ROS 2 node of the plant: owns simulated time (thin wrapper of :class:`PlantProcess`).
 
-Each sample k: publish /clock and /plant/measurement for t_k, wait for both
-valves' states of sample k, then :func:`phfdi.loop.advance_plant` (the same
-call the in-process simulation makes), publish /plant/state for k and go on
-with k + 1: as fast as the loop answers (lock-step, ``pace`` 0) or at
+Each sample k: publish /plant/measurement and /clock for t_k, wait for
+/valve/state of sample k, then :func:`phfdi.loop.advance_plant` (the same
+call the in-process simulation makes), go on with k + 1 and publish
+/plant/state for k: as fast as the loop answers (lock-step, ``pace`` 0) or at
 ``pace`` times real time. Prints JSON lines on stdout for the launcher
 (connected, progress, done).
 
@@ -17,7 +17,7 @@ import sys
 import time
 
 from phfdi.ros.node import GraphNode, ParamSpec, main, to_time
-from phfdi.ros.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_OUTLET, VALVE_PH
+from phfdi.ros.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_STATE
 
 from phfdi_interfaces.msg import Measurement, PlantState, ValveState
 from rosgraph_msgs.msg import Clock
@@ -42,17 +42,18 @@ class PlantNode(GraphNode):
         self.valve_feed = self.spec.valves.ph.feed
         self.n_samples = parts.n_samples
         self.feed_names = [f.name for f in self.process.plant.feeds]
-        self.pub_clock = self.data_publisher(Clock, CLOCK.name)
         self.pub_measurement = self.data_publisher(Measurement, MEASUREMENT.name)
+        self.pub_clock = self.data_publisher(Clock, CLOCK.name, announce=False)
         self.pub_state = self.data_publisher(PlantState, PLANT_STATE.name)
-        self.data_subscription(ValveState, VALVE_PH.name, self._on_valve_ph)
-        self.data_subscription(ValveState, VALVE_OUTLET.name, self._on_valve_outlet)
+        self.data_subscription(ValveState, VALVE_STATE.name, self._on_valve_state)
+        # one message object per topic, refilled each sample (building one costs more than filling it)
+        self._measurement_msg, self._clock_msg = Measurement(), Clock()
+        self._state_msg = PlantState(feed_names=self.feed_names)
         self.k = -1  # sample waiting for the valves
         self._m = None  # its measurement
-        self._valve_ph: ValveState | None = None
-        self._valve_outlet: ValveState | None = None
         self._next_k: int | None = None  # paced mode: sample due at _next_due (wall, monotonic)
         self._next_due = 0.0
+        self._pace = self.param("pace")
         self._report_every = max(1, self.n_samples // 20)
         self.start_barrier()
 
@@ -69,56 +70,45 @@ class PlantNode(GraphNode):
 
     # ---- one sample ---------------------------------------------------------------
     def _publish_sample(self, k: int) -> None:
-        t = k * self.dt_s
-        self._m = self.process.measure(t)
+        self._m = m = self.process.measure(k * self.dt_s)
         self.k = k
-        self._valve_ph = self._valve_outlet = None
-        stamp = to_time(k * self.dt_ns)
-        self.pub_clock.publish(Clock(clock=stamp))
-        msg = Measurement(ph=self._m.ph_measured, level_cm=self._m.level_measured_cm)
-        msg.header.stamp = stamp
+        sec, nanosec = divmod(k * self.dt_ns, 1_000_000_000)
+        msg = self._measurement_msg
+        msg.stamp.sec, msg.stamp.nanosec = sec, nanosec
+        msg.ph, msg.level_cm = m.ph_measured, m.level_measured_cm
         self.pub_measurement.publish(msg)
+        if self.pub_clock.get_subscription_count():  # only nodes with use_sim_time listen
+            clock = self._clock_msg
+            clock.clock.sec, clock.clock.nanosec = sec, nanosec
+            self.pub_clock.publish(clock)
 
-    def _on_valve_ph(self, msg: ValveState) -> None:
-        if self._accept(msg):
-            self._valve_ph = msg
-            self._maybe_advance()
-
-    def _on_valve_outlet(self, msg: ValveState) -> None:
-        if self._accept(msg):
-            self._valve_outlet = msg
-            self._maybe_advance()
-
-    def _accept(self, msg: ValveState) -> bool:
-        k = self.sample_of(msg.header.stamp)
+    def _on_valve_state(self, msg: ValveState) -> None:
+        k = self.sample_of(msg.stamp)
         if k != self.k:
             self.get_logger().warning(f"ignored a valve state stamped for sample {k} while at sample {self.k}")
-            return False
-        return True
-
-    def _maybe_advance(self) -> None:
-        if self._valve_ph is None or self._valve_outlet is None:
             return
         from phfdi.loop import advance_plant
 
-        k, m = self.k, self._m
-        flows, outlet_flow = advance_plant(self.process, self.valve_feed, k * self.dt_s,
-                                           self._valve_ph.flow_ml_s, self._valve_outlet.opening)
-        state = PlantState(ph=m.ph_true, level_cm=m.level_true_cm, feed_names=self.feed_names,
-                           feed_flows_ml_s=flows, outlet_flow_ml_s=outlet_flow,
-                           sensor_fault_severity=m.sensor_fault_severity)
-        state.header.stamp = to_time(k * self.dt_ns)
-        self.pub_state.publish(state)
+        m = self._m
+        flows, outlet_flow = advance_plant(self.process, self.valve_feed, k * self.dt_s, msg.ph_flow_ml_s,
+                                           msg.outlet_opening)
         self.k = -1
+        done = k + 1 >= self.n_samples
+        if not done:
+            self._schedule(k + 1)  # the loop goes on while the ground truth of k is published
+        state = self._state_msg
+        state.stamp = msg.stamp
+        state.ph, state.level_cm = m.ph_true, m.level_true_cm
+        state.feed_flows_ml_s = flows
+        state.outlet_flow_ml_s, state.sensor_fault_severity = outlet_flow, m.sensor_fault_severity
+        self.pub_state.publish(state)
         if (k + 1) % self._report_every == 0:
             self._emit("progress", sample=k + 1, of=self.n_samples)
-        if k + 1 >= self.n_samples:
+        if done:
             self._finish()
-        else:
-            self._schedule(k + 1)
 
     def _schedule(self, k: int) -> None:
-        pace = self.param("pace")
+        pace = self._pace
         if pace <= 0.0:
             self._publish_sample(k)
             return
@@ -146,6 +136,8 @@ class PlantNode(GraphNode):
 
     def apply_parameters(self, params) -> None:
         for p in params:
+            if p.name == "pace":
+                self._pace = p.value
             if p.name == "pace" and self.connected:
                 # keep the current sample's schedule continuous: restart the wall reference here
                 k = self._next_k if self._next_k is not None else max(self.k, 0)

@@ -188,8 +188,8 @@ class BagWriter:
 def stamp_of_cdr(cdr: bytes) -> int:
     """Stamp (ns) of a CDR message whose first field is a builtin_interfaces/Time.
 
-    True of every topic of the graph (header.stamp, or Clock.clock): 4 bytes
-    of encapsulation header, then int32 sec and uint32 nanosec.
+    True of every topic of the graph (``stamp``, ``clock``, ``header.stamp``):
+    4 bytes of encapsulation header, then int32 sec and uint32 nanosec.
     """
     little = cdr[1] == 1
     sec = int.from_bytes(cdr[4:8], "little" if little else "big", signed=True)
@@ -213,24 +213,23 @@ def _extract(topic: str, msg, row: dict) -> None:
     """The run signals one message carries."""
     if topic == T.MEASUREMENT.name:
         row["ph_measured"], row["level_measured_cm"] = msg.ph, msg.level_cm
+    elif topic == T.CONTROLLER.name:
+        row["ph_setpoint"], row["ph_controller_output_pct"] = msg.ph_setpoint, msg.ph_output_pct
+        row["level_setpoint_cm"], row["level_controller_output_pct"] = msg.level_setpoint_cm, msg.level_output_pct
+    elif topic == T.VALVE_STATE.name:
+        row["valve_command_pct"], row["valve_position_pct"] = msg.ph_command_pct, msg.ph_position_pct
+        row["outlet_valve_position_pct"] = msg.outlet_position_pct
+        row["_valve_fault_severity"] = msg.ph_fault_severity
     elif topic == T.PLANT_STATE.name:
         row["ph_true"], row["level_true_cm"] = msg.ph, msg.level_cm
         for name, q in zip(msg.feed_names, msg.feed_flows_ml_s):
             row[f"{name}_flow_ml_s"] = float(q)
         row["outlet_flow_ml_s"] = msg.outlet_flow_ml_s
         row["_sensor_fault_severity"] = msg.sensor_fault_severity
-    elif topic == T.CONTROLLER_PH.name:
-        row["ph_setpoint"], row["ph_controller_output_pct"] = msg.setpoint, msg.output_pct
-    elif topic == T.CONTROLLER_LEVEL.name:
-        row["level_setpoint_cm"], row["level_controller_output_pct"] = msg.setpoint, msg.output_pct
-    elif topic == T.VALVE_PH.name:
-        row["valve_command_pct"], row["valve_position_pct"] = msg.command_pct, msg.position_pct
-        row["_valve_fault_severity"] = msg.fault_severity
-    elif topic == T.VALVE_OUTLET.name:
-        row["outlet_valve_position_pct"] = msg.position_pct
 
 
-_RUN_TOPICS = (T.MEASUREMENT, T.PLANT_STATE, T.CONTROLLER_PH, T.CONTROLLER_LEVEL, T.VALVE_PH, T.VALVE_OUTLET)
+#: topics that carry run signals (the rest: /clock, /diagnostics, /fault_alarm)
+_RUN_TOPICS = (T.MEASUREMENT, T.CONTROLLER, T.VALVE_STATE, T.PLANT_STATE)
 
 
 def read_metadata(path: Path) -> dict[str, dict[str, str]]:
@@ -275,7 +274,7 @@ def load_run(path: str | Path) -> Run:
                 raise UserError(f"{path}: no {T.MEASUREMENT.name} topic: not a bag of the phfdi graph")
             for conn, _t, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
-                ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                ns = msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec
                 _extract(conn.topic, msg, rows[ns])
                 if conn.topic == T.MEASUREMENT.name:
                     measured.add(ns)
@@ -342,26 +341,21 @@ def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES)
         for i in range(len(t)):
             ns = int(round((t[i] - t0) * 1e9))
             stamp = _time(store, ns)
-            header = ty["std_msgs/msg/Header"](stamp=stamp, frame_id="")
             msgs = (
-                (T.CLOCK, ty["rosgraph_msgs/msg/Clock"](clock=stamp)),
                 (T.MEASUREMENT, ty["phfdi_interfaces/msg/Measurement"](
-                    header=header, ph=c["ph_measured"][i], level_cm=c["level_measured_cm"][i])),
-                (T.CONTROLLER_PH, ty["phfdi_interfaces/msg/ControllerOutput"](
-                    header=header, setpoint=c["ph_setpoint"][i], process_value=c["ph_measured"][i],
-                    output_pct=c["ph_controller_output_pct"][i], manual=False)),
-                (T.CONTROLLER_LEVEL, ty["phfdi_interfaces/msg/ControllerOutput"](
-                    header=header, setpoint=c["level_setpoint_cm"][i], process_value=c["level_measured_cm"][i],
-                    output_pct=c["level_controller_output_pct"][i], manual=False)),
-                (T.VALVE_PH, ty["phfdi_interfaces/msg/ValveState"](
-                    header=header, command_pct=c["valve_command_pct"][i], position_pct=c["valve_position_pct"][i],
-                    opening=math.nan, flow_ml_s=valve_flow[i], fault_severity=sev[i], rejected_commands=0)),
-                (T.VALVE_OUTLET, ty["phfdi_interfaces/msg/ValveState"](
-                    header=header, command_pct=c["level_controller_output_pct"][i],
-                    position_pct=c["outlet_valve_position_pct"][i], opening=math.nan, flow_ml_s=math.nan,
-                    fault_severity=0.0, rejected_commands=0)),
+                    stamp=stamp, ph=c["ph_measured"][i], level_cm=c["level_measured_cm"][i])),
+                (T.CONTROLLER, ty["phfdi_interfaces/msg/ControllerOutput"](
+                    stamp=stamp, ph_setpoint=c["ph_setpoint"][i], ph_output_pct=c["ph_controller_output_pct"][i],
+                    ph_manual=False, level_setpoint_cm=c["level_setpoint_cm"][i],
+                    level_output_pct=c["level_controller_output_pct"][i], level_manual=False)),
+                (T.VALVE_STATE, ty["phfdi_interfaces/msg/ValveState"](
+                    stamp=stamp, ph_command_pct=c["valve_command_pct"][i], ph_position_pct=c["valve_position_pct"][i],
+                    ph_opening=math.nan, ph_flow_ml_s=valve_flow[i], ph_fault_severity=sev[i],
+                    ph_rejected_commands=0, outlet_command_pct=c["level_controller_output_pct"][i],
+                    outlet_position_pct=c["outlet_valve_position_pct"][i], outlet_opening=math.nan,
+                    outlet_fault_severity=0.0, outlet_rejected_commands=0)),
                 (T.PLANT_STATE, ty["phfdi_interfaces/msg/PlantState"](
-                    header=header, ph=c["ph_true"][i], level_cm=c["level_true_cm"][i], feed_names=feeds,
+                    stamp=stamp, ph=c["ph_true"][i], level_cm=c["level_true_cm"][i], feed_names=feeds,
                     feed_flows_ml_s=np.array([c[f"{f}_flow_ml_s"][i] for f in feeds], dtype=np.float64),
                     outlet_flow_ml_s=c["outlet_flow_ml_s"][i], sensor_fault_severity=sev[i])),
             )

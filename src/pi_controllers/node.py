@@ -2,7 +2,7 @@
 
 On /plant/measurement of sample k it calls ``ControllerBank.compute`` (the
 same call the in-process simulation makes) and answers with
-/controller/ph/output and /controller/level/output stamped k. Tuning can be
+/controller/output stamped k. Tuning can be
 changed while running (bumpless).
 
     python -m pi_controllers.node --ros-args -p scenario:=paper -p ph_kp:=4.0
@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 
 from phfdi.ros.node import GraphNode, ParamSpec, main
-from phfdi.ros.topics import CONTROLLER_LEVEL, CONTROLLER_PH, CONTROLLERS, MEASUREMENT
+from phfdi.ros.topics import CONTROLLER, CONTROLLERS, MEASUREMENT
 
 from phfdi_interfaces.msg import ControllerOutput, Measurement
 
@@ -47,9 +47,9 @@ class ControllersNode(GraphNode):
 
         self.bank = build_parts(self.spec).controllers  # the controllers' own part only
         self._apply_tuning()
-        self.pub_ph = self.data_publisher(ControllerOutput, CONTROLLER_PH.name)
-        self.pub_level = self.data_publisher(ControllerOutput, CONTROLLER_LEVEL.name)
+        self.pub_output = self.data_publisher(ControllerOutput, CONTROLLER.name)
         self.data_subscription(Measurement, MEASUREMENT.name, self._on_measurement)
+        self._output = ControllerOutput()  # refilled each sample
         self._last_k = -1
         self.start_barrier()
 
@@ -72,21 +72,19 @@ class ControllersNode(GraphNode):
         self.get_logger().info("tuning now: " + ", ".join(f"{p.name} = {p.value:g}" for p in params))
 
     def _on_measurement(self, msg: Measurement) -> None:
-        k = self.sample_of(msg.header.stamp)
+        k = self.sample_of(msg.stamp)
         if k is None or k <= self._last_k:
-            self.get_logger().warning(f"ignored a measurement stamped {msg.header.stamp} (last sample {self._last_k})")
+            self.get_logger().warning(f"ignored a measurement stamped {msg.stamp} (last sample {self._last_k})")
             return
         self._last_k = k
-        c = self.bank.compute(k * self.dt_s, msg.ph, msg.level_cm)
-        out = ControllerOutput(setpoint=c.ph_setpoint, process_value=msg.ph, output_pct=c.ph_output_pct,
-                               manual=self.bank.ph.manual)
-        out.header.stamp = msg.header.stamp
-        self.pub_ph.publish(out)
-        level_manual = self.bank.level.manual if self.bank.level is not None else False
-        out = ControllerOutput(setpoint=c.level_setpoint_cm, process_value=msg.level_cm,
-                               output_pct=c.level_output_pct, manual=level_manual)
-        out.header.stamp = msg.header.stamp
-        self.pub_level.publish(out)
+        bank = self.bank
+        c = bank.compute(k * self.dt_s, msg.ph, msg.level_cm)
+        out = self._output
+        out.stamp = msg.stamp
+        out.ph_setpoint, out.ph_output_pct, out.ph_manual = c.ph_setpoint, c.ph_output_pct, bank.ph.manual
+        out.level_setpoint_cm, out.level_output_pct = c.level_setpoint_cm, c.level_output_pct
+        out.level_manual = bank.level.manual if bank.level is not None else False
+        self.pub_output.publish(out)
 
 
 def run() -> int:

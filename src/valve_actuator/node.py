@@ -1,8 +1,8 @@
 """ROS 2 node of the loop's valves (thin wrapper of :class:`Valve`): the pH valve and the outlet valve.
 
-When both controller outputs of sample k are in, it calls
-:func:`phfdi.loop.step_valves` (the same call the in-process simulation
-makes) and answers with /valve/ph/state and /valve/outlet/state stamped k.
+On /controller/output of sample k it calls :func:`phfdi.loop.step_valves`
+(the same call the in-process simulation makes) and answers with
+/valve/state stamped k.
 
 Bad commands never crash it: a command that is not finite, or outside
 [command_min_pct, command_max_pct] (default -2.5..106.25 %, the NAMUR NE 43
@@ -22,7 +22,7 @@ import math
 import sys
 
 from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main
-from phfdi.ros.topics import CONTROLLER_LEVEL, CONTROLLER_PH, DIAGNOSTICS, VALVE, VALVE_OUTLET, VALVE_PH
+from phfdi.ros.topics import CONTROLLER, DIAGNOSTICS, VALVE, VALVE_STATE
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, ValveState
@@ -65,16 +65,15 @@ class ValveNode(GraphNode):
         except ValueError as exc:
             raise NodeStartError(str(exc)) from None
         self.held = {"ph": _Held(), "outlet": _Held()}
-        self.pub_ph = self.data_publisher(ValveState, VALVE_PH.name)
-        self.pub_outlet = self.data_publisher(ValveState, VALVE_OUTLET.name)
+        self.pub_state = self.data_publisher(ValveState, VALVE_STATE.name)
         self.pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
-        self.data_subscription(ControllerOutput, CONTROLLER_PH.name, self._on_ph_output)
-        self.data_subscription(ControllerOutput, CONTROLLER_LEVEL.name, self._on_level_output)
-        self._pending: dict[int, dict[str, ControllerOutput]] = {}
+        self.data_subscription(ControllerOutput, CONTROLLER.name, self._on_output)
+        self._state = ValveState()  # refilled each sample
         self._last_k = -1
         self._last_report_k: int | None = None
         self._reported_total = 0
         self._pending_change = None
+        self._command_min, self._command_max = self.param("command_min_pct"), self.param("command_max_pct")
         self.start_barrier()
 
     # ---- valves from the scenario ---------------------------------------------------------
@@ -95,8 +94,6 @@ class ValveNode(GraphNode):
             self.position = {"ph": min(max(start.valve_command_pct, 0.0), 100.0),
                              "outlet": min(max(start.outlet_command_pct, 0.0), 100.0)}
         self.faults = [f"{f.type}@{f.where} from {f.onset_s:g} s" for f in spec.faults] or ["none"]
-        self.rated = {"ph": spec.valves.ph.max_flow_ml_s,
-                      "outlet": spec.valves.outlet.max_flow_ml_s if spec.valves.outlet else None}
 
     def check_parameters(self, params) -> str | None:
         self._pending_change = None
@@ -117,6 +114,7 @@ class ValveNode(GraphNode):
         return None
 
     def apply_parameters(self, params) -> None:
+        self._command_min, self._command_max = self.param("command_min_pct"), self.param("command_max_pct")
         if self._pending_change is None:
             return
         old = {"ph": self.valve, "outlet": self.outlet_valve}
@@ -131,59 +129,45 @@ class ValveNode(GraphNode):
         self._report(self._last_k, force=True)
 
     # ---- one sample -------------------------------------------------------------------
-    def _on_ph_output(self, msg: ControllerOutput) -> None:
-        self._collect("ph", msg)
-
-    def _on_level_output(self, msg: ControllerOutput) -> None:
-        self._collect("outlet", msg)
-
-    def _collect(self, which: str, msg: ControllerOutput) -> None:
-        k = self.sample_of(msg.header.stamp)
-        if k is None or k <= self._last_k:
-            self.get_logger().warning(f"ignored a command stamped {msg.header.stamp} (last sample {self._last_k})")
-            return
-        got = self._pending.setdefault(k, {})
-        got[which] = msg
-        if len(got) == 2:
-            del self._pending[k]
-            self._step(k, got["ph"], got["outlet"])
-
     def _admit(self, which: str, command_pct: float) -> float:
         """The command to apply, or NaN (the core Valve then holds and counts it)."""
+        if math.isfinite(command_pct) and \
+                self._command_min <= command_pct <= self._command_max:
+            return command_pct
         held = self.held[which]
-        if not math.isfinite(command_pct):
-            held.not_finite += 1
-        elif not self.param("command_min_pct") <= command_pct <= self.param("command_max_pct"):
+        if math.isfinite(command_pct):
             held.out_of_range += 1
         else:
-            return command_pct
+            held.not_finite += 1
         held.last_rejected = command_pct
         return math.nan
 
-    def _step(self, k: int, ph: ControllerOutput, level: ControllerOutput) -> None:
+    def _on_output(self, out: ControllerOutput) -> None:
         from phfdi.loop import step_valves
 
+        k = self.sample_of(out.stamp)
+        if k is None or k <= self._last_k:
+            self.get_logger().warning(f"ignored a command stamped {out.stamp} (last sample {self._last_k})")
+            return
         self._last_k = k
-        ph_cmd = self._admit("ph", ph.output_pct)
-        level_cmd = self._admit("outlet", level.output_pct) if self.outlet_valve is not None else level.output_pct
+        ph_cmd = self._admit("ph", out.ph_output_pct)
+        level_cmd = out.level_output_pct
+        if self.outlet_valve is not None:
+            level_cmd = self._admit("outlet", level_cmd)
         vs = step_valves(self.valve, self.outlet_valve, self.fixed_outlet_opening, k * self.dt_s, ph_cmd, level_cmd)
-        v = vs.valve
-        self.position = {"ph": v.position_pct, "outlet": vs.outlet_position_pct}
-        msg = ValveState(command_pct=ph.output_pct, position_pct=v.position_pct, opening=v.opening,
-                         flow_ml_s=v.flow_ml_s, fault_severity=v.fault_severity,
-                         rejected_commands=self.valve.rejected_commands)
-        msg.header.stamp = ph.header.stamp
-        self.pub_ph.publish(msg)
-        if vs.outlet is not None:
-            o = vs.outlet
-            msg = ValveState(command_pct=level.output_pct, position_pct=o.position_pct, opening=o.opening,
-                             flow_ml_s=o.flow_ml_s if self.rated["outlet"] else math.nan,
-                             fault_severity=o.fault_severity, rejected_commands=self.outlet_valve.rejected_commands)
-        else:  # no outlet valve in the scenario: the outlet stays at its fixed opening
-            msg = ValveState(command_pct=level.output_pct, position_pct=vs.outlet_position_pct,
-                             opening=vs.outlet_opening, flow_ml_s=math.nan, fault_severity=0.0, rejected_commands=0)
-        msg.header.stamp = ph.header.stamp
-        self.pub_outlet.publish(msg)
+        v, o = vs.valve, vs.outlet
+        self.position["ph"], self.position["outlet"] = v.position_pct, vs.outlet_position_pct
+        msg = self._state
+        msg.stamp = out.stamp
+        msg.ph_command_pct, msg.ph_position_pct, msg.ph_opening = out.ph_output_pct, v.position_pct, v.opening
+        msg.ph_flow_ml_s, msg.ph_fault_severity = v.flow_ml_s, v.fault_severity
+        msg.ph_rejected_commands = self.valve.rejected_commands
+        msg.outlet_command_pct, msg.outlet_position_pct = out.level_output_pct, vs.outlet_position_pct
+        msg.outlet_opening = vs.outlet_opening
+        # no outlet valve in the scenario: the outlet stays at its fixed opening
+        msg.outlet_fault_severity = o.fault_severity if o is not None else 0.0
+        msg.outlet_rejected_commands = self.outlet_valve.rejected_commands if o is not None else 0
+        self.pub_state.publish(msg)
         self._report(k)
 
     # ---- diagnostics -------------------------------------------------------------------

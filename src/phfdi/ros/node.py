@@ -9,10 +9,11 @@ SIGTERM (publishers flushed to their reliable readers first).
 
 Start barrier (why: a reliable writer delivers only to readers it has already
 matched, and in lock-step a lost first sample would stall the graph): every
-node announces on /graph/ready (transient local) the topics it subscribes to,
-then waits until each of its publishers has matched every announced reader of
-its topic, then announces ``ready``. The plant starts sample 0 once every
-node named in ``graph_nodes`` is ready.
+node announces on /graph/ready the topics it subscribes to and publishes,
+waits until each of its publishers has matched every announced reader of its
+topic and each of its subscriptions every announced writer (both sides, so no
+sample has to be repaired after the start), then announces ``ready``. The
+plant starts sample 0 once every node named in ``graph_nodes`` is ready.
 """
 
 from __future__ import annotations
@@ -158,8 +159,9 @@ class GraphNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
         self._data_publishers: list = []
-        self._subscribed_topics: list[str] = []
-        self._peers: dict[str, set[str]] = {}
+        self._extra_publishers: list = []  # published on, but no reader is waited for (/clock)
+        self._data_subscriptions: list = []
+        self._peers: dict[str, tuple[set[str], set[str]]] = {}  # node -> (subscribed, published) topics
         self._peers_ready: set[str] = set()
         self._connected = False
         self._announced_ready = False
@@ -236,70 +238,85 @@ class GraphNode(Node):
         """Put accepted runtime changes into effect."""
 
     # ---- endpoints and barrier --------------------------------------------------------
-    def data_publisher(self, msg_type, topic: str):
+    def data_publisher(self, msg_type, topic: str, announce: bool = True):
+        """A reliable keep-all publisher; ``announce`` False: not part of the start barrier."""
         pub = self.create_publisher(msg_type, topic, DATA_QOS)
-        self._data_publishers.append(pub)
+        if announce:
+            self._data_publishers.append(pub)
+        else:
+            self._extra_publishers.append(pub)
         return pub
 
     def data_subscription(self, msg_type, topic: str, callback: Callable, raw: bool = False):
-        self._subscribed_topics.append(topic)
-        return self.create_subscription(msg_type, topic, callback, DATA_QOS, raw=raw)
+        sub = self.create_subscription(msg_type, topic, callback, DATA_QOS, raw=raw)
+        self._data_subscriptions.append(sub)
+        return sub
 
     def start_barrier(self) -> None:
         """Call once all data endpoints exist."""
         self._ready_pub = self.create_publisher(DiagnosticStatus, GRAPH_READY, READY_QOS)
         self.create_subscription(DiagnosticStatus, GRAPH_READY, self._on_peer_status, READY_QOS)
-        self._announce("subscribed")
-        self._barrier_timer = self.create_timer(0.02, self._check_barrier)
+        self._barrier_timer = self.create_timer(0.05, self._check_barrier)
+        self._announce_timer = self.create_timer(0.2, self._announce)
+        self._announce()
 
-    def _announce(self, state: str) -> None:
+    def _announce(self) -> None:
+        # Repeated (transient local alone proved unreliable here for late joiners): every
+        # 0.2 s until connected, then every 1 s as a heartbeat.
+        state = "connected" if self._connected else "ready" if self._announced_ready else "waiting"
         self._ready_pub.publish(DiagnosticStatus(
             level=DiagnosticStatus.OK, name=self.get_name(), message=state,
-            values=[KeyValue(key="subscriptions", value=",".join(self._subscribed_topics))]))
+            values=[KeyValue(key="subscriptions", value=",".join(s.topic_name for s in self._data_subscriptions)),
+                    KeyValue(key="publications", value=",".join(p.topic_name for p in self._data_publishers))]))
 
     def _on_peer_status(self, msg: DiagnosticStatus) -> None:
-        subs = {v.value for v in msg.values if v.key == "subscriptions"}
-        self._peers[msg.name] = set(",".join(subs).split(",")) - {""}
-        if msg.message == "ready":
+        values = {v.key: set(v.value.split(",")) - {""} for v in msg.values}
+        self._peers[msg.name] = (values.get("subscriptions", set()), values.get("publications", set()))
+        if msg.message in ("ready", "connected"):
             self._peers_ready.add(msg.name)
 
     def _unmatched(self) -> str | None:
+        """Why this node's endpoints are not all matched yet (None: they are)."""
         missing = [n for n in self.param("graph_nodes") if n not in self._peers]
         if missing:
             return "waiting for node(s) " + ", ".join(missing)
         for pub in self._data_publishers:
-            topic = pub.topic_name
-            needed = {n for n, subs in self._peers.items() if topic in subs}
-            infos = self.get_subscriptions_info_by_topic(topic)
-            present = {i.node_name for i in infos}
-            if not needed <= present:
-                return f"{topic}: reader(s) {', '.join(sorted(needed - present))} not discovered yet"
-            if pub.get_subscription_count() < len(infos):
-                return f"{topic}: {pub.get_subscription_count()} of {len(infos)} readers matched"
+            readers = sum(pub.topic_name in subs for subs, _ in self._peers.values())
+            if pub.get_subscription_count() < readers:
+                return f"{pub.topic_name}: {pub.get_subscription_count()} of {readers} readers matched"
+        for sub in self._data_subscriptions:
+            writers = sum(sub.topic_name in pubs for _, pubs in self._peers.values())
+            if sub.get_publisher_count() < writers:
+                return f"{sub.topic_name}: {sub.get_publisher_count()} of {writers} writers matched"
         return None
 
     def _check_barrier(self) -> None:
-        if self._connected:
+        if self._connected or self.finished:
             return
         why = self._unmatched()
         if why is None and not self._announced_ready:
-            self._announce("ready")
             self._announced_ready = True
+            self._announce()
         if why is None:
             waiting = [n for n in self.param("graph_nodes") if n not in self._peers_ready]
             why = "waiting for node(s) " + ", ".join(waiting) + " to connect" if waiting else None
         if why is None:
             self._connected = True
             self._barrier_timer.cancel()
-            self.destroy_timer(self._barrier_timer)
+            self._announce_timer.cancel()
+            self._announce_timer = self.create_timer(1.0, self._announce)
+            self._announce()
             self.on_connected()
             return
+        if why != self._waiting_for:
+            self.get_logger().debug(f"start barrier: {why}")
         self._waiting_for = why
         if time.monotonic() - self._barrier_t0 > self.param("connect_timeout_s"):
             self.get_logger().error(f"the graph did not connect within {self.param('connect_timeout_s'):g} s: "
-                                    f"{why}")
+                                    f"{why} (announcements from: {', '.join(sorted(self._peers)) or 'none'})")
             self.exit_code = 3
             self.finished = True
+            self._barrier_timer.cancel()
 
     @property
     def connected(self) -> bool:

@@ -1,6 +1,6 @@
 """ROS 2 node that records the graph's topics to an MCAP bag (ros2 profile).
 
-Subscribes (reliable, keep all) to every topic of :data:`phfdi.ros.topics.RECORDED`
+Subscribes (reliable, keep all) to the topics of :data:`phfdi.ros.topics.RECORDED`
 as raw CDR and writes each message at its simulated time stamp with
 :class:`phfdi.bagio.BagWriter`: 16 KB chunks reach the disk as they fill, and
 the chunk in progress is flushed every ``flush_period_s`` of wall time, so a

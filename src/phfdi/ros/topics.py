@@ -1,13 +1,16 @@
 """The graph's topics: one table for the nodes, the recorder, the bag tools and the docs.
 
-Every data message starts with its simulated time stamp (``header.stamp``, or
-``clock`` for /clock): the stamp of sample k is k * sample_time_s. Lock-step
-order of one sample (as :func:`phfdi.loop.tick`):
+Every data message starts with its simulated time stamp (``stamp``, or
+``clock`` for /clock, ``header.stamp`` for /diagnostics): the stamp of sample k
+is k * sample_time_s. Lock-step order of one sample (as :func:`phfdi.loop.tick`):
 
-    plant        /clock, /plant/measurement (k)
-    controllers  /controller/ph/output, /controller/level/output (k)
-    valve        /valve/ph/state, /valve/outlet/state (k)
-    plant        /plant/state (k), integrates to k + 1
+    plant        /plant/measurement, /clock (k)
+    controllers  /controller/output (k)
+    valve        /valve/state (k)
+    plant        integrates to k + 1, /plant/measurement, /clock (k + 1), /plant/state (k)
+
+One message per node and sample: in rclpy each message costs tens of
+microseconds to build and decode, which bounds the lock-step rate.
 
 No rclpy import here: the bag tools use this table without ROS.
 """
@@ -36,29 +39,27 @@ class Topic:
     description: str
 
 
-CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", PLANT, True,
-              "simulated time; one message per sample, before the measurement")
 MEASUREMENT = Topic("/plant/measurement", "phfdi_interfaces/msg/Measurement", PLANT, True,
-                    "pH probe and level transmitter readings (pH, cm)")
-CONTROLLER_PH = Topic("/controller/ph/output", "phfdi_interfaces/msg/ControllerOutput", CONTROLLERS, True,
-                      "pH loop: setpoint (pH), measurement used (pH), output = acid valve command (%)")
-CONTROLLER_LEVEL = Topic("/controller/level/output", "phfdi_interfaces/msg/ControllerOutput", CONTROLLERS, True,
-                         "level loop: setpoint (cm), measurement used (cm), output = outlet valve command (%)")
-VALVE_PH = Topic("/valve/ph/state", "phfdi_interfaces/msg/ValveState", VALVE, True,
-                 "the pH loop's valve: command, stem position (%), opening, flow (mL/s), fault severity")
-VALVE_OUTLET = Topic("/valve/outlet/state", "phfdi_interfaces/msg/ValveState", VALVE, True,
-                     "outlet valve: command, stem position (%), opening (flow depends on the level)")
+                    "pH probe and level transmitter readings: ph (pH), level_cm (cm)")
+CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", PLANT, True,
+              "simulated time, one message per sample (for nodes with use_sim_time)")
+CONTROLLER = Topic("/controller/output", "phfdi_interfaces/msg/ControllerOutput", CONTROLLERS, True,
+                   "both PI loops: setpoints (pH, cm) and outputs = valve commands (%)")
+VALVE_STATE = Topic("/valve/state", "phfdi_interfaces/msg/ValveState", VALVE, True,
+                    "pH valve and outlet valve: command, stem position (%), opening, flow (mL/s), fault severity")
 PLANT_STATE = Topic("/plant/state", "phfdi_interfaces/msg/PlantState", PLANT, True,
                     "simulation ground truth: true pH and level, feed and outlet flows (mL/s), sensor fault")
 DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", VALVE, False,
-                    "valve health: commands held (not finite / out of range), active fault")
+                    "valve health: commands held (not finite / out of range), active faults")
 FAULT_ALARM = Topic("/fault_alarm", "phfdi_interfaces/msg/FaultAlarm", DETECTOR, False,
                     "the detector's alarm (next issue); recorded when present")
 
-#: what the recorder writes, in lock-step order
-RECORDED: tuple[Topic, ...] = (CLOCK, MEASUREMENT, CONTROLLER_PH, CONTROLLER_LEVEL, VALVE_PH, VALVE_OUTLET,
-                               PLANT_STATE, DIAGNOSTICS, FAULT_ALARM)
-BY_NAME = {t.name: t for t in RECORDED}
+#: every topic the recorder can write, in lock-step order
+RECORDABLE: tuple[Topic, ...] = (MEASUREMENT, CLOCK, CONTROLLER, VALVE_STATE, PLANT_STATE, DIAGNOSTICS, FAULT_ALARM)
+#: what it writes by default: all but /clock, which repeats the stamps every message
+#: carries and the bag's log times (players regenerate it, as ``ros2 bag play --clock``)
+RECORDED: tuple[Topic, ...] = tuple(t for t in RECORDABLE if t is not CLOCK)
+BY_NAME = {t.name: t for t in RECORDABLE}
 
 #: where nodes announce that their endpoints are up and matched (not recorded)
 GRAPH_READY = "/graph/ready"
