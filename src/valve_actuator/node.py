@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import sys
 
-from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main
+from phfdi.ros.node import GraphNode, ParamSpec, main
 from phfdi.ros.topics import CONTROLLER, DIAGNOSTICS, VALVE, VALVE_STATE
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -60,10 +60,7 @@ class ValveNode(GraphNode):
 
     def __init__(self) -> None:
         super().__init__(VALVE)
-        try:
-            self._install_valves(self._build_valves(self.spec))
-        except ValueError as exc:
-            raise NodeStartError(str(exc)) from None
+        self._install_valves(self._build_valves(self.spec))
         self.held = {"ph": _Held(), "outlet": _Held()}
         self.pub_state = self.data_publisher(ValveState, VALVE_STATE.name)
         self.pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
@@ -77,11 +74,11 @@ class ValveNode(GraphNode):
         self.start_barrier()
 
     # ---- valves from the scenario ---------------------------------------------------------
-    def _build_valves(self, spec):
+    def _build_valves(self, spec, runtime: bool = False):
         from phfdi.loop import build_parts
 
-        for f in spec.faults:
-            if f.where not in VALVE_SITES:
+        for f in spec.faults if runtime else ():
+            if f.where not in VALVE_SITES:  # the plant node owns sensor faults, fixed at launch
                 raise ValueError(f"fault {f.type} acts on the {f.where.replace('_', ' ')}, not on a valve: "
                                  f"set it on the plant node at launch")
         parts = build_parts(spec)  # keep the valves only
@@ -108,7 +105,7 @@ class ValveNode(GraphNode):
         try:
             spec = load_scenario(self.param("scenario"), fault=fault, overrides=list(self.param("overrides")),
                                  onset_s=None if onset < 0 else onset)
-            self._pending_change = self._build_valves(spec)
+            self._pending_change = self._build_valves(spec, runtime=True)
         except Exception as exc:  # noqa: BLE001 - UserError or ValueError: the reason goes back to the caller
             return str(exc)
         return None

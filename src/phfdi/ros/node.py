@@ -45,7 +45,11 @@ from rcl_interfaces.msg import (  # noqa: E402
     ParameterType,
     SetParametersResult,
 )
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException  # noqa: E402
+from rclpy.exceptions import (  # noqa: E402
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterUninitializedException,
+)
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -200,10 +204,13 @@ class GraphNode(Node):
                                      f"{p.allowed()}")
 
     def param(self, name: str) -> Any:
-        value = self.get_parameter(name).value
-        if value is None and self._specs[name].default == []:
+        if self._specs[name].default == [] and not self.has_parameter(name):
             return []
-        return value
+        try:
+            value = self.get_parameter(name).value
+        except ParameterUninitializedException:  # an empty list declared by type: not given
+            return []
+        return [] if value is None and self._specs[name].default == [] else value
 
     def _load_spec(self):
         from phfdi.scenario import load_scenario
