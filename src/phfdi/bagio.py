@@ -368,23 +368,32 @@ def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES)
 
 # ---- inspecting and recovering ---------------------------------------------------------------
 def _scan(path: Path, validate: bool = True):
-    """Records of an MCAP file in order up to the first incomplete one; (records, error or None)."""
-    from mcap.stream_reader import StreamReader
+    """Records of an MCAP file in order, chunks opened, up to the first incomplete or damaged one.
+
+    Returns (records, number of complete chunks, error or None).
+    """
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader, breakup_chunk
 
     out = []
+    chunks = 0
     error = None
     with open(path, "rb") as f:
         try:
-            for rec in StreamReader(f, validate_crcs=validate).records:
-                out.append(rec)
+            for rec in StreamReader(f, emit_chunks=True, validate_crcs=validate).records:
+                if isinstance(rec, Chunk):
+                    out.extend(breakup_chunk(rec, validate_crc=validate))
+                    chunks += 1
+                else:
+                    out.append(rec)
         except Exception as exc:  # noqa: BLE001 - end of a truncated file, or a damaged record
             error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
-    return out, error
+    return out, chunks, error
 
 
 def bag_info(path: str | Path) -> dict:
     """Topics (type, message count), time range, chunks and metadata of a bag."""
-    from mcap.records import Channel, Chunk, Header, Message, Schema, Statistics
+    from mcap.records import Channel, Header, Message, Schema, Statistics
 
     path = Path(path)
     if not path.exists():
@@ -413,7 +422,7 @@ def bag_info(path: str | Path) -> dict:
     else:
         if path.read_bytes()[:8] != b"\x89MCAP0\r\n":
             raise UserError(f"{path}: not an MCAP file")
-        records, error = _scan(path, validate=False)
+        records, n_chunks, error = _scan(path, validate=False)
         schemas = {r.id: r.name for r in records if isinstance(r, Schema)}
         channels = {r.id: r for r in records if isinstance(r, Channel)}
         counts: dict[int, int] = defaultdict(int)
@@ -424,7 +433,7 @@ def bag_info(path: str | Path) -> dict:
         header = next((r for r in records if isinstance(r, Header)), None)
         info.update(finished=False, truncated_by=error, profile=header.profile if header else "",
                     library=header.library if header else "", messages=len(times),
-                    chunks=sum(isinstance(r, Chunk) for r in records),
+                    chunks=n_chunks,
                     start_s=min(times) * 1e-9 if times else math.nan, end_s=max(times) * 1e-9 if times else math.nan)
         info["topics"] = [{"topic": ch.topic, "type": schemas.get(ch.schema_id, ""), "count": counts[cid]}
                           for cid, ch in sorted(channels.items())]
@@ -460,7 +469,7 @@ def recover(src: str | Path, dst: str | Path) -> dict:
     with open(src, "rb") as f:
         if f.read(8) != b"\x89MCAP0\r\n":
             raise UserError(f"{src}: not an MCAP file")
-    records, error = _scan(src)
+    records, _chunks, error = _scan(src)
     dst.parent.mkdir(parents=True, exist_ok=True)
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}

@@ -112,3 +112,8 @@ def reserve_domain_id(requested: int | None = None) -> DomainLease:
             return DomainLease(d, fd)
         os.close(fd)
     raise UserError("no free ROS domain id (1..232) on this machine")
+
+
+if __name__ == "__main__":  # prints a free domain id (for scripts/launch_graph.sh)
+    with reserve_domain_id() as lease:
+        print(lease.domain_id)

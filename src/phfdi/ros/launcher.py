@@ -88,6 +88,7 @@ class LaunchResult:
     scenario: str = ""
     sample_time_s: float = 1.0
     interrupted_by: str | None = None  # signal that stopped the launch
+    published: dict[str, int] = field(default_factory=dict)  # messages per topic, as the nodes counted them
 
     @property
     def simulated_s(self) -> float:
@@ -284,7 +285,21 @@ class Launcher:
                                     + " | ".join(p.stderr_tail(3)))
 
     # ---- after the processes are gone ---------------------------------------------------------------
+    def _collect_published(self, result: LaunchResult) -> None:
+        for p in self.procs.values():
+            p.stdout_pos = 0
+            for line in p.new_stdout_lines():
+                if '"published"' not in line:
+                    continue
+                try:
+                    event = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                for topic, n in event.get("counts", {}).items():
+                    result.published[topic] = result.published.get(topic, 0) + n
+
     def _cleanup(self, result: LaunchResult) -> None:
+        self._collect_published(result)
         if any(p.popen.returncode is not None and p.popen.returncode < 0
                and p.popen.returncode != -signal.SIGTERM for p in self.procs.values()):
             result.notes.append(clean_shared_memory())

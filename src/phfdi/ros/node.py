@@ -18,6 +18,7 @@ plant starts sample 0 once every node named in ``graph_nodes`` is ready.
 
 from __future__ import annotations
 
+import json
 import signal
 import sys
 import time
@@ -61,6 +62,26 @@ DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1, reliability=Relia
 #: /graph/ready: late joiners get each node's last announcement
 READY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class _CountingPublisher:
+    """A publisher that counts what it published (reported on exit: published vs recorded)."""
+
+    __slots__ = ("_pub", "_counts", "topic_name")
+
+    def __init__(self, pub, counts: dict[str, int]) -> None:
+        self._pub, self._counts, self.topic_name = pub, counts, pub.topic_name
+        counts.setdefault(pub.topic_name, 0)
+
+    def publish(self, msg) -> None:
+        self._pub.publish(msg)
+        self._counts[self.topic_name] += 1
+
+    def get_subscription_count(self) -> int:
+        return self._pub.get_subscription_count()
+
+    def wait_for_all_acked(self, timeout):
+        return self._pub.wait_for_all_acked(timeout)
 
 
 class NodeStartError(Exception):
@@ -162,6 +183,7 @@ class GraphNode(Node):
         self._declare(self.PARAMS, self.spec)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
+        self.published: dict[str, int] = {}  # messages per topic, printed on exit
         self._data_publishers: list = []
         self._extra_publishers: list = []  # published on, but no reader is waited for (/clock)
         self._data_subscriptions: list = []
@@ -247,7 +269,7 @@ class GraphNode(Node):
     # ---- endpoints and barrier --------------------------------------------------------
     def data_publisher(self, msg_type, topic: str, announce: bool = True):
         """A reliable keep-all publisher; ``announce`` False: not part of the start barrier."""
-        pub = self.create_publisher(msg_type, topic, DATA_QOS)
+        pub = _CountingPublisher(self.create_publisher(msg_type, topic, DATA_QOS), self.published)
         if announce:
             self._data_publishers.append(pub)
         else:
@@ -355,12 +377,16 @@ class GraphNode(Node):
     def close(self) -> None:
         """Called once on the way out, before the node is destroyed: deliver what was published."""
         self.flush_publishers()
+        self.report_published()
+
+    def report_published(self) -> None:
+        print(json.dumps({"event": "published", "node": self.get_name(), "counts": self.published}), flush=True)
 
     def flush_publishers(self, timeout_s: float = 2.0) -> bool:
         """Wait until every reliable reader acknowledged everything published (shared deadline)."""
         deadline = time.monotonic() + timeout_s
         ok = True
-        for pub in self._data_publishers:
+        for pub in self._data_publishers + self._extra_publishers:
             left = max(0.0, deadline - time.monotonic())
             try:
                 ok = pub.wait_for_all_acked(rclpy.duration.Duration(seconds=left)) and ok
