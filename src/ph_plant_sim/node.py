@@ -16,6 +16,7 @@ import json
 import sys
 import time
 
+from phfdi.loop import advance_plant
 from phfdi.ros.node import GraphNode, ParamSpec, main, to_time
 from phfdi.ros.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_STATE
 
@@ -87,8 +88,6 @@ class PlantNode(GraphNode):
         if k != self.k:
             self.get_logger().warning(f"ignored a valve state stamped for sample {k} while at sample {self.k}")
             return
-        from phfdi.loop import advance_plant
-
         m = self._m
         flows, outlet_flow = advance_plant(self.process, self.valve_feed, k * self.dt_s, msg.ph_flow_ml_s,
                                            msg.outlet_opening)

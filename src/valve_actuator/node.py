@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import sys
 
+from phfdi.loop import step_valves
 from phfdi.ros.node import GraphNode, ParamSpec, main
 from phfdi.ros.topics import CONTROLLER, DIAGNOSTICS, VALVE, VALVE_STATE
 
@@ -70,8 +71,13 @@ class ValveNode(GraphNode):
         self._last_report_k: int | None = None
         self._reported_total = 0
         self._pending_change = None
-        self._command_min, self._command_max = self.param("command_min_pct"), self.param("command_max_pct")
+        self._read_limits()
         self.start_barrier()
+
+    def _read_limits(self) -> None:
+        """Parameters used every sample, read once per change."""
+        self._command_min, self._command_max = self.param("command_min_pct"), self.param("command_max_pct")
+        self._diagnostics_period_s = self.param("diagnostics_period_s")
 
     # ---- valves from the scenario ---------------------------------------------------------
     def _build_valves(self, spec, runtime: bool = False):
@@ -111,7 +117,7 @@ class ValveNode(GraphNode):
         return None
 
     def apply_parameters(self, params) -> None:
-        self._command_min, self._command_max = self.param("command_min_pct"), self.param("command_max_pct")
+        self._read_limits()
         if self._pending_change is None:
             return
         old = {"ph": self.valve, "outlet": self.outlet_valve}
@@ -140,8 +146,6 @@ class ValveNode(GraphNode):
         return math.nan
 
     def _on_output(self, out: ControllerOutput) -> None:
-        from phfdi.loop import step_valves
-
         k = self.sample_of(out.stamp)
         if k is None or k <= self._last_k:
             self.get_logger().warning(f"ignored a command stamped {out.stamp} (last sample {self._last_k})")
@@ -169,8 +173,8 @@ class ValveNode(GraphNode):
 
     # ---- diagnostics -------------------------------------------------------------------
     def _report(self, k: int, force: bool = False) -> None:
-        total = sum(h.total for h in self.held.values())
-        period = self.param("diagnostics_period_s")
+        total = self.held["ph"].total + self.held["outlet"].total
+        period = self._diagnostics_period_s
         due = (self._last_report_k is None
                or (period > 0 and (k - self._last_report_k) * self.dt_s >= period))
         if not (force or due or total != self._reported_total):

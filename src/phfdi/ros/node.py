@@ -104,7 +104,10 @@ class ParamSpec:
 
     def allowed(self) -> str:
         if self.range is not None:
-            return f"[{self.range[0]:g}, {self.range[1]:g}]"
+            lo, hi = self.range
+            if isinstance(self.default, int) and not isinstance(self.default, bool):
+                return f"[{int(lo)}, {int(hi)}]"
+            return f"[{lo:g}, {hi:g}]"
         if self.choices is not None:
             return "one of " + ", ".join(repr(c) for c in self.choices)
         return ""
@@ -418,7 +421,10 @@ def main(factory: Callable[[], GraphNode], prog: str, summary: str, specs: Seque
     argv = list(sys.argv if argv is None else argv)
     own = argv[1:argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
     if "-h" in own or "--help" in own:
-        print_parameter_help(prog, summary, tuple(COMMON_PARAMS) + tuple(specs))
+        runtime = getattr(factory, "RUNTIME_COMMON", ())
+        common = tuple(ParamSpec(p.name, p.default, p.description, p.range, p.choices, True)
+                       if p.name in runtime else p for p in COMMON_PARAMS)
+        print_parameter_help(prog, summary, common + tuple(specs))
         return 0
     stop: list[int] = []
 

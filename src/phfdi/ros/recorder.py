@@ -66,6 +66,7 @@ class RecorderNode(GraphNode):
             cid = self.bag.add_topic(topic.name, topic.type)
             self.data_subscription(_message_class(topic.type), topic.name, self._writer_for(cid), raw=True)
         self._last_flush = time.monotonic()
+        self._flush_period_s = self.param("flush_period_s")  # read once: after_spin runs per message
         self.start_barrier()
 
     def _writer_for(self, channel_id: int):
@@ -79,7 +80,7 @@ class RecorderNode(GraphNode):
 
     def after_spin(self) -> None:
         now = time.monotonic()
-        if now - self._last_flush >= self.param("flush_period_s"):
+        if now - self._last_flush >= self._flush_period_s:
             self.bag.flush()
             self._last_flush = now
 
