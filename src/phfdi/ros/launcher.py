@@ -260,13 +260,16 @@ class Launcher:
             except ProcessLookupError:
                 pass
         deadline = time.monotonic() + self.stop_timeout_s
-        for p in alive:
-            try:
-                p.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                p.killed_by_us = True
-                p.popen.kill()
-                p.popen.wait()
+        while any(p.popen.poll() is None for p in alive):
+            # too slow, or asked twice (a second Ctrl-C): kill what is left
+            if time.monotonic() > deadline or len(self._signals) > 1:
+                for p in alive:
+                    if p.popen.poll() is None:
+                        p.killed_by_us = True
+                        p.popen.kill()
+                        p.popen.wait()
+                break
+            time.sleep(0.05)
 
     def _stop_all(self, result: LaunchResult) -> None:
         self.t_stop = time.monotonic()
@@ -341,9 +344,7 @@ class Launcher:
             return None
 
         def on_signal(signum, _frame) -> None:
-            if self._signals:  # second request: stop waiting for a clean stop
-                self.stop_timeout_s = 0.5
-            self._signals.append(signum)
+            self._signals.append(signum)  # a second one kills the nodes still stopping (see _stop)
 
         return {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
 
