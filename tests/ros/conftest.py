@@ -65,20 +65,47 @@ def processes_with(text: str) -> list[int]:
     return out
 
 
-def stale_shm_files(since: float) -> list[str]:
-    """Fast DDS shared-memory files created after ``since`` whose owner is gone (lock free)."""
-    stale = []
-    for f in Path("/dev/shm").glob("fastrtps_*_el"):
+def shm_files_used(pids: list[int]) -> set[str]:
+    """Fast DDS shared-memory files mapped by these processes (what a graph uses)."""
+    names = set()
+    for pid in pids:
         try:
-            if f.stat().st_mtime < since:
-                continue
-            with open(f, "ab") as fd:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                fcntl.flock(fd, fcntl.LOCK_UN)
-            stale.append(f.name)
-        except (OSError, FileNotFoundError):
-            continue  # locked (in use) or gone
-    return stale
+            maps = Path(f"/proc/{pid}/maps").read_text()
+        except OSError:
+            continue
+        names.update(line.rsplit("/", 1)[-1] for line in maps.splitlines() if "/dev/shm/fastrtps_" in line)
+    return names
+
+
+def _owned(name: str) -> bool:
+    """A live process holds the lock file of this segment."""
+    lock = Path("/dev/shm") / f"{name}_el"
+    try:
+        with open(lock, "rb") as fd:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
+    except FileNotFoundError:
+        return False
+    except OSError:
+        return True
+
+
+def stale_shm_files(domain_id: int, used: set[str] = frozenset()) -> list[str]:
+    """Shared-memory files of a finished graph still on disk: the domain's port segments
+    nobody owns, and any file the graph used (``shm_files_used``) whose owner is gone."""
+    from phfdi.ros.launcher import ownerless_port_segments
+
+    stale = {f.name for f in ownerless_port_segments(domain_id, since=float("inf"))}
+    stale |= {n for n in used if (Path("/dev/shm") / n).exists() and not _owned(n)}
+    return sorted(stale)
+
+
+def domain_of(launch_stderr: str) -> int:
+    """The ROS domain a launch reported ("... on ROS domain N: ...")."""
+    import re
+
+    return int(re.search(r"on ROS domain (\d+)", launch_stderr).group(1))
 
 
 def phfdi_cmd(*args: str) -> list[str]:
@@ -94,7 +121,7 @@ def node_cmd(module: str, **params) -> list[str]:
 
 def read_until(proc: subprocess.Popen, pattern: str, timeout_s: float) -> str:
     """Read the process's stderr until a line contains ``pattern``; returns what was read."""
-    seen = ""
+    seen = getattr(proc, "stderr_seen", "")
     deadline = time.monotonic() + timeout_s
     fd = proc.stderr.fileno()
     while time.monotonic() < deadline:
@@ -104,6 +131,7 @@ def read_until(proc: subprocess.Popen, pattern: str, timeout_s: float) -> str:
             if not chunk:
                 break
             seen += chunk
+            proc.stderr_seen = seen
             if pattern in seen:
                 return seen
         elif proc.poll() is not None:

@@ -37,7 +37,7 @@ def test_launch_succeeds_and_leaves_nothing_behind(graph_run):
     assert summary["samples"] == summary["of"] == 601
     assert summary["failure"] is None
     assert processes_with(str(graph_run["logs"])) == []
-    assert stale_shm_files(graph_run["t0"]) == []
+    assert stale_shm_files(summary["domain_id"]) == []
 
 
 def test_graph_run_equals_in_process_simulation(graph_run):

@@ -16,7 +16,15 @@ import pytest
 from phfdi import bagio
 from phfdi.ros import topics as T
 
-from .conftest import SHORT_RUN, phfdi_cmd, processes_with, read_until, stale_shm_files
+from .conftest import (
+    SHORT_RUN,
+    domain_of,
+    phfdi_cmd,
+    processes_with,
+    read_until,
+    shm_files_used,
+    stale_shm_files,
+)
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 
@@ -28,9 +36,11 @@ def _start_paced(tmp_path, *extra):
     proc = subprocess.Popen(phfdi_cmd("launch", *SHORT_RUN, "--pace", "20", "--record", str(bag),
                                       "--log-dir", str(logs), *extra),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    read_until(proc, "graph connected", timeout_s=120)
+    seen = read_until(proc, "graph connected", timeout_s=120)
     time.sleep(2.0)  # let some samples through
-    return proc, bag, logs
+    used = shm_files_used(processes_with(str(logs)))
+    assert used, "the graph's processes map no Fast DDS shared memory: the check below would be empty"
+    return proc, bag, logs, (domain_of(seen), used)
 
 
 def _wait_gone(logs, timeout_s: float = 30.0) -> list[int]:
@@ -56,8 +66,7 @@ def _assert_counts_consistent(bag):
 
 
 def test_sigterm_to_the_launcher_stops_every_node_and_closes_the_bag(tmp_path):
-    t0 = time.time()
-    proc, bag, logs = _start_paced(tmp_path)
+    proc, bag, logs, domain = _start_paced(tmp_path)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 128 + signal.SIGTERM, err.decode()
@@ -65,12 +74,11 @@ def test_sigterm_to_the_launcher_stops_every_node_and_closes_the_bag(tmp_path):
     assert _wait_gone(logs) == []
     n = _assert_counts_consistent(bag)
     assert n < 601  # it really was stopped in the middle
-    assert stale_shm_files(t0) == []
+    assert stale_shm_files(*domain) == []
 
 
 def test_a_killed_node_is_named_and_the_rest_stops_cleanly(tmp_path):
-    t0 = time.time()
-    proc, bag, logs = _start_paced(tmp_path)
+    proc, bag, logs, domain = _start_paced(tmp_path)
     (valve,) = [pid for pid in processes_with(str(logs)) if "valve_actuator.node" in
                 open(f"/proc/{pid}/cmdline", "rb").read().decode(errors="replace")]
     os.kill(valve, signal.SIGKILL)
@@ -80,11 +88,11 @@ def test_a_killed_node_is_named_and_the_rest_stops_cleanly(tmp_path):
     assert "node valve" in err and "SIGKILL" in err
     assert _wait_gone(logs) == []
     _assert_counts_consistent(bag)
-    assert stale_shm_files(t0) == []  # the launcher cleaned the killed node's shared memory
+    assert stale_shm_files(*domain) == []  # the launcher cleaned the killed node's shared memory
 
 
 def test_a_killed_recorder_leaves_a_bag_the_launcher_recovers(tmp_path):
-    proc, bag, logs = _start_paced(tmp_path)
+    proc, bag, logs, domain = _start_paced(tmp_path)
     (recorder,) = [pid for pid in processes_with(str(logs)) if "phfdi.ros.recorder" in
                    open(f"/proc/{pid}/cmdline", "rb").read().decode(errors="replace")]
     os.kill(recorder, signal.SIGKILL)
@@ -94,3 +102,4 @@ def test_a_killed_recorder_leaves_a_bag_the_launcher_recovers(tmp_path):
     assert _wait_gone(logs) == []
     info = bagio.bag_info(bag)
     assert info["finished"] and info["messages"] > 0
+    assert stale_shm_files(*domain) == []

@@ -189,6 +189,7 @@ class Launcher:
     def _spawn_all(self, domain_id: int) -> None:
         env = graph_env(domain_id)
         self.t0 = time.monotonic()
+        self.wall_t0 = time.time() - 1.0  # for file times (coarse clocks)
         for spec in self.nodes:
             params_file = self.log_dir / f"{spec.name}.params.yaml"
             params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.params}}, sort_keys=False))
@@ -303,9 +304,10 @@ class Launcher:
 
     def _cleanup(self, result: LaunchResult) -> None:
         self._collect_published(result)
-        if any(p.popen.returncode is not None and p.popen.returncode < 0
-               and p.popen.returncode != -signal.SIGTERM for p in self.procs.values()):
-            result.notes.append(clean_shared_memory())
+        if result.failure or any(p.popen.returncode not in (0, None) for p in self.procs.values()):
+            # a node that died while the others ran leaves shared memory behind
+            time.sleep(1.0)
+            result.notes.append(clean_shared_memory(result.domain_id, self.wall_t0))
         recorder = self.procs.get(RECORDER)
         if recorder is not None:
             path = Path(recorder.spec.params["path"])
@@ -355,11 +357,50 @@ class Launcher:
                 signal.signal(s, handler)
 
 
-def clean_shared_memory() -> str:
-    """Remove Fast DDS shared-memory files whose owner died (``fastdds shm clean``: it checks their locks)."""
+SHM_DIR = Path("/dev/shm")
+
+
+def ownerless_port_segments(domain_id: int, since: float) -> list[Path]:
+    """Fast DDS port segments of this graph that no live process owns.
+
+    A listening participant holds ``fastrtps_portN_el`` locked while it lives.
+    When a node is killed, the others keep sending to its ports for a while
+    and re-create the segments without that lock file, which ``fastdds shm
+    clean`` does not look at. Ours: the domain's port range, or the
+    per-participant ports below it (7000 + i) created during this launch.
+    """
+    lo = 7400 + 250 * domain_id
+    out = []
+    for f in SHM_DIR.glob("fastrtps_port*"):
+        name = f.name
+        if name.endswith(("_el", "_sl")) or not name[len("fastrtps_port"):].isdigit():
+            continue
+        port = int(name[len("fastrtps_port"):])
+        if (SHM_DIR / f"{name}_el").exists() or (SHM_DIR / f"{name}_sl").exists():
+            continue
+        try:
+            recent = f.stat().st_mtime >= since
+        except FileNotFoundError:
+            continue
+        if lo <= port < lo + 250 or (port < 7400 and recent):
+            out.append(f)
+    return out
+
+
+def clean_shared_memory(domain_id: int, since: float) -> str:
+    """Remove the Fast DDS shared memory a killed node left: zombie segments and ownerless ports."""
     tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
-    if not tool.exists():
-        return "fastdds shm clean not found: stale /dev/shm/fastrtps_* files may remain"
-    out = subprocess.run([sys.executable, str(tool), "shm", "clean"], capture_output=True, text=True, timeout=60)
-    lines = [ln.strip() for ln in out.stdout.splitlines() if "cleaned" in ln]
-    return "shared memory of killed nodes cleaned (" + ", ".join(lines) + ")"
+    summary = []
+    if tool.exists():  # segments whose lock file is no longer held ("fastdds shm clean" checks the locks)
+        out = subprocess.run([sys.executable, str(tool), "shm", "clean"], capture_output=True, text=True,
+                             timeout=60)
+        summary += [ln.strip() for ln in out.stdout.splitlines() if "cleaned" in ln]
+    ports = ownerless_port_segments(domain_id, since)
+    for f in ports:
+        for path in (f, SHM_DIR / f"sem.{f.name}_mutex"):
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                pass
+    summary.append(f"{len(ports)} ownerless port segments removed")
+    return "shared memory of the stopped graph cleaned (" + ", ".join(summary) + ")"
