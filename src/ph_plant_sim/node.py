@@ -44,7 +44,7 @@ class PlantNode(GraphNode):
         self.n_samples = parts.n_samples
         self.feed_names = [f.name for f in self.process.plant.feeds]
         self.pub_measurement = self.data_publisher(Measurement, MEASUREMENT.name)
-        self.pub_clock = self.data_publisher(Clock, CLOCK.name, announce=False)
+        self.pub_clock = self.data_publisher(Clock, CLOCK.name)
         self.pub_state = self.data_publisher(PlantState, PLANT_STATE.name)
         self.data_subscription(ValveState, VALVE_STATE.name, self._on_valve_state)
         # one message object per topic, refilled each sample (building one costs more than filling it)

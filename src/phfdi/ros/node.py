@@ -188,7 +188,6 @@ class GraphNode(Node):
         self.add_post_set_parameters_callback(self._after_set_parameters)
         self.published: dict[str, int] = {}  # messages per topic, printed on exit
         self._data_publishers: list = []
-        self._extra_publishers: list = []  # published on, but no reader is waited for (/clock)
         self._data_subscriptions: list = []
         self._peers: dict[str, tuple[set[str], set[str]]] = {}  # node -> (subscribed, published) topics
         self._peers_ready: set[str] = set()
@@ -270,13 +269,10 @@ class GraphNode(Node):
         """Put accepted runtime changes into effect."""
 
     # ---- endpoints and barrier --------------------------------------------------------
-    def data_publisher(self, msg_type, topic: str, announce: bool = True):
-        """A reliable keep-all publisher; ``announce`` False: not part of the start barrier."""
+    def data_publisher(self, msg_type, topic: str):
+        """A reliable keep-all publisher, counted, part of the start barrier."""
         pub = _CountingPublisher(self.create_publisher(msg_type, topic, DATA_QOS), self.published)
-        if announce:
-            self._data_publishers.append(pub)
-        else:
-            self._extra_publishers.append(pub)
+        self._data_publishers.append(pub)
         return pub
 
     def data_subscription(self, msg_type, topic: str, callback: Callable, raw: bool = False):
@@ -389,7 +385,7 @@ class GraphNode(Node):
         """Wait until every reliable reader acknowledged everything published (shared deadline)."""
         deadline = time.monotonic() + timeout_s
         ok = True
-        for pub in self._data_publishers + self._extra_publishers:
+        for pub in self._data_publishers:
             left = max(0.0, deadline - time.monotonic())
             try:
                 ok = pub.wait_for_all_acked(rclpy.duration.Duration(seconds=left)) and ok
