@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 
 from .common import EPILOG_FORMAT, Progress, add_scenario_args, scenario_from_args
 
@@ -29,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     add_scenario_args(p)
     p.add_argument("--record", metavar="BAG.mcap", default=None, help="record every topic to this MCAP bag")
+    p.add_argument("--overwrite", action="store_true", help="replace the --record file if it exists")
     p.add_argument("--pace", type=float, default=0.0, metavar="FACTOR",
                    help="0: lock-step as fast as possible (default); F: F times real time")
     p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: a free one)")
@@ -51,6 +53,8 @@ def _check(args: argparse.Namespace) -> None:
         raise UserError(f"--connect-timeout {args.connect_timeout}: use 0.1 .. 3600 s")
     if args.record is not None and not args.record.endswith(".mcap"):
         raise UserError(f"--record {args.record}: give a .mcap file name")
+    if args.record is not None and Path(args.record).exists() and not args.overwrite:
+        raise UserError(f"--record {args.record} exists: give another name, or --overwrite to replace it")
 
 
 def summary_dict(result) -> dict:
