@@ -50,7 +50,6 @@ class ControllersNode(GraphNode):
         self.pub_output = self.data_publisher(ControllerOutput, CONTROLLER.name)
         self.data_subscription(Measurement, MEASUREMENT.name, self._on_measurement)
         self._output = ControllerOutput()  # refilled each sample
-        self._last_k = -1
         self.start_barrier()
 
     def _apply_tuning(self) -> None:
@@ -72,11 +71,9 @@ class ControllersNode(GraphNode):
         self.get_logger().info("tuning now: " + ", ".join(f"{p.name} = {p.value:g}" for p in params))
 
     def _on_measurement(self, msg: Measurement) -> None:
-        k = self.sample_of(msg.stamp)
-        if k is None or k <= self._last_k:
-            self.get_logger().warning(f"ignored a measurement stamped {msg.stamp} (last sample {self._last_k})")
+        k = self.next_sample(msg.stamp, "measurement")
+        if k is None:
             return
-        self._last_k = k
         bank = self.bank
         c = bank.compute(k * self.dt_s, msg.ph, msg.level_cm)
         out = self._output

@@ -67,7 +67,6 @@ class ValveNode(GraphNode):
         self.pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
         self.data_subscription(ControllerOutput, CONTROLLER.name, self._on_output)
         self._state = ValveState()  # refilled each sample
-        self._last_k = -1
         self._last_report_k: int | None = None
         self._reported_total = 0
         self._pending_change = None
@@ -146,11 +145,9 @@ class ValveNode(GraphNode):
         return math.nan
 
     def _on_output(self, out: ControllerOutput) -> None:
-        k = self.sample_of(out.stamp)
-        if k is None or k <= self._last_k:
-            self.get_logger().warning(f"ignored a command stamped {out.stamp} (last sample {self._last_k})")
+        k = self.next_sample(out.stamp, "command")
+        if k is None:
             return
-        self._last_k = k
         ph_cmd = self._admit("ph", out.ph_output_pct)
         level_cmd = out.level_output_pct
         if self.outlet_valve is not None:

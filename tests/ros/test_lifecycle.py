@@ -43,6 +43,12 @@ def _start_paced(tmp_path, *extra):
     return proc, bag, logs, (domain_of(seen), used)
 
 
+def _pid_of(logs, module: str) -> int:
+    (pid,) = [pid for pid in processes_with(str(logs))
+              if module in open(f"/proc/{pid}/cmdline", "rb").read().decode(errors="replace")]
+    return pid
+
+
 def _wait_gone(logs, timeout_s: float = 30.0) -> list[int]:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and processes_with(str(logs)):
@@ -79,9 +85,7 @@ def test_sigterm_to_the_launcher_stops_every_node_and_closes_the_bag(tmp_path):
 
 def test_a_killed_node_is_named_and_the_rest_stops_cleanly(tmp_path):
     proc, bag, logs, domain = _start_paced(tmp_path)
-    (valve,) = [pid for pid in processes_with(str(logs)) if "valve_actuator.node" in
-                open(f"/proc/{pid}/cmdline", "rb").read().decode(errors="replace")]
-    os.kill(valve, signal.SIGKILL)
+    os.kill(_pid_of(logs, "valve_actuator.node"), signal.SIGKILL)
     out, err = proc.communicate(timeout=120)
     err = err.decode()
     assert proc.returncode == 1, err
@@ -93,9 +97,7 @@ def test_a_killed_node_is_named_and_the_rest_stops_cleanly(tmp_path):
 
 def test_a_killed_recorder_leaves_a_bag_the_launcher_recovers(tmp_path):
     proc, bag, logs, domain = _start_paced(tmp_path)
-    (recorder,) = [pid for pid in processes_with(str(logs)) if "phfdi.ros.recorder" in
-                   open(f"/proc/{pid}/cmdline", "rb").read().decode(errors="replace")]
-    os.kill(recorder, signal.SIGKILL)
+    os.kill(_pid_of(logs, "phfdi.ros.recorder"), signal.SIGKILL)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 1
     assert "node recorder" in err.decode() and "recovered" in out.decode()

@@ -191,6 +191,7 @@ class GraphNode(Node):
         self._data_subscriptions: list = []
         self._peers: dict[str, tuple[set[str], set[str]]] = {}  # node -> (subscribed, published) topics
         self._peers_ready: set[str] = set()
+        self._last_k = -1  # last input sample taken (next_sample)
         self._connected = False
         self._announced_ready = False
         self._waiting_for = "announcements"
@@ -361,6 +362,16 @@ class GraphNode(Node):
         """Sample index of a stamp; None if it is not on the sample grid."""
         k, rest = divmod(time_ns(stamp), self.dt_ns)
         return None if rest else k
+
+    def next_sample(self, stamp: Time, what: str) -> int | None:
+        """Sample index of a new input; None (with a warning) if off the grid or not newer than the last."""
+        k = self.sample_of(stamp)
+        if k is None or k <= self._last_k:
+            self.get_logger().warning(f"ignored a {what} stamped {stamp.sec}.{stamp.nanosec:09d} s "
+                                      f"(last sample {self._last_k})")
+            return None
+        self._last_k = k
+        return k
 
     # ---- main loop hooks ----------------------------------------------------------------
     def spin_timeout_s(self) -> float:
