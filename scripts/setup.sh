@@ -20,10 +20,12 @@ stamp="$VENV/.phfdi-setup-stamp"
 want=$(cat pyproject.toml scripts/setup.sh | sha256sum | cut -d' ' -f1)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ] && "$VENV/bin/python" -c 'import phfdi, rclpy' 2>/dev/null; then
   echo "setup: $VENV is up to date"
-  exit 0
+else
+  echo "setup: installing into $VENV (ROS 2 Jazzy wheels, numpy/scipy/PyWavelets, mcap, test tools) ..."
+  "$VENV/bin/python" -m pip install --quiet --upgrade pip 2>&1 | { grep -v "is ignored: it is neither a file nor a directory" || true; }
+  "$VENV/bin/python" -m pip install --quiet -e ".[ros,interfaces,peers,test]" 2>&1 | { grep -v -e "is ignored: it is neither a file nor a directory" -e "BuildBackendWarning" || true; }
+  echo "$want" > "$stamp"
 fi
-echo "setup: installing into $VENV (ROS 2 Jazzy wheels, numpy/scipy/PyWavelets, mcap, test tools) ..."
-"$VENV/bin/python" -m pip install --quiet --upgrade pip 2>&1 | { grep -v "is ignored: it is neither a file nor a directory" || true; }
-"$VENV/bin/python" -m pip install --quiet -e ".[ros,peers,test]" 2>&1 | { grep -v -e "is ignored: it is neither a file nor a directory" -e "BuildBackendWarning" || true; }
-echo "$want" > "$stamp"
+# The graph's message package (ROS 2 .msg -> C type support + Python); skipped when up to date.
+PHFDI_VENV="$VENV" bash scripts/build_interfaces.sh
 echo "setup: done"

@@ -22,6 +22,8 @@ COMMANDS = [
     "simulate",
     "scenarios",
     "paper_runs",
+    "launch",
+    "bag",
     "analyze",
     "loop_diagnose",
 ]

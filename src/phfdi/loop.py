@@ -25,7 +25,7 @@ from ph_plant_sim.plant import CstrPlant, Feed, GravityOutlet, Tank
 from ph_plant_sim.process import PlantProcess
 from pi_controllers.loops import ControllerBank
 from pi_controllers.pi import PIController
-from valve_actuator.valve import Valve, inherent_characteristic
+from valve_actuator.valve import Valve, ValveOutput, inherent_characteristic
 
 from . import __version__
 from .blocks import Chain, Injected, make_block
@@ -217,20 +217,49 @@ def signal_names(parts: LoopParts) -> list[str]:
     return names[:i] + feeds + names[i:]
 
 
+@dataclass(slots=True)
+class ValveStep:
+    """The valves' answer to one sample's controller outputs."""
+
+    valve: ValveOutput  # the pH loop's valve
+    outlet_position_pct: float  # outlet stem position (the level output itself when there is no outlet valve)
+    outlet_opening: float  # fraction of full outlet flow
+    outlet: ValveOutput | None  # the outlet valve's full output, if there is one
+
+
+def step_valves(valve: Valve, outlet_valve: Valve | None, fixed_outlet_opening: float, t_s: float,
+                ph_command_pct: float, level_command_pct: float) -> ValveStep:
+    """Valve side of a tick: both valves move for the commands of t_s (the valve node calls this too)."""
+    v = valve.step(ph_command_pct, t_s)
+    if outlet_valve is None:
+        return ValveStep(v, level_command_pct, fixed_outlet_opening, None)
+    o = outlet_valve.step(level_command_pct, t_s)
+    return ValveStep(v, o.position_pct, o.opening, o)
+
+
+def advance_plant(process: PlantProcess, valve_feed: str, t_s: float, valve_flow_ml_s: float,
+                  outlet_opening: float) -> tuple[list[float], float]:
+    """Plant side of a tick: feed flows and outlet flow of t_s, then integrate to t_s + dt.
+
+    Returns (feed flows in plant feed order, outlet flow), both mL/s, as they
+    were during the sample. The plant node calls this too.
+    """
+    flows = process.feed_flows(t_s, {valve_feed: valve_flow_ml_s})
+    outlet_flow = process.plant.outlet_flow(flows, outlet_opening)
+    process.plant.step(flows, outlet_opening, process.dt_s)
+    return flows, outlet_flow
+
+
 def tick(parts: LoopParts, k: int) -> dict[str, float]:
     """One sample of the closed loop; returns the run's row for t_k."""
     t = k * parts.dt_s
     proc = parts.process
     m = proc.measure(t)
     c = parts.controllers.compute(t, m.ph_measured, m.level_measured_cm)
-    v = parts.valve.step(c.ph_output_pct, t)
-    if parts.outlet_valve is not None:
-        o = parts.outlet_valve.step(c.level_output_pct, t)
-        outlet_pos, opening = o.position_pct, o.opening
-    else:
-        outlet_pos, opening = c.level_output_pct, parts.start.outlet_opening
-    feed = parts.spec.valves.ph.feed
-    flows = proc.feed_flows(t, {feed: v.flow_ml_s})
+    vs = step_valves(parts.valve, parts.outlet_valve, parts.start.outlet_opening, t,
+                     c.ph_output_pct, c.level_output_pct)
+    v = vs.valve
+    flows, outlet_flow = advance_plant(proc, parts.spec.valves.ph.feed, t, v.flow_ml_s, vs.outlet_opening)
     row = {
         "time_s": t,
         "ph_setpoint": c.ph_setpoint,
@@ -239,8 +268,8 @@ def tick(parts: LoopParts, k: int) -> dict[str, float]:
         "level_controller_output_pct": c.level_output_pct,
         "valve_command_pct": c.ph_output_pct,
         "valve_position_pct": v.position_pct,
-        "outlet_valve_position_pct": outlet_pos,
-        "outlet_flow_ml_s": proc.plant.outlet_flow(flows, opening),
+        "outlet_valve_position_pct": vs.outlet_position_pct,
+        "outlet_flow_ml_s": outlet_flow,
         "ph_true": m.ph_true,
         "ph_measured": m.ph_measured,
         "level_true_cm": m.level_true_cm,
@@ -249,7 +278,6 @@ def tick(parts: LoopParts, k: int) -> dict[str, float]:
     }
     for f, q in zip(proc.plant.feeds, flows):
         row[f"{f.name}_flow_ml_s"] = q
-    proc.plant.step(flows, opening, parts.dt_s)
     return row
 
 

@@ -1,0 +1,498 @@
+"""Bags (MCAP files, ros2 profile) and runs: write, read, inspect, recover.
+
+A bag of the graph holds one channel per topic of :mod:`phfdi.ros.topics`
+(cdr messages, ``ros2msg`` schemas, the offered QoS in the channel metadata
+as rosbag2 writes it), every message logged at its simulated time stamp, and
+the run's metadata (scenario, seed, faults) in an MCAP metadata record named
+``phfdi_run``. rosbags (AnyReader), mcap-ros2-support and Foxglove read it.
+
+- :class:`BagWriter`: what the recorder node and :func:`write_run` write with;
+  small chunks (16 KB) so that a killed writer leaves recoverable chunks.
+- :func:`load_run`: bag (or .csv / .parquet run file) -> :class:`phfdi.run.Run`
+  with the run's signal names and units on the simulated time base.
+- :func:`write_run`: a Run -> bag with the graph's topics (for replay).
+- :func:`bag_info` and :func:`recover`: ``phfdi bag info`` / ``phfdi bag recover``.
+
+No rclpy here: messages are decoded with rosbags from the bag's own schemas.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import sys
+from collections import defaultdict
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .errors import UserError
+from .ros import topics as T
+from .run import SIGNALS, Run
+
+RUN_METADATA = "phfdi_run"
+INTERFACES_PACKAGE = "phfdi_interfaces"
+DEFAULT_CHUNK_BYTES = 16 * 1024
+
+
+# ---- message definitions --------------------------------------------------------------
+def _msg_dirs() -> list[Path]:
+    """Where phfdi_interfaces' .msg files are: this checkout, then installed prefixes."""
+    dirs = [Path(__file__).resolve().parents[2] / "interfaces" / INTERFACES_PACKAGE / "msg"]
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p] + [sys.prefix]
+    dirs += [Path(p) / "share" / INTERFACES_PACKAGE / "msg" for p in prefixes]
+    return [d for d in dirs if d.is_dir()]
+
+
+@lru_cache(maxsize=1)
+def typestore():
+    """rosbags type store: ROS 2 Jazzy's standard types plus phfdi_interfaces."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    dirs = _msg_dirs()
+    if not dirs:
+        raise UserError(f"cannot find the {INTERFACES_PACKAGE} message definitions (run scripts/setup.sh)")
+    types: dict = {}
+    for f in sorted(dirs[0].glob("*.msg")):
+        types.update(get_types_from_msg(f.read_text(encoding="utf-8"), f"{INTERFACES_PACKAGE}/msg/{f.stem}"))
+    store.register(types)
+    return store
+
+
+def schema_text(msgtype: str) -> str:
+    """Full ros2msg definition of a type (dependencies appended after '=' * 80 lines)."""
+    return typestore().generate_msgdef(msgtype, ros_version=2)[0]
+
+
+def qos_metadata(qos: dict = T.DATA_QOS) -> str:
+    """The offered QoS as rosbag2 (metadata version 9) stores it in a channel's metadata."""
+    import yaml
+
+    default = {"sec": 0, "nsec": 0}  # rmw's "unspecified": the QoS the graph's nodes offer
+    profile = {"history": qos["history"], "depth": qos["depth"], "reliability": qos["reliability"],
+               "durability": qos["durability"], "deadline": default, "lifespan": default,
+               "liveliness": "automatic", "liveliness_lease_duration": default,
+               "avoid_ros_namespace_conventions": False}
+    return yaml.safe_dump([profile], default_flow_style=False, sort_keys=False).strip()
+
+
+# ---- writing ------------------------------------------------------------------------
+class _Unbuffered(io.RawIOBase):
+    """A file the MCAP writer cannot buffer: each finished chunk reaches the OS at once.
+
+    (mcap wraps raw files in a BufferedWriter; a killed recorder would then
+    lose complete chunks still in that buffer.)
+    """
+
+    def __init__(self, path: Path) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._pos = 0
+
+    def write(self, data) -> int:
+        view = memoryview(data)
+        while view:
+            n = os.write(self._fd, view)
+            view = view[n:]
+            self._pos += n
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def writable(self) -> bool:
+        return True
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+        super().close()
+
+
+class _NotRaw:
+    """Hide the raw file's type so that mcap.writer.Writer does not add a buffer."""
+
+    def __init__(self, raw: _Unbuffered) -> None:
+        self.raw = raw
+        self.write = raw.write
+        self.tell = raw.tell
+        self.flush = raw.flush
+
+
+@dataclass
+class BagWriter:
+    """MCAP writer with the ros2 profile: one channel per topic, cdr payloads."""
+
+    path: Path
+    chunk_size: int = DEFAULT_CHUNK_BYTES
+    compression: str = "zstd"
+    counts: dict[str, int] = field(default_factory=lambda: defaultdict(int))
+
+    def __post_init__(self) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        self.path = Path(self.path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+        if self.compression not in kinds:
+            raise UserError(f"compression {self.compression!r}: use zstd, lz4 or none")
+        self._raw = _Unbuffered(self.path)
+        self._writer = Writer(_NotRaw(self._raw), chunk_size=self.chunk_size, compression=kinds[self.compression])
+        self._writer.start(profile="ros2", library=f"phfdi {__version__}")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._topic_of: dict[int, str] = {}
+        self.closed = False
+
+    def add_topic(self, topic: str, msgtype: str, qos: dict = T.DATA_QOS) -> int:
+        """Register a topic (idempotent); returns its channel id."""
+        if topic in self._channels:
+            return self._channels[topic]
+        if msgtype not in self._schemas:
+            self._schemas[msgtype] = self._writer.register_schema(msgtype, "ros2msg",
+                                                                  schema_text(msgtype).encode())
+        cid = self._writer.register_channel(topic, "cdr", self._schemas[msgtype],
+                                            {"offered_qos_profiles": qos_metadata(qos)})
+        self._channels[topic] = cid
+        self._topic_of[cid] = topic
+        return cid
+
+    def write(self, channel_id: int, stamp_ns: int, cdr: bytes) -> None:
+        """One message, logged (and published) at its simulated time stamp."""
+        self._writer.add_message(channel_id, log_time=stamp_ns, data=cdr, publish_time=stamp_ns)
+        self.counts[self._topic_of[channel_id]] += 1
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        self._writer.add_metadata(name, data)
+
+    def flush(self) -> None:
+        """Close the chunk in progress and hand it to the OS (crash safety in slow runs)."""
+        self._writer.flush()
+
+    def close(self) -> None:
+        if not self.closed:
+            self._writer.finish()
+            self._raw.close()
+            self.closed = True
+
+
+def stamp_of_cdr(cdr: bytes) -> int:
+    """Stamp (ns) of a CDR message whose first field is a builtin_interfaces/Time.
+
+    True of every topic of the graph (``stamp``, ``clock``, ``header.stamp``):
+    4 bytes of encapsulation header, then int32 sec and uint32 nanosec.
+    """
+    little = cdr[1] == 1
+    sec = int.from_bytes(cdr[4:8], "little" if little else "big", signed=True)
+    nsec = int.from_bytes(cdr[8:12], "little" if little else "big", signed=False)
+    return sec * 1_000_000_000 + nsec
+
+
+# ---- run <-> bag --------------------------------------------------------------------
+def _feed_names(names) -> list[str]:
+    return [n[: -len("_flow_ml_s")] for n in names if n.endswith("_flow_ml_s") and n != "outlet_flow_ml_s"]
+
+
+def run_signal_names(feeds: list[str]) -> list[str]:
+    """Signal order of a closed-loop run (as phfdi.loop.signal_names)."""
+    names = [s.name for s in SIGNALS]
+    i = names.index("outlet_valve_position_pct")
+    return names[:i] + [f"{f}_flow_ml_s" for f in feeds] + names[i:]
+
+
+def _extract(topic: str, msg, row: dict) -> None:
+    """The run signals one message carries."""
+    if topic == T.MEASUREMENT.name:
+        row["ph_measured"], row["level_measured_cm"] = msg.ph, msg.level_cm
+    elif topic == T.CONTROLLER.name:
+        row["ph_setpoint"], row["ph_controller_output_pct"] = msg.ph_setpoint, msg.ph_output_pct
+        row["level_setpoint_cm"], row["level_controller_output_pct"] = msg.level_setpoint_cm, msg.level_output_pct
+    elif topic == T.VALVE_STATE.name:
+        row["valve_command_pct"], row["valve_position_pct"] = msg.ph_command_pct, msg.ph_position_pct
+        row["outlet_valve_position_pct"] = msg.outlet_position_pct
+        row["_valve_fault_severity"] = msg.ph_fault_severity
+    elif topic == T.PLANT_STATE.name:
+        row["ph_true"], row["level_true_cm"] = msg.ph, msg.level_cm
+        for name, q in zip(msg.feed_names, msg.feed_flows_ml_s):
+            row[f"{name}_flow_ml_s"] = float(q)
+        row["outlet_flow_ml_s"] = msg.outlet_flow_ml_s
+        row["_sensor_fault_severity"] = msg.sensor_fault_severity
+
+
+#: topics that carry run signals (the rest: /clock, /diagnostics, /fault_alarm)
+_RUN_TOPICS = (T.MEASUREMENT, T.CONTROLLER, T.VALVE_STATE, T.PLANT_STATE)
+
+
+def read_metadata(path: Path) -> dict[str, dict[str, str]]:
+    """MCAP metadata records by name (empty for a file without a summary)."""
+    from mcap.reader import make_reader
+
+    out = {}
+    try:
+        with open(path, "rb") as f:
+            for rec in make_reader(f).iter_metadata():
+                out[rec.name] = dict(rec.metadata)
+    except Exception:  # noqa: BLE001 - unfinished file: no metadata index
+        pass
+    return out
+
+
+def load_run(path: str | Path) -> Run:
+    """A run from a bag of the graph (.mcap) or a run file (.csv, .parquet).
+
+    Bag topics map onto the run's signals (``/plant/measurement.ph`` ->
+    ``ph_measured``, ...; the table is in docs/ros_graph.md); the time base is
+    the stamps of /plant/measurement. ``fault_severity`` is the larger of the
+    pH valve's and the sensors' severity, as in :func:`phfdi.loop.tick`.
+    Samples a topic lacks (a recovered bag's last sample) are NaN.
+    """
+    path = Path(path)
+    if path.suffix.lower() in (".csv", ".parquet", ".pq"):
+        return Run.load(path)
+    if not path.exists():
+        raise UserError(f"no such file: {path}")
+    if path.suffix.lower() != ".mcap" and not (path / "metadata.yaml").exists():
+        raise UserError(f"cannot read a run from {path}: expected .mcap, .csv or .parquet")
+    from rosbags.highlevel import AnyReader, AnyReaderError
+
+    rows: dict[int, dict] = defaultdict(dict)
+    measured: set[int] = set()
+    feeds: list[str] | None = None
+    try:
+        with AnyReader([path]) as reader:
+            conns = [c for c in reader.connections if c.topic in {t.name for t in _RUN_TOPICS}]
+            if not any(c.topic == T.MEASUREMENT.name for c in conns):
+                raise UserError(f"{path}: no {T.MEASUREMENT.name} topic: not a bag of the phfdi graph")
+            for conn, _t, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                ns = msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec
+                _extract(conn.topic, msg, rows[ns])
+                if conn.topic == T.MEASUREMENT.name:
+                    measured.add(ns)
+                elif feeds is None and conn.topic == T.PLANT_STATE.name:
+                    feeds = list(msg.feed_names)  # the plant's feed order
+    except AnyReaderError as exc:
+        raise UserError(f"{path}: cannot read the bag ({exc}); if its recorder was killed, "
+                        f"run: phfdi bag recover {path} FIXED.mcap") from None
+    meta = read_metadata(path)
+    metadata = json.loads(meta.get(RUN_METADATA, {}).get("json", "{}"))
+    metadata.update({"source": str(path), "mode": "graph"})
+    stamps = sorted(measured)
+    dt = metadata.get("sample_time_s")
+    try:
+        dt_ns = T.sample_period_ns(dt) if dt else None
+    except ValueError:
+        dt_ns = None
+    if dt_ns and all(ns % dt_ns == 0 for ns in stamps):
+        time_s = [(ns // dt_ns) * dt for ns in stamps]  # k * dt exactly as the simulation
+    else:
+        time_s = [ns * 1e-9 for ns in stamps]
+    names = run_signal_names(feeds or [])
+    signals = {n: np.full(len(stamps), np.nan) for n in names}
+    signals["time_s"] = np.asarray(time_s, dtype=float)
+    for i, ns in enumerate(stamps):
+        row = rows[ns]
+        for n, v in row.items():
+            if n in signals:
+                signals[n][i] = v
+        sev = [row[k] for k in ("_valve_fault_severity", "_sensor_fault_severity") if k in row]
+        signals["fault_severity"][i] = max(sev) if sev else math.nan
+    return Run(signals, metadata)
+
+
+def _time(store, ns: int):
+    return store.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
+    """Write a run as a bag with the graph's per-sample topics (NaN where the run lacks a signal).
+
+    Stamps are time_s (relative to the first sample when it is not 0), so any
+    run, simulated or measured, can be replayed into the graph's topics.
+    """
+    store = typestore()
+    ty = store.types
+    path = Path(path)
+    t = np.asarray(run.time_s, dtype=float)
+    t0 = t[0] if len(t) and t[0] < 0 else 0.0
+    feeds = _feed_names(run.names)
+
+    def col(name: str) -> np.ndarray:
+        return np.asarray(run[name], dtype=float) if name in run else np.full(len(t), np.nan)
+
+    c = {n: col(n) for n in run_signal_names(feeds)}
+    sev = c["fault_severity"]
+    valve_flow = c.get(f"{run.metadata.get('valve_feed')}_flow_ml_s", np.full(len(t), np.nan))
+    bag = BagWriter(path, chunk_size=chunk_size)
+    try:
+        ch = {tp.name: bag.add_topic(tp.name, tp.type) for tp in T.RECORDED if tp.per_sample}
+        meta = dict(run.metadata)
+        meta.setdefault("sample_time_s", run.dt_s)
+        bag.add_metadata(RUN_METADATA, {"json": json.dumps(meta, default=str)})
+        for i in range(len(t)):
+            ns = int(round((t[i] - t0) * 1e9))
+            stamp = _time(store, ns)
+            msgs = (
+                (T.MEASUREMENT, ty["phfdi_interfaces/msg/Measurement"](
+                    stamp=stamp, ph=c["ph_measured"][i], level_cm=c["level_measured_cm"][i])),
+                (T.CONTROLLER, ty["phfdi_interfaces/msg/ControllerOutput"](
+                    stamp=stamp, ph_setpoint=c["ph_setpoint"][i], ph_output_pct=c["ph_controller_output_pct"][i],
+                    ph_manual=False, level_setpoint_cm=c["level_setpoint_cm"][i],
+                    level_output_pct=c["level_controller_output_pct"][i], level_manual=False)),
+                (T.VALVE_STATE, ty["phfdi_interfaces/msg/ValveState"](
+                    stamp=stamp, ph_command_pct=c["valve_command_pct"][i], ph_position_pct=c["valve_position_pct"][i],
+                    ph_opening=math.nan, ph_flow_ml_s=valve_flow[i], ph_fault_severity=sev[i],
+                    ph_rejected_commands=0, outlet_command_pct=c["level_controller_output_pct"][i],
+                    outlet_position_pct=c["outlet_valve_position_pct"][i], outlet_opening=math.nan,
+                    outlet_fault_severity=0.0, outlet_rejected_commands=0)),
+                (T.PLANT_STATE, ty["phfdi_interfaces/msg/PlantState"](
+                    stamp=stamp, ph=c["ph_true"][i], level_cm=c["level_true_cm"][i], feed_names=feeds,
+                    feed_flows_ml_s=np.array([c[f"{f}_flow_ml_s"][i] for f in feeds], dtype=np.float64),
+                    outlet_flow_ml_s=c["outlet_flow_ml_s"][i], sensor_fault_severity=sev[i])),
+            )
+            for topic, msg in msgs:
+                bag.write(ch[topic.name], ns, bytes(store.serialize_cdr(msg, topic.type)))
+    finally:
+        bag.close()
+    return path
+
+
+# ---- inspecting and recovering ---------------------------------------------------------------
+def _scan(path: Path, validate: bool = True):
+    """Records of an MCAP file in order, chunks opened, up to the first incomplete or damaged one.
+
+    Returns (records, number of complete chunks, error or None).
+    """
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader, breakup_chunk
+
+    out = []
+    chunks = 0
+    error = None
+    with open(path, "rb") as f:
+        try:
+            for rec in StreamReader(f, emit_chunks=True, validate_crcs=validate).records:
+                if isinstance(rec, Chunk):
+                    out.extend(breakup_chunk(rec, validate_crc=validate))
+                    chunks += 1
+                else:
+                    out.append(rec)
+        except Exception as exc:  # noqa: BLE001 - end of a truncated file, or a damaged record
+            error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    return out, chunks, error
+
+
+def bag_info(path: str | Path) -> dict:
+    """Topics (type, message count), time range, chunks and metadata of a bag."""
+    from mcap.records import Channel, Header, Message, Schema, Statistics
+
+    path = Path(path)
+    if not path.exists():
+        raise UserError(f"no such file: {path}")
+    info: dict = {"path": str(path), "size_bytes": path.stat().st_size}
+    summary = None
+    try:
+        from mcap.reader import make_reader
+
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            header = reader.get_header()
+            summary = reader.get_summary()
+    except Exception:  # noqa: BLE001 - truncated or not MCAP: scanned below
+        summary = None
+    if summary is not None and summary.statistics is not None:
+        st: Statistics = summary.statistics
+        info.update(finished=True, profile=header.profile, library=header.library,
+                    messages=st.message_count, chunks=st.chunk_count,
+                    start_s=st.message_start_time * 1e-9, end_s=st.message_end_time * 1e-9)
+        schemas = summary.schemas
+        info["topics"] = [{"topic": ch.topic, "type": schemas[ch.schema_id].name if ch.schema_id in schemas else "",
+                           "count": st.channel_message_counts.get(cid, 0)}
+                          for cid, ch in sorted(summary.channels.items())]
+        info["compression"] = sorted({c.compression or "none" for c in summary.chunk_indexes})
+    else:
+        if path.read_bytes()[:8] != b"\x89MCAP0\r\n":
+            raise UserError(f"{path}: not an MCAP file")
+        records, n_chunks, error = _scan(path, validate=False)
+        schemas = {r.id: r.name for r in records if isinstance(r, Schema)}
+        channels = {r.id: r for r in records if isinstance(r, Channel)}
+        counts: dict[int, int] = defaultdict(int)
+        times = [r.log_time for r in records if isinstance(r, Message)]
+        for r in records:
+            if isinstance(r, Message):
+                counts[r.channel_id] += 1
+        header = next((r for r in records if isinstance(r, Header)), None)
+        info.update(finished=False, truncated_by=error, profile=header.profile if header else "",
+                    library=header.library if header else "", messages=len(times),
+                    chunks=n_chunks,
+                    start_s=min(times) * 1e-9 if times else math.nan, end_s=max(times) * 1e-9 if times else math.nan)
+        info["topics"] = [{"topic": ch.topic, "type": schemas.get(ch.schema_id, ""), "count": counts[cid]}
+                          for cid, ch in sorted(channels.items())]
+    info["metadata"] = sorted(read_metadata(path)) if info["finished"] else []
+    return info
+
+
+def format_info(info: dict) -> str:
+    lines = [f"bag       {info['path']} ({info['size_bytes'] / 1e6:.2f} MB, "
+             f"{'complete' if info['finished'] else 'NOT FINISHED: recover it with phfdi bag recover'})",
+             f"profile   {info['profile']} (written by {info['library']})",
+             f"messages  {info['messages']} in {info['chunks']} chunks",
+             f"time      {info['start_s']:.3f} .. {info['end_s']:.3f} s (simulated)"]
+    if info.get("truncated_by"):
+        lines.append(f"stopped   at {info['truncated_by']}")
+    width = max([len(t["topic"]) for t in info["topics"]] + [5])
+    lines.append("topics")
+    for t in info["topics"]:
+        lines.append(f"  {t['topic']:{width}s}  {t['count']:8d}  {t['type']}")
+    return "\n".join(lines)
+
+
+def recover(src: str | Path, dst: str | Path) -> dict:
+    """Copy everything up to the last complete chunk of a (truncated) bag into a new, finished bag."""
+    from mcap.records import Channel, Message, Metadata, Schema
+    from mcap.writer import CompressionType, Writer
+
+    src, dst = Path(src), Path(dst)
+    if not src.exists():
+        raise UserError(f"no such file: {src}")
+    if src.resolve() == dst.resolve():
+        raise UserError("recover writes a new file: give an output path other than the input")
+    with open(src, "rb") as f:
+        if f.read(8) != b"\x89MCAP0\r\n":
+            raise UserError(f"{src}: not an MCAP file")
+    records, _chunks, error = _scan(src)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    schema_ids: dict[int, int] = {}
+    channel_ids: dict[int, int] = {}
+    n = 0
+    last_ns = None
+    with open(dst, "wb") as out:
+        w = Writer(out, chunk_size=DEFAULT_CHUNK_BYTES, compression=CompressionType.ZSTD)
+        header = next((r for r in records if type(r).__name__ == "Header"), None)
+        w.start(profile=header.profile if header else "ros2", library=f"phfdi {__version__} (recovered)")
+        for r in records:
+            if isinstance(r, Schema) and r.id not in schema_ids:
+                schema_ids[r.id] = w.register_schema(r.name, r.encoding, r.data)
+            elif isinstance(r, Channel) and r.id not in channel_ids:
+                channel_ids[r.id] = w.register_channel(r.topic, r.message_encoding, schema_ids.get(r.schema_id, 0),
+                                                       dict(r.metadata))
+            elif isinstance(r, Metadata):
+                w.add_metadata(r.name, dict(r.metadata))
+            elif isinstance(r, Message) and r.channel_id in channel_ids:
+                w.add_message(channel_ids[r.channel_id], log_time=r.log_time, data=r.data,
+                              publish_time=r.publish_time, sequence=r.sequence)
+                n += 1
+                last_ns = r.log_time if last_ns is None else max(last_ns, r.log_time)
+        w.add_metadata("phfdi_recovered", {"source": str(src), "stopped_at": error or "end of file"})
+        w.finish()
+    return {"path": str(dst), "messages": n, "last_s": None if last_ns is None else last_ns * 1e-9,
+            "complete_input": error is None, "stopped_at": error}

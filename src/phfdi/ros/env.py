@@ -1,0 +1,119 @@
+"""The environment every ROS process of phfdi runs in (no rclpy import here).
+
+DDS must stay on this machine: ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``
+(discovery by unicast to 127.0.0.1, data over shared memory). Every entry point
+calls :func:`ensure_localhost` before rclpy starts, so nobody can forget it.
+Each launched graph (and each test) gets a ROS domain of its own from
+:func:`reserve_domain_id`.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import random
+import socket
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from phfdi.errors import UserError
+
+DISCOVERY_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+#: ROS domain ids usable on Linux (the DDS port formula overflows above 232)
+DOMAIN_IDS = range(1, 233)
+
+
+def ensure_localhost(environ: dict | None = None) -> None:
+    """Set ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST if unset; refuse any other value."""
+    env = os.environ if environ is None else environ
+    value = env.get(DISCOVERY_VAR, "")
+    if value == "":
+        env[DISCOVERY_VAR] = "LOCALHOST"
+    elif value.upper() != "LOCALHOST":
+        raise UserError(f"{DISCOVERY_VAR}={value}: phfdi keeps DDS traffic on this machine; "
+                        f"unset it or set {DISCOVERY_VAR}=LOCALHOST")
+
+
+def graph_env(domain_id: int, base: dict | None = None) -> dict[str, str]:
+    """Environment for a process of a graph on ``domain_id``."""
+    env = dict(os.environ if base is None else base)
+    env[DISCOVERY_VAR] = "LOCALHOST"
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _domain_ports(domain_id: int) -> list[int]:
+    # RTPS well-known ports: PB 7400 + DG 250 * domain; unicast metatraffic
+    # and user ports of the first participants (+10 + 2 i, +11 + 2 i).
+    base = 7400 + 250 * domain_id
+    return [base + 10 + i for i in range(6)]
+
+
+def _ports_free(ports: list[int]) -> bool:
+    for port in ports:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("0.0.0.0", port))
+            except OSError as exc:
+                if exc.errno == errno.EADDRINUSE:
+                    return False
+                raise
+    return True
+
+
+@dataclass
+class DomainLease:
+    """A ROS domain id held for this process (a lock file) until :meth:`release`."""
+
+    domain_id: int
+    _fd: int | None
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> "DomainLease":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def _lock_dir() -> Path:
+    d = Path(tempfile.gettempdir()) / "phfdi-ros-domains"
+    d.mkdir(exist_ok=True)
+    return d
+
+
+def reserve_domain_id(requested: int | None = None) -> DomainLease:
+    """A domain id no other phfdi graph holds and no DDS participant on this machine uses.
+
+    Held by a lock file (released when this process ends), so parallel
+    launches and test workers never share a domain. ``requested`` checks and
+    holds that id instead of picking one.
+    """
+    candidates = [requested] if requested is not None else random.sample(list(DOMAIN_IDS), len(DOMAIN_IDS))
+    if requested is not None and requested not in DOMAIN_IDS and requested != 0:
+        raise UserError(f"--domain-id {requested}: use 0..232")
+    for d in candidates:
+        fd = os.open(_lock_dir() / f"{d}.lock", os.O_CREAT | os.O_RDWR, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            if requested is not None:
+                raise UserError(f"ROS domain {d} is in use by another phfdi graph; pick another --domain-id") from None
+            continue
+        if requested is not None or _ports_free(_domain_ports(d)):
+            return DomainLease(d, fd)
+        os.close(fd)
+    raise UserError("no free ROS domain id (1..232) on this machine")
+
+
+if __name__ == "__main__":  # prints a free domain id (for scripts/launch_graph.sh)
+    with reserve_domain_id() as lease:
+        print(lease.domain_id)

@@ -1,0 +1,406 @@
+"""Start the graph as processes and stop it cleanly, whatever happens (no rclpy here).
+
+A graph is a list of :class:`NodeSpec` (the detector will be one more). Each
+node runs as ``python -m <module> --ros-args --params-file <file>`` in a
+process group of its own, on a ROS domain reserved for this launch, with
+LOCALHOST discovery. The plant prints JSON lines (connected, progress, done)
+that the launcher follows.
+
+Stopping, always in this order so that nothing published is lost: the plant
+(no new samples), then the loop nodes (they deliver what they published to
+their reliable readers before exiting), then the observers (the recorder takes
+what its readers hold and finishes the bag). A node that does not stop within
+``stop_timeout_s`` is killed. Afterwards: no process of the graph is left
+(children also get SIGTERM if the launcher itself dies), a killed node's
+Fast DDS shared-memory files are removed (``fastdds shm clean``), and a bag
+whose recorder could not finish it is recovered in place.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import yaml
+
+from phfdi.errors import UserError
+
+from .env import graph_env, reserve_domain_id
+from .topics import CONTROLLERS, PLANT, PLANT_STATE, RECORDER, VALVE
+
+LOOP, OBSERVER = "loop", "observer"
+
+
+@dataclass
+class NodeSpec:
+    """One node of a graph: its name, the module it runs and its parameters."""
+
+    name: str
+    module: str
+    params: dict = field(default_factory=dict)
+    role: str = LOOP  # loop: in the lock-step ring; observer: only listens (stopped last)
+
+
+def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float | None = None,
+               overrides: list[str] = (), record: str | Path | None = None, pace: float = 0.0,
+               executor: str = "events", connect_timeout_s: float = 60.0,
+               extra: list[NodeSpec] = ()) -> list[NodeSpec]:
+    """The loop graph: plant, valve, controllers (+ recorder, + extra nodes such as a detector)."""
+    if Path(scenario).suffix in (".yaml", ".yml"):
+        scenario = str(Path(scenario).resolve())
+    common = {"scenario": scenario, "fault": fault or "", "fault_onset_s": -1.0 if onset_s is None else float(onset_s),
+              "executor": executor, "connect_timeout_s": float(connect_timeout_s)}
+    if overrides:
+        common["overrides"] = list(overrides)
+    nodes = [NodeSpec(CONTROLLERS, "pi_controllers.node"), NodeSpec(VALVE, "valve_actuator.node"),
+             NodeSpec(PLANT, "ph_plant_sim.node", {"pace": float(pace)})]
+    if record is not None:
+        nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", {"path": str(Path(record).resolve())}, OBSERVER))
+    nodes += list(extra)
+    names = [n.name for n in nodes]
+    for n in nodes:
+        n.params = {**common, "graph_nodes": names, **n.params}
+    return nodes
+
+
+@dataclass
+class LaunchResult:
+    status: int  # 0 done, 1 a node failed, 128 + signal when interrupted
+    samples: int  # of the scenario
+    samples_done: int
+    connect_s: float  # start of the processes -> graph connected (wall)
+    run_wall_s: float  # sample 0 -> last sample (wall, as the plant measured it)
+    domain_id: int
+    bag: dict | None = None  # phfdi.bagio.bag_info of the recorded bag
+    failure: str | None = None
+    notes: list[str] = field(default_factory=list)
+    log_dir: str | None = None
+    scenario: str = ""
+    sample_time_s: float = 1.0
+    interrupted_by: str | None = None  # signal that stopped the launch
+    published: dict[str, int] = field(default_factory=dict)  # messages per topic, as the nodes counted them
+
+    @property
+    def simulated_s(self) -> float:
+        return max(self.samples_done - 1, 0) * self.sample_time_s
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.simulated_s / self.run_wall_s if self.run_wall_s > 0 else float("nan")
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG: SIGTERM when the launcher dies
+
+
+class _Proc:
+    def __init__(self, spec: NodeSpec, popen: subprocess.Popen, log_dir: Path) -> None:
+        self.spec, self.popen, self.log_dir = spec, popen, log_dir
+        self.expected_exit = False
+        self.stdout_pos = 0
+        self.killed_by_us = False
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def stderr_tail(self, n: int = 8) -> list[str]:
+        try:
+            lines = (self.log_dir / f"{self.name}.stderr").read_text(errors="replace").splitlines()
+        except OSError:
+            return []
+        return [ln for ln in lines if ln.strip()][-n:]
+
+    def new_stdout_lines(self) -> list[str]:
+        try:
+            with open(self.log_dir / f"{self.name}.stdout", "rb") as f:
+                f.seek(self.stdout_pos)
+                data = f.read()
+        except OSError:
+            return []
+        end = data.rfind(b"\n") + 1
+        self.stdout_pos += end
+        return data[:end].decode(errors="replace").splitlines()
+
+    def describe_exit(self) -> str:
+        rc = self.popen.returncode
+        if rc is None:
+            return "is still running"
+        if rc < 0:
+            try:
+                return f"was killed by {signal.Signals(-rc).name}"
+            except ValueError:
+                return f"was killed by signal {-rc}"
+        return f"exited with status {rc}"
+
+
+class Launcher:
+    """Runs a graph to its end (or to a failure or a stop request) and cleans up."""
+
+    def __init__(self, nodes: list[NodeSpec], domain_id: int | None = None, log_dir: str | Path | None = None,
+                 progress: Callable[[float], None] | None = None, stop_timeout_s: float = 15.0,
+                 status: Callable[[str], None] | None = None) -> None:
+        names = [n.name for n in nodes]
+        if len(set(names)) != len(names):
+            raise UserError(f"node names must be unique, got {names}")
+        if PLANT not in names:
+            raise UserError("a graph needs the plant node (it owns simulated time)")
+        self.nodes = nodes
+        self.requested_domain = domain_id
+        self.keep_logs = log_dir is not None
+        self.log_dir = Path(log_dir) if log_dir else None
+        self.progress = progress
+        self.status = status or (lambda text: None)
+        self.stop_timeout_s = stop_timeout_s
+        self.procs: dict[str, _Proc] = {}
+        self._signals: list[int] = []
+        self.t_connected: float | None = None
+
+    # ---- public ---------------------------------------------------------------------------
+    def run(self) -> LaunchResult:
+        lease = reserve_domain_id(self.requested_domain)
+        self.log_dir = Path(tempfile.mkdtemp(prefix="phfdi-launch-")) if self.log_dir is None else self.log_dir
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        previous = self._catch_signals()
+        result = LaunchResult(status=0, samples=0, samples_done=0, connect_s=float("nan"), run_wall_s=float("nan"),
+                              domain_id=lease.domain_id)
+        try:
+            self._spawn_all(lease.domain_id)
+            self._watch(result)
+        finally:
+            self._stop_all(result)
+            self._restore_signals(previous)
+            self._cleanup(result)
+            lease.release()
+        return result
+
+    # ---- processes ---------------------------------------------------------------------------
+    def _spawn_all(self, domain_id: int) -> None:
+        env = graph_env(domain_id)
+        self.t0 = time.monotonic()
+        self.wall_t0 = time.time() - 1.0  # for file times (coarse clocks)
+        for spec in self.nodes:
+            params_file = self.log_dir / f"{spec.name}.params.yaml"
+            params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.params}}, sort_keys=False))
+            cmd = [sys.executable, "-m", spec.module, "--ros-args", "--params-file", str(params_file)]
+            with open(self.log_dir / f"{spec.name}.stdout", "wb") as out, \
+                 open(self.log_dir / f"{spec.name}.stderr", "wb") as err:
+                popen = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=env,
+                                         start_new_session=True, preexec_fn=_die_with_parent)
+            self.procs[spec.name] = _Proc(spec, popen, self.log_dir)
+        self.status(f"started {len(self.nodes)} nodes on ROS domain {domain_id}: "
+                    + ", ".join(f"{p.name} (pid {p.popen.pid})" for p in self.procs.values()))
+
+    def _watch(self, result: LaunchResult) -> None:
+        plant = self.procs[PLANT]
+        done = False
+        while True:
+            for line in plant.new_stdout_lines():
+                done = self._on_plant_event(line, result) or done
+            if self._signals:
+                sig = self._signals[0]
+                result.status = 128 + sig
+                result.interrupted_by = signal.Signals(sig).name
+                return
+            for p in self.procs.values():
+                if p.popen.poll() is None:
+                    continue
+                if p is plant and p.popen.returncode == 0 and done:
+                    p.expected_exit = True
+                    return
+                result.status = 1
+                tail = p.stderr_tail()
+                result.failure = (f"node {p.name} (python -m {p.spec.module}, pid {p.popen.pid}) {p.describe_exit()}"
+                                  + (" at sample " + str(result.samples_done) if result.samples else "")
+                                  + ("; last lines of its stderr:\n    " + "\n    ".join(tail) if tail else ""))
+                return
+            time.sleep(0.05)
+
+    def _on_plant_event(self, line: str, result: LaunchResult) -> bool:
+        try:
+            event = json.loads(line)
+        except json.JSONDecodeError:
+            return False
+        kind = event.get("event")
+        if kind == "connected":
+            self.t_connected = time.monotonic()
+            result.connect_s = self.t_connected - self.t0
+            result.samples = event["samples"]
+            result.sample_time_s = event["sample_time_s"]
+            result.scenario = event.get("scenario", "")
+            self.status(f"graph connected after {result.connect_s:.1f} s; running {result.samples} samples")
+        elif kind == "progress":
+            result.samples_done = event["sample"]
+            if self.progress is not None and result.samples:
+                self.progress(event["sample"] / result.samples)
+        elif kind == "done":
+            result.samples_done = event["samples"]
+            result.run_wall_s = event["wall_s"]
+            if self.progress is not None:
+                self.progress(1.0)
+            return True
+        return False
+
+    def _stop(self, procs: list[_Proc]) -> None:
+        alive = [p for p in procs if p.popen.poll() is None]
+        for p in alive:
+            p.expected_exit = True
+            try:
+                p.popen.send_signal(signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + self.stop_timeout_s
+        while any(p.popen.poll() is None for p in alive):
+            # too slow, or asked twice (a second Ctrl-C): kill what is left
+            if time.monotonic() > deadline or len(self._signals) > 1:
+                for p in alive:
+                    if p.popen.poll() is None:
+                        p.killed_by_us = True
+                        p.popen.kill()
+                        p.popen.wait()
+                break
+            time.sleep(0.05)
+
+    def _stop_all(self, result: LaunchResult) -> None:
+        self.t_stop = time.monotonic()
+        if not self.procs:
+            return
+        plant = [p for p in self.procs.values() if p.name == PLANT]
+        loop = [p for p in self.procs.values() if p.spec.role == LOOP and p.name != PLANT]
+        observers = [p for p in self.procs.values() if p.spec.role == OBSERVER]
+        for group in (plant, loop, observers):
+            self._stop(group)
+        for p in self.procs.values():
+            if p.killed_by_us:
+                result.notes.append(f"node {p.name} did not stop within {self.stop_timeout_s:g} s and was killed")
+            elif p.popen.returncode not in (0, None) and p.expected_exit and result.failure is None:
+                result.notes.append(f"node {p.name} {p.describe_exit()} while stopping: "
+                                    + " | ".join(p.stderr_tail(3)))
+
+    # ---- after the processes are gone ---------------------------------------------------------------
+    def _collect_published(self, result: LaunchResult) -> None:
+        for p in self.procs.values():
+            p.stdout_pos = 0
+            for line in p.new_stdout_lines():
+                if '"published"' not in line:
+                    continue
+                try:
+                    event = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                for topic, n in event.get("counts", {}).items():
+                    result.published[topic] = result.published.get(topic, 0) + n
+
+    def _cleanup(self, result: LaunchResult) -> None:
+        self._collect_published(result)
+        if result.failure or any(p.popen.returncode not in (0, None) for p in self.procs.values()):
+            # a node that died while the others ran leaves shared memory behind
+            time.sleep(1.0)
+            result.notes.append(clean_shared_memory(result.domain_id, self.wall_t0))
+        recorder = self.procs.get(RECORDER)
+        if recorder is not None:
+            path = Path(recorder.spec.params["path"])
+            result.bag = self._finish_bag(path, recorder, result)
+            if result.bag is not None:  # the bag knows best how far the run got
+                counts = {t["topic"]: t["count"] for t in result.bag["topics"]}
+                result.samples_done = counts.get(PLANT_STATE.name, result.samples_done)
+        if result.run_wall_s != result.run_wall_s and self.t_connected is not None:  # NaN: stopped early
+            result.run_wall_s = self.t_stop - self.t_connected
+        if result.status == 0 and not self.keep_logs:
+            shutil.rmtree(self.log_dir, ignore_errors=True)
+        else:
+            result.log_dir = str(self.log_dir)
+
+    def _finish_bag(self, path: Path, recorder: _Proc, result: LaunchResult) -> dict | None:
+        from phfdi import bagio
+
+        if not path.exists():
+            return None
+        info = bagio.bag_info(path)
+        if not info["finished"]:
+            partial = path.with_name(path.stem + ".partial.mcap")
+            os.replace(path, partial)
+            rec = bagio.recover(partial, path)
+            partial.unlink()
+            result.notes.append(f"the recorder {recorder.describe_exit()} before finishing the bag: recovered "
+                                f"{rec['messages']} messages up to its last complete chunk")
+            info = bagio.bag_info(path)
+        return info
+
+    # ---- signals -----------------------------------------------------------------------------
+    def _catch_signals(self):
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return None
+
+        def on_signal(signum, _frame) -> None:
+            self._signals.append(signum)  # a second one kills the nodes still stopping (see _stop)
+
+        return {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    @staticmethod
+    def _restore_signals(previous) -> None:
+        if previous:
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+
+
+SHM_DIR = Path("/dev/shm")
+
+
+def ownerless_port_segments(domain_id: int, since: float) -> list[Path]:
+    """Fast DDS port segments of this graph that no live process owns.
+
+    A listening participant holds ``fastrtps_portN_el`` locked while it lives.
+    When a node is killed, the others keep sending to its ports for a while
+    and re-create the segments without that lock file, which ``fastdds shm
+    clean`` does not look at. Ours: the domain's port range, or the
+    per-participant ports below it (7000 + i) created during this launch.
+    """
+    lo = 7400 + 250 * domain_id
+    out = []
+    for f in SHM_DIR.glob("fastrtps_port*"):
+        name = f.name
+        if name.endswith(("_el", "_sl")) or not name[len("fastrtps_port"):].isdigit():
+            continue
+        port = int(name[len("fastrtps_port"):])
+        if (SHM_DIR / f"{name}_el").exists() or (SHM_DIR / f"{name}_sl").exists():
+            continue
+        try:
+            recent = f.stat().st_mtime >= since
+        except FileNotFoundError:
+            continue
+        if lo <= port < lo + 250 or (port < 7400 and recent):
+            out.append(f)
+    return out
+
+
+def clean_shared_memory(domain_id: int, since: float) -> str:
+    """Remove the Fast DDS shared memory a killed node left: zombie segments and ownerless ports."""
+    tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
+    summary = []
+    if tool.exists():  # segments whose lock file is no longer held ("fastdds shm clean" checks the locks)
+        out = subprocess.run([sys.executable, str(tool), "shm", "clean"], capture_output=True, text=True,
+                             timeout=60)
+        summary += [ln.strip() for ln in out.stdout.splitlines() if "cleaned" in ln]
+    ports = ownerless_port_segments(domain_id, since)
+    for f in ports:
+        for path in (f, SHM_DIR / f"sem.{f.name}_mutex"):
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                pass
+    summary.append(f"{len(ports)} ownerless port segments removed")
+    return "shared memory of the stopped graph cleaned (" + ", ".join(summary) + ")"

@@ -1,0 +1,82 @@
+"""The graph's topics: one table for the nodes, the recorder, the bag tools and the docs.
+
+Every data message starts with its simulated time stamp (``stamp``, or
+``clock`` for /clock, ``header.stamp`` for /diagnostics): the stamp of sample k
+is k * sample_time_s. Lock-step order of one sample (as :func:`phfdi.loop.tick`):
+
+    plant        /plant/measurement, /clock (k)
+    controllers  /controller/output (k)
+    valve        /valve/state (k)
+    plant        integrates to k + 1, /plant/measurement, /clock (k + 1), /plant/state (k)
+
+One message per node and sample: in rclpy each message costs tens of
+microseconds to build and decode, which bounds the lock-step rate.
+
+No rclpy import here: the bag tools use this table without ROS.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+# node names (the ROS node name and the launcher's label)
+PLANT = "plant"
+CONTROLLERS = "controllers"
+VALVE = "valve"
+RECORDER = "recorder"
+DETECTOR = "detector"
+
+#: nodes a lock-step graph cannot run without
+LOOP_NODES = (PLANT, CONTROLLERS, VALVE)
+
+
+@dataclass(frozen=True)
+class Topic:
+    name: str
+    type: str  # "package/msg/Type"
+    publisher: str
+    per_sample: bool  # one message per simulated sample
+    description: str
+
+
+MEASUREMENT = Topic("/plant/measurement", "phfdi_interfaces/msg/Measurement", PLANT, True,
+                    "pH probe and level transmitter readings: ph (pH), level_cm (cm)")
+CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", PLANT, True,
+              "simulated time, one message per sample (for nodes with use_sim_time)")
+CONTROLLER = Topic("/controller/output", "phfdi_interfaces/msg/ControllerOutput", CONTROLLERS, True,
+                   "both PI loops: setpoints (pH, cm) and outputs = valve commands (%)")
+VALVE_STATE = Topic("/valve/state", "phfdi_interfaces/msg/ValveState", VALVE, True,
+                    "pH valve and outlet valve: command, stem position (%), opening, flow (mL/s), fault severity")
+PLANT_STATE = Topic("/plant/state", "phfdi_interfaces/msg/PlantState", PLANT, True,
+                    "simulation ground truth: true pH and level, feed and outlet flows (mL/s), sensor fault")
+DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", VALVE, False,
+                    "valve health: commands held (not finite / out of range), active faults")
+FAULT_ALARM = Topic("/fault_alarm", "phfdi_interfaces/msg/FaultAlarm", DETECTOR, False,
+                    "the detector's alarm (next issue); recorded when present")
+
+#: every topic the recorder can write, in lock-step order
+RECORDABLE: tuple[Topic, ...] = (MEASUREMENT, CLOCK, CONTROLLER, VALVE_STATE, PLANT_STATE, DIAGNOSTICS, FAULT_ALARM)
+#: what it writes by default: all but /clock, which repeats the stamps every message
+#: carries and the bag's log times (players regenerate it, as ``ros2 bag play --clock``)
+RECORDED: tuple[Topic, ...] = tuple(t for t in RECORDABLE if t is not CLOCK)
+BY_NAME = {t.name: t for t in RECORDABLE}
+
+#: where nodes announce that their endpoints are up and matched (not recorded)
+GRAPH_READY = "/graph/ready"
+
+#: QoS of every data topic, as written to the bag's channel metadata. Reliable and
+#: keep-all: nothing is lost, a slow reliable reader slows the writer down.
+DATA_QOS = {"history": "keep_all", "depth": 0, "reliability": "reliable", "durability": "volatile"}
+
+
+def stamp_ns(k: int, dt_ns: int) -> int:
+    """Stamp (ns) of sample k."""
+    return k * dt_ns
+
+
+def sample_period_ns(sample_time_s: float) -> int:
+    """The sample time as whole nanoseconds (stamps are exact multiples of it)."""
+    dt_ns = round(sample_time_s * 1e9)
+    if dt_ns <= 0 or abs(dt_ns - sample_time_s * 1e9) > 1e-3:
+        raise ValueError(f"sample_time_s = {sample_time_s} s is not a whole number of nanoseconds")
+    return dt_ns

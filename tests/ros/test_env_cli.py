@@ -1,0 +1,47 @@
+"""Environment rules and the command line, without starting a graph."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+
+from phfdi.errors import UserError
+from phfdi.ros.env import ensure_localhost, graph_env, reserve_domain_id
+
+from .conftest import node_cmd, phfdi_cmd
+
+
+def test_localhost_discovery_is_set_when_missing_and_other_values_refused():
+    env = {}
+    ensure_localhost(env)
+    assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    with pytest.raises(UserError, match="LOCALHOST"):
+        ensure_localhost({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"})
+    assert graph_env(7, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"})["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+
+
+def test_a_node_refuses_to_run_with_network_wide_discovery(ros_env):
+    env = dict(ros_env, ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET")
+    out = subprocess.run(node_cmd("valve_actuator.node"), env=env, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "LOCALHOST" in out.stderr
+
+
+def test_reserved_domains_are_exclusive():
+    with reserve_domain_id() as a, reserve_domain_id() as b:
+        assert a.domain_id != b.domain_id
+        with pytest.raises(UserError, match="in use"):
+            reserve_domain_id(a.domain_id)
+
+
+@pytest.mark.parametrize("args", [("launch", "--help"), ("bag", "info", "--help"), ("bag", "recover", "--help")])
+def test_subcommands_explain_themselves_with_examples(args):
+    out = subprocess.run(phfdi_cmd(*args), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "examples:" in out.stdout
+
+
+def test_launch_refuses_a_bad_scenario_before_starting_anything(tmp_path):
+    out = subprocess.run(phfdi_cmd("launch", "--set", "duration_s=-1", "--log-dir", str(tmp_path / "logs")),
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and out.stderr.count("\n") == 1 and "duration_s" in out.stderr
+    assert not (tmp_path / "logs").exists()
