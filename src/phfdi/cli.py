@@ -22,6 +22,9 @@ COMMANDS = [
     "simulate",
     "scenarios",
     "paper_runs",
+    "calibrate",
+    "replay",
+    "evaluate",
 ]
 
 

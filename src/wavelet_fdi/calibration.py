@@ -87,7 +87,8 @@ def window_maxima(z: np.ndarray, window: int) -> np.ndarray:
 def provisional(settings: DetectorSettings, scenario: str, dt_s: float) -> Calibration:
     """Unit sigmas and infinite thresholds: runs the detector's front end without alarms."""
     bands = settings.bands() + ["raw"]
-    names = DetectorSettings(**{**settings.__dict__, "channels": ("ph", "level")}).statistic_names()
+    names = [n for rb in (True, False) for n in
+             DetectorSettings(**{**settings.__dict__, "channels": ("ph", "level"), "raw_band": rb}).statistic_names()]
     return Calibration(scenario, settings.wavelet, settings.level, dt_s, settings.arl0_samples,
                        {ch: {b: 1.0 for b in bands} for ch in ("ph", "level")},
                        {n: math.inf for n in names})
@@ -136,9 +137,9 @@ def statistic_increments(trace: dict[str, np.ndarray], name: str, sigma: dict[st
     from .statistics import increments
 
     ch, band, kind = name.split(".")
-    j = settings.bands().index(band)
+    j = settings.rows().index(band)
     mask = trace[f"{ch}_monitored"]
-    u = trace[f"{ch}_coefficients"][mask, j] / sigma[ch][band]
+    u = trace[f"{ch}_coefficients"][mask, j] / sigma[ch]["raw" if band == "R" else band]
     return increments(kind, u, settings.reference_value(name))
 
 
@@ -169,7 +170,7 @@ def calibrate_from_traces(traces: list[dict[str, np.ndarray]], settings: Detecto
         arl0_samples=settings.arl0_samples, sigma=sigma, thresholds=thresholds,
         design={"mean_shift_sigma": settings.mean_shift_sigma, "variance_ratio": settings.variance_ratio,
                 "arl0_samples": settings.arl0_samples, "warmup_s": settings.warmup_s,
-                "channels": list(settings.channels)},
+                "channels": list(settings.channels), "raw_band": settings.raw_band},
         seeds=[int(s) for s in seeds], healthy_samples=n_samples, window_samples=window,
         method=(f"window maxima of CUSUMs restarted every {window} samples, exponential fit to the upper "
                 f"{int(100 * TAIL_FRACTION)} %, P(max > h) = {window} / (ARL0 x {len(names)} statistics)"),

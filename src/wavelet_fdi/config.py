@@ -33,6 +33,8 @@ class DetectorSettings:
     arl0_samples: float = 1e5
     #: residual channels watched for detection ("ph", optionally "level")
     channels: tuple[str, ...] = ("ph",)
+    #: watch the residual's own mean (R) besides the wavelet bands' energies; False: the paper's bands only
+    raw_band: bool = True
     #: mean CUSUMs on the approximation band are designed for a residual mean shift of this many sigma
     mean_shift_sigma: float = 1.0
     #: energy CUSUMs are designed for this variance ratio
@@ -49,8 +51,8 @@ class DetectorSettings:
     command_timeout_s: float = 10.0
     #: an alarm clears after this long without a statistic crossing its threshold
     clear_after_s: float = 1800.0
-    #: isolation runs this long after a detection (and again at each later delay)
-    isolation_delays_s: tuple[float, ...] = (300.0, 900.0)
+    #: isolation runs this long after a detection (and again at each further delay given)
+    isolation_delays_s: tuple[float, ...] = (300.0,)
     #: past samples kept for isolation (bounds memory)
     history_samples: int = 4096
     #: statistics are held this long after a setpoint change (0: off)
@@ -73,25 +75,40 @@ class DetectorSettings:
         energy_reference(self.variance_ratio)
 
     def bands(self) -> list[str]:
+        """Wavelet bands D1..DJ, AJ."""
         return [f"D{j}" for j in range(1, self.level + 1)] + [f"A{self.level}"]
 
+    def rows(self) -> list[str]:
+        """Rows of the detector's coefficient arrays: the wavelet bands, then R (the residual itself)."""
+        return self.bands() + ["R"]
+
     def statistic_names(self) -> list[str]:
-        """channel.band.kind for every CUSUM the detector runs."""
+        """channel.band.kind for every CUSUM the detector runs.
+
+        With ``raw_band`` (default): the residual's mean (R, up and down) and
+        the energy of every wavelet band. Without it, the paper's bands only:
+        the mean of AJ replaces R's. (AJ's mean is R's mean seen through a
+        low-pass filter: the same information, later.)
+        """
         out = []
         a = f"A{self.level}"
         for ch in self.channels:
+            if self.raw_band:
+                out.extend((f"{ch}.R.mean_up", f"{ch}.R.mean_down"))
             for b in self.bands():
-                kinds = ("mean_up", "mean_down", "energy") if b == a else ("energy",)
-                out.extend(f"{ch}.{b}.{k}" for k in kinds)
+                if b == a and not self.raw_band:
+                    out.extend((f"{ch}.{b}.mean_up", f"{ch}.{b}.mean_down"))
+                out.append(f"{ch}.{b}.energy")
         return out
 
     def reference_value(self, name: str) -> float:
         """k of a statistic: the energy CUSUM's for variance_ratio; the mean CUSUM's for a shift of
         mean_shift_sigma residual standard deviations, which A_J carries 2^(J/2) times (its DC gain)."""
-        kind = name.rsplit(".", 1)[1]
+        band, kind = name.split(".")[1:]
         if kind == "energy":
             return energy_reference(self.variance_ratio)
-        return 0.5 * self.mean_shift_sigma * 2.0 ** (0.5 * self.level)
+        gain = 1.0 if band == "R" else 2.0 ** (0.5 * self.level)
+        return 0.5 * self.mean_shift_sigma * gain
 
 
 @dataclass
@@ -133,6 +150,9 @@ class Calibration:
         if channels is not None and tuple(channels) != tuple(settings.channels):
             raise UserError(f"calibration is for channels {', '.join(channels)}, detector watches "
                             f"{', '.join(settings.channels)}: run phfdi calibrate with the same channels")
+        if "raw_band" in self.design and bool(self.design["raw_band"]) != settings.raw_band:
+            raise UserError(f"calibration was made with raw_band = {bool(self.design['raw_band'])}, detector "
+                            f"uses {settings.raw_band}: run phfdi calibrate with the same settings")
         for key in ("mean_shift_sigma", "variance_ratio", "arl0_samples"):
             if key in self.design and abs(self.design[key] - getattr(settings, key)) > 1e-12 * abs(self.design[key]):
                 raise UserError(f"calibration was made for {key} = {self.design[key]:g}, detector uses "

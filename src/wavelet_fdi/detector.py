@@ -69,6 +69,8 @@ class Alarm:
     alternatives: list = field(default_factory=list)
     evidence: dict = field(default_factory=dict)
     isolation_time_s: float | None = None
+    #: onset fitted by isolation (more accurate than the estimate at detection)
+    onset_refined_s: float | None = None
     cleared_time_s: float | None = None
     onset_index: int = 0
     detection_index: int = 0
@@ -79,7 +81,8 @@ class Alarm:
     def summary(self) -> dict:
         """The fields ``phfdi replay --json`` prints."""
         return {
-            "onset_time": self.onset_time_s,
+            "onset_time": self.onset_refined_s if self.onset_refined_s is not None else self.onset_time_s,
+            "onset_time_at_detection": self.onset_time_s,
             "detection_time": self.detection_time_s,
             "fault_class": self.fault_class,
             "severity": self.severity_ph,
@@ -107,6 +110,26 @@ class Event:
     alarm: dict | None = None
 
 
+def change_time_glr(u: np.ndarray, min_after: int = 3) -> int:
+    """Most likely change position in u (healthy: N(0, 1)) to N(mu, s^2) for the last samples.
+
+    Maximises m/2 (mean(u^2) - 1 - ln var(u)) over the m samples after the
+    change (the generalised likelihood ratio for an unknown new mean and
+    variance). Non-finite samples count as healthy zeros.
+    """
+    u = np.where(np.isfinite(u), u, 0.0)
+    n = len(u)
+    if n <= min_after:
+        return 0
+    s1 = np.cumsum(u[::-1])[::-1]
+    s2 = np.cumsum((u * u)[::-1])[::-1]
+    m = np.arange(n, 0, -1, dtype=float)
+    var = np.maximum(s2 / m - (s1 / m) ** 2, 1e-12)
+    llr = 0.5 * m * (s2 / m - 1.0 - np.log(var))
+    llr[n - min_after + 1:] = -np.inf
+    return int(np.argmax(llr))
+
+
 class StreamingDetector:
     """Feed samples in time order; get events back. See the module docstring."""
 
@@ -124,9 +147,9 @@ class StreamingDetector:
         self.h = np.array([calibration.thresholds[n] for n in self.names])
         self._parsed = [n.split(".") for n in self.names]
         self.bands = s.bands()
+        self._row = {b: i for i, b in enumerate(s.rows())}
         self.channels = s.channels
         self.swt = {ch: CausalSwt(s.wavelet, s.level) for ch in self._transformed_channels()}
-        self.band_delay = self.swt["ph"].delays()
         self.cusum = CusumBank(len(self.names))
         self.block = s.block_samples
         self.warmup_samples = max(int(math.ceil(s.warmup_s / self.dt_s)), self.swt["ph"].fill_samples)
@@ -138,7 +161,7 @@ class StreamingDetector:
         n_feeds = len(self.reference.feed_names)
         self.history = History(s.history_samples, {
             "t": 1, "ph": 1, "level": 1, "command": 1, "ph_pred": 1, "level_pred": 1, "monitor": 1,
-            "flows": n_feeds, "opening": 1, "setpoint": 1, "coef": s.level + 1})
+            "flows": n_feeds, "opening": 1, "setpoint": 1, "coef": s.level + 2})
         self.snapshots: dict[int, ReferenceState] = {}
         self.isolator = None
         if isolate:
@@ -157,7 +180,6 @@ class StreamingDetector:
         self._sp_last = math.nan
         self._sp_change_index = -(10**12)
         self._s_last = np.zeros(len(self.names))
-        self._rate_flag = False
         self._stale_prev = False
         self.samples_processed = 0
         self.observer_corrections = 0
@@ -207,13 +229,6 @@ class StreamingDetector:
             self._stale_prev = bool(stale[-1])
             events += self._segment(grid, i, end)
             i = end
-        mismatch = self.inputs.sample_rate_mismatch()
-        if mismatch != self._rate_flag:
-            self._rate_flag = mismatch
-            t_last = float(grid.t_s[-1]) if len(grid) else math.nan
-            msg = (f"sample interval {self.inputs.measured_interval_s():.3g} s differs from the calibrated "
-                   f"{self.dt_s:g} s" if mismatch else "sample interval back to nominal")
-            events.append(Event("input", t_last, self.samples_processed, "WARN" if mismatch else "OK", msg))
         return events
 
     def flush(self) -> list[Event]:
@@ -307,12 +322,11 @@ class StreamingDetector:
         coefs = {}
         for ch, f in self.swt.items():
             out = f.process(residual[ch])
-            coefs[ch] = np.vstack((out.details, out.approx[None, :]))
+            coefs[ch] = np.vstack((out.details, out.approx[None, :], residual[ch][None, :]))
         z = np.empty((len(self.names), n))
         for row, (ch, band, kind) in enumerate(self._parsed):
-            j = self.bands.index(band)
-            sigma = self.calibration.sigma[ch][band]
-            z[row] = np.where(mask[ch], increments(kind, coefs[ch][j] / sigma, self.k[row]), 0.0)
+            sigma = self.calibration.sigma[ch]["raw" if band == "R" else band]
+            z[row] = np.where(mask[ch], increments(kind, coefs[ch][self._row[band]] / sigma, self.k[row]), 0.0)
         # block sums for the observer, accumulated left to right (chunking-independent)
         sel = live & ok_ph
         sel_l = live & ok_lv
@@ -357,8 +371,8 @@ class StreamingDetector:
             tr.setdefault(f"{ch}_coefficients", []).append(c.T)
 
     def trace(self) -> dict[str, np.ndarray]:
-        """Per-sample record (needs ``record_trace=True``): residuals, coefficients (N, J+1) per
-        channel, monitored masks, CUSUM increments (N, n_statistics) in :attr:`names` order."""
+        """Per-sample record (needs ``record_trace=True``): residuals, coefficients (N, J+2: D1..DJ,
+        AJ, R = the residual) per channel, monitored masks, CUSUM increments (N, n_statistics) in :attr:`names` order."""
         if self._trace is None:
             raise ValueError("detector was built without record_trace=True")
         return {k: np.concatenate(v) for k, v in self._trace.items()}
@@ -407,9 +421,11 @@ class StreamingDetector:
                 return events
             events += self._clear(self._last_confirm + self.clear_samples, t_s, "no threshold crossing for clear_after_s")
         ch, band, kind = self._parsed[row]
-        delay = int(round(self.band_delay[band]))
-        onset = max(last_zero + 1 - delay, self._reset_index, self.history.start)
-        onset = min(onset, gi)
+        # change time: the Gaussian mean-and-variance GLR on the raw pH residual, searched from a
+        # filter length before the CUSUM's last zero (the band's filter smears the change)
+        lo = max(last_zero - 2 * self.swt["ph"].fill_samples, self._reset_index, self.history.start)
+        onset = lo + change_time_glr((self.history.read(lo, gi + 1, "ph") - self.history.read(lo, gi + 1, "ph_pred"))
+                                     / self.calibration.sigma["ph"]["raw"])
         t_hist = self.history.read(onset, onset + 1, "t")
         onset_t = float(t_hist[0]) if len(t_hist) and math.isfinite(t_hist[0]) else t_s - (gi - onset) * self.dt_s
         r = self.history.read(onset, gi + 1, "ph") - self.history.read(onset, gi + 1, "ph_pred")
@@ -463,6 +479,7 @@ class StreamingDetector:
         alarm.parameter = result.parameter
         alarm.alternatives = result.alternatives
         alarm.evidence = result.evidence
+        alarm.onset_refined_s = result.evidence.get("onset_fit_s")
         return [Event("diagnosis", alarm.isolation_time_s or math.nan, end_index, "ERROR",
                       f"alarm {alarm.alarm_id}: most likely {result.fault_class} "
                       f"(confidence {result.confidence:.2f})", alarm.summary())]

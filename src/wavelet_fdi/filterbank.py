@@ -79,16 +79,6 @@ class CausalSwt:
         """Samples after which every output depends on real inputs only (no start-up zeros)."""
         return (self.taps - 1) * (2 ** self.level - 1) + 1
 
-    def delays(self) -> dict[str, float]:
-        """Energy centroid (samples) of each band's equivalent causal filter: how far it lags the input."""
-        impulse = np.zeros(self.fill_samples + 1)
-        impulse[0] = 1.0
-        out = CausalSwt(self.wavelet, self.level).process(impulse)
-        n = np.arange(len(impulse))
-        bands = {f"D{j + 1}": out.details[j] for j in range(self.level)}
-        bands[f"A{self.level}"] = out.approx
-        return {k: float(np.sum(n * v**2) / np.sum(v**2)) for k, v in bands.items()}
-
     def reset(self) -> None:
         for h in self._hist:
             h[:] = 0.0

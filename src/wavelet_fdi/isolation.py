@@ -15,12 +15,16 @@ probe_delay    pH sensor ``sensor_delay``                          delay_s
 =============  ==================================================  =====================
 
 Each is re-simulated from the reference state saved before the onset, driven
-by the same measured commands; its parameter is fitted by minimising
-J = SSR_pH / sigma_pH^2 + SSR_level / sigma_level^2 over the samples since
-the onset (a coarse log grid, then golden-section refinement). Classes are
+by the same measured commands; its parameter and the onset are fitted by
+minimising J = SSR_pH / sigma_pH^2 + SSR_level / sigma_level^2 over the
+samples since the onset: grids over each class's parameter and a scan of the
+onset, screened with a fast linearised bank (:class:`FastBank`), then the
+three best classes re-simulated exactly with the core. Classes are
 weighed by BIC (J + k ln m, k free parameters): the confidence is the best
-class's weight. When even the best model leaves the residual far from white
-noise (J / m above a chi-square bound) the class is ``unknown``.
+class's weight. When even the best model leaves a channel's residual far from
+white noise of the calibrated level (its J per sample above a chi-square
+bound) the class is ``unknown``, with the share of residual variance left
+unexplained as its confidence.
 
 What cannot be told apart, and why (see docs/detector.md): nested models
 (stiction with J = 0 is backlash; friction with a fast stem is a backlash
@@ -44,9 +48,11 @@ from .config import Calibration, DetectorSettings
 from .history import History
 from .reference import HealthyReference, ReferenceState
 
-GRID_POINTS = 9
-GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
-GOLDEN_STEPS = 12
+GRID_POINTS = 7
+FINE_POINTS = 11
+#: refinement of the best classes: (onset scan before, after), parameter range +-, grid points;
+#: abrupt faults need the parameter to 0.1 % (a dead-zone 0.5 % off leaves 5 sigma^2 per sample)
+ZOOM = (((40, 20), 0.3, 31), ((3, 3), 0.04, 17), ((1, 1), 0.005, 11), ((0, 0), 0.0006, 11))
 GOF_RELATIVE = 1.3  # J/m tolerated above 1 for model and onset errors
 GOF_SIGMAS = 5.0
 
@@ -145,6 +151,7 @@ class FastBank:
         self.c0 = c
         self.c_valve = c_feed[ref.valve_index]
         self.q0 = w.flows[:, ref.valve_index]
+        self.q0_command = snapshot.valve_command_pct
         self.balance = plant.balance
         self.guess = np.where(np.isfinite(w.ph), w.ph, 7.0)
         self.ph0 = self.balance.ph_array(c, guess=self.guess)
@@ -190,8 +197,7 @@ class FaultIsolator:
     """Fits every hypothesis of :data:`HYPOTHESES` to the data since the onset; see the module docstring."""
 
     #: onset candidates scanned for the best classes: this many samples before .. after the estimate
-    ONSET_BEFORE = 40
-    ONSET_AFTER = 20
+    ONSET_BEFORE = ZOOM[0][0][0]
     CONFIRMED = 3
 
     def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings) -> None:
@@ -224,8 +230,8 @@ class FaultIsolator:
         confirmed = []
         for c in cands[: self.CONFIRMED]:
             pred = self._candidate_prediction(w, snapshot, c, healthy)
-            confirmed.append((c, self._cost(w, pred, c.onset)))
-        h0_cost = self._cost(w, healthy, min(c.onset for c, _ in confirmed))
+            confirmed.append((c, self._cost(w, pred, c.onset), self._ph_share(w, pred, c.onset)))
+        h0_cost = self._cost(w, healthy, min(c.onset for c, _, _ in confirmed))
         return self._decide(w, confirmed, h0_cost, cands)
 
     # ---- data ---------------------------------------------------------------------------
@@ -283,22 +289,30 @@ class FaultIsolator:
             cost += float(np.sum(rl * rl)) / self.sigma_level**2
         return cost if math.isfinite(cost) else math.inf
 
-    def _samples(self, w: Window, onset: int) -> int:
+    def _samples(self, w: Window, onset: int) -> tuple[int, int]:
+        """(pH samples, level samples) from the onset on."""
         sl = slice(onset, None)
-        return int(np.count_nonzero(np.isfinite(w.ph[sl])) + np.count_nonzero(np.isfinite(w.level[sl])))
+        return int(np.count_nonzero(np.isfinite(w.ph[sl]))), int(np.count_nonzero(np.isfinite(w.level[sl])))
+
+    def _ph_share(self, w: Window, pred, onset: int) -> float:
+        """The pH part of J from the onset on."""
+        r = w.ph[onset:] - pred[0][onset:]
+        r = r[np.isfinite(r)]
+        return float(np.sum(r * r)) / self.sigma_ph**2
 
     # ---- search with the fast bank -------------------------------------------------------
     def _screen(self, w: Window, bank: FastBank, cands: list[Candidate], cost_from: int) -> None:
         """Fast pH-only cost of each candidate from sample ``cost_from`` on (in place)."""
         valve = [c for c in cands if c.hyp.site == "valve"]
         if valve:
-            q = np.empty((len(valve), len(w.t)))
+            q = np.repeat(bank.q0[None, :], len(valve), axis=0)
             ref = self.reference
             for i, c in enumerate(valve):
-                v = ref.new_valve(Chain([Injected(make_block(c.hyp.block, c.params(), dt_s=self.dt_s),
-                                                  float(w.t[c.onset]))]))
-                v.reset(float(w.command[0]) if math.isfinite(w.command[0]) else 0.0)
-                q[i] = ref.valve_flows(v, w.command, w.t)
+                # before its onset a hypothesis is the healthy valve; from it, the block starts at rest
+                # on the last finite command (what phfdi.blocks.Injected does)
+                v = ref.new_valve(Chain([make_block(c.hyp.block, c.params(), dt_s=self.dt_s)]))
+                v.reset(_last_finite(w.command[:c.onset], bank.q0_command))
+                q[i, c.onset:] = ref.valve_flows(v, w.command[c.onset:], w.t[c.onset:])
             ph = bank.ph(q)
             for i, c in enumerate(valve):
                 c.cost = self._ph_cost(w, ph[i], cost_from)
@@ -315,107 +329,92 @@ class FaultIsolator:
         return c if math.isfinite(c) else math.inf
 
     def _search(self, w: Window, bank: FastBank) -> list[Candidate]:
-        """Best candidate per class, best first: grid, golden section, onset scan, golden again."""
+        """Best candidate per class, best first.
+
+        Coarse grid per class and variant, a finer grid between the best
+        point's neighbours; then, for the best classes, the onset is scanned
+        sample by sample and the parameter re-gridded around its value, twice
+        (the costs of stick-slip models are rugged in both, so grids rather
+        than a local search).
+        """
         onset = w.onset
         n = len(w.t)
         start = max(0, onset - self.ONSET_BEFORE)  # costs compare from the earliest onset scanned
         variants = [(h, v) for h in HYPOTHESES for v in (h.variants or (("", math.nan),))]
-        cands = [Candidate(h, v, float(th), onset) for h, v in variants for th in _grid(h.low, h.high, h.log_scale, GRID_POINTS)]
+        cands = [Candidate(h, v, float(th), onset) for h, v in variants
+                 for th in _grid(h.low, h.high, h.log_scale, GRID_POINTS)]
         self._screen(w, bank, cands, start)
-        best = []
+        ranges = []
         for i in range(len(variants)):
             mine = cands[i * GRID_POINTS:(i + 1) * GRID_POINTS]
             j = int(np.argmin([c.cost for c in mine]))
-            best.append((mine[j], mine[max(j - 1, 0)].theta, mine[min(j + 1, GRID_POINTS - 1)].theta))
-        best = self._golden(w, bank, best, start)
+            ranges.append((mine[j], mine[max(j - 1, 0)].theta, mine[min(j + 1, GRID_POINTS - 1)].theta))
+        best = self._regrid(w, bank, ranges, FINE_POINTS, start)
         per_class: dict[str, Candidate] = {}
         for c in best:
             if c.hyp.fault_class not in per_class or c.cost < per_class[c.hyp.fault_class].cost:
                 per_class[c.hyp.fault_class] = c
         ranked = sorted(per_class.values(), key=lambda c: c.cost)
-        # the onset matters to the sample for stick-type and abrupt faults: scan it, then refit
         top = ranked[: self.CONFIRMED]
-        for before, after in ((self.ONSET_BEFORE, self.ONSET_AFTER), (3, 3)):
-            onsets = {id(c): list(range(max(1, c.onset - before), min(n - 8, c.onset + after) + 1)) for c in top}
-            scan = [Candidate(c.hyp, c.variant, c.theta, o) for c in top for o in onsets[id(c)]]
-            self._screen(w, bank, scan, start)
-            brackets = []
-            pos = 0
-            for c in top:
-                k = len(onsets[id(c)])
-                b = min(scan[pos:pos + k] + [c], key=lambda x: x.cost)
-                pos += k
-                lo_v, hi_v = (b.theta / 1.25, b.theta * 1.25) if b.hyp.log_scale else (b.theta - 2.5, b.theta + 2.5)
-                brackets.append((b, max(lo_v, b.hyp.low), min(hi_v, b.hyp.high)))
-            top = self._golden(w, bank, brackets, start)
+        for (before, after), rel, points in ZOOM:
+            scans = [[Candidate(c.hyp, c.variant, c.theta, o)
+                      for o in range(max(1, c.onset - before), min(n - 8, c.onset + after) + 1)] for c in top]
+            self._screen(w, bank, [x for sc in scans for x in sc], start)
+            ranges = []
+            for c, sc in zip(top, scans):
+                b = min(sc + [c], key=lambda x: x.cost)
+                half = rel * (b.hyp.high - b.hyp.low) / 4.0
+                span = (b.theta / (1 + rel), b.theta * (1 + rel)) if b.hyp.log_scale else (b.theta - half,
+                                                                                             b.theta + half)
+                ranges.append((b, max(span[0], b.hyp.low), min(span[1], b.hyp.high)))
+            top = self._regrid(w, bank, ranges, points, start)
         return sorted(top, key=lambda c: c.cost) + ranked[self.CONFIRMED:]
 
-    def _golden(self, w: Window, bank: FastBank, items: list[tuple[Candidate, float, float]],
+    def _regrid(self, w: Window, bank: FastBank, items: list[tuple[Candidate, float, float]], points: int,
                 start: int) -> list[Candidate]:
-        """Golden-section search of each candidate's parameter within its bracket, all in lockstep."""
-        state = []
-        for c, lo_v, hi_v in items:
-            f = (math.log, math.exp) if c.hyp.log_scale else ((lambda v: v), (lambda x: x))
-            a, b = f[0](lo_v), f[0](hi_v)
-            state.append([c, f, a, b, b - GOLDEN * (b - a), a + GOLDEN * (b - a), None, None])
-        for it in range(GOLDEN_STEPS + 1):
-            batch = []
-            for st in state:
-                c, f, a, b, x1, x2, f1, f2 = st
-                if f1 is None:
-                    batch.append((st, 6, Candidate(c.hyp, c.variant, f[1](x1), c.onset)))
-                if f2 is None:
-                    batch.append((st, 7, Candidate(c.hyp, c.variant, f[1](x2), c.onset)))
-            self._screen(w, bank, [b[2] for b in batch], start)
-            for st, slot, cand in batch:
-                st[slot] = cand
-            if it == GOLDEN_STEPS:
-                break
-            for st in state:
-                c, f, a, b, x1, x2, f1, f2 = st
-                if f1.cost < f2.cost:
-                    b, x2, f2 = x2, x1, f1
-                    x1, f1 = b - GOLDEN * (b - a), None
-                else:
-                    a, x1, f1 = x1, x2, f2
-                    x2, f2 = a + GOLDEN * (b - a), None
-                st[2:] = [a, b, x1, x2, f1, f2]
-        out = []
-        for st in state:
-            out.append(min([st[0]] + [x for x in st[6:] if x is not None], key=lambda x: x.cost))
-        return out
+        """For each (candidate, low, high): the best of the candidate and a grid of its parameter."""
+        grids = [[Candidate(c.hyp, c.variant, float(th), c.onset) for th in _grid(lo, hi, c.hyp.log_scale, points)]
+                 for c, lo, hi in items]
+        self._screen(w, bank, [x for g in grids for x in g], start)
+        return [min(g + [c], key=lambda x: x.cost) for g, (c, _, _) in zip(grids, items)]
 
     # ---- decision ------------------------------------------------------------------------
-    def _decide(self, w: Window, confirmed: list[tuple[Candidate, float]], h0_cost: float,
+    def _decide(self, w: Window, confirmed: list[tuple[Candidate, float, float]], h0_cost: float,
                 ranked: list[Candidate]) -> IsolationResult:
-        start = min(c.onset for c, _ in confirmed)
-        m = max(self._samples(w, start), 1)
-        # every cost over the same samples: from the earliest onset (before its onset a
-        # hypothesis equals the healthy model, whose cost there is shared)
-        costs = {c.hyp.fault_class: cost for c, cost in confirmed}
-        n_free = {c.hyp.fault_class: 1 + (1 if c.hyp.variants else 0) + 1 for c, _ in confirmed}  # + onset
+        start = min(c.onset for c, _, _ in confirmed)
+        m_ph, m_lv = self._samples(w, start)
+        m = max(m_ph + m_lv, 1)
+        costs = {c.hyp.fault_class: cost for c, cost, _ in confirmed}
+        n_free = {c.hyp.fault_class: 1 + (1 if c.hyp.variants else 0) + 1 for c, _, _ in confirmed}  # + onset
         bic = {k: v + n_free[k] * math.log(m) for k, v in costs.items()}
         bic["healthy"] = h0_cost
         b_min = min(bic.values())
         weights = {k: math.exp(-0.5 * (v - b_min)) if math.isfinite(v) else 0.0 for k, v in bic.items()}
         total = sum(weights.values())
         post = {k: v / total for k, v in weights.items()}
-        best_c, best_cost = min(confirmed, key=lambda cc: bic[cc[0].hyp.fault_class])
-        gof = best_cost / m
-        gof_limit = GOF_RELATIVE + GOF_SIGMAS * math.sqrt(2.0 / m)
+        best_c, best_cost, best_ph = min(confirmed, key=lambda cc: bic[cc[0].hyp.fault_class])
+        # goodness of fit per channel: the best model must leave white noise of the calibrated level
+        m_best_ph, m_best_lv = self._samples(w, best_c.onset)
+        gof = {"ph": best_ph / max(m_best_ph, 1)}
+        limit = {"ph": GOF_RELATIVE + GOF_SIGMAS * math.sqrt(2.0 / max(m_best_ph, 1))}
+        if m_best_lv:
+            gof["level"] = (best_cost - best_ph) / m_best_lv
+            limit["level"] = GOF_RELATIVE + GOF_SIGMAS * math.sqrt(2.0 / m_best_lv)
         alternatives = [{"fault_class": c.hyp.fault_class, "probability": post[c.hyp.fault_class],
                          "cost_per_sample": cost / m, "parameters": c.reported(),
                          "onset_time_s": float(w.t[c.onset])}
-                        for c, cost in sorted(confirmed, key=lambda cc: bic[cc[0].hyp.fault_class])]
+                        for c, cost, _ in sorted(confirmed, key=lambda cc: bic[cc[0].hyp.fault_class])]
         evidence = self._evidence(w, best_c.onset)
-        evidence.update({"samples": m, "healthy_cost_per_sample": h0_cost / m, "best_cost_per_sample": gof,
-                         "goodness_of_fit_limit": gof_limit, "healthy_probability": post["healthy"],
-                         "onset_fit_s": float(w.t[best_c.onset]),
+        evidence.update({"samples": m, "healthy_cost_per_sample": h0_cost / m,
+                         "goodness_of_fit": gof, "goodness_of_fit_limit": limit,
+                         "healthy_probability": post["healthy"], "onset_fit_s": float(w.t[best_c.onset]),
                          "screened": {c.hyp.fault_class: c.cost / m for c in ranked}})
         hyp = best_c.hyp
         parameter = {"name": hyp.param, "value": best_c.theta, "unit": hyp.unit, "fault_class": hyp.fault_class}
-        if gof > gof_limit or post["healthy"] > 0.5:
-            unexplained = max(0.0, min(1.0, 1.0 - 1.0 / gof)) if gof > 0 else 0.0
+        worst = max(gof[k] / limit[k] for k in gof)
+        if worst > 1.0 or post["healthy"] > 0.5:
+            ratio = max(gof.values())
+            unexplained = max(0.0, min(1.0, 1.0 - 1.0 / ratio)) if ratio > 0 else 0.0
             return IsolationResult("unknown", unexplained, parameter, alternatives, evidence)
         return IsolationResult(hyp.fault_class, post[hyp.fault_class], parameter, alternatives, evidence)
 
@@ -436,13 +435,18 @@ class FaultIsolator:
         if ok.any():
             out["band_energy"] = {b: float(np.mean((coef[ok, j] / self.band_sigma[b]) ** 2))
                                   for j, b in enumerate(self.bands)}
-        a = coef[ok, -1] if ok.any() else np.empty(0)
+        a = coef[ok, len(self.bands) - 1] if ok.any() else np.empty(0)  # AJ
         if len(a) > 16:
             x = a - np.mean(a)
             crossings = np.flatnonzero(np.diff(np.sign(x)) != 0)
             if len(crossings) >= 3:
                 out["oscillation_period_s"] = float(2.0 * np.mean(np.diff(crossings)) * self.dt_s)
         return out
+
+
+def _last_finite(x: np.ndarray, default: float) -> float:
+    fin = np.flatnonzero(np.isfinite(x))
+    return float(x[fin[-1]]) if len(fin) else default
 
 
 def _grid(low: float, high: float, log_scale: bool, n: int) -> np.ndarray:
