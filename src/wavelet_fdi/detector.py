@@ -212,6 +212,8 @@ class StreamingDetector:
             if grid.reset[i] or not self._initialized:
                 events += self._restart(grid, i)
             if grid.rewarm[i]:
+                self.reference.realign(float(grid.ph[i]), float(grid.level[i]))
+                self._guess = self.reference.ph
                 self._warmup_end = int(grid.index[i]) + self.warmup_samples
                 events.append(Event("input", float(grid.t_s[i]), int(grid.index[i]), "WARN",
                                     "valve command back: reference warming up again"))
@@ -280,7 +282,7 @@ class StreamingDetector:
         gi = int(grid.index[i])
         others = {f: float(v[i]) for f, v in grid.other_flows.items()}
         self.reference.initialize(float(grid.t_s[i]), float(grid.command[i]), float(grid.outlet_command[i]),
-                                  float(grid.level[i]), others)
+                                  float(grid.level[i]), others, float(grid.ph[i]))
         self._guess = self.reference.ph
         for f in self.swt.values():
             f.reset()

@@ -153,19 +153,21 @@ def alarm_positions(z: np.ndarray, h: np.ndarray, clear_samples: int) -> list[in
 
     out, pos, last = [], 0, None
     n = z.shape[1]
+    bank = CusumBank(z.shape[0])
     while pos < n:
-        bank = CusumBank(z.shape[0])
-        s = bank.update(z[:, pos:], pos)
+        end = min(n, pos + 65536)
+        s = bank.update(z[:, pos:end], pos)
         over = np.flatnonzero((s > h[:, None]).any(axis=0))
         if not len(over):
-            break
+            pos = end
+            continue
         x = pos + int(over[0])
         if last is None or x - last > clear_samples:
             out.append(x)
         last = x
+        bank.restart(x)
         pos = x + 1
     return out
-
 
 def evaluate_run(task: RunTask) -> dict:
     """Simulate one run, run our detector and the peers on its residual, compute the bound."""

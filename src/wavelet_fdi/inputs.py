@@ -6,15 +6,18 @@ bad input (every case is counted in :attr:`InputRegularizer.counts`; none
 raises):
 
 ============================  ==========================================================
-non-finite or NaN time stamp  dropped (``bad_time``)
+non-finite or absurd stamp    dropped (``bad_time``; absurd: 2^50 samples from the first)
 same time stamp again         dropped (``duplicate_stamps``)
 time stamp going backwards    dropped (``out_of_order``); after more than max_gap
                               such samples in a row the stream is taken to have a new
                               clock: re-anchored and the window reset (``time_resets``)
 faster sample rate            samples landing in an already filled slot are dropped
                               (``extra_samples``): the stream is decimated to the grid
-gap up to max_gap samples     the missing slots are bridged: inputs held (a real valve
-                              holds its last command), no measurement (``missing_samples``)
+gap up to max_gap samples     the missing slots are bridged: commands interpolated between
+                              the samples around the gap (the valve kept receiving commands
+                              the detector did not see; holding them instead misleads the
+                              reference during setpoint transients), no measurement
+                              (``missing_samples``)
 gap over max_gap samples      window reset: reference re-initialised, filters and
                               statistics restarted, warm-up again (``gap_resets``)
 slower sample rate            shows as bridged gaps; flagged when the median interval
@@ -23,12 +26,14 @@ slower sample rate            shows as bridged gaps; flagged when the median int
 NaN/inf or out-of-range pH    sample kept for the reference, no residual (imputed 0 in
                               the filters, statistics not updated; ``nonfinite_ph``,
                               ``out_of_range_ph``)
-NaN/inf level                 same for the level channel (``nonfinite_level``)
+inf or out-of-range level     same for the level channel (``bad_level``; range 0..1e4 cm);
+                              NaN: no level reading (a plant without level sensor)
 NaN/inf valve command         the reference valve holds its position (``nonfinite_command``);
                               missing for longer than command_timeout: the reference can
                               no longer be trusted: statistics held (``command_stale``)
                               until commands return, then warm-up again
-NaN/inf outlet command        the outlet valve holds (``nonfinite_outlet_command``)
+inf outlet command            the outlet valve holds (``nonfinite_outlet_command``); NaN: not
+                              given, the outlet valve holds too
 ============================  ==========================================================
 """
 
@@ -44,8 +49,10 @@ import numpy as np
 INPUT_SIGNALS = ("time_s", "ph_measured", "valve_command_pct", "level_measured_cm",
                  "level_controller_output_pct", "ph_setpoint")
 PH_RANGE = (-1.0, 15.0)
+LEVEL_RANGE_CM = (0.0, 1e4)
 RATE_WINDOW = 31
 RATE_TOLERANCE = 0.1
+MAX_SLOT = 2**50  # samples from the anchor; further stamps are rejected as bad
 
 
 @dataclass
@@ -87,15 +94,17 @@ class InputRegularizer:
     _anchor: float | None = None
     _last_slot: int = -1
     _last_t: float = -math.inf
+    _last_raw_t: float = -math.inf
     _next_index: int = 0
     _backwards_run: int = 0
     _cmd_missing_run: int = 0
     _stale: bool = False
     _intervals: deque = field(default_factory=lambda: deque(maxlen=RATE_WINDOW))
+    _last_inputs: tuple = (math.nan, math.nan, {})
 
     COUNTERS = ("samples_received", "samples_used", "bad_time", "duplicate_stamps", "out_of_order",
                 "extra_samples", "missing_samples", "gaps_bridged", "gap_resets", "time_resets",
-                "nonfinite_ph", "out_of_range_ph", "nonfinite_level", "nonfinite_command",
+                "nonfinite_ph", "out_of_range_ph", "bad_level", "nonfinite_command",
                 "nonfinite_outlet_command", "command_stale_episodes")
 
     def __post_init__(self) -> None:
@@ -143,28 +152,34 @@ class InputRegularizer:
         n = len(t)
         if n == 0 or self._anchor is None or self._stale or self._backwards_run:
             return None
-        if not np.all(np.isfinite(t)):
+        if not np.all(np.isfinite(t)) or self._last_slot + n >= MAX_SLOT:
             return None
         slots = np.floor((t - self._anchor) / self.dt_s + 0.5)
         expected = self._last_slot + 1 + np.arange(n)
-        if not np.array_equal(slots, expected) or not t[0] > self._last_t or np.any(np.diff(t) <= 0.0):
+        if (not np.array_equal(slots, expected) or not t[0] > self._last_t or not t[0] >= self._last_raw_t
+                or np.any(np.diff(t) <= 0.0)):
             return None
         ph, cmd, level, ocmd, sp, others = self._columns(cols, n)
         if not (np.all(np.isfinite(cmd)) and np.all(np.isfinite(ph)) and np.all((ph >= PH_RANGE[0]) & (ph <= PH_RANGE[1]))):
             return None
-        lvl_bad = int(np.count_nonzero(~np.isfinite(level)))
-        oc_bad = int(np.count_nonzero(~np.isfinite(ocmd)))
-        self.counts["nonfinite_level"] += lvl_bad
+        lvl_ok = (level > LEVEL_RANGE_CM[0]) & (level < LEVEL_RANGE_CM[1])
+        lvl_bad = int(np.count_nonzero(~lvl_ok & ~np.isnan(level)))
+        oc_bad = int(np.count_nonzero(np.isinf(ocmd)))
+        self.counts["bad_level"] += lvl_bad
         self.counts["nonfinite_outlet_command"] += oc_bad
         self.counts["samples_used"] += n
-        self._intervals.extend(np.concatenate(([t[0] - self._last_t], np.diff(t)))[-RATE_WINDOW:].tolist())
+        first = [t[0] - self._last_raw_t] if t[0] > self._last_raw_t else []
+        self._intervals.extend(np.concatenate((first, np.diff(t)))[-RATE_WINDOW:].tolist())
+        self._last_raw_t = float(t[-1])
         self._last_slot = int(slots[-1])
         self._last_t = float(t[-1])
         self._cmd_missing_run = 0
+        self._last_inputs = (float(cmd[-1]), float(ocmd[-1]) if math.isfinite(ocmd[-1]) else math.nan,
+                             {f: float(v[-1]) for f, v in others.items()})
         index = self._next_index + np.arange(n, dtype=np.int64)
         self._next_index += n
         false = np.zeros(n, dtype=bool)
-        return GridBatch(index, t.copy(), ph, cmd, np.where(np.isfinite(level), level, np.nan),
+        return GridBatch(index, t.copy(), ph, cmd, np.where(lvl_ok, level, np.nan),
                          np.where(np.isfinite(ocmd), ocmd, np.nan), sp, others,
                          np.ones(n, dtype=bool), false, false.copy(), false.copy())
 
@@ -184,39 +199,41 @@ class InputRegularizer:
             reset = False
             if self._anchor is None:
                 self._anchor, self._last_slot, reset = t, -1, True
-            slot = math.floor((t - self._anchor) / self.dt_s + 0.5)
+            position = (t - self._anchor) / self.dt_s
+            if not abs(position) < MAX_SLOT:  # beyond any real clock: as unusable as NaN
+                c["bad_time"] += 1
+                continue
+            if t > self._last_raw_t:  # the sender's own rate, dropped samples included
+                self._intervals.append(t - self._last_raw_t)
+            self._last_raw_t = t
+            slot = math.floor(position + 0.5)
             if t <= self._last_t or slot <= self._last_slot:
-                if t == self._last_t:
-                    c["duplicate_stamps"] += 1
+                if t < self._last_t and self._backwards_run >= self.max_gap_samples:
+                    # a new clock (a restarted recording, a bag looping): start over on it
+                    c["time_resets"] += 1
+                    self._anchor, self._last_slot, self._last_t, reset = t, -1, -math.inf, True
+                    slot = 0
                 elif t < self._last_t:
-                    c["out_of_order"] += 1
-                else:
-                    c["extra_samples"] += 1
-                if t < self._last_t:
                     self._backwards_run += 1
-                    if self._backwards_run > self.max_gap_samples:
-                        # a new clock (a restarted recording, a bag looping): start over on it
-                        c["time_resets"] += 1
-                        self._anchor, self._last_slot, self._last_t, reset = t, -1, -math.inf, True
-                        self._backwards_run = 0
-                        slot = 0
-                    else:
-                        continue
+                    c["out_of_order"] += 1
+                    continue
                 else:
+                    c["duplicate_stamps" if t == self._last_t else "extra_samples"] += 1
                     continue
             self._backwards_run = 0
             gap = slot - self._last_slot - 1
-            if self._last_t > -math.inf and t > self._last_t:
-                self._intervals.append(t - self._last_t)
             if not reset and gap > self.max_gap_samples:
                 c["gap_resets"] += 1
                 reset = True
             elif not reset and gap > 0:
                 c["gaps_bridged"] += 1
                 c["missing_samples"] += gap
+                now = (float(cmd[i]), float(ocmd[i]), {f: float(v[i]) for f, v in others.items()})
                 for g in range(1, gap + 1):
+                    w = g / (gap + 1)
+                    u, oc, fl = self._between(now, w)
                     self._emit(out, out_other, self._anchor + (self._last_slot + g) * self.dt_s,
-                               math.nan, math.nan, math.nan, math.nan, math.nan, {}, False, False)
+                               math.nan, u, math.nan, oc, math.nan, fl, False, False)
             self._last_slot = slot
             self._last_t = t
             c["samples_used"] += 1
@@ -228,12 +245,12 @@ class InputRegularizer:
                 c["out_of_range_ph"] += 1
                 p = math.nan
             lv = float(level[i])
-            if not math.isfinite(lv):
-                c["nonfinite_level"] += 1
+            if not LEVEL_RANGE_CM[0] < lv < LEVEL_RANGE_CM[1]:
+                c["bad_level"] += 1 if not math.isnan(lv) else 0
                 lv = math.nan
             oc = float(ocmd[i])
             if not math.isfinite(oc):
-                c["nonfinite_outlet_command"] += 1
+                c["nonfinite_outlet_command"] += 1 if not math.isnan(oc) else 0
                 oc = math.nan
             u = float(cmd[i])
             if not math.isfinite(u):
@@ -249,6 +266,15 @@ class InputRegularizer:
                          {f: np.asarray(v, dtype=float) for f, v in out_other.items()},
                          np.asarray(out["real"], dtype=bool).reshape(m), np.asarray(out["reset"], dtype=bool).reshape(m),
                          np.asarray(out["stale"], dtype=bool).reshape(m), np.asarray(out["rewarm"], dtype=bool).reshape(m))
+
+    def _between(self, now: tuple, w: float) -> tuple[float, float, dict]:
+        """Inputs a fraction w of the way from the last emitted sample to ``now`` (NaN if either is)."""
+        def lerp(a: float, b: float) -> float:
+            return a + w * (b - a) if math.isfinite(a) and math.isfinite(b) else math.nan
+
+        last_u, last_oc, last_fl = self._last_inputs
+        return (lerp(last_u, now[0]), lerp(last_oc, now[1]),
+                {f: lerp(last_fl.get(f, math.nan), v) for f, v in now[2].items()})
 
     def _emit(self, out, out_other, t, ph, cmd, level, ocmd, sp, others, real, reset) -> None:
         """One grid sample; tracks how long the valve command has been missing."""
@@ -280,3 +306,5 @@ class InputRegularizer:
         out["rewarm"].append(rewarm)
         for f, lst in out_other.items():
             lst.append(others.get(f, math.nan))
+        if real:
+            self._last_inputs = (cmd, ocmd, dict(others))

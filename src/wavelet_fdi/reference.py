@@ -113,8 +113,8 @@ class HealthyReference:
 
     # ---- state -------------------------------------------------------------------
     def initialize(self, t_s: float, valve_command_pct: float, outlet_command_pct: float,
-                   level_cm: float, other_flows: dict[str, float] | None = None) -> None:
-        """Steady state of these inputs; volume from the measured level when it is usable."""
+                   level_cm: float, other_flows: dict[str, float] | None = None, ph: float = math.nan) -> None:
+        """Steady state of these inputs, then re-aligned on the measured pH and level (:meth:`realign`)."""
         cmd = valve_command_pct if math.isfinite(valve_command_pct) else self._last_cmd
         self._last_cmd = cmd
         q = self.valve.reset(cmd).flow_ml_s
@@ -125,8 +125,21 @@ class HealthyReference:
         if sum(flows) <= 0.0:
             flows = list(self.start.flows_ml_s)
         self._restart_low(np.asarray(flows, dtype=float), opening)
+        self.realign(ph, level_cm)
+
+    def realign(self, ph: float, level_cm: float) -> None:
+        """Put the state on the measured pH (strong-ion balance) and level (volume), where they are usable.
+
+        Used when the model's state cannot be trusted: at a start (the plant
+        need not be at the steady state of its first inputs) and after the
+        valve command was missing (the valve moved unseen). The third
+        direction of the composition (the buffer's total) is left to fade
+        with the dilution time constant during the warm-up.
+        """
         if self.has_level and math.isfinite(level_cm) and level_cm > 0.0:
-            self.plant.set_state(self.plant.concentrations, level_cm)
+            self.correct(0.0, level_cm - self.plant.level_cm)
+        if math.isfinite(ph) and 0.0 <= ph <= 14.0:
+            self.correct(ph - self.ph, 0.0)
 
     def _flows_at(self, t_s: float, valve_flow: float, other: dict[str, float] | None) -> list[float]:
         flows = self.process.feed_flows(t_s, {self.valve_feed: valve_flow})
@@ -210,8 +223,9 @@ class HealthyReference:
         n = len(flows)
         try:
             out = plant.simulate_flows(flows, openings, self.dt_s)
-        except FloatingPointError:
-            # the tank ran dry under these inputs: the model cannot follow; restart it near empty
+        except (FloatingPointError, ValueError, OverflowError, ZeroDivisionError):
+            # the tank ran dry (or inputs drove the state out of range): the model cannot follow;
+            # restart it near empty
             self.resets += 1
             self._restart_low(flows[-1], float(openings[-1]))
             return Prediction(np.full(n, np.nan), np.full(n, np.nan), flows, openings)
