@@ -60,6 +60,8 @@ class EvalConfig:
     faults: tuple[str, ...] = tuple(SEVERITIES)
     #: scenario key=value overrides for every run (calibration included)
     overrides: tuple[str, ...] = ()
+    #: calibration window (samples): much shorter than ARL0, long against the statistics' memory
+    window_samples: int = 1000
     settings: DetectorSettings = field(default_factory=DetectorSettings)
     jobs: int = 2
 
@@ -231,9 +233,9 @@ def calibrate_all(cfg: EvalConfig, pool, say: Callable[[str], None]) -> tuple[Ca
     traces = list(pool.map(_calibration_trace, [(cfg.scenario, s, cfg.settings, cfg.overrides)
                                                  for s in cfg.calibration_seeds]))
     dt = scenario_for_seed(cfg.scenario, cfg.overrides)(cfg.calibration_seeds[0]).sample_time_s
-    cal = calibrate_from_traces(traces, cfg.settings, cfg.scenario, dt, cfg.calibration_seeds)
+    cal = calibrate_from_traces(traces, cfg.settings, cfg.scenario, dt, cfg.calibration_seeds, cfg.window_samples)
     bands = calibrate_from_traces(traces, replace(cfg.settings, raw_band=False), cfg.scenario, dt,
-                                  cfg.calibration_seeds)
+                                  cfg.calibration_seeds, cfg.window_samples)
     sigma = cal.sigma["ph"]["raw"]
     streams = [t["ph_residual"][t["ph_monitored"]] / sigma for t in traces]
     say("calibration: peers on the same residual streams")

@@ -8,8 +8,6 @@ from phfdi.loop import simulate
 from phfdi.scenario import load_scenario
 from wavelet_fdi.config import DetectorSettings, load_default_calibration
 
-PAPER_FAULTS = ("backlash", "friction", "deadzone", "saturation", "stiction", "probe_delay")
-
 _RUNS: dict = {}
 
 

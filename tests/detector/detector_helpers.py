@@ -5,6 +5,8 @@ from __future__ import annotations
 from phfdi.scenario import load_scenario
 from wavelet_fdi.config import DetectorSettings
 
+PAPER_FAULTS = ("backlash", "friction", "deadzone", "saturation", "stiction", "probe_delay")
+
 
 def short_spec(fault: str = "backlash", onset_s: float = 1000.0, duration_s: float = 1600.0, **over):
     """The paper loop shortened: pH 8 from 200 s, a fault at ``onset_s``."""
