@@ -53,6 +53,10 @@ class DetectorSettings:
     clear_after_s: float = 1800.0
     #: isolation runs this long after a detection (and again at each further delay given)
     isolation_delays_s: tuple[float, ...] = (300.0,)
+    #: when the diagnosis is unsure (confidence below isolation_confidence or class unknown), isolate
+    #: again, one isolation delay later each time, at most this many times
+    isolation_retries: int = 2
+    isolation_confidence: float = 0.9
     #: past samples kept for isolation (bounds memory)
     history_samples: int = 4096
     #: statistics are held this long after a setpoint change (0: off)

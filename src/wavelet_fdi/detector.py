@@ -177,6 +177,8 @@ class StreamingDetector:
         self._acc = np.zeros(4)  # block sums: pH residual, count, level residual, count
         self._last_confirm = -1
         self._due: list[tuple[int, int]] = []  # (global index, alarm id) isolations to run
+        self._retries: dict[int, int] = {}  # alarm id -> isolations repeated because unsure
+        self._isolated_at: dict[int, int] = {}  # alarm id -> last sample its isolation used
         self._sp_last = math.nan
         self._sp_change_index = -(10**12)
         self._s_last = np.zeros(len(self.names))
@@ -237,8 +239,11 @@ class StreamingDetector:
         """End of a record: run pending isolations on the data there is."""
         events = []
         last = self.history.end - 1
-        for due, alarm_id in list(self._due):
-            events += self._isolate(alarm_id, last)
+        pending = list(dict.fromkeys(a for _, a in self._due))
+        self._due.clear()
+        for alarm_id in pending:
+            if last > self._isolated_at.get(alarm_id, -1):  # only with data the last isolation lacked
+                events += self._isolate(alarm_id, last)
         self._due.clear()
         return events
 
@@ -472,6 +477,13 @@ class StreamingDetector:
         snap_index = max(snaps)
         result = self.isolator.isolate(self.history, self.snapshots[snap_index], snap_index, alarm.onset_index,
                                        end_index)
+        self._isolated_at[alarm_id] = end_index
+        s = self.settings
+        unsure = result is None or result.fault_class == "unknown" or result.confidence < s.isolation_confidence
+        if unsure and self._retries.get(alarm_id, 0) < s.isolation_retries and s.isolation_delays_s:
+            # more data may separate the candidates (a stuck valve slips, a limit cycle develops)
+            self._retries[alarm_id] = self._retries.get(alarm_id, 0) + 1
+            self._due.append((end_index + int(round(s.isolation_delays_s[-1] / self.dt_s)), alarm_id))
         if result is None:
             return []
         t_end = self.history.read(end_index, end_index + 1, "t")

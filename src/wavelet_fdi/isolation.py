@@ -20,8 +20,9 @@ minimising J = SSR_pH / sigma_pH^2 + SSR_level / sigma_level^2 over the
 samples since the onset: grids over each class's parameter and a scan of the
 onset, screened with a fast linearised bank (:class:`FastBank`), then the
 three best classes re-simulated exactly with the core. Classes are
-weighed by BIC (J + k ln m, k free parameters): the confidence is the best
-class's weight. When even the best model leaves a channel's residual far from
+ranked by BIC (J + k ln m, k free parameters); the confidence is the reported
+class's likelihood share exp(-J/2) / sum exp(-J/2) (equal priors), so classes
+the data cannot separate share it. When even the best model leaves a channel's residual far from
 white noise of the calibrated level (its J per sample above a chi-square
 bound) the class is ``unknown``, with the share of residual variance left
 unexplained as its confidence.
@@ -199,6 +200,7 @@ class FaultIsolator:
     #: onset candidates scanned for the best classes: this many samples before .. after the estimate
     ONSET_BEFORE = ZOOM[0][0][0]
     CONFIRMED = 3
+    REFINED = 5
 
     def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings) -> None:
         self.reference = HealthyReference(spec)  # its own copy: re-simulations never touch the detector's
@@ -227,12 +229,36 @@ class FaultIsolator:
         except (FloatingPointError, ValueError):
             return None
         cands = self._search(w, bank)
-        confirmed = []
-        for c in cands[: self.CONFIRMED]:
+        top = cands[: self.CONFIRMED]
+        start = max(0, w.onset - self.ONSET_BEFORE)  # every cost over the same samples
+        preds = [self._candidate_prediction(w, snapshot, c, healthy) for c in top]
+        best = int(np.argmin([self._cost(w, p, start) for p in preds]))
+        if not self._fits(w, preds[best], start):
+            # stick-slip models are rugged in (onset, parameter) jointly: search both at once
+            c = self._rescue(w, bank, top[best], start)
             pred = self._candidate_prediction(w, snapshot, c, healthy)
-            confirmed.append((c, self._cost(w, pred, c.onset), self._ph_share(w, pred, c.onset)))
-        h0_cost = self._cost(w, healthy, min(c.onset for c, _, _ in confirmed))
-        return self._decide(w, confirmed, h0_cost, cands)
+            if self._cost(w, pred, start) < self._cost(w, preds[best], start):
+                top[best], preds[best] = c, pred
+        confirmed = [(c, self._cost(w, p, start), self._ph_share(w, p, start)) for c, p in zip(top, preds)]
+        return self._decide(w, confirmed, self._cost(w, healthy, start), cands, start)
+
+    def _fits(self, w: Window, pred, start: int) -> bool:
+        m_ph = self._samples(w, start)[0]
+        return self._ph_share(w, pred, start) / max(m_ph, 1) <= GOF_RELATIVE + GOF_SIGMAS * math.sqrt(2.0 / max(m_ph, 1))
+
+    def _rescue(self, w: Window, bank: FastBank, c: Candidate, start: int) -> Candidate:
+        """Joint grid over onset (+-15 samples), parameter (+-6 %) and the class's variants."""
+        n = len(w.t)
+        onsets = range(max(1, c.onset - 15), min(n - 8, c.onset + 15) + 1)
+        thetas = _grid(max(c.hyp.low, c.theta / 1.06), min(c.hyp.high, c.theta * 1.06), c.hyp.log_scale, 13)
+        variants = c.hyp.variants or (("", math.nan),)
+        grid = [Candidate(c.hyp, v, float(th), o) for v in variants for o in onsets for th in thetas]
+        self._screen(w, bank, grid, start)
+        b = min(grid + [c], key=lambda x: x.cost)
+        fine = [Candidate(b.hyp, b.variant, float(th), b.onset)
+                for th in _grid(max(b.hyp.low, b.theta / 1.01), min(b.hyp.high, b.theta * 1.01), b.hyp.log_scale, 11)]
+        self._screen(w, bank, fine, start)
+        return min(fine + [b], key=lambda x: x.cost)
 
     # ---- data ---------------------------------------------------------------------------
     def _window(self, history: History, a: int, onset: int, b: int) -> Window | None:
@@ -350,12 +376,14 @@ class FaultIsolator:
             j = int(np.argmin([c.cost for c in mine]))
             ranges.append((mine[j], mine[max(j - 1, 0)].theta, mine[min(j + 1, GRID_POINTS - 1)].theta))
         best = self._regrid(w, bank, ranges, FINE_POINTS, start)
-        per_class: dict[str, Candidate] = {}
-        for c in best:
-            if c.hyp.fault_class not in per_class or c.cost < per_class[c.hyp.fault_class].cost:
-                per_class[c.hyp.fault_class] = c
-        ranked = sorted(per_class.values(), key=lambda c: c.cost)
-        top = ranked[: self.CONFIRMED]
+        # refine the best variants (not only each class's best: a second parameter's grid value
+        # that loses before the onset is refined may win after)
+        best.sort(key=lambda c: c.cost)
+        top = best[: self.REFINED]
+        for cls in dict.fromkeys(c.hyp.fault_class for c in best[: self.CONFIRMED * 2]):
+            if not any(c.hyp.fault_class == cls for c in top):
+                top.append(next(c for c in best if c.hyp.fault_class == cls))
+        rest = [c for c in best if c not in top]
         for (before, after), rel, points in ZOOM:
             scans = [[Candidate(c.hyp, c.variant, c.theta, o)
                       for o in range(max(1, c.onset - before), min(n - 8, c.onset + after) + 1)] for c in top]
@@ -368,7 +396,10 @@ class FaultIsolator:
                                                                                              b.theta + half)
                 ranges.append((b, max(span[0], b.hyp.low), min(span[1], b.hyp.high)))
             top = self._regrid(w, bank, ranges, points, start)
-        return sorted(top, key=lambda c: c.cost) + ranked[self.CONFIRMED:]
+        per_class: dict[str, Candidate] = {}
+        for c in sorted(top, key=lambda c: c.cost) + sorted(rest, key=lambda c: c.cost):
+            per_class.setdefault(c.hyp.fault_class, c)
+        return list(per_class.values())
 
     def _regrid(self, w: Window, bank: FastBank, items: list[tuple[Candidate, float, float]], points: int,
                 start: int) -> list[Candidate]:
@@ -380,21 +411,24 @@ class FaultIsolator:
 
     # ---- decision ------------------------------------------------------------------------
     def _decide(self, w: Window, confirmed: list[tuple[Candidate, float, float]], h0_cost: float,
-                ranked: list[Candidate]) -> IsolationResult:
-        start = min(c.onset for c, _, _ in confirmed)
+                ranked: list[Candidate], start: int) -> IsolationResult:
         m_ph, m_lv = self._samples(w, start)
         m = max(m_ph + m_lv, 1)
         costs = {c.hyp.fault_class: cost for c, cost, _ in confirmed}
         n_free = {c.hyp.fault_class: 1 + (1 if c.hyp.variants else 0) + 1 for c, _, _ in confirmed}  # + onset
         bic = {k: v + n_free[k] * math.log(m) for k, v in costs.items()}
         bic["healthy"] = h0_cost
-        b_min = min(bic.values())
-        weights = {k: math.exp(-0.5 * (v - b_min)) if math.isfinite(v) else 0.0 for k, v in bic.items()}
+        # confidence: likelihoods of the fitted classes (equal priors, no complexity penalty: when
+        # the data cannot separate nested models, e.g. a valve stuck all through the window, the
+        # confidence says so); the class reported is the BIC-best (the simplest adequate one)
+        cost_all = dict(costs, healthy=h0_cost)
+        c_min = min(cost_all.values())
+        weights = {k: math.exp(-0.5 * (v - c_min)) if math.isfinite(v) else 0.0 for k, v in cost_all.items()}
         total = sum(weights.values())
         post = {k: v / total for k, v in weights.items()}
         best_c, best_cost, best_ph = min(confirmed, key=lambda cc: bic[cc[0].hyp.fault_class])
         # goodness of fit per channel: the best model must leave white noise of the calibrated level
-        m_best_ph, m_best_lv = self._samples(w, best_c.onset)
+        m_best_ph, m_best_lv = m_ph, m_lv
         gof = {"ph": best_ph / max(m_best_ph, 1)}
         limit = {"ph": GOF_RELATIVE + GOF_SIGMAS * math.sqrt(2.0 / max(m_best_ph, 1))}
         if m_best_lv:
