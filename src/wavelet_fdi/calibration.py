@@ -55,8 +55,8 @@ class TailFit:
                 "window_max_observed": self.window_max_observed}
 
 
-def tail_threshold(maxima: np.ndarray, p_target: float, tail_fraction: float = TAIL_FRACTION) -> TailFit:
-    """Threshold h with P(window maximum > h) = p_target from an exponential fit to the upper tail."""
+def fit_tail(maxima: np.ndarray, tail_fraction: float = TAIL_FRACTION) -> tuple[float, float, int]:
+    """(a, theta, points) of ln P(M > h) = a - theta h fitted to the upper tail of window maxima."""
     m = np.sort(np.asarray(maxima, dtype=float))[::-1]
     w = len(m)
     if w < 8:
@@ -65,13 +65,26 @@ def tail_threshold(maxima: np.ndarray, p_target: float, tail_fraction: float = T
     top = max(4, int(tail_fraction * w))
     x, y = m[:top], np.log(surv[:top])
     if np.ptp(x) <= 0.0:
-        return TailFit(float(m[0]) + 1.0, math.nan, math.nan, top, w, float(m[0]))
+        return math.nan, math.nan, top
     slope, intercept = np.polyfit(x, y, 1)
-    theta = -slope
-    if not theta > 0.0:
-        return TailFit(float(m[0]) * 2.0 + 1.0, float(intercept), float(theta), top, w, float(m[0]))
-    h = (intercept - math.log(p_target)) / theta
-    return TailFit(float(max(h, 0.0)), float(intercept), float(theta), top, w, float(m[0]))
+    return float(intercept), float(-slope), top
+
+
+def tail_threshold(maxima: np.ndarray, p_target: float, tail_fraction: float = TAIL_FRACTION) -> TailFit:
+    """Threshold h with P(window maximum > h) = p_target from an exponential fit to the upper tail."""
+    m = np.asarray(maxima, dtype=float)
+    a, theta, top = fit_tail(m, tail_fraction)
+    top_max = float(np.max(m))
+    if not theta > 0.0:  # degenerate maxima (all equal, or no tail): stay above everything seen
+        return TailFit(top_max * 2.0 + 1.0, a, theta, top, len(m), top_max)
+    h = (a - math.log(p_target)) / theta
+    return TailFit(float(max(h, 0.0)), a, theta, top, len(m), top_max)
+
+
+def tail_probability(maxima: np.ndarray, threshold: float) -> float:
+    """P(window maximum > threshold) from the tail fit (for held-out checks of a calibration)."""
+    a, theta, _ = fit_tail(maxima)
+    return math.exp(a - theta * threshold) if theta > 0.0 else math.nan
 
 
 def window_maxima(z: np.ndarray, window: int) -> np.ndarray:
