@@ -107,28 +107,46 @@ def provisional(settings: DetectorSettings, scenario: str, dt_s: float) -> Calib
                        {n: math.inf for n in names})
 
 
-def healthy_traces(spec_for_seed: Callable[[int], ScenarioSpec], seeds: Sequence[int], settings: DetectorSettings,
-                   progress: Callable[[float], None] | None = None) -> list[dict[str, np.ndarray]]:
-    """Front-end traces (residuals, coefficients) of healthy runs, one per seed."""
-    from phfdi.loop import simulate
-
+def front_end_trace(spec: ScenarioSpec, run, settings: DetectorSettings) -> dict[str, np.ndarray]:
+    """Residuals and coefficients of one healthy run through the detector's front end (no alarms)."""
     from .detector import StreamingDetector
     from .replay import run_chunks
 
-    out = []
     both = DetectorSettings(**{**settings.__dict__, "channels": ("ph", "level")})
+    det = StreamingDetector(spec, provisional(both, spec.name, spec.sample_time_s), both, isolate=False,
+                            record_trace=True)
+    run_chunks(det, run)
+    return det.trace()
+
+
+def healthy_traces(spec_for_seed: Callable[[int], ScenarioSpec], seeds: Sequence[int], settings: DetectorSettings,
+                   progress: Callable[[float], None] | None = None) -> list[dict[str, np.ndarray]]:
+    """Front-end traces (residuals, coefficients) of simulated healthy runs, one per seed."""
+    from phfdi.loop import simulate
+
+    out = []
     for i, seed in enumerate(seeds):
         spec = spec_for_seed(seed)
-        run = simulate(spec)
-        det = StreamingDetector(spec, provisional(both, spec.name, spec.sample_time_s), both, isolate=False,
-                                record_trace=True)
-        run_chunks(det, run)
-        tr = det.trace()
-        tr["seed"] = np.array([seed])
-        out.append(tr)
+        out.append(front_end_trace(spec, simulate(spec), settings))
         if progress:
             progress((i + 1) / len(seeds))
     return out
+
+
+def calibrate_from_runs(paths: Sequence[str], spec: ScenarioSpec, settings: DetectorSettings | None = None,
+                        progress: Callable[[float], None] | None = None) -> Calibration:
+    """Calibrate on recorded healthy runs of a plant (its model: ``spec``) instead of simulations."""
+    from .replay import load_any
+
+    settings = settings or DetectorSettings()
+    traces = []
+    for i, path in enumerate(paths):
+        traces.append(front_end_trace(spec, load_any(path), settings))
+        if progress:
+            progress((i + 1) / len(paths))
+    cal = calibrate_from_traces(traces, settings, spec.name, spec.sample_time_s, [])
+    cal.sources = [str(p) for p in paths]
+    return cal
 
 
 def measure_sigma(traces: list[dict[str, np.ndarray]], bands: list[str]) -> dict[str, dict[str, float]]:

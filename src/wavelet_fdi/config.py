@@ -17,6 +17,7 @@ from pathlib import Path
 
 from phfdi.errors import UserError
 
+from .filterbank import wavelet_filters
 from .statistics import energy_reference
 
 CALIBRATION_DIR = Path(str(resources.files("wavelet_fdi"))) / "calibrations"
@@ -76,7 +77,14 @@ class DetectorSettings:
             raise UserError("history_samples must be at least twice block_samples")
         if not self.mean_shift_sigma > 0:
             raise UserError("mean_shift_sigma must be positive")
-        energy_reference(self.variance_ratio)
+        if not self.variance_ratio > 1.0:
+            raise UserError(f"variance_ratio must exceed 1, got {self.variance_ratio}")
+        if not 1 <= self.level <= 10:
+            raise UserError(f"wavelet level must be between 1 and 10, got {self.level}")
+        try:
+            wavelet_filters(self.wavelet)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
 
     def bands(self) -> list[str]:
         """Wavelet bands D1..DJ, AJ."""
@@ -131,6 +139,8 @@ class Calibration:
     #: design values the thresholds belong to
     design: dict[str, float] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=list)
+    #: recorded healthy runs it was made from (empty: simulated with ``seeds``)
+    sources: list[str] = field(default_factory=list)
     healthy_samples: int = 0
     window_samples: int = 0
     method: str = ""

@@ -94,6 +94,7 @@ class Alarm:
             "threshold": self.threshold,
             "dominant_level": self.dominant_level,
             "alternatives": self.alternatives,
+            "isolation_time": self.isolation_time_s,
             "cleared_time": self.cleared_time_s,
         }
 
@@ -309,7 +310,6 @@ class StreamingDetector:
 
     def _segment(self, grid, a: int, b: int) -> list[Event]:
         """Samples a..b-1 of the grid: all inside one block, no reset after a."""
-        s = self.settings
         idx0 = int(grid.index[a])
         n = b - a
         t = grid.t_s[a:b]

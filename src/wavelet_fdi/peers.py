@@ -75,24 +75,22 @@ class Peer:
     def _page_hinkley(self, u: np.ndarray) -> list[int]:
         from river.drift import PageHinkley
 
-        det = PageHinkley(delta=self.k, threshold=self.threshold, alpha=PH_ALPHA, mode="both")
-        out = []
-        for i, x in enumerate(u.tolist()):
-            det.update(x)
-            if det.drift_detected:
-                out.append(i)
-        return out
+        return _river_alarms(PageHinkley(delta=self.k, threshold=self.threshold, alpha=PH_ALPHA, mode="both"), u)
 
     def _adwin(self, u: np.ndarray) -> list[int]:
         from river.drift import ADWIN
 
-        det = ADWIN(delta=self.threshold, clock=1)
-        out = []
-        for i, x in enumerate(u.tolist()):
-            det.update(x)
-            if det.drift_detected:
-                out.append(i)
-        return out
+        return _river_alarms(ADWIN(delta=self.threshold, clock=1), u)
+
+
+def _river_alarms(det, u: np.ndarray) -> list[int]:
+    """Positions where a river drift detector flags (it resets itself after each)."""
+    out = []
+    for i, x in enumerate(u.tolist()):
+        det.update(x)
+        if det.drift_detected:
+            out.append(i)
+    return out
 
 
 # ---- calibration ------------------------------------------------------------------------

@@ -74,6 +74,22 @@ def test_calibrate_writes_a_file_the_detector_accepts(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
 
 
+def test_calibrate_on_recorded_runs(tmp_path, capsys):
+    """A plant's own healthy recordings (here: simulated ones saved to files) set the thresholds."""
+    files = []
+    for seed in (2001, 2002):
+        path = tmp_path / f"healthy{seed}.parquet"
+        simulate(short_spec("healthy", duration_s=5000.0, seed=seed)).save(path)
+        files.append(str(path))
+    out = tmp_path / "plant.yaml"
+    overrides = ["--set", "duration_s=5000", "--set", "setpoints.ph.changes=[{at_s: 200, value: 8.0}]"]
+    assert main(["calibrate", "--runs", *files, *overrides, "--out", str(out)]) == 0
+    cal = Calibration.load(out)
+    assert cal.sources == files and cal.seeds == []
+    assert cal.healthy_samples == 2 * (5001 - 600)
+    assert cal.sigma["ph"]["raw"] == pytest.approx(0.01, rel=0.1)
+
+
 @pytest.mark.parametrize("command", ["replay", "evaluate", "calibrate"])
 def test_help_says_what_it_does_with_an_example(command, capsys):
     with pytest.raises(SystemExit) as exc:

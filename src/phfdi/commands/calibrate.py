@@ -10,6 +10,7 @@ EXAMPLES = """examples:
   phfdi calibrate --out my_calibration.yaml                 # paper scenario, sym4 level 3, ARL0 1e5 samples
   phfdi calibrate --wavelet db8 --level 3 --out db8.yaml
   phfdi calibrate --scenario my_loop.yaml --seeds 2001-2032 --arl0 1e6 --out my_loop.yaml
+  phfdi calibrate --scenario my_loop.yaml --runs healthy1.parquet healthy2.parquet --out plant.yaml
 
 The seeds default to 1001-1016, disjoint from the evaluation's (1-99). The file
 records the seeds, the noise level per band and each threshold; pass it to
@@ -63,21 +64,32 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario key (as in phfdi simulate)")
     p.add_argument("--seeds", default="1001-1016", help="noise seeds of the healthy runs (default 1001-1016)")
+    p.add_argument("--runs", nargs="+", default=None, metavar="FILE",
+                   help="calibrate on these recorded healthy runs (.csv, .parquet, .mcap) instead of simulating; "
+                        "--scenario is then the plant's model")
     add_detector_args(p)
     p.add_argument("--out", required=True, help="calibration file to write (.yaml or .json)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from wavelet_fdi.calibration import calibrate
+    from phfdi.scenario import load_scenario
+    from wavelet_fdi.calibration import calibrate, calibrate_from_runs
 
-    seeds = parse_seeds(args.seeds)
     settings = settings_from_args(args)
-    cal = calibrate(args.scenario, settings, seeds, args.overrides,
-                    progress=Progress(f"calibrate on {len(seeds)} healthy runs", enabled=True))
+    if args.runs:
+        spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
+        cal = calibrate_from_runs(args.runs, spec, settings,
+                                  progress=Progress(f"calibrate on {len(args.runs)} recorded runs", enabled=True))
+        source = f"{len(args.runs)} recorded runs"
+    else:
+        seeds = parse_seeds(args.seeds)
+        cal = calibrate(args.scenario, settings, seeds, args.overrides,
+                        progress=Progress(f"calibrate on {len(seeds)} healthy runs", enabled=True))
+        source = f"seeds {seeds[0]}..{seeds[-1]}"
     path = cal.save(args.out)
     print(f"calibrated {settings.wavelet} level {settings.level} on {cal.healthy_samples} healthy samples "
-          f"(seeds {seeds[0]}..{seeds[-1]}), ARL0 {settings.arl0_samples:g} samples:")
+          f"({source}), ARL0 {settings.arl0_samples:g} samples:")
     for name, h in cal.thresholds.items():
         print(f"  {name:22s} threshold {h:8.2f}")
     print(f"wrote {path}")
