@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     result = replay_run(run_, spec, cal, settings, chunk=args.chunk, isolate=not args.no_isolation)
     elapsed = time.perf_counter() - t0
     print(f"replayed {result.samples} samples in {elapsed:.2f} s ({result.samples / max(elapsed, 1e-9):.0f} "
-          f"samples/s)", file=sys.stderr)
+          f"samples/s, isolation included)", file=sys.stderr)
     if args.json:
         print(json.dumps([a.summary() for a in result.alarms], indent=2))
         return 0
