@@ -130,6 +130,16 @@ def test_a_clock_that_restarts_is_followed_after_max_gap_samples(healthy, calibr
     assert any("window reset" in e.message for e in events)
 
 
+def test_setpoint_holdoff_holds_the_statistics_after_a_setpoint_change(healthy, calibration):
+    spec, cols = healthy  # pH setpoint 12 -> 8 at 200 s
+    held = replace(SHORT, warmup_s=100.0, setpoint_holdoff_s=150.0)
+    det, _ = replay(spec, calibration, cols, settings_=held)
+    tr = det.trace()
+    t = tr["time_s"]
+    assert not tr["ph_monitored"][(t >= 200.0) & (t < 350.0)].any()
+    assert tr["ph_monitored"][(t >= 100.0) & (t < 200.0)].all() and tr["ph_monitored"][t >= 350.0].all()
+
+
 floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
 garbage = st.lists(st.tuples(st.one_of(floats, st.floats(0, 200)), floats, floats, floats, floats, floats),
                    min_size=1, max_size=60)

@@ -65,13 +65,20 @@ def test_user_errors_are_one_line_with_exit_status_2(args, message, backlash_fil
     assert len(err) == 1 and message in err[0] and "Traceback" not in err[0]
 
 
-def test_calibrate_writes_a_file_the_detector_accepts(tmp_path, capsys):
+def test_calibrate_with_the_level_channel_and_replay_with_it(tmp_path, backlash_file, capsys):
     out = tmp_path / "cal.yaml"
-    assert main(["calibrate", "--seeds", "1001-1002", "--set", "duration_s=6000", "--out", str(out)]) == 0
+    assert main(["calibrate", "--seeds", "1001-1002", "--set", "duration_s=6000", "--channels", "ph,level",
+                 "--out", str(out)]) == 0
     cal = Calibration.load(out)
     assert cal.seeds == [1001, 1002]
-    cal.check(DetectorSettings(), 1.0)
-    assert "wrote" in capsys.readouterr().out
+    settings = DetectorSettings(channels=("ph", "level"))
+    cal.check(settings, 1.0)
+    assert {"level.R.mean_up", "level.D1.energy"} <= set(cal.thresholds)
+    capsys.readouterr()
+    assert main(["replay", str(backlash_file), "--json", "--no-isolation", "--channels", "ph,level",
+                 "--calibration", str(out)]) == 0
+    alarms = json.loads(capsys.readouterr().out)
+    assert alarms and alarms[0]["detection_time"] >= 1000.0
 
 
 def test_calibrate_on_recorded_runs(tmp_path, capsys):
