@@ -24,6 +24,9 @@ COMMANDS = [
     "paper_runs",
     "launch",
     "bag",
+    "replay",
+    "calibrate",
+    "evaluate",
     "analyze",
     "loop_diagnose",
 ]

@@ -14,6 +14,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
+import numpy as np
+
 from phfdi.blocks import Chain, Injected
 
 Characteristic = Literal["linear", "equal_percentage"]
@@ -40,6 +42,16 @@ class ValveOutput:
     opening: float  # fraction of maximum flow, 0..1
     flow_ml_s: float
     fault_severity: float
+
+
+@dataclass
+class ValveOutputs:
+    """:class:`ValveOutput` of many samples (arrays)."""
+
+    position_pct: np.ndarray
+    opening: np.ndarray
+    flow_ml_s: np.ndarray
+    fault_severity: np.ndarray
 
 
 @dataclass
@@ -83,3 +95,55 @@ class Valve:
         sev = max((b.severity_at(t_s) for b in self._faults), default=0.0) if self._faults else 0.0
         self._last = ValveOutput(pos, opening, flow, sev)
         return self._last
+
+    def step_many(self, commands_pct: np.ndarray, t_s: np.ndarray) -> ValveOutputs:
+        """Many samples at once; the same outputs as calling :meth:`step` for each in turn.
+
+        Blocks are stepped per sample (they have state); clipping, the
+        inherent characteristic and the hold on non-finite commands are
+        applied to whole arrays, so a valve without blocks runs vectorised
+        (the replaying detector's healthy reference valve).
+        """
+        cmd = np.asarray(commands_pct, dtype=float)
+        t = np.asarray(t_s, dtype=float)
+        n = len(cmd)
+        fin = np.isfinite(cmd)
+        if n and not fin[0] and self._last is None:
+            raise ValueError("first valve command is not finite and there is no position to hold")
+        self.rejected_commands += int(n - np.count_nonzero(fin))
+        live = np.flatnonzero(fin)
+        pos = np.where(fin, cmd, 0.0)
+        if self.position_blocks.blocks:
+            step = self.position_blocks.step
+            for k in live.tolist():
+                pos[k] = step(float(cmd[k]), float(t[k]))
+        pos = np.clip(pos, 0.0, 100.0)
+        x = np.clip(pos / 100.0, 0.0, 1.0)
+        if self.characteristic == "linear":
+            opening = x
+        else:
+            inherent_characteristic(50.0, self.characteristic, self.rangeability)  # validates the kind
+            opening = np.where(x > 0.0, self.rangeability ** (x - 1.0), 0.0)
+        flow = opening * self.max_flow_ml_s
+        if self.flow_blocks.blocks:
+            fstep = self.flow_blocks.step
+            for k in live.tolist():
+                flow[k] = fstep(float(flow[k]), float(t[k]))
+        sev = np.zeros(n)
+        if self._faults:
+            for k in live.tolist():
+                sev[k] = max(b.severity_at(float(t[k])) for b in self._faults)
+        if len(live) < n:  # non-finite commands hold the last output
+            src = np.maximum.accumulate(np.where(fin, np.arange(n), -1))
+            held = src < 0
+            src = np.maximum(src, 0)
+            last = self._last
+            out = []
+            for arr, prev in ((pos, last.position_pct if last else 0.0), (opening, last.opening if last else 0.0),
+                              (flow, last.flow_ml_s if last else 0.0), (sev, last.fault_severity if last else 0.0)):
+                out.append(np.where(held, prev, arr[src]))
+            pos, opening, flow, sev = out
+        if n:
+            self._last = ValveOutput(float(pos[-1]), float(opening[-1]), float(flow[-1]), float(sev[-1]))
+        return ValveOutputs(pos, opening, flow, sev)
+

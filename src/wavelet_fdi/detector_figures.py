@@ -1,0 +1,152 @@
+"""Figures of the evaluation and of the paper's coefficient residuals (Section 7, Figures 50-55)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .config import DetectorSettings  # noqa: E402
+from .filterbank import coefficient_residuals  # noqa: E402
+
+COLORS = {"wavelet": "tab:blue", "wavelet_bands": "tab:cyan", "cusum": "tab:orange", "focus": "tab:green", "page_hinkley": "tab:red",
+          "adwin": "tab:purple"}
+
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_delays(summary: dict, path: Path) -> Path:
+    from .evaluation import DETECTORS, LABELS
+
+    faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
+    cols = 3
+    rows = (len(faults) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(14, 4 * rows), squeeze=False)
+    width = 0.8 / len(DETECTORS)
+    for ax, fault in zip(axes.flat, faults):
+        mine = [r for r in summary["rows"] if r["fault"] == fault]
+        x = np.arange(len(mine))
+        for j, d in enumerate(DETECTORS):
+            vals = [r["delay"][d] if r["delay"][d] is not None else np.nan for r in mine]
+            ax.bar(x + (j - len(DETECTORS) / 2 + 0.5) * width, vals, width, color=COLORS[d], label=LABELS[d])
+        bounds = [r["bound_s"] if r["bound_s"] is not None else np.nan for r in mine]
+        ax.plot(x, bounds, "k_", ms=30, mew=2, label="bound (oracle)")
+        ax.set_xticks(x)
+        ax.set_xticklabels([f"{r['param']}\n= {r['value']:g}" for r in mine], fontsize=8)
+        ax.set_yscale("log")
+        ax.set_ylabel("detection delay (s)")
+        ax.set_title(fault)
+        ax.grid(alpha=0.3, axis="y")
+    for ax in list(axes.flat)[len(faults):]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle(f"Detection delay at equal false-alarm rate (ARL0 = {summary['arl0_samples']:g} samples); "
+                 "missing bar: missed", fontsize=10)
+    return _save(fig, path)
+
+
+def plot_false_alarms(summary: dict, path: Path) -> Path:
+    from .evaluation import DETECTORS, LABELS
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    vals = [summary["false_per_hour"][d] or 0.0 for d in DETECTORS]
+    ax.bar([LABELS[d] for d in DETECTORS], vals, color=[COLORS[d] for d in DETECTORS])
+    for i, d in enumerate(DETECTORS):
+        ax.text(i, vals[i], f"{summary['false_alarms'][d]}", ha="center", va="bottom", fontsize=9)
+    target = 3600.0 / summary["arl0_samples"]  # 1 s samples
+    ax.axhline(target, color="k", ls="--", lw=1, label=f"target 1/ARL0 ({target:.3f} per hour at 1 s)")
+    ax.set_ylabel("false alarms per hour (1/h)")
+    ax.set_title(f"False alarms over {summary['healthy_hours']:.1f} h of healthy operation (counts on bars)")
+    ax.legend(fontsize=8)
+    ax.tick_params(axis="x", labelsize=8)
+    return _save(fig, path)
+
+
+def plot_isolation(summary: dict, path: Path) -> Path:
+    from .isolation import CLASSES
+
+    faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
+    cols = list(CLASSES) + ["pending"]
+    m = np.zeros((len(faults), len(cols)))
+    for r in summary["rows"]:
+        for c in r["classes"]:
+            m[faults.index(r["fault"]), cols.index(c) if c in cols else -1] += 1
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    ax.imshow(m, cmap="Blues")
+    for i in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            if m[i, j]:
+                ax.text(j, i, f"{int(m[i, j])}", ha="center", va="center", fontsize=9)
+    ax.set_xticks(range(len(cols)))
+    ax.set_xticklabels(cols, rotation=30, fontsize=8)
+    ax.set_yticks(range(len(faults)))
+    ax.set_yticklabels(faults, fontsize=8)
+    ax.set_xlabel("class given by isolation (-)")
+    ax.set_ylabel("injected fault (-)")
+    ax.set_title("Isolation: runs per injected fault and diagnosed class")
+    return _save(fig, path)
+
+
+def plot_parameters(summary: dict, path: Path) -> Path:
+    faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
+    fig, axes = plt.subplots(1, len(faults), figsize=(3.2 * len(faults), 3.4), squeeze=False)
+    for ax, fault in zip(axes[0], faults):
+        mine = [r for r in summary["rows"] if r["fault"] == fault]
+        lo = min(r["value"] for r in mine)
+        hi = max(r["value"] for r in mine)
+        for r in mine:
+            ax.plot([r["value"]] * len(r["estimates"]), r["estimates"], "o", color="tab:blue")
+        span = np.linspace(0.8 * lo, 1.2 * hi, 2)
+        ax.plot(span, span, "k--", lw=0.8)
+        unit = "s" if mine[0]["param"].endswith("_s") else "% of span"
+        ax.set_xlabel(f"true {mine[0]['param']} ({unit})", fontsize=8)
+        ax.set_ylabel(f"estimated ({unit})", fontsize=8)
+        ax.set_title(fault, fontsize=9)
+        ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def plot_coefficient_residuals(signals: dict, settings: DetectorSettings, path: Path, title: str) -> Path:
+    """Paper Figures 50-55: D1..DJ, AJ of the measured and predicted pH, and their differences."""
+    t = signals["time_s"]
+    ok = np.isfinite(signals["ph_predicted"]) & np.isfinite(signals["ph_measured"])
+    res = coefficient_residuals(signals["ph_measured"][ok], signals["ph_predicted"][ok],
+                                settings.wavelet, settings.level)
+    bands = settings.bands()
+    fig, axes = plt.subplots(len(bands), 3, figsize=(14, 2.2 * len(bands)), sharex=True)
+    t0, t1 = float(t[ok][0]), float(t[ok][-1])
+    for i, b in enumerate(bands):
+        for j, key in enumerate(("measured", "predicted", "residual")):
+            c = res[key][b]
+            ax = axes[i, j]
+            ax.plot(np.linspace(t0, t1, len(c)), c, lw=0.6, color="tab:red" if key == "residual" else "tab:blue")
+            ax.set_ylabel(f"{'Res' if key == 'residual' else ''}{b} (pH)", fontsize=8)
+            if i == 0:
+                ax.set_title({"measured": "measured pH", "predicted": "healthy prediction",
+                              "residual": "coefficient residual (measured - predicted)"}[key], fontsize=9)
+            ax.grid(alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+def plot_evaluation(summary: dict, records: list[dict], out: Path, signals: dict | None,
+                    settings: DetectorSettings) -> list[Path]:
+    paths = [plot_delays(summary, out / "delays.png"), plot_false_alarms(summary, out / "false_alarms.png"),
+             plot_isolation(summary, out / "isolation.png"), plot_parameters(summary, out / "parameters.png")]
+    if signals is not None:
+        paths.append(plot_coefficient_residuals(
+            signals, settings, out / "coefficient_residuals_backlash.png",
+            f"Backlash at 7000 s: {settings.wavelet} level-{settings.level} DWT (pywt.wavedec) of the measured pH, "
+            f"the healthy model's prediction and their difference (paper Figures 50-55)"))
+    return paths

@@ -1,0 +1,88 @@
+"""Page's CUSUM for several statistics at once, vectorised over a chunk.
+
+Each statistic accumulates increments z_n (log-likelihood-ratio-like:
+positive drift after a change, negative before) as
+
+    S_n = max(0, S_(n-1) + z_n)
+
+computed in the equivalent form S_n = C_n - min(M_(n-1), C_n), with C the
+running sum of z and M its running minimum, so a whole chunk is two numpy
+accumulations. Both are exact left-to-right recursions, so chunked and
+whole-record processing agree bit for bit. :meth:`CusumBank.renormalise`
+(C := S, M := 0) keeps the state bounded; it leaves S unchanged and is called
+at fixed sample indices so that it too is independent of chunking.
+
+Increments used by the detector, with u a coefficient divided by its healthy
+standard deviation:
+
+* ``energy``: u^2 - k (k = ln(rho) / (1 - 1/rho): the CUSUM of the Gaussian
+  log-likelihood ratio for a variance increase by rho, scaled);
+* ``mean_up`` / ``mean_down``: +u - k / -u - k (k = delta / 2: a mean shift of
+  delta standard deviations).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+KINDS = ("energy", "mean_up", "mean_down")
+
+
+def energy_reference(variance_ratio: float) -> float:
+    """Reference value k of the variance CUSUM designed for a variance ratio rho > 1."""
+    if not variance_ratio > 1.0:
+        raise ValueError(f"variance ratio must exceed 1, got {variance_ratio}")
+    return math.log(variance_ratio) / (1.0 - 1.0 / variance_ratio)
+
+
+def increments(kind: str, u: np.ndarray, k: float) -> np.ndarray:
+    if kind == "energy":
+        return u * u - k
+    if kind == "mean_up":
+        return u - k
+    if kind == "mean_down":
+        return -u - k
+    raise ValueError(f"unknown statistic kind {kind!r}; known: {', '.join(KINDS)}")
+
+
+class CusumBank:
+    """n one-sided CUSUMs with a global sample counter for change-time estimates."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.c = np.zeros(n)
+        self.m = np.zeros(n)
+        self.last_zero = np.zeros(n, dtype=np.int64)  # last sample index where S was 0
+
+    @property
+    def value(self) -> np.ndarray:
+        return self.c - self.m
+
+    def restart(self, index: int) -> None:
+        """All statistics to zero, as after sample ``index``."""
+        self.c[:] = 0.0
+        self.m[:] = 0.0
+        self.last_zero[:] = index
+
+    def renormalise(self) -> None:
+        s = self.c - self.m
+        self.c = s
+        self.m = np.zeros(self.n)
+
+    def update(self, z: np.ndarray, first_index: int) -> np.ndarray:
+        """Consume increments z (n, N) of samples first_index..first_index+N-1; return S (n, N)."""
+        if z.shape[1] == 0:
+            return np.empty((self.n, 0))
+        c = np.cumsum(np.concatenate((self.c[:, None], z), axis=1), axis=1)[:, 1:]
+        m = np.minimum.accumulate(np.concatenate((self.m[:, None], c), axis=1), axis=1)[:, 1:]
+        s = c - m
+        zero = s <= 0.0
+        any_zero = zero.any(axis=1)
+        if any_zero.any():
+            last = z.shape[1] - 1 - np.argmax(zero[:, ::-1], axis=1)
+            self.last_zero = np.where(any_zero, first_index + last, self.last_zero)
+        self.c = c[:, -1].copy()
+        self.m = m[:, -1].copy()
+        return s
