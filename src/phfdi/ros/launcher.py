@@ -36,7 +36,7 @@ import yaml
 from phfdi.errors import UserError
 
 from .env import graph_env, reserve_domain_id
-from .topics import CONTROLLERS, PLANT, PLANT_STATE, RECORDER, VALVE
+from .topics import CONTROLLERS, DETECTOR, PLANT, PLANT_STATE, RECORDER, VALVE
 
 LOOP, OBSERVER = "loop", "observer"
 
@@ -54,8 +54,9 @@ class NodeSpec:
 def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float | None = None,
                overrides: list[str] = (), record: str | Path | None = None, pace: float = 0.0,
                executor: str = "events", connect_timeout_s: float = 60.0,
-               extra: list[NodeSpec] = ()) -> list[NodeSpec]:
-    """The loop graph: plant, valve, controllers (+ recorder, + extra nodes such as a detector)."""
+               extra: list[NodeSpec] = (), detector: dict | None = None) -> list[NodeSpec]:
+    """The loop graph: plant, valve, controllers (+ recorder, + the fault detector with these
+    parameters, + extra nodes)."""
     if Path(scenario).suffix in (".yaml", ".yml"):
         scenario = str(Path(scenario).resolve())
     common = {"scenario": scenario, "fault": fault or "", "fault_onset_s": -1.0 if onset_s is None else float(onset_s),
@@ -66,11 +67,18 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
              NodeSpec(PLANT, "ph_plant_sim.node", {"pace": float(pace)})]
     if record is not None:
         nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", {"path": str(Path(record).resolve())}, OBSERVER))
+    if detector is not None:
+        nodes.append(detector_spec(detector))
     nodes += list(extra)
     names = [n.name for n in nodes]
     for n in nodes:
         n.params = {**common, "graph_nodes": names, **n.params}
     return nodes
+
+
+def detector_spec(params: dict | None = None) -> NodeSpec:
+    """The fault detector (wavelet_fdi.node): an observer, outside the lock-step ring."""
+    return NodeSpec(DETECTOR, "wavelet_fdi.node", dict(params or {}), OBSERVER)
 
 
 @dataclass
@@ -89,6 +97,8 @@ class LaunchResult:
     sample_time_s: float = 1.0
     interrupted_by: str | None = None  # signal that stopped the launch
     published: dict[str, int] = field(default_factory=dict)  # messages per topic, as the nodes counted them
+    #: JSON lines the nodes other than the clock node printed (e.g. the detector's fault_alarm events)
+    node_events: dict[str, list[dict]] = field(default_factory=dict)
 
     @property
     def simulated_s(self) -> float:
@@ -150,12 +160,17 @@ class Launcher:
 
     def __init__(self, nodes: list[NodeSpec], domain_id: int | None = None, log_dir: str | Path | None = None,
                  progress: Callable[[float], None] | None = None, stop_timeout_s: float = 15.0,
-                 status: Callable[[str], None] | None = None) -> None:
+                 status: Callable[[str], None] | None = None, clock_node: str = PLANT,
+                 on_event: Callable[[str, dict], None] | None = None) -> None:
+        """``clock_node``: the node that owns simulated time (prints connected/progress/done);
+        ``on_event(node, event)`` gets the JSON lines the other nodes print, as they come."""
         names = [n.name for n in nodes]
         if len(set(names)) != len(names):
             raise UserError(f"node names must be unique, got {names}")
-        if PLANT not in names:
-            raise UserError("a graph needs the plant node (it owns simulated time)")
+        if clock_node not in names:
+            raise UserError(f"a graph needs the {clock_node} node (it owns simulated time)")
+        self.clock_node = clock_node
+        self.on_event = on_event
         self.nodes = nodes
         self.requested_domain = domain_id
         self.keep_logs = log_dir is not None
@@ -203,11 +218,12 @@ class Launcher:
                     + ", ".join(f"{p.name} (pid {p.popen.pid})" for p in self.procs.values()))
 
     def _watch(self, result: LaunchResult) -> None:
-        plant = self.procs[PLANT]
+        plant = self.procs[self.clock_node]
         done = False
         while True:
             for line in plant.new_stdout_lines():
                 done = self._on_plant_event(line, result) or done
+            self._follow_others()
             if self._signals:
                 sig = self._signals[0]
                 result.status = 128 + sig
@@ -226,6 +242,17 @@ class Launcher:
                                   + ("; last lines of its stderr:\n    " + "\n    ".join(tail) if tail else ""))
                 return
             time.sleep(0.05)
+
+    def _follow_others(self) -> None:
+        if self.on_event is None:
+            return
+        for p in self.procs.values():
+            if p.name == self.clock_node:
+                continue
+            for line in p.new_stdout_lines():
+                event = _json_event(line)
+                if event is not None:
+                    self.on_event(p.name, event)
 
     def _on_plant_event(self, line: str, result: LaunchResult) -> bool:
         try:
@@ -276,11 +303,14 @@ class Launcher:
         self.t_stop = time.monotonic()
         if not self.procs:
             return
-        plant = [p for p in self.procs.values() if p.name == PLANT]
-        loop = [p for p in self.procs.values() if p.spec.role == LOOP and p.name != PLANT]
-        observers = [p for p in self.procs.values() if p.spec.role == OBSERVER]
-        for group in (plant, loop, observers):
+        plant = [p for p in self.procs.values() if p.name == self.clock_node]
+        loop = [p for p in self.procs.values() if p.spec.role == LOOP and p.name != self.clock_node]
+        # observers that publish (the detector) deliver their last messages before the recorder closes
+        observers = [p for p in self.procs.values() if p.spec.role == OBSERVER and p.name != RECORDER]
+        recorder = [p for p in self.procs.values() if p.spec.role == OBSERVER and p.name == RECORDER]
+        for group in (plant, loop, observers, recorder):
             self._stop(group)
+        self._follow_others()
         for p in self.procs.values():
             if p.killed_by_us:
                 result.notes.append(f"node {p.name} did not stop within {self.stop_timeout_s:g} s and was killed")
@@ -293,14 +323,14 @@ class Launcher:
         for p in self.procs.values():
             p.stdout_pos = 0
             for line in p.new_stdout_lines():
-                if '"published"' not in line:
+                event = _json_event(line)
+                if event is None:
                     continue
-                try:
-                    event = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                for topic, n in event.get("counts", {}).items():
-                    result.published[topic] = result.published.get(topic, 0) + n
+                if event["event"] == "published":
+                    for topic, n in event.get("counts", {}).items():
+                        result.published[topic] = result.published.get(topic, 0) + n
+                elif p.name != self.clock_node:
+                    result.node_events.setdefault(p.name, []).append(event)
 
     def _cleanup(self, result: LaunchResult) -> None:
         self._collect_published(result)
@@ -355,6 +385,17 @@ class Launcher:
         if previous:
             for s, handler in previous.items():
                 signal.signal(s, handler)
+
+
+def _json_event(line: str) -> dict | None:
+    """A node's JSON line ({"event": ...}); None for anything else (log lines)."""
+    if not line.startswith("{"):
+        return None
+    try:
+        event = json.loads(line)
+    except json.JSONDecodeError:
+        return None
+    return event if isinstance(event, dict) and "event" in event else None
 
 
 SHM_DIR = Path("/dev/shm")
