@@ -309,6 +309,22 @@ def load_run(path: str | Path) -> Run:
     return Run(signals, metadata)
 
 
+def read_messages(path: str | Path, topic: str) -> list:
+    """Every message of one topic, decoded (rosbags objects with the message's field names), in log-time order."""
+    from rosbags.highlevel import AnyReader, AnyReaderError
+
+    path = Path(path)
+    if not path.exists():
+        raise UserError(f"no such file: {path}")
+    try:
+        with AnyReader([path]) as reader:
+            conns = [c for c in reader.connections if c.topic == topic]
+            return [reader.deserialize(raw, conn.msgtype) for conn, _t, raw in reader.messages(connections=conns)]
+    except AnyReaderError as exc:
+        raise UserError(f"{path}: cannot read the bag ({exc}); if its recorder was killed, "
+                        f"run: phfdi bag recover {path} FIXED.mcap") from None
+
+
 def _time(store, ns: int):
     return store.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
