@@ -1,0 +1,64 @@
+"""/fault_alarm messages as plain dicts: from a bag or a live subscription, one line per alarm (no rclpy).
+
+Works on rclpy messages and on rosbags' decoded ones alike (same field names).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+STATE_NAMES = {0: "OK", 1: "WARN", 2: "ALARM"}
+
+
+def _seconds(t) -> float:
+    return t.sec + t.nanosec * 1e-9
+
+
+def to_dict(msg) -> dict:
+    """One phfdi_interfaces/FaultAlarm message; times in s of simulated time (None while OK)."""
+    detection = _seconds(msg.detection_time)
+    return {
+        "time": _seconds(msg.stamp), "loop": msg.loop, "state": STATE_NAMES.get(int(msg.state), str(msg.state)),
+        "fault_class": msg.fault_class, "confidence": float(msg.confidence),
+        "onset_time": _seconds(msg.onset_time) if detection > 0 else None,
+        "detection_time": detection if detection > 0 else None,
+        "severity": float(msg.severity), "severity_unit": msg.severity_unit,
+        "statistic": float(msg.statistic), "threshold": float(msg.threshold),
+        "wavelet_level": int(msg.wavelet_level), "message": msg.message,
+    }
+
+
+def from_bag(path: str | Path) -> list[dict]:
+    """Every /fault_alarm message a bag holds, in order."""
+    from phfdi.bagio import read_messages
+    from phfdi.ros.topics import FAULT_ALARM
+
+    return [to_dict(m) for m in read_messages(path, FAULT_ALARM.name)]
+
+
+def per_alarm(messages: list[dict]) -> list[dict]:
+    """The latest message about each alarm (keyed by detection time): its final diagnosis,
+    with ``cleared`` set when a later message of that alarm says so."""
+    out: dict[float, dict] = {}
+    for m in messages:
+        if m["detection_time"] is None:
+            continue
+        key = round(m["detection_time"], 6)
+        previous = out.get(key)
+        cleared = previous.get("cleared") if previous else None
+        out[key] = dict(m, cleared=cleared if m["state"] != "OK" else m["time"])
+    return [out[k] for k in sorted(out)]
+
+
+def format_table(alarms: list[dict]) -> str:
+    """One line per alarm: onset, detection, class, confidence, severity."""
+    if not alarms:
+        return "  no alarm"
+    lines = [f"  {'onset (s)':>10s} {'detected (s)':>12s}  {'class':12s} {'confidence':>10s}  severity"]
+    for a in alarms:
+        sev = "-" if a["severity"] is None or not math.isfinite(a["severity"]) else f"{a['severity']:.3g}"
+        lines.append(f"  {a['onset_time']:10.0f} {a['detection_time']:12.0f}  {a['fault_class']:12s} "
+                     f"{a['confidence']:10.2f}  {sev} {a['severity_unit']}"
+                     + (f"; cleared {a['cleared']:g} s" if a.get("cleared") is not None else ""))
+    return "\n".join(lines)

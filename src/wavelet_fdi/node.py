@@ -1,0 +1,461 @@
+"""ROS 2 node of the fault detector (thin wrapper of :class:`StreamingDetector`): publishes /fault_alarm.
+
+Inputs: /plant/measurement (pH, level of stamp t_k) and /controller/output
+(setpoint and valve commands computed for t_k). The reading of t_k is paired
+with the controller output stamped t_k; if that output has not arrived once
+``pairing_window`` further measurements have (default 1: the next one) and
+``pairing_timeout_s`` of wall time have passed, the sample goes on with NaN
+commands, which the core counts and, if it lasts, answers by holding
+detection (see :mod:`wavelet_fdi.inputs`). Why the wall-time grace: two
+topics from two writers are not delivered in publication order; in a
+lock-step run 29 of 1601 controller outputs arrived after the next
+measurement, though published before it.
+
+Outputs: /fault_alarm (phfdi_interfaces/FaultAlarm) on every state change
+(alarm raised, diagnosed, cleared, input problem, warm-up over) and as a
+heartbeat every ``heartbeat_period_s`` of simulated time; /diagnostics
+(diagnostic_msgs/DiagnosticArray: the core's input counters, pairing counts,
+processing lag, calibration in use) every ``diagnostics_period_s`` and
+whenever a problem counter grows.
+
+The node is an observer, never part of the lock-step ring: its callbacks
+only queue samples. A worker thread hands everything queued since its last
+call to the core in one ``StreamingDetector.process`` call (results are
+identical for any chunking), so an isolation (1-3 s, once per alarm) never
+stops the executor from taking messages, and nothing is lost (reliable,
+keep-all). On SIGINT/SIGTERM it takes what its readers still hold, processes
+it, runs pending isolations on the data there is (``flush``), publishes the
+result and exits.
+
+    python -m wavelet_fdi.node --ros-args -p scenario:=paper -p graph_nodes:="[detector]"
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import threading
+import time
+import traceback
+from collections import deque
+
+import numpy as np
+
+from phfdi.errors import UserError
+from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main, to_time
+from phfdi.ros.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
+
+PARAMS = (
+    ParamSpec("calibration", "", "calibration file (.yaml/.json) from phfdi calibrate; '' takes the one shipped "
+                                 "for the scenario"),
+    ParamSpec("wavelet", "sym4", "PyWavelets orthogonal wavelet of the filter bank (sym4, db8, ...)"),
+    ParamSpec("level", 3, "wavelet decomposition level", range=(1, 10)),
+    ParamSpec("arl0_samples", 1e5, "false-alarm target: average run length to a false alarm (samples)",
+              range=(10.0, 1e12)),
+    ParamSpec("channels", ["ph"], "residual channels watched: [ph] or [ph, level]"),
+    ParamSpec("isolate", True, "name the fault class (and estimate its parameter) after an alarm"),
+    ParamSpec("loop", "ph", "name of the monitored loop in /fault_alarm"),
+    ParamSpec("pairing_window", 1, "measurements that must arrive after a sample before its missing controller "
+                                   "output is given up (then NaN commands)", range=(1, 1000)),
+    ParamSpec("pairing_timeout_s", 0.5, "and wall time a sample waits for its controller output (s): cross-topic "
+                                        "delivery is not in publication order", range=(0.0, 60.0)),
+    ParamSpec("heartbeat_period_s", 60.0, "publish the state on /fault_alarm every this many s of simulated "
+                                          "time; 0: only on changes", range=(0.0, 1e9), runtime=True),
+    ParamSpec("diagnostics_period_s", 60.0, "publish /diagnostics every this many s of simulated time (and "
+                                            "whenever an input problem is counted); 0: only then",
+              range=(0.0, 1e9), runtime=True),
+)
+
+#: FaultAlarm.state of the core's levels
+STATE_OF_LEVEL = {"OK": FaultAlarm.OK, "WARN": FaultAlarm.WARN, "ERROR": FaultAlarm.ALARM}
+STATE_NAMES = {FaultAlarm.OK: "OK", FaultAlarm.WARN: "WARN", FaultAlarm.ALARM: "ALARM"}
+#: diagnostics counters that mean bad input (a growth is reported at once)
+PROBLEM_COUNTERS = ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
+                    "gap_resets", "time_resets", "nonfinite_ph", "out_of_range_ph", "bad_level",
+                    "nonfinite_command", "nonfinite_outlet_command", "command_stale_episodes",
+                    "commands_missing", "late_controller_outputs", "unpaired_controller_outputs", "core_errors")
+LAG_WINDOW = 4096  # samples whose processing lag the statistics cover
+
+
+def stamp_ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def time_s_of(ns: int, dt_ns: int, dt_s: float) -> float:
+    """Sample time of a stamp, exactly as :func:`phfdi.bagio.load_run` computes it (k * dt on the grid)."""
+    return (ns // dt_ns) * dt_s if ns % dt_ns == 0 else ns * 1e-9
+
+
+class Pairing:
+    """Pairs measurements with the controller output of the same stamp, in measurement arrival order.
+
+    Rows: (stamp_ns, ph, level_cm, (ph_output_pct, level_output_pct, ph_setpoint) or None, arrival).
+    A measurement leaves when its output is there, or without it once ``window`` later measurements
+    have arrived and it has waited ``timeout_s`` (wall, monotonic clock). Bad stamps are not judged
+    here: the core does (duplicates, order, gaps).
+    """
+
+    EARLY_LIMIT = 256  # outputs kept waiting for their measurement
+
+    def __init__(self, window: int = 1, timeout_s: float = 0.0) -> None:
+        self.window = window
+        self.timeout_s = timeout_s
+        self.pending: deque[list] = deque()
+        self.early: dict[int, tuple] = {}
+        self.missed: deque[int] = deque(maxlen=256)  # stamps passed on without an output
+        self.counts = {"measurements": 0, "controller_outputs": 0, "commands_missing": 0,
+                       "late_controller_outputs": 0, "unpaired_controller_outputs": 0}
+
+    def measurement(self, ns: int, ph: float, level_cm: float, arrival: float) -> list[tuple]:
+        self.counts["measurements"] += 1
+        self.pending.append([ns, ph, level_cm, self.early.pop(ns, None), arrival])
+        return self._ready(arrival)
+
+    def output(self, ns: int, values: tuple, now: float) -> list[tuple]:
+        self.counts["controller_outputs"] += 1
+        for row in reversed(self.pending):
+            if row[0] == ns and row[3] is None:
+                row[3] = values
+                return self._ready(now)
+        if ns in self.missed:
+            self.counts["late_controller_outputs"] += 1
+        else:
+            self.early[ns] = values
+            if len(self.early) > self.EARLY_LIMIT:
+                del self.early[next(iter(self.early))]
+                self.counts["unpaired_controller_outputs"] += 1
+        return []
+
+    def expire(self, now: float) -> list[tuple]:
+        """Samples whose controller output is given up by now."""
+        return self._ready(now)
+
+    def _ready(self, now: float, all_: bool = False) -> list[tuple]:
+        out = []
+        pending = self.pending
+        while pending and (all_ or pending[0][3] is not None
+                           or (len(pending) > self.window and now - pending[0][4] >= self.timeout_s)):
+            row = pending.popleft()
+            if row[3] is None:
+                self.counts["commands_missing"] += 1
+                self.missed.append(row[0])
+            out.append(tuple(row))
+        return out
+
+    def drain(self) -> list[tuple]:
+        """Everything still waiting (the end of a stream)."""
+        return self._ready(math.inf, all_=True)
+
+
+class LagStats:
+    """Processing lag (s, wall) of the last samples: arrival of a measurement to the core's result."""
+
+    def __init__(self) -> None:
+        self.lags = deque(maxlen=LAG_WINDOW)
+        self.calls = 0
+        self.samples = 0
+        self.core_s = 0.0
+        self.max_lag_s = 0.0
+        self.max_queue = 0
+        self.max_call_samples = 0
+
+    def add(self, arrivals: list[float], done: float, core_s: float, queued: int) -> None:
+        lags = [done - a for a in arrivals]
+        self.lags.extend(lags)
+        self.calls += 1
+        self.samples += len(arrivals)
+        self.core_s += core_s
+        self.max_lag_s = max(self.max_lag_s, max(lags, default=0.0))
+        self.max_queue = max(self.max_queue, queued)
+        self.max_call_samples = max(self.max_call_samples, len(arrivals))
+
+    def summary(self) -> dict:
+        q = np.percentile(np.asarray(self.lags), [50, 99]) if self.lags else [math.nan, math.nan]
+        return {"lag_median_s": float(q[0]), "lag_p99_s": float(q[1]), "lag_max_s": self.max_lag_s,
+                "core_calls": self.calls, "samples_per_call": self.samples / self.calls if self.calls else 0.0,
+                "max_samples_per_call": self.max_call_samples, "max_queue": self.max_queue,
+                "core_s_per_sample": self.core_s / self.samples if self.samples else math.nan}
+
+
+class DetectorNode(GraphNode):
+    PARAMS = PARAMS
+
+    def __init__(self) -> None:
+        super().__init__(DETECTOR)
+        self.core, self.calibration_source = self._build_core()
+        self.pairing = Pairing(self.param("pairing_window"), self.param("pairing_timeout_s"))
+        self.lag = LagStats()
+        self._heartbeat_s = self.param("heartbeat_period_s")
+        self._diagnostics_s = self.param("diagnostics_period_s")
+        self._loop = self.param("loop")
+        self.pub_alarm = self.data_publisher(FaultAlarm, FAULT_ALARM.name)
+        self.pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
+        self.data_subscription(Measurement, MEASUREMENT.name, self._on_measurement)
+        self.data_subscription(ControllerOutput, CONTROLLER.name, self._on_output)
+        # worker: the only thread that touches the core and the two publishers
+        self._queue: list[tuple] = []
+        self._cond = threading.Condition()
+        self._closing = False
+        self._state = FaultAlarm.OK
+        self._core_state = "starting"
+        self._last_heartbeat_t = -math.inf
+        self._last_diag_t = -math.inf
+        self._reported_problems: dict[str, int] = {}
+        self._last_ns = 0
+        self.core_errors = 0
+        self._worker = threading.Thread(target=self._work, name="detector-core", daemon=True)
+        self._worker.start()
+        self.start_barrier()
+
+    # ---- parameters -----------------------------------------------------------------------
+    def _build_core(self):
+        from .config import Calibration, DetectorSettings, load_default_calibration
+        from .detector import StreamingDetector
+
+        try:
+            settings = DetectorSettings(wavelet=self.param("wavelet"), level=self.param("level"),
+                                        arl0_samples=self.param("arl0_samples"),
+                                        channels=tuple(self.param("channels")))
+            path = self.param("calibration")
+            if path:
+                cal, source = Calibration.load(path), path
+            else:
+                base = self.spec.name.split("-")[0]
+                cal = load_default_calibration(base, settings)
+                source = f"shipped {base}_{settings.wavelet}_L{settings.level}"
+            core = StreamingDetector(self.spec, cal, settings, isolate=self.param("isolate"))
+        except UserError as exc:
+            raise NodeStartError(str(exc)) from None
+        return core, source
+
+    def apply_parameters(self, params) -> None:
+        # runtime changes take effect at the next sample the worker processes
+        self._heartbeat_s = self.param("heartbeat_period_s")
+        self._diagnostics_s = self.param("diagnostics_period_s")
+
+    # ---- executor thread: queue only ------------------------------------------------------
+    def _on_measurement(self, msg: Measurement) -> None:
+        self._enqueue(self.pairing.measurement(stamp_ns(msg.stamp), msg.ph, msg.level_cm, time.monotonic()))
+
+    def _on_output(self, msg: ControllerOutput) -> None:
+        self._enqueue(self.pairing.output(stamp_ns(msg.stamp),
+                                          (msg.ph_output_pct, msg.level_output_pct, msg.ph_setpoint),
+                                          time.monotonic()))
+
+    def after_spin(self) -> None:
+        if self.pairing.pending:
+            self._enqueue(self.pairing.expire(time.monotonic()))
+
+    def _enqueue(self, rows: list[tuple]) -> None:
+        if rows:
+            with self._cond:
+                self._queue.extend(rows)
+                self._cond.notify()
+
+    # ---- worker thread: the core and the publishers ----------------------------------------
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                while not self._queue and not self._closing:
+                    self._cond.wait()
+                rows, self._queue = self._queue, []
+                closing = self._closing
+            if rows:
+                self._process(rows)
+            if closing and not rows:
+                return
+
+    def _chunk(self, rows: list[tuple]) -> dict[str, np.ndarray]:
+        nan = (math.nan, math.nan, math.nan)
+        t = [time_s_of(r[0], self.dt_ns, self.dt_s) for r in rows]
+        cmds = [r[3] or nan for r in rows]
+        return {"time_s": np.array(t), "ph_measured": np.array([r[1] for r in rows], dtype=float),
+                "level_measured_cm": np.array([r[2] for r in rows], dtype=float),
+                "valve_command_pct": np.array([c[0] for c in cmds], dtype=float),
+                "level_controller_output_pct": np.array([c[1] for c in cmds], dtype=float),
+                "ph_setpoint": np.array([c[2] for c in cmds], dtype=float)}
+
+    def _process(self, rows: list[tuple], flush: bool = False) -> None:
+        before = self._state
+        t0 = time.perf_counter()
+        try:
+            events = self.core.process(self._chunk(rows)) if rows else []
+            if flush:
+                events += self.core.flush()
+        except Exception:  # noqa: BLE001 - a bug must not take the observer down: report, start over
+            self._core_failed(rows)
+            return
+        core_s = time.perf_counter() - t0
+        self.lag.add([r[4] for r in rows], time.monotonic(), core_s, len(rows))
+        self._last_ns = max([self._last_ns] + [r[0] for r in rows if r[0] > 0])
+        status = self.core.status()
+        state = before
+        for ev in events:
+            state = self._publish_event(ev, state)
+        self._state = STATE_OF_LEVEL[status["level"]]
+        core_state = status["state"]
+        changed = core_state != self._core_state and not events
+        self._core_state = core_state
+        t_now = self._t_last()
+        if changed or (self._heartbeat_s > 0 and t_now >= self._last_heartbeat_t + self._heartbeat_s):
+            self._publish_heartbeat(status, t_now, changed)
+        problems = self._problems()
+        grew = any(v > self._reported_problems.get(k, 0) for k, v in problems.items())
+        if grew or events or changed or (self._diagnostics_s > 0 and t_now >= self._last_diag_t
+                                         + self._diagnostics_s):
+            self._publish_diagnostics(t_now, problems, grew)
+
+    def _t_last(self) -> float:
+        """Time (s) of the last sample the core took; else of the newest stamp received."""
+        hist = self.core.history
+        t = hist.read(hist.end - 1, hist.end, "t")
+        return float(t[0]) if len(t) and math.isfinite(t[0]) else self._last_ns * 1e-9
+
+    def _core_failed(self, rows: list[tuple]) -> None:
+        self.core_errors += 1
+        self.get_logger().error(f"detector core failed on {len(rows)} samples; starting over (warm-up):\n"
+                                + traceback.format_exc())
+        self.core, _ = self._build_core()
+        self._state = FaultAlarm.WARN
+        self._publish_diagnostics(self._last_ns * 1e-9, self._problems(), True)
+
+    # ---- messages -------------------------------------------------------------------------
+    def _alarm_fields(self, msg: FaultAlarm, alarm: dict | None) -> None:
+        if not alarm:
+            msg.severity = math.nan
+            msg.wavelet_level = -1
+            return
+        msg.fault_class = alarm["fault_class"]
+        msg.confidence = float(alarm["confidence"])
+        msg.onset_time = to_time(max(0, round(alarm["onset_time"] * 1e9)))
+        msg.detection_time = to_time(max(0, round(alarm["detection_time"] * 1e9)))
+        p = alarm.get("parameter")
+        if p and alarm["fault_class"] not in ("pending", "unknown"):
+            msg.severity, msg.severity_unit = float(p["value"]), f"{p['unit']} ({p['name']})"
+        else:
+            msg.severity, msg.severity_unit = float(alarm["severity"]), "pH (RMS residual, onset to detection)"
+        band = alarm.get("dominant_level") or ""
+        msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
+
+    def _publish_event(self, ev, state: int) -> int:
+        """Publish one core event on /fault_alarm; returns the state after it."""
+        if ev.kind in ("alarm", "diagnosis"):
+            state = FaultAlarm.ALARM
+        elif ev.kind == "cleared":
+            state = FaultAlarm.OK
+        elif state != FaultAlarm.ALARM:  # an input problem does not hide an active alarm
+            state = STATE_OF_LEVEL[ev.level]
+        msg = FaultAlarm(loop=self._loop, state=state, message=ev.message)
+        msg.stamp = to_time(max(0, round(ev.time_s * 1e9))) if math.isfinite(ev.time_s) else to_time(self._last_ns)
+        self._alarm_fields(msg, ev.alarm)
+        if ev.alarm:
+            msg.statistic, msg.threshold = float(ev.alarm["statistic_value"]), float(ev.alarm["threshold"])
+        self.pub_alarm.publish(msg)
+        self._report({"event": "fault_alarm", "kind": ev.kind, "state": STATE_NAMES[state], "time_s": ev.time_s,
+                      "message": ev.message, "alarm": ev.alarm})
+        return state
+
+    def _publish_heartbeat(self, status: dict, t_s: float, changed: bool) -> None:
+        state = STATE_OF_LEVEL[status["level"]]
+        text = (f"{status['state']}: worst statistic {status['worst_statistic']} "
+                f"{status['worst_statistic_value']:.1f} of threshold {status['worst_threshold']:.1f}; "
+                f"{status['samples_processed']} samples")
+        msg = FaultAlarm(loop=self._loop, state=state, message=("state now " if changed else "") + text,
+                         statistic=status["worst_statistic_value"], threshold=status["worst_threshold"])
+        msg.stamp = to_time(max(0, round(t_s * 1e9))) if math.isfinite(t_s) else to_time(self._last_ns)
+        self._alarm_fields(msg, status["alarm"])
+        self.pub_alarm.publish(msg)
+        self._last_heartbeat_t = t_s
+        if changed:
+            self._report({"event": "fault_alarm", "kind": "state", "state": STATE_NAMES[state], "time_s": t_s,
+                          "message": msg.message, "alarm": status["alarm"]})
+
+    def _problems(self) -> dict[str, int]:
+        d = self.core.diagnostics()
+        d.update(self.pairing.counts)
+        d["core_errors"] = self.core_errors
+        return {k: int(d[k]) for k in PROBLEM_COUNTERS if k in d}
+
+    def _publish_diagnostics(self, t_s: float, problems: dict[str, int], grew: bool) -> None:
+        d = self.core.diagnostics()
+        d.update(self.pairing.counts)
+        d.update(self.lag.summary())
+        d.update(core_errors=self.core_errors, calibration=self.calibration_source)
+        counted = {k: v for k, v in problems.items() if v}
+        stale = bool(d.get("command_stale"))
+        level = DiagnosticStatus.WARN if grew or stale or d.get("sample_rate_mismatch") else DiagnosticStatus.OK
+        if self.core_errors and grew:
+            level = DiagnosticStatus.ERROR
+        text = ", ".join(f"{k} {v}" for k, v in counted.items()) if counted else "no input problem so far"
+        if stale:
+            text = "valve command missing: detection held; " + text
+        inputs = DiagnosticStatus(level=level, name=f"{self.get_name()}: {self._loop} loop inputs",
+                                  hardware_id=f"{self._loop}_loop", message=text,
+                                  values=[KeyValue(key=k, value=_text(v)) for k, v in d.items()])
+        state = DiagnosticStatus(level={FaultAlarm.OK: DiagnosticStatus.OK, FaultAlarm.WARN: DiagnosticStatus.WARN,
+                                        FaultAlarm.ALARM: DiagnosticStatus.ERROR}[self._state],
+                                 name=f"{self.get_name()}: {self._loop} loop state", hardware_id=f"{self._loop}_loop",
+                                 message=f"{d['state']}; {d['alarms']} alarm(s); calibration {self.calibration_source}")
+        array = DiagnosticArray(status=[inputs, state])
+        array.header.stamp = to_time(max(0, round(t_s * 1e9))) if math.isfinite(t_s) else to_time(self._last_ns)
+        self.pub_diag.publish(array)
+        self._last_diag_t = t_s
+        self._reported_problems = problems
+
+    @staticmethod
+    def _report(event: dict) -> None:
+        """One JSON line on stdout per published state change (the launcher follows them)."""
+        print(json.dumps(event, default=_json_default), flush=True)
+
+    # ---- the end ---------------------------------------------------------------------------
+    def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
+        """Take what the readers already hold (acknowledged to the writers)."""
+        t_end = time.monotonic() + limit_s
+        counts = self.pairing.counts
+        last, idle_since = counts["measurements"] + counts["controller_outputs"], time.monotonic()
+        while time.monotonic() < t_end:
+            executor.spin_once(timeout_sec=0.05)
+            now = counts["measurements"] + counts["controller_outputs"]
+            if now != last:
+                last, idle_since = now, time.monotonic()
+            elif time.monotonic() - idle_since >= idle_s:
+                break
+
+    def close(self) -> None:
+        """Process everything queued, run pending isolations, publish, then deliver and report."""
+        self._enqueue(self.pairing.drain())
+        with self._cond:
+            self._closing = True
+            self._cond.notify()
+        self._worker.join()
+        self._process([], flush=True)
+        self._publish_heartbeat(self.core.status(), self._t_last(), False)
+        self._publish_diagnostics(self._t_last(), self._problems(), False)
+        self.flush_publishers(5.0)
+        self.report_published()
+        alarms = [{"alarm_id": a.alarm_id, **a.summary()} for a in self.core.alarms]
+        self._report({"event": "detector_done", "samples": self.core.samples_processed, "alarms": alarms,
+                      "diagnostics": self.core.diagnostics() | self.pairing.counts, "lag": self.lag.summary(),
+                      "calibration": self.calibration_source})
+
+
+def _text(v) -> str:
+    return repr(v) if isinstance(v, float) else str(v)
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    return str(x)
+
+
+def run() -> int:
+    return main(DetectorNode, "wavelet_fdi.node", __doc__.strip().splitlines()[0], PARAMS)
+
+
+if __name__ == "__main__":
+    sys.exit(run())
