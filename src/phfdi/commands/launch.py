@@ -12,6 +12,7 @@ from .common import EPILOG_FORMAT, Progress, add_scenario_args, scenario_from_ar
 
 EXAMPLES = """examples:
   phfdi launch --scenario paper --fault backlash --record bags/run.mcap
+  phfdi launch --fault backlash --detector --record bags/run.mcap   # + the fault detector (/fault_alarm)
   phfdi launch --fault stiction --set duration_s=2000 --onset 1000 --record bags/stiction.mcap
   phfdi launch --record bags/live.mcap --pace 20          # 20 x real time, for a live demo
   phfdi launch --domain-id 42 --pace 1                    # real time, join with your own nodes on domain 42
@@ -23,14 +24,19 @@ or SIGTERM stops all nodes and leaves a readable bag. See docs/ros_graph.md.
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("launch", help="run a scenario through the ROS 2 node graph (plant, valve, controllers)",
-                       description="Start the plant, valve and controller nodes (and a recorder) as separate "
+    p = sub.add_parser("launch", help="run a scenario through the ROS 2 node graph (plant, valve, controllers, detector)",
+                       description="Start the plant, valve and controller nodes (and a recorder, and the fault detector) as separate "
                                    "processes, run the scenario in lock-step simulated time (or paced), stop "
                                    "everything cleanly and print a summary.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     add_scenario_args(p)
     p.add_argument("--record", metavar="BAG.mcap", default=None, help="record every topic to this MCAP bag")
     p.add_argument("--overwrite", action="store_true", help="replace the --record file if it exists")
+    p.add_argument("--detector", action="store_true",
+                   help="add the fault detector node (wavelet_fdi.node): publishes /fault_alarm and /diagnostics")
+    p.add_argument("--detector-param", dest="detector_params", action="append", default=[], metavar="NAME=VALUE",
+                   help="a parameter of the detector node, e.g. --detector-param calibration=my.yaml "
+                        "(see python -m wavelet_fdi.node --help); implies --detector")
     p.add_argument("--pace", type=float, default=0.0, metavar="FACTOR",
                    help="0: lock-step as fast as possible (default); F: F times real time")
     p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: a free one)")
@@ -57,7 +63,48 @@ def _check(args: argparse.Namespace) -> None:
         raise UserError(f"--record {args.record} exists: give another name, or --overwrite to replace it")
 
 
-def summary_dict(result) -> dict:
+def detector_params(items: list[str]) -> dict:
+    """--detector-param NAME=VALUE items as typed node parameters (VALUE read as YAML: 2.0, true, [ph, level])."""
+    import yaml
+
+    from phfdi.errors import UserError
+
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise UserError(f"--detector-param {item!r}: write NAME=VALUE")
+        try:
+            out[name.strip()] = yaml.safe_load(value) if value.strip() else ""
+        except yaml.YAMLError:
+            raise UserError(f"--detector-param {item!r}: cannot read the value") from None
+    if "calibration" in out and out["calibration"]:
+        out["calibration"] = str(Path(out["calibration"]).resolve())
+    return out
+
+
+def alarm_event_line(event: dict) -> str | None:
+    """One line for a state change the detector published on /fault_alarm (None: not worth a line)."""
+    if event.get("event") != "fault_alarm" or event.get("kind") == "state" and event.get("state") == "OK":
+        return None
+    return f"/fault_alarm {event['state']} at {event['time_s']:g} s: {event['message']}"
+
+
+def received_alarms(result) -> tuple[list[dict], str]:
+    """The alarms of the run: as the recorder received them on /fault_alarm (bag), else as the detector
+    reported publishing them."""
+    from wavelet_fdi import alarm_messages
+
+    if result.bag is not None and any(t["topic"] == "/fault_alarm" for t in result.bag["topics"]):
+        return alarm_messages.per_alarm(alarm_messages.from_bag(result.bag["path"])), "received in the bag"
+    done = [e for e in result.node_events.get("detector", []) if e["event"] == "detector_done"]
+    alarms = done[-1]["alarms"] if done else []
+    return [{"onset_time": a["onset_time"], "detection_time": a["detection_time"], "fault_class": a["fault_class"],
+             "confidence": a["confidence"], "severity": a["severity"], "severity_unit": "pH RMS residual",
+             "cleared": a["cleared_time"]} for a in alarms], "as the detector reported them"
+
+
+def summary_dict(result, alarms: list[dict] | None = None) -> dict:
     out = {"scenario": result.scenario, "status": result.status, "samples": result.samples_done,
            "of": result.samples, "simulated_s": result.simulated_s, "wall_s": result.run_wall_s,
            "connect_s": result.connect_s, "real_time_factor": result.real_time_factor,
@@ -66,6 +113,8 @@ def summary_dict(result) -> dict:
     if result.bag is not None:
         out["bag"] = {"path": result.bag["path"], "size_bytes": result.bag["size_bytes"],
                       "counts": {t["topic"]: t["count"] for t in result.bag["topics"]}}
+    if alarms is not None:
+        out["alarms"] = alarms
     return out
 
 
@@ -96,16 +145,29 @@ def run(args: argparse.Namespace) -> int:
 
     _check(args)
     spec = scenario_from_args(args)  # one clear line for a bad scenario before any process starts
+    detector = detector_params(args.detector_params) if args.detector or args.detector_params else None
     nodes = loop_graph(args.scenario, args.fault, args.onset, args.overrides, args.record, args.pace,
-                       args.executor, args.connect_timeout)
+                       args.executor, args.connect_timeout, detector=detector)
+    say = lambda text: print(f"phfdi launch: {text}", file=sys.stderr)  # noqa: E731
+
+    def on_event(node: str, event: dict) -> None:
+        line = alarm_event_line(event)
+        if line:
+            say(line)
+
     launcher = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir,
-                        progress=Progress(f"launch {spec.name}"),
-                        status=lambda text: print(f"phfdi launch: {text}", file=sys.stderr))
+                        progress=Progress(f"launch {spec.name}"), status=say, on_event=on_event)
     result = launcher.run()
+    alarms, source = received_alarms(result) if detector is not None else (None, "")
     if args.json:
-        print(json.dumps(summary_dict(result), indent=2))
+        print(json.dumps(summary_dict(result, alarms), indent=2))
     else:
         print(format_summary(result))
+        if alarms is not None:
+            from wavelet_fdi.alarm_messages import format_table
+
+            print(f"  alarms on /fault_alarm ({source}):")
+            print(format_table(alarms))
     if result.failure:
         print(f"phfdi launch: error: {result.failure}", file=sys.stderr)
         print("phfdi launch: stopped the other nodes" + (", bag closed" if result.bag else ""), file=sys.stderr)
