@@ -13,20 +13,27 @@ from .common import EPILOG_FORMAT
 EXAMPLES = """examples:
   phfdi simulate --fault backlash --out runs/backlash.parquet && phfdi replay runs/backlash.parquet
   phfdi replay runs/backlash.csv --json                 # machine-readable list of alarms
-  phfdi replay bags/run.mcap --calibration my.yaml      # a bag (needs phfdi.bagio), own calibration
+  phfdi replay bags/run.mcap --calibration my.yaml      # a bag recorded by phfdi launch, own calibration
+  phfdi replay --live bags/run.mcap                     # through a detector NODE, over ROS topics
 
 The detector sees only what a plant would measure: time_s, ph_measured,
 valve_command_pct (or ph_controller_output_pct), level_measured_cm,
 level_controller_output_pct, ph_setpoint and the flows of feeds the valve does
 not drive. The plant model comes from the run's metadata (simulated runs),
 else from --scenario; the faults in it are ignored.
+
+--live plays the bag's topics (raw CDR, each message at its simulated time
+stamp, and /clock) into a ROS graph of two processes started for the
+purpose on a ROS domain of their own: a player (phfdi.ros.player) and the
+detector node (wavelet_fdi.node), which publishes /fault_alarm. It prints
+the alarms the node raised; they equal the offline replay's.
 """
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="detect and diagnose faults in a recorded run (offline, fast)",
-                       description="Feed a recorded run (.csv, .parquet; .mcap bags once phfdi.bagio is "
-                                   "installed) through the streaming wavelet-residual detector, as fast as the "
+                       description="Feed a recorded run (.csv, .parquet, or an .mcap bag of phfdi launch) "
+                                   "through the streaming wavelet-residual detector, as fast as the "
                                    "CPU allows, and print each alarm: onset, detection time, fault class with "
                                    "confidence, parameter estimate, severity, statistic against threshold.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
@@ -38,6 +45,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_detector_args(p)
     p.add_argument("--no-isolation", action="store_true", help="detect only (no fault class)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
+    live = p.add_argument_group("live replay (ROS 2)")
+    live.add_argument("--live", action="store_true",
+                      help="play the bag over ROS topics into a detector node instead (.mcap only)")
+    live.add_argument("--pace", type=float, default=0.0, metavar="FACTOR",
+                      help="with --live: 0 as fast as the detector takes it (default), F: F times real time")
+    live.add_argument("--domain-id", type=int, default=None, help="with --live: ROS domain id (default: a free one)")
+    live.add_argument("--log-dir", default=None, help="with --live: keep the nodes' logs here")
     p.set_defaults(func=run)
 
 
@@ -49,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
+    if args.live:
+        return run_live(args)
     run_ = load_any(args.file)
     spec = load_scenario(args.scenario, fault="healthy") if args.scenario else scenario_of(run_)
     settings = settings_from_args(args)
@@ -65,12 +81,96 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scenario_file(bag: str, fallback: str | None, folder: str) -> str:
+    """The bag's own scenario (its metadata) as a file the nodes load; else --scenario (default paper)."""
+    from pathlib import Path
+
+    import yaml
+
+    from phfdi import bagio
+    from phfdi.scenario import load_scenario, validate_scenario
+
+    meta = json.loads(bagio.read_metadata(Path(bag)).get(bagio.RUN_METADATA, {}).get("json", "{}"))
+    if fallback or not isinstance(meta.get("spec"), dict):
+        spec = load_scenario(fallback or "paper", fault="healthy")
+    else:
+        spec = validate_scenario(meta["spec"], source=f"{bag} metadata")
+    path = Path(folder) / "scenario.yaml"
+    path.write_text(yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
+    return str(path)
+
+
+def run_live(args: argparse.Namespace) -> int:
+    """The bag through a detector node over ROS: player + detector, started and stopped here."""
+    import math
+    import tempfile
+    from pathlib import Path
+
+    from phfdi import bagio
+    from phfdi.errors import UserError
+    from phfdi.ros.launcher import Launcher, NodeSpec, detector_spec
+    from phfdi.ros.player import PLAYER
+    from phfdi.ros.topics import DETECTOR
+
+    from .common import Progress
+    from .launch import alarm_event_line
+
+    if not args.file.endswith(".mcap"):
+        raise UserError(f"--live plays a bag: give an .mcap file, not {args.file}")
+    if not (math.isfinite(args.pace) and 0.0 <= args.pace <= 1e6):
+        raise UserError(f"--pace {args.pace}: use 0 (as fast as possible) or a factor up to 1e6")
+    info = bagio.bag_info(args.file)
+    if not info["finished"]:
+        raise UserError(f"{args.file}: the bag is not finished; run phfdi bag recover {args.file} FIXED.mcap")
+    if not any(t["topic"] == "/plant/measurement" for t in info["topics"]):
+        raise UserError(f"{args.file}: no /plant/measurement topic: not a bag of the phfdi graph")
+    settings_from_args(args)  # one line for bad detector settings before any process starts
+    say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
+
+    def on_event(node: str, event: dict) -> None:
+        line = alarm_event_line(event)
+        if line:
+            say(line)
+
+    with tempfile.TemporaryDirectory(prefix="phfdi-replay-") as tmp:
+        common = {"scenario": _scenario_file(args.file, args.scenario, tmp), "fault": "",
+                  "graph_nodes": [PLAYER, DETECTOR]}
+        detector = {**common, "wavelet": args.wavelet, "level": args.level, "arl0_samples": float(args.arl0),
+                    "channels": [c.strip() for c in args.channels.split(",") if c.strip()],
+                    "isolate": not args.no_isolation}
+        if args.calibration:
+            detector["calibration"] = str(Path(args.calibration).resolve())
+        nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
+                                                        "pace": float(args.pace)}),
+                 detector_spec(detector)]
+        t0 = time.perf_counter()
+        result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
+                          progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
+        elapsed = time.perf_counter() - t0
+    done = [e for e in result.node_events.get(DETECTOR, []) if e["event"] == "detector_done"]
+    if result.failure or not done:
+        say(f"error: {result.failure or 'the detector node did not report'}"
+            + (f"; node logs: {result.log_dir}" if result.log_dir else ""))
+        return result.status or 1
+    report = done[-1]
+    say(f"played {report['samples']} samples through the detector node in {elapsed:.1f} s "
+        f"({result.run_wall_s:.1f} s after the graph connected; ROS domain {result.domain_id})")
+    alarms = report["alarms"]
+    if args.json:
+        print(json.dumps([{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms], indent=2))
+    else:
+        print(format_alarms(alarms, report["diagnostics"]))
+    return result.status
+
+
 def format_alarms(alarms: list, diagnostics: dict) -> str:
+    """Alarms (the detector's Alarm objects, or their summaries with an alarm_id) as lines for people."""
     lines = []
     if not alarms:
         lines.append("no alarm")
-    for a in alarms:
-        s = a.summary()
+    for i, a in enumerate(alarms, 1):
+        s = a.summary() if hasattr(a, "summary") else a
+        alarm_id = getattr(a, "alarm_id", None) or s.get("alarm_id", i)
         p = s["parameter"]
         what = s["fault_class"]
         if what != "pending":
@@ -79,7 +179,7 @@ def format_alarms(alarms: list, diagnostics: dict) -> str:
             what += f", {p['name']} = {p['value']:.3g} {p['unit']}"
         elif p and s["fault_class"] == "unknown":
             what += f"; closest: {p['fault_class']}"
-        lines.append(f"alarm {a.alarm_id}: {what}")
+        lines.append(f"alarm {alarm_id}: {what}")
         lines.append(f"  onset {s['onset_time']:g} s, detected {s['detection_time']:g} s by {s['statistic']} "
                      f"({s['statistic_value']:.1f} > threshold {s['threshold']:.1f}), dominant band "
                      f"{s['dominant_level']}, severity {s['severity']:.3g} pH RMS")
