@@ -2,14 +2,14 @@
 
 Inputs: /plant/measurement (pH, level of stamp t_k) and /controller/output
 (setpoint and valve commands computed for t_k). The reading of t_k is paired
-with the controller output stamped t_k; if that output has not arrived once
-``pairing_window`` further measurements have (default 1: the next one) and
-``pairing_timeout_s`` of wall time have passed, the sample goes on with NaN
-commands, which the core counts and, if it lasts, answers by holding
-detection (see :mod:`wavelet_fdi.inputs`). Why the wall-time grace: two
-topics from two writers are not delivered in publication order; in a
-lock-step run 29 of 1601 controller outputs arrived after the next
-measurement, though published before it.
+with the controller output stamped t_k. If that output is missing (an output
+with a later stamp came, or the output topic fell silent for
+``pairing_timeout_s`` while ``pairing_window`` later measurements waited),
+the sample goes on with NaN commands, which the core counts and, if it lasts,
+answers by holding detection (see :mod:`wavelet_fdi.inputs`). Not simply "by
+the next measurement": two topics from two writers are not delivered in
+publication order (in a lock-step run 29 of 1601 controller outputs arrived
+after the next measurement, though published before it; :class:`Pairing`).
 
 Outputs: /fault_alarm (phfdi_interfaces/FaultAlarm) on every state change
 (alarm raised, diagnosed, cleared, input problem, warm-up over) and as a
@@ -59,10 +59,10 @@ PARAMS = (
     ParamSpec("channels", ["ph"], "residual channels watched: [ph] or [ph, level]"),
     ParamSpec("isolate", True, "name the fault class (and estimate its parameter) after an alarm"),
     ParamSpec("loop", "ph", "name of the monitored loop in /fault_alarm"),
-    ParamSpec("pairing_window", 1, "measurements that must arrive after a sample before its missing controller "
-                                   "output is given up (then NaN commands)", range=(1, 1000)),
-    ParamSpec("pairing_timeout_s", 0.5, "and wall time a sample waits for its controller output (s): cross-topic "
-                                        "delivery is not in publication order", range=(0.0, 60.0)),
+    ParamSpec("pairing_window", 1, "measurements that must wait behind a sample before its controller output "
+                                   "is given up on a silent output topic (then NaN commands)", range=(1, 1000)),
+    ParamSpec("pairing_timeout_s", 2.0, "silence of the controller-output topic (s, wall) after which waiting "
+                                        "samples go on without their output", range=(0.0, 60.0)),
     ParamSpec("heartbeat_period_s", 60.0, "publish the state on /fault_alarm every this many s of simulated "
                                           "time; 0: only on changes", range=(0.0, 1e9), runtime=True),
     ParamSpec("diagnostics_period_s", 60.0, "publish /diagnostics every this many s of simulated time (and "
@@ -94,19 +94,29 @@ class Pairing:
     """Pairs measurements with the controller output of the same stamp, in measurement arrival order.
 
     Rows: (stamp_ns, ph, level_cm, (ph_output_pct, level_output_pct, ph_setpoint) or None, arrival).
-    A measurement leaves when its output is there, or without it once ``window`` later measurements
-    have arrived and it has waited ``timeout_s`` (wall, monotonic clock). Bad stamps are not judged
-    here: the core does (duplicates, order, gaps).
+    Each topic arrives in its writer's order, but the two topics are not ordered with each other
+    (measured: outputs overtaken by the next measurement in a lock-step run, by a thousand of them
+    in a fast replay). So a measurement leaves with its output, or without it (NaN commands) once
+
+    * an output with a later stamp has arrived (its own will not come: one writer, in order), or
+    * ``window`` later measurements have arrived and no output has come for ``timeout_s``
+      (wall, monotonic clock) since it arrived: a silent controller-output topic, or
+    * ``MAX_PENDING`` measurements wait (memory and delay stay bounded whatever the stamps).
+
+    Bad stamps are not judged here: the core does (duplicates, order, gaps).
     """
 
     EARLY_LIMIT = 256  # outputs kept waiting for their measurement
+    MAX_PENDING = 4096
 
     def __init__(self, window: int = 1, timeout_s: float = 0.0) -> None:
         self.window = window
         self.timeout_s = timeout_s
         self.pending: deque[list] = deque()
         self.early: dict[int, tuple] = {}
-        self.missed: deque[int] = deque(maxlen=256)  # stamps passed on without an output
+        self.missed: deque[int] = deque(maxlen=self.EARLY_LIMIT)  # stamps passed on without an output
+        self.newest_output_ns = -math.inf
+        self.last_output_at = -math.inf  # wall time of the last output received
         self.counts = {"measurements": 0, "controller_outputs": 0, "commands_missing": 0,
                        "late_controller_outputs": 0, "unpaired_controller_outputs": 0}
 
@@ -117,6 +127,8 @@ class Pairing:
 
     def output(self, ns: int, values: tuple, now: float) -> list[tuple]:
         self.counts["controller_outputs"] += 1
+        self.last_output_at = now
+        self.newest_output_ns = max(self.newest_output_ns, ns)
         for row in reversed(self.pending):
             if row[0] == ns and row[3] is None:
                 row[3] = values
@@ -128,17 +140,20 @@ class Pairing:
             if len(self.early) > self.EARLY_LIMIT:
                 del self.early[next(iter(self.early))]
                 self.counts["unpaired_controller_outputs"] += 1
-        return []
+        return self._ready(now)
 
     def expire(self, now: float) -> list[tuple]:
         """Samples whose controller output is given up by now."""
         return self._ready(now)
 
+    def _given_up(self, row: list, now: float) -> bool:
+        return (row[0] < self.newest_output_ns or len(self.pending) > self.MAX_PENDING
+                or (len(self.pending) > self.window and now - max(row[4], self.last_output_at) >= self.timeout_s))
+
     def _ready(self, now: float, all_: bool = False) -> list[tuple]:
         out = []
         pending = self.pending
-        while pending and (all_ or pending[0][3] is not None
-                           or (len(pending) > self.window and now - pending[0][4] >= self.timeout_s)):
+        while pending and (all_ or pending[0][3] is not None or self._given_up(pending[0], now)):
             row = pending.popleft()
             if row[3] is None:
                 self.counts["commands_missing"] += 1
@@ -301,12 +316,12 @@ class DetectorNode(GraphNode):
         changed = core_state != self._core_state and not events
         self._core_state = core_state
         t_now = self._t_last()
-        if changed or (self._heartbeat_s > 0 and t_now >= self._last_heartbeat_t + self._heartbeat_s):
+        if changed or (self._heartbeat_s > 0 and t_now >= _next_multiple(self._last_heartbeat_t, self._heartbeat_s)):
             self._publish_heartbeat(status, t_now, changed)
         problems = self._problems()
         grew = any(v > self._reported_problems.get(k, 0) for k, v in problems.items())
-        if grew or events or changed or (self._diagnostics_s > 0 and t_now >= self._last_diag_t
-                                         + self._diagnostics_s):
+        if grew or events or changed or (self._diagnostics_s > 0 and t_now >= _next_multiple(self._last_diag_t,
+                                                                                              self._diagnostics_s)):
             self._publish_diagnostics(t_now, problems, grew)
 
     def _t_last(self) -> float:
@@ -441,6 +456,12 @@ class DetectorNode(GraphNode):
         self._report({"event": "detector_done", "samples": self.core.samples_processed, "alarms": alarms,
                       "diagnostics": self.core.diagnostics() | self.pairing.counts, "lag": self.lag.summary(),
                       "calibration": self.calibration_source})
+
+
+def _next_multiple(t_s: float, period_s: float) -> float:
+    """The first multiple of the period after t_s: periodic messages stay on their grid of simulated time
+    (0, 60, 120 s, ...) whatever the chunks the core was given."""
+    return (math.floor(t_s / period_s) + 1) * period_s if math.isfinite(t_s) else -math.inf
 
 
 def _text(v) -> str:

@@ -1,0 +1,85 @@
+"""phfdi launch --detector and phfdi replay (offline and --live) on one recorded faulty run: same alarms."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import pytest
+
+from phfdi import bagio
+from phfdi.ros import topics as T
+from wavelet_fdi import alarm_messages
+
+from .conftest import SHORT_FAULTY, phfdi_cmd, processes_with
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
+
+
+@pytest.fixture(scope="module")
+def launched(tmp_path_factory):
+    """One lock-step run of the short faulty scenario with the detector, recorded."""
+    tmp = tmp_path_factory.mktemp("launch")
+    bag = tmp / "run.mcap"
+    proc = subprocess.run(phfdi_cmd("launch", *SHORT_FAULTY, "--detector", "--record", str(bag),
+                                    "--log-dir", str(tmp / "logs"), "--json"),
+                          capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr
+    return {"proc": proc, "bag": bag, "logs": tmp / "logs", "summary": json.loads(proc.stdout)}
+
+
+@pytest.fixture(scope="module")
+def offline(launched):
+    """phfdi replay BAG --json: the bag recorded by phfdi launch, offline (phfdi.bagio.load_run)."""
+    proc = subprocess.run(phfdi_cmd("replay", str(launched["bag"]), "--json"), capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout)
+
+
+def test_launch_reports_the_backlash_after_its_onset(launched):
+    summary = launched["summary"]
+    assert summary["samples"] == summary["of"] == 1601 and summary["failure"] is None
+    (alarm,) = summary["alarms"]  # as the recorder received them on /fault_alarm
+    assert 1000.0 < alarm["detection_time"] < 1200.0
+    assert alarm["fault_class"] == "backlash" and alarm["confidence"] > 0.9
+    assert alarm["severity"] == pytest.approx(0.7, rel=0.1) and alarm["severity_unit"].startswith("% of span")
+    assert "/fault_alarm ALARM at" in launched["proc"].stderr  # printed as it came
+    assert processes_with(str(launched["logs"])) == []  # every node stopped
+
+
+def test_bag_holds_the_alarm_the_heartbeat_and_the_detector_diagnostics(launched):
+    msgs = alarm_messages.from_bag(launched["bag"])
+    states = [m["state"] for m in msgs]
+    assert states[0] == "OK" and "ALARM" in states
+    first_alarm = next(m for m in msgs if m["state"] == "ALARM")
+    assert first_alarm["time"] == first_alarm["detection_time"] > 1000.0
+    assert first_alarm["fault_class"] == "pending"  # isolation comes 300 s later
+    diagnosed = [m for m in msgs if m["fault_class"] == "backlash"]
+    assert diagnosed and diagnosed[0]["time"] == pytest.approx(first_alarm["time"] + 300.0)
+    # heartbeat every 60 s of simulated time, besides the state changes
+    heartbeat_times = sorted({round(m["time"]) for m in msgs})
+    assert len(heartbeat_times) >= 1600 // 60
+    status = [s for a in bagio.read_messages(launched["bag"], T.DIAGNOSTICS.name) for s in a.status
+              if s.name.startswith("detector:")]
+    last_inputs = {kv.key: kv.value for kv in [s for s in status if "inputs" in s.name][-1].values}
+    assert last_inputs["samples_used"] == "1601" and last_inputs["commands_missing"] == "0"
+    assert last_inputs["calibration"] == "shipped paper_sym4_L3"
+
+
+def test_offline_replay_of_the_launched_bag_gives_the_alarms_the_graph_published(launched, offline):
+    published = alarm_messages.per_alarm(alarm_messages.from_bag(launched["bag"]))
+    assert len(offline) == len(published) == 1
+    for off, live in zip(offline, published):
+        assert off["detection_time"] == live["detection_time"]
+        assert off["onset_time"] == live["onset_time"]
+        assert off["fault_class"] == live["fault_class"] and off["confidence"] == live["confidence"]
+        assert off["parameter"]["value"] == live["severity"]
+
+
+def test_live_replay_gives_the_same_alarms_as_offline_replay(launched, offline):
+    proc = subprocess.run(phfdi_cmd("replay", "--live", str(launched["bag"]), "--json"), capture_output=True,
+                          text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == offline  # every field, the isolation's alternatives included
+    assert "/fault_alarm ALARM at" in proc.stderr and "through the detector node" in proc.stderr

@@ -1,0 +1,97 @@
+"""The node's pairing of measurement k with controller output k, under any arrival order."""
+
+from __future__ import annotations
+
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wavelet_fdi.node import Pairing, time_s_of
+
+
+def _feed(pairing: Pairing, arrivals: list[tuple[str, int]], clock_step_s: float = 0.1) -> list[tuple]:
+    rows, now = [], 0.0
+    for kind, k in arrivals:
+        now += clock_step_s
+        if kind == "m":
+            rows += pairing.measurement(k, 7.0 + k, 30.0, now)
+        else:
+            rows += pairing.output(k, (float(k), 50.0, 8.0), now)
+    return rows + pairing.drain()
+
+
+@st.composite
+def two_topics(draw, n_max: int = 40):
+    """Measurements in stamp order; the outputs in stamp order too (one writer), each published after
+    its measurement but delivered any number of measurements later; some never come."""
+    n = draw(st.integers(1, n_max))
+    sent = [k for k in range(n) if draw(st.booleans()) or draw(st.booleans())]  # about 3 in 4 sent
+    events = [("m", k, float(k)) for k in range(n)]
+    t = 0.0
+    for k in sent:
+        t = max(t, k + 0.5) + draw(st.floats(0.0, 10.0))  # arrival times stay in order
+        events.append(("o", k, t))
+    events.sort(key=lambda e: e[2])
+    return [(kind, k) for kind, k, _ in events], set(sent)
+
+
+@settings(max_examples=300, deadline=None)
+@given(two_topics())
+def test_every_output_that_comes_is_paired_however_late(case):
+    arrivals, sent = case
+    pairing = Pairing(window=1, timeout_s=math.inf)
+    rows = _feed(pairing, arrivals)
+    assert [r[0] for r in rows] == sorted(r[0] for r in rows)  # measurement order kept
+    for r in rows:
+        if r[0] in sent:
+            assert r[3] is not None and r[3][0] == float(r[0])  # with its own output
+        else:
+            assert r[3] is None  # NaN commands: the core counts them
+    assert pairing.counts["commands_missing"] == len(rows) - len(sent)
+
+
+def test_an_output_with_a_later_stamp_gives_up_the_missing_one_at_once():
+    pairing = Pairing(window=1, timeout_s=math.inf)
+    pairing.measurement(0, 7.0, 30.0, 0.0)
+    pairing.measurement(1, 7.0, 30.0, 0.1)
+    first, second = pairing.output(1, (1.0, 50.0, 8.0), 0.2)  # output 0 was never sent
+    assert first[0] == 0 and first[3] is None
+    assert second[0] == 1 and second[3][0] == 1.0
+
+
+def test_wall_time_grace_keeps_a_reordered_output():
+    """Window 1 alone loses an output overtaken by the next measurement; 0.5 s of grace keeps it."""
+    arrivals = [("m", 0), ("m", 1), ("o", 0), ("o", 1)]
+    strict = Pairing(window=1, timeout_s=0.0)
+    rows = _feed(strict, arrivals)
+    assert rows[0][3] is None and strict.counts["late_controller_outputs"] == 1
+    graceful = Pairing(window=1, timeout_s=0.5)
+    rows = _feed(graceful, arrivals)  # the output comes 0.1 s after the next measurement
+    assert [r[3][0] for r in rows] == [0.0, 1.0]
+
+
+def test_a_silent_controller_topic_passes_nan_commands_after_the_window_and_the_grace():
+    pairing = Pairing(window=1, timeout_s=0.5)
+    assert pairing.measurement(0, 7.0, 30.0, 0.0) == []
+    assert pairing.measurement(1, 7.0, 30.0, 0.1) == []  # sample 0 still within its grace
+    assert pairing.expire(0.4) == []
+    (row,) = pairing.expire(0.6)  # sample 0 waited 0.5 s and one measurement came after it
+    assert row[0] == 0 and row[3] is None
+    assert pairing.counts["commands_missing"] == 1
+    assert [r[0] for r in pairing.drain()] == [1]
+
+
+def test_unpaired_outputs_are_bounded_and_counted():
+    pairing = Pairing(window=1)
+    for k in range(Pairing.EARLY_LIMIT + 10):
+        pairing.output(10**6 + k, (1.0, 2.0, 3.0), 0.0)
+    assert len(pairing.early) == Pairing.EARLY_LIMIT
+    assert pairing.counts["unpaired_controller_outputs"] == 10
+
+
+def test_sample_times_equal_the_bag_readers():
+    """k * dt on the grid (as phfdi.bagio.load_run), so live and offline replay see the same floats."""
+    dt_ns = 100_000_000
+    assert time_s_of(7 * dt_ns, dt_ns, 0.1) == 7 * 0.1
+    assert time_s_of(7 * dt_ns + 5, dt_ns, 0.1) == (7 * dt_ns + 5) * 1e-9
