@@ -60,16 +60,10 @@ def scenario_of(run: Run, fallback: str = "paper") -> ScenarioSpec:
 
 
 def load_any(path: str | Path) -> Run:
-    """A run from .csv/.parquet, or from an .mcap bag once phfdi.bagio exists."""
-    path = Path(path)
-    if path.suffix.lower() == ".mcap":
-        try:
-            from phfdi.bagio import load_run  # written with the ROS node graph (issue 3)
-        except ImportError:
-            raise UserError(f"{path}: reading .mcap bags needs phfdi.bagio, which this install lacks; "
-                            f"export the run to .csv or .parquet") from None
-        return load_run(path)
-    return Run.load(path)
+    """A run from .csv/.parquet, or from an .mcap bag recorded by phfdi launch (:func:`phfdi.bagio.load_run`)."""
+    from phfdi.bagio import load_run
+
+    return load_run(path)
 
 
 @dataclass
