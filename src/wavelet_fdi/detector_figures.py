@@ -150,3 +150,95 @@ def plot_evaluation(summary: dict, records: list[dict], out: Path, signals: dict
             f"Backlash at 7000 s: {settings.wavelet} level-{settings.level} DWT (pywt.wavedec) of the measured pH, "
             f"the healthy model's prediction and their difference (paper Figures 50-55)"))
     return paths
+
+
+def statistic_paths(increments: np.ndarray, thresholds: np.ndarray, start: int = 0) -> np.ndarray:
+    """The CUSUM statistics (N, n_statistics) from a trace's increments, all restarted after every
+    threshold crossing, as the detector runs them (without its resets at gaps)."""
+    from .statistics import CusumBank
+
+    n, m = increments.shape
+    bank = CusumBank(m)
+    out = np.zeros((n, m))
+    a = start
+    while a < n:
+        s = bank.update(increments[a:].T, a).T
+        over = np.flatnonzero((s > thresholds[None, :]).any(axis=1))
+        if not len(over):
+            out[a:] = s
+            break
+        c = int(over[0])
+        out[a:a + c + 1] = s[:c + 1]
+        bank.restart(a + c)
+        a += c + 1
+    return out
+
+
+class _Unlabelled:
+    """An axes whose axvline adds no legend entry."""
+
+    def __init__(self, ax) -> None:
+        self.ax = ax
+
+    def axvline(self, *args, label=None, **kw):
+        return self.ax.axvline(*args, **kw)
+
+    def grid(self, *args, **kw):
+        return self.ax.grid(*args, **kw)
+
+
+def plot_detection(trace: dict, names: list[str], thresholds: np.ndarray, sigma_ph: float, alarms: list,
+                   path: Path, title: str, true_onsets_s: list[float] = ()) -> Path:
+    """Measured pH against the healthy reference's prediction, the residual, and every CUSUM statistic
+    over its threshold, with the fault onset, the estimated onset and the alarm marked; left the whole
+    run, right around the first alarm."""
+    t = trace["time_s"]
+    ratio = statistic_paths(trace["increments"], thresholds) / thresholds[None, :]
+    fig, axes = plt.subplots(3, 2, figsize=(14, 8.5), sharex="col", gridspec_kw={"width_ratios": [1.4, 1]})
+    first = alarms[0] if alarms else None
+    if first is not None:
+        lo = first.onset_time_s - 300.0
+        hi = (first.isolation_time_s or first.detection_time_s) + 200.0
+    else:
+        lo, hi = float(t[0]), float(t[-1])
+    for col, (a, b) in enumerate(((float(t[0]), float(t[-1])), (lo, hi))):
+        sel = (t >= a) & (t <= b)
+        ax = axes[0, col]
+        ax.plot(t[sel], trace["ph_measured"][sel], color="0.6", lw=0.6, label="measured")
+        ax.plot(t[sel], trace["ph_predicted"][sel], color="tab:blue", lw=0.9, label="healthy reference model")
+        ax.set_ylabel("pH (-)")
+        ax = axes[1, col]
+        ax.plot(t[sel], trace["ph_residual"][sel], color="tab:red", lw=0.6, label="residual (measured - predicted)")
+        for sign in (-3, 3):
+            ax.axhline(sign * sigma_ph, color="k", ls=":", lw=0.8, label="+-3 healthy sigma" if sign > 0 else None)
+        ax.set_ylabel("pH residual (pH)")
+        ax = axes[2, col]
+        for j, name in enumerate(names):
+            ax.plot(t[sel], ratio[sel, j], lw=0.8, label=name)
+        ax.axhline(1.0, color="k", lw=1.0, label="threshold")
+        ax.set_ylabel("CUSUM statistic / threshold (-)")
+        ax.set_xlabel("time (s)")
+        ax.set_ylim(0.0, 1.6)
+        for i, row in enumerate(axes[:, col]):
+            if i:  # the events are marked in every panel, named in the top one
+                row = _Unlabelled(row)
+            for k, onset in enumerate(true_onsets_s):
+                if a <= onset <= b:
+                    row.axvline(onset, color="tab:red", ls=":", lw=1.2, label="fault injected" if k == 0 else None)
+            for k, al in enumerate(alarms):
+                if a <= al.detection_time_s <= b:
+                    row.axvline(al.detection_time_s, color="k", ls="--", lw=1.0, label="alarm" if k == 0 else None)
+                onset = al.onset_refined_s if al.onset_refined_s is not None else al.onset_time_s
+                if a <= onset <= b and col == 1:
+                    row.axvline(onset, color="tab:orange", ls="-.", lw=1.0,
+                                label="estimated onset" if k == 0 else None)
+                if al.isolation_time_s is not None and a <= al.isolation_time_s <= b and col == 1:
+                    row.axvline(al.isolation_time_s, color="tab:green", ls="--", lw=1.0,
+                                label=f"diagnosis: {al.fault_class}" if k == 0 else None)
+            row.grid(alpha=0.3)
+    for row in range(3):
+        axes[row, 1].legend(fontsize=7, loc="upper left", ncol=2, framealpha=0.8)
+    axes[0, 0].set_title("whole run", fontsize=10)
+    axes[0, 1].set_title("around the first alarm" if first else "(no alarm)", fontsize=10)
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)

@@ -6,7 +6,9 @@ import subprocess
 
 import pytest
 
-from .conftest import node_cmd, phfdi_cmd
+from phfdi.cli import main
+
+from .conftest import node_cmd
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 
@@ -27,8 +29,6 @@ def test_bad_parameters_are_refused_with_one_line(ros_env):
         "missing file": (node_cmd("wavelet_fdi.node", calibration="/nonexistent/cal.yaml"),
                          ["no such calibration file"]),
         "channel": (node_cmd("wavelet_fdi.node", channels="[ph, flow]"), ["channel 'flow'"]),
-        "launch": (phfdi_cmd("launch", "--detector-param", "level"), ["--detector-param", "NAME=VALUE"]),
-        "live replay of a csv": (phfdi_cmd("replay", "--live", "run.csv"), ["--live", ".mcap"]),
     }
     procs = {k: subprocess.Popen(cmd, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for k, (cmd, _) in cases.items()}
@@ -39,3 +39,15 @@ def test_bad_parameters_are_refused_with_one_line(ros_env):
         assert len(lines) == 1 and "Traceback" not in err, (key, err)
         for word in cases[key][1]:
             assert word in lines[0], (key, lines[0])
+
+
+@pytest.mark.parametrize("args, words", [
+    (["launch", "--detector-param", "level"], ["--detector-param", "NAME=VALUE"]),
+    (["replay", "--live", "run.csv"], ["--live", ".mcap"]),
+    (["replay", "--live", "missing.mcap"], ["no such file"]),
+])
+def test_bad_command_lines_are_refused_before_any_node_starts(args, words, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(args) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and all(w in lines[0] for w in words), lines

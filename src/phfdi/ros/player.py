@@ -104,13 +104,28 @@ class PlayerNode(GraphNode):
                 delay = due - time.monotonic()
                 if delay > 0:
                     time.sleep(min(delay, 0.1))
-            self.pubs[channel.topic].publish(message.data)
+            self._publish(self.pubs[channel.topic], message.data)
             self._sent += 1
             if channel.topic == MEASUREMENT.name:
                 self._tick(message.log_time)
             if time.monotonic() >= until:
                 return
         self._finish()
+
+    def _publish(self, pub, cdr: bytes, patience_s: float = 60.0) -> None:
+        """Publish, waiting while a reader's backlog fills the writer's history (the publish then fails
+        after blocking: seen with a reader stalled for seconds); give up after ``patience_s``."""
+        from rclpy._rclpy_pybind11 import RCLError
+
+        deadline = time.monotonic() + patience_s
+        while True:
+            try:
+                pub.publish(cdr)
+                return
+            except RCLError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.05)
 
     def _tick(self, stamp_ns: int) -> None:
         if self.pub_clock.get_subscription_count():  # only nodes with use_sim_time listen
