@@ -1,6 +1,6 @@
 """Start the graph as processes and stop it cleanly, whatever happens (no rclpy here).
 
-A graph is a list of :class:`NodeSpec` (the detector will be one more). Each
+A graph is a list of :class:`NodeSpec` (the detector is one more, an observer). Each
 node runs as ``python -m <module> --ros-args --params-file <file>`` in a
 process group of its own, on a ROS domain reserved for this launch, with
 LOCALHOST discovery. The plant prints JSON lines (connected, progress, done)
@@ -8,8 +8,9 @@ that the launcher follows.
 
 Stopping, always in this order so that nothing published is lost: the plant
 (no new samples), then the loop nodes (they deliver what they published to
-their reliable readers before exiting), then the observers (the recorder takes
-what its readers hold and finishes the bag). A node that does not stop within
+their reliable readers before exiting), then the observers (the detector
+processes what it holds and publishes its last alarms), then the recorder
+(takes what its readers hold and finishes the bag). A node that does not stop within
 ``stop_timeout_s`` is killed. Afterwards: no process of the graph is left
 (children also get SIGTERM if the launcher itself dies), a killed node's
 Fast DDS shared-memory files are removed (``fastdds shm clean``), and a bag

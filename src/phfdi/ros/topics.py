@@ -50,9 +50,10 @@ VALVE_STATE = Topic("/valve/state", "phfdi_interfaces/msg/ValveState", VALVE, Tr
 PLANT_STATE = Topic("/plant/state", "phfdi_interfaces/msg/PlantState", PLANT, True,
                     "simulation ground truth: true pH and level, feed and outlet flows (mL/s), sensor fault")
 DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", VALVE, False,
-                    "valve health: commands held (not finite / out of range), active faults")
+                    "valve health: commands held (not finite / out of range), active faults; the detector's "
+                    "input counters, state and processing lag")
 FAULT_ALARM = Topic("/fault_alarm", "phfdi_interfaces/msg/FaultAlarm", DETECTOR, False,
-                    "the detector's alarm (next issue); recorded when present")
+                    "the fault detector's state: on every change and as a heartbeat")
 
 #: every topic the recorder can write, in lock-step order
 RECORDABLE: tuple[Topic, ...] = (MEASUREMENT, CLOCK, CONTROLLER, VALVE_STATE, PLANT_STATE, DIAGNOSTICS, FAULT_ALARM)
