@@ -11,6 +11,26 @@ from pathlib import Path
 STATE_NAMES = {0: "OK", 1: "WARN", 2: "ALARM"}
 
 
+def severity_of(summary: dict) -> tuple[float, str]:
+    """An alarm's severity as /fault_alarm carries it: the fault's parameter once isolation named the
+    fault (e.g. backlash width, % of span), before that the RMS pH residual from onset to detection."""
+    p = summary.get("parameter")
+    if p and summary["fault_class"] not in ("pending", "unknown"):
+        return float(p["value"]), f"{p['unit']} ({p['name']})"
+    return float(summary["severity"]), "pH (RMS residual, onset to detection)"
+
+
+def from_summaries(alarms: list[dict]) -> list[dict]:
+    """Alarm summaries (``Alarm.summary()``, as the detector node reports them) in the shape of :func:`per_alarm`."""
+    out = []
+    for a in alarms:
+        severity, unit = severity_of(a)
+        out.append({"onset_time": a["onset_time"], "detection_time": a["detection_time"],
+                    "fault_class": a["fault_class"], "confidence": a["confidence"], "severity": severity,
+                    "severity_unit": unit, "cleared": a.get("cleared_time")})
+    return out
+
+
 def _seconds(t) -> float:
     return t.sec + t.nanosec * 1e-9
 

@@ -49,6 +49,8 @@ from phfdi.ros.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, MEA
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
 
+from .alarm_messages import severity_of
+
 PARAMS = (
     ParamSpec("calibration", "", "calibration file (.yaml/.json) from phfdi calibrate; '' takes the one shipped "
                                  "for the scenario"),
@@ -354,11 +356,7 @@ class DetectorNode(GraphNode):
         msg.confidence = float(alarm["confidence"])
         msg.onset_time = to_time(max(0, round(alarm["onset_time"] * 1e9)))
         msg.detection_time = to_time(max(0, round(alarm["detection_time"] * 1e9)))
-        p = alarm.get("parameter")
-        if p and alarm["fault_class"] not in ("pending", "unknown"):
-            msg.severity, msg.severity_unit = float(p["value"]), f"{p['unit']} ({p['name']})"
-        else:
-            msg.severity, msg.severity_unit = float(alarm["severity"]), "pH (RMS residual, onset to detection)"
+        msg.severity, msg.severity_unit = severity_of(alarm)
         band = alarm.get("dominant_level") or ""
         msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
 

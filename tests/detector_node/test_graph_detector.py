@@ -83,3 +83,19 @@ def test_live_replay_gives_the_same_alarms_as_offline_replay(launched, offline):
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout) == offline  # every field, the isolation's alternatives included
     assert "/fault_alarm ALARM at" in proc.stderr and "through the detector node" in proc.stderr
+
+
+def test_without_a_bag_the_launcher_reports_what_the_detector_published(launched):
+    """phfdi launch --detector without --record lists the detector's own report: the same alarms as the bag."""
+    from phfdi.commands.launch import received_alarms
+    from phfdi.ros.launcher import LaunchResult
+
+    lines = (launched["logs"] / "detector.stdout").read_text().splitlines()
+    events = [json.loads(line) for line in lines if line.startswith("{")]
+    result = LaunchResult(status=0, samples=1601, samples_done=1601, connect_s=0.0, run_wall_s=0.0, domain_id=0,
+                          node_events={"detector": events})
+    reported, source = received_alarms(result)
+    assert source == "as the detector reported them"
+    in_bag = alarm_messages.per_alarm(alarm_messages.from_bag(launched["bag"]))
+    keys = ("onset_time", "detection_time", "fault_class", "confidence", "severity", "severity_unit")
+    assert [{k: a[k] for k in keys} for a in reported] == [{k: a[k] for k in keys} for a in in_bag]

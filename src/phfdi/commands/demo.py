@@ -189,11 +189,12 @@ def _replay_and_compare(run_, received, out: Path, no_ros: bool):
 def _differences(offline: list, received: list[dict]) -> list[str]:
     if len(offline) != len(received):
         return [f"{len(offline)} alarm(s) offline, {len(received)} live"]
+    from wavelet_fdi.alarm_messages import severity_of
+
     out = []
     for a, b in zip(offline, received):
         s = a.summary()
-        severity = s["parameter"]["value"] if s["parameter"] and s["fault_class"] not in ("pending", "unknown") \
-            else s["severity"]
+        severity, _unit = severity_of(s)
         for key, mine, theirs in (("detection_time", s["detection_time"], b["detection_time"]),
                                   ("onset_time", s["onset_time"], b["onset_time"]),
                                   ("fault_class", s["fault_class"], b["fault_class"]),

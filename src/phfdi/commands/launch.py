@@ -98,10 +98,7 @@ def received_alarms(result) -> tuple[list[dict], str]:
     if result.bag is not None and any(t["topic"] == "/fault_alarm" for t in result.bag["topics"]):
         return alarm_messages.per_alarm(alarm_messages.from_bag(result.bag["path"])), "received in the bag"
     done = [e for e in result.node_events.get("detector", []) if e["event"] == "detector_done"]
-    alarms = done[-1]["alarms"] if done else []
-    return [{"onset_time": a["onset_time"], "detection_time": a["detection_time"], "fault_class": a["fault_class"],
-             "confidence": a["confidence"], "severity": a["severity"], "severity_unit": "pH RMS residual",
-             "cleared": a["cleared_time"]} for a in alarms], "as the detector reported them"
+    return alarm_messages.from_summaries(done[-1]["alarms"] if done else []), "as the detector reported them"
 
 
 def summary_dict(result, alarms: list[dict] | None = None) -> dict:
