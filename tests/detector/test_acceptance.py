@@ -9,7 +9,7 @@ import pytest
 from wavelet_fdi.config import DetectorSettings
 from wavelet_fdi.replay import replay_run
 
-from detector_helpers import PAPER_FAULTS
+from .detector_helpers import PAPER_FAULTS
 
 ONSET_S = 7000.0
 #: the library's paper severities (src/phfdi/scenarios/faults.yaml)

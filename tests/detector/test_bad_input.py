@@ -16,7 +16,7 @@ from wavelet_fdi.detector import StreamingDetector
 from wavelet_fdi.inputs import InputRegularizer
 from wavelet_fdi.replay import detector_inputs
 
-from detector_helpers import SHORT, short_spec
+from .detector_helpers import SHORT, short_spec
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ from phfdi.cli import main
 from phfdi.loop import simulate
 from wavelet_fdi.config import Calibration, DetectorSettings
 
-from detector_helpers import short_spec
+from .detector_helpers import short_spec
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ from wavelet_fdi.detector import StreamingDetector
 from wavelet_fdi.evaluation import alarm_positions
 from wavelet_fdi.replay import detector_inputs
 
-from detector_helpers import SHORT, short_spec
+from .detector_helpers import SHORT, short_spec
 
 
 @pytest.fixture(scope="module")
