@@ -12,7 +12,7 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
-from ros.conftest import node_cmd, phfdi_cmd, processes_with, ros_domain, ros_env  # noqa: F401
+from ..ros.conftest import node_cmd, phfdi_cmd, processes_with, ros_domain, ros_env  # noqa: F401
 
 ROOT = Path(__file__).resolve().parents[2]
 
