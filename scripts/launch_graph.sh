@@ -3,20 +3,21 @@
 # process (python -m <package>.node), LOCALHOST discovery, a ROS domain of its own.
 #
 #   scripts/launch_graph.sh [--scenario NAME|FILE.yaml] [--fault NAME] [--onset S]
-#                           [--record BAG.mcap] [--pace FACTOR] [--set KEY=VALUE ...]
+#                           [--record BAG.mcap] [--pace FACTOR] [--detector] [--set KEY=VALUE ...]
 #
 #   scripts/launch_graph.sh --fault backlash --record bags/run.mcap
+#   scripts/launch_graph.sh --fault backlash --detector --pace 50     # + the fault detector (/fault_alarm)
 #   scripts/launch_graph.sh --pace 20 --set duration_s=2000 --set setpoints.ph.changes.0.at_s=1000
 #
 # Ctrl-C or SIGTERM stops the plant first, then the controllers and the valve, then
-# the recorder (the bag stays readable). Node logs go to the terminal. Overrides are
+# the detector, then the recorder (the bag stays readable). Node logs go to the terminal. Overrides are
 # simple KEY=VALUE pairs here (no commas); use phfdi launch for list-valued ones.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PHFDI_VENV:-.venv}/bin/python
 unset _ROS_WHEELS_BOOTSTRAP_COMPLETE || true
 
-scenario=paper fault="" onset=-1.0 record="" pace=0.0 overrides=()
+scenario=paper fault="" onset=-1.0 record="" pace=0.0 detector="" overrides=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --scenario) scenario=$2; shift 2 ;;
@@ -25,7 +26,8 @@ while [ $# -gt 0 ]; do
     --record) record=$2; shift 2 ;;
     --pace) pace=$2; shift 2 ;;
     --set) overrides+=("$2"); shift 2 ;;
-    -h|--help) sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --detector) detector=1; shift ;;
+    -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "launch_graph.sh: unknown argument $1 (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -34,7 +36,7 @@ case "$pace" in *.*) ;; *) pace="$pace.0" ;; esac
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST     # DDS stays on this machine
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$("$PY" -m phfdi.ros.env)}
-nodes="controllers,valve,plant${record:+,recorder}"
+nodes="controllers,valve,plant${record:+,recorder}${detector:+,detector}"
 common=(-p "scenario:=$scenario" -p "fault:='$fault'" -p "fault_onset_s:=$onset" -p "graph_nodes:=[$nodes]")
 if [ ${#overrides[@]} -gt 0 ]; then
   common+=(-p "overrides:=[$(IFS=,; echo "${overrides[*]}")]")
@@ -47,10 +49,11 @@ start() { setsid setpriv --pdeathsig TERM "$PY" -m "$@" & }
 rec=""; if [ -n "$record" ]; then start phfdi.ros.recorder --ros-args "${common[@]}" -p "path:=$record"; rec=$!; fi
 start pi_controllers.node --ros-args "${common[@]}"; ctl=$!
 start valve_actuator.node --ros-args "${common[@]}"; valve=$!
+det=""; if [ -n "$detector" ]; then start wavelet_fdi.node --ros-args "${common[@]}"; det=$!; fi
 start ph_plant_sim.node --ros-args "${common[@]}" -p "pace:=$pace" -p progress:=false; plant=$!
 
-stop() {  # plant first (no new samples), then the loop, then the recorder (finishes the bag)
-  for group in "$plant" "$ctl $valve" "$rec"; do
+stop() {  # plant first (no new samples), the loop, the detector (last alarms), the recorder (finishes the bag)
+  for group in "$plant" "$ctl $valve" "$det" "$rec"; do
     for pid in $group; do kill -TERM "$pid" 2>/dev/null || true; done
     for pid in $group; do wait "$pid" 2>/dev/null || true; done
   done
