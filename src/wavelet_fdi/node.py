@@ -342,7 +342,10 @@ class DetectorNode(GraphNode):
         self.core_errors += 1
         self.get_logger().error(f"detector core failed on {len(rows)} samples; starting over (warm-up):\n"
                                 + traceback.format_exc())
-        self.core, _ = self._build_core()
+        try:
+            self.core, _ = self._build_core()
+        except NodeStartError as exc:  # the calibration file went away meanwhile: keep the old core
+            self.get_logger().error(f"cannot start over: {exc}")
         self._state = FaultAlarm.WARN
         self._publish_diagnostics(self._last_ns * 1e-9, self._problems(), True)
 
