@@ -135,35 +135,35 @@ def _spaced(low: float, high: float, n: int, log: bool = False) -> list[float]:
 
 def actuator_candidates(ctx: Context) -> list[Candidate]:
     cmd = ctx.command_pct
-    med = min(max(float(np.median(cmd)), 5.0), 95.0)
+    # limits split at the lowest commands: a stop below them cannot be seen, one above them can
+    sat_split = min(max(float(np.quantile(cmd, 0.02)), 2.0), 90.0)
     med_cmd = float(np.median(cmd))
     lo_cmd, hi_cmd = float(np.min(cmd)), max(float(np.max(cmd)), float(np.min(cmd)) + 1.0)
     qmax = ctx.valve_max_flow_ml_s
     out = [
         Candidate("stiction", [Param("s_pct", 0.0, 20.0, "%"), Param("j_pct", 0.0, 20.0, "%")],
-                  [{"s_pct": s, "j_pct": j} for s, j in ((0.5, 0.2), (1.5, 0.5), (1.5, 1.5), (4.0, 1.0),
-                                                         (4.0, 4.0), (10.0, 3.0))],
+                  [{"s_pct": s, "j_pct": s * f} for s in _spaced(0.3, 15.0, 7, log=True) for f in (0.1, 0.4, 0.7, 1.0)],
                   lambda raw, p: _add_fault(raw, "stiction", {"s_pct": p["s_pct"], "j_pct": p["j_pct"]}),
                   "s_pct", nonsmooth=True, band=lambda p: 0.5 * p["s_pct"]),
         Candidate("backlash", [Param("width_pct", 0.0, 20.0, "%")],
-                  [{"width_pct": w} for w in (0.3, 1.0, 3.0, 8.0)],
+                  [{"width_pct": w} for w in _spaced(0.15, 15.0, 8, log=True)],
                   lambda raw, p: _add_fault(raw, "backlash", {"width_pct": p["width_pct"]}),
                   "width_pct", nonsmooth=True, band=lambda p: 0.5 * p["width_pct"]),
         Candidate("deadzone", [Param("width_pct", 0.0, 100.0, "%"), Param("center_pct", lo_cmd, hi_cmd, "%")],
-                  [{"width_pct": w, "center_pct": c} for w in (1.0, 4.0, 15.0, 40.0)
+                  [{"width_pct": w, "center_pct": c} for w in _spaced(0.5, 60.0, 6, log=True)
                    for c in (float(np.quantile(cmd, 0.25)), med_cmd, float(np.quantile(cmd, 0.75)))],
                   lambda raw, p: _add_fault(raw, "deadzone", {"width_pct": p["width_pct"],
                                                               "center_pct": p["center_pct"]}),
                   "width_pct", nonsmooth=True),
-        Candidate("saturation", [Param("low_pct", 0.0, med, "%"), Param("high_pct", med, 100.0, "%")],
-                  [{"low_pct": 0.0, "high_pct": float(np.quantile(cmd, q))} for q in (0.5, 0.75, 0.9, 0.98)]
-                  + [{"low_pct": float(np.quantile(cmd, 0.1)), "high_pct": 100.0}],
-                  lambda raw, p: _add_fault(raw, "saturation", {"low_pct": p["low_pct"],
-                                                                "high_pct": max(p["high_pct"], p["low_pct"] + 1e-6)}),
+        Candidate("saturation", [Param("low_pct", 0.0, sat_split, "%"), Param("high_pct", sat_split, 100.0, "%")],
+                  [{"low_pct": 0.0, "high_pct": h} for h in _spaced(sat_split, 100.0, 6)]
+                  + [{"low_pct": l_, "high_pct": 100.0} for l_ in _spaced(0.0, sat_split, 2)],
+                  lambda raw, p: _add_fault(raw, "saturation", {"low_pct": p["low_pct"], "high_pct": p["high_pct"]}),
                   "high_pct", nonsmooth=True),
         Candidate("coulomb_viscous_friction",
                   [Param("coulomb_pct", 0.0, 20.0, "%"), Param("mobility_per_s", 1e-3, 10.0, "1/s", log=True)],
-                  [{"coulomb_pct": c, "mobility_per_s": m} for c in (0.5, 2.0, 6.0) for m in (0.03, 0.3)],
+                  [{"coulomb_pct": c, "mobility_per_s": m} for c in _spaced(0.15, 8.0, 6, log=True)
+                   for m in (0.01, 0.05, 0.3, 2.0)],
                   lambda raw, p: _add_fault(raw, "coulomb_viscous_friction",
                                             {"coulomb_pct": p["coulomb_pct"], "mobility_per_s": p["mobility_per_s"]}),
                   "coulomb_pct", nonsmooth=True, band=lambda p: p["coulomb_pct"]),

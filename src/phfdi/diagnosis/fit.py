@@ -67,6 +67,7 @@ class FitResult:
     val_nrmse: dict[str, float]
     val_cost: float  # mean over outputs of (RMSE / noise floor)^2
     val_sq: np.ndarray  # per held-out sample: summed squared error in noise units
+    val_lag1: float  # lag-one autocorrelation of the held-out error (main output)
     starts: list  # per record: the fitted Start
     raw: dict  # the extended model mapping
     nfev: int = 0
@@ -213,7 +214,7 @@ class Fitter:
             variant="+".join(c.variant for c in cands if c.variant), params=flat,
             intervals=intervals, fixed=fixed, main=cands[0].main if len(cands) == 1 else "",
             n_params=n_par, train_sse=sse, n_train=n, aic=aic, bic=bic, val_rmse=res_val["rmse"],
-            val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], starts=res_val["starts"],
+            val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"], starts=res_val["starts"],
             raw=raw, nfev=nfev, seconds=time.perf_counter() - t0, message=str(message), identified=identified)
 
     def _intervals(self, params, u, jac, r, n, k) -> tuple[dict, dict]:
@@ -246,6 +247,7 @@ class Fitter:
         """
         starts = list(starts)
         sq_parts, acc = [], {o: [0.0, 0] for o in self.p.outputs}
+        main_parts = []
         for i, rec in enumerate(self.p.records):
             mask = self.p.val[i].copy()
             if not mask.any():
@@ -258,6 +260,8 @@ class Fitter:
             except (UserError, ValueError, FloatingPointError):
                 err = {o: np.full(len(rec), 1e3) for o in self.p.outputs if o in rec.outputs}
             sq = np.zeros(int(mask.sum()))
+            if self.p.outputs[0] in err:
+                main_parts.append(err[self.p.outputs[0]][mask])
             for o, e in err.items():
                 ev = e[mask]
                 sq += ev ** 2
@@ -268,7 +272,8 @@ class Fitter:
         nrmse = {o: rmse[o] / self.p.scale[o] for o in rmse}
         cost = float(np.mean([(rmse[o] / self.p.noise[o]) ** 2 for o in rmse if math.isfinite(rmse[o])]))
         return {"rmse": rmse, "nrmse": nrmse, "cost": cost,
-                "sq": np.concatenate(sq_parts) if sq_parts else np.zeros(0), "starts": starts}
+                "sq": np.concatenate(sq_parts) if sq_parts else np.zeros(0), "starts": starts,
+                "lag1": float(np.mean([lag1(e) for e in main_parts])) if main_parts else 0.0}
 
     def _start_of(self, i: int, raw: dict, half_band: float) -> Start:
         """Unknown start of a validation-only record, fitted on its first samples."""

@@ -44,7 +44,7 @@ from .data import Record
 from .fit import FitResult, Fitter, Problem, fit_task, init_worker
 from .model import Evaluator, Prediction
 from .report import check_report, family_of
-from .residual import analyse, noise_floor, significance
+from .residual import analyse, noise_floor, significance, significance_f
 
 UNITS = {"ph_measured": "pH", "level_measured_cm": "cm"}
 
@@ -270,8 +270,14 @@ def _best_per_cause(results: list[FitResult]) -> list[FitResult]:
 
 
 def _counts(r: FitResult, ref: FitResult, opts: Options) -> tuple[bool, float, float]:
-    """(counts, p-value, RMSE gain) of a candidate against a reference on held-out samples."""
-    p = significance(ref.val_sq, r.val_sq)
+    """(counts, p-value, RMSE gain) of a candidate against a reference on held-out samples.
+
+    The p-value is the smaller of two tests (batch means, robust to coloured errors but weak when few
+    stretches carry the misfit; F with the candidate's error as noise model, strong when it leaves white
+    noise), times two for the choice (Bonferroni).
+    """
+    p = min(1.0, 2.0 * min(significance(ref.val_sq, r.val_sq),
+                           significance_f(ref.val_sq, r.val_sq, r.val_lag1, max(r.n_params - ref.n_params, 1))))
     gain = 1.0 - math.sqrt(r.val_cost / ref.val_cost) if ref.val_cost > 0 else 0.0
     return p < opts.alpha and gain >= opts.min_gain, p, gain
 
@@ -366,8 +372,7 @@ def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], lo
         winner = best_pair
         explained = math.sqrt(winner.val_cost) <= opts.explained_ratio
     runner = next((r for r in ranked if r.cause != winner.cause and r.cause not in winner.cause.split("+")), None)
-    conf = 1.0 - significance(runner.val_sq, winner.val_sq) if runner is not None else \
-        1.0 - significance(nom.val_sq, winner.val_sq)
+    conf = 1.0 - _better_p(winner, runner) if runner is not None else 1.0 - _better_p(winner, nom)
     ratio = math.sqrt(winner.val_cost)
     gain = 100.0 * (1.0 - winner.val_nrmse[main] / nominal_main) if nominal_main else math.nan
     margin = ""
@@ -387,8 +392,14 @@ def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], lo
 def _parsimonious(counting: list[FitResult], opts: Options) -> FitResult:
     """Best held-out error, unless a simpler candidate is not significantly worse."""
     best = counting[0]
-    simpler = [r for r in counting[1:] if r.n_params < best.n_params and significance(r.val_sq, best.val_sq) >= 0.05]
+    simpler = [r for r in counting[1:] if r.n_params < best.n_params and _better_p(best, r) >= 0.05]
     return min(simpler, key=lambda r: (r.n_params, r.val_cost)) if simpler else best
+
+
+def _better_p(a: FitResult, b: FitResult) -> float:
+    """p-value that ``a`` is not better than ``b`` on held-out samples (both tests, Bonferroni)."""
+    return min(1.0, 2.0 * min(significance(b.val_sq, a.val_sq),
+                              significance_f(b.val_sq, a.val_sq, a.val_lag1, max(a.n_params - b.n_params, 1))))
 
 
 def _none_confidence(nom: FitResult, ranked: list[FitResult], opts: Options) -> float | None:
