@@ -22,6 +22,7 @@ COMMANDS = [
     "simulate",
     "scenarios",
     "paper_runs",
+    "diagnose",
 ]
 
 

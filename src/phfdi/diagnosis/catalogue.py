@@ -142,7 +142,7 @@ def actuator_candidates(ctx: Context) -> list[Candidate]:
     qmax = ctx.valve_max_flow_ml_s
     out = [
         Candidate("stiction", [Param("s_pct", 0.0, 20.0, "%"), Param("j_pct", 0.0, 20.0, "%")],
-                  [{"s_pct": s, "j_pct": s * f} for s in _spaced(0.3, 15.0, 7, log=True) for f in (0.1, 0.4, 0.7, 1.0)],
+                  [{"s_pct": s, "j_pct": s * f} for s in _spaced(0.3, 15.0, 6, log=True) for f in (0.1, 0.4, 0.7, 1.0)],
                   lambda raw, p: _add_fault(raw, "stiction", {"s_pct": p["s_pct"], "j_pct": p["j_pct"]}),
                   "s_pct", nonsmooth=True, band=lambda p: 0.5 * p["s_pct"]),
         Candidate("backlash", [Param("width_pct", 0.0, 20.0, "%")],
@@ -150,7 +150,7 @@ def actuator_candidates(ctx: Context) -> list[Candidate]:
                   lambda raw, p: _add_fault(raw, "backlash", {"width_pct": p["width_pct"]}),
                   "width_pct", nonsmooth=True, band=lambda p: 0.5 * p["width_pct"]),
         Candidate("deadzone", [Param("width_pct", 0.0, 100.0, "%"), Param("center_pct", lo_cmd, hi_cmd, "%")],
-                  [{"width_pct": w, "center_pct": c} for w in _spaced(0.5, 60.0, 6, log=True)
+                  [{"width_pct": w, "center_pct": c} for w in _spaced(0.5, 60.0, 5, log=True)
                    for c in (float(np.quantile(cmd, 0.25)), med_cmd, float(np.quantile(cmd, 0.75)))],
                   lambda raw, p: _add_fault(raw, "deadzone", {"width_pct": p["width_pct"],
                                                               "center_pct": p["center_pct"]}),
@@ -162,13 +162,13 @@ def actuator_candidates(ctx: Context) -> list[Candidate]:
                   "high_pct", nonsmooth=True),
         Candidate("coulomb_viscous_friction",
                   [Param("coulomb_pct", 0.0, 20.0, "%"), Param("mobility_per_s", 1e-3, 10.0, "1/s", log=True)],
-                  [{"coulomb_pct": c, "mobility_per_s": m} for c in _spaced(0.15, 8.0, 6, log=True)
-                   for m in (0.01, 0.05, 0.3, 2.0)],
+                  [{"coulomb_pct": c, "mobility_per_s": m} for c in _spaced(0.15, 8.0, 5, log=True)
+                   for m in (0.02, 0.1, 1.0)],
                   lambda raw, p: _add_fault(raw, "coulomb_viscous_friction",
                                             {"coulomb_pct": p["coulomb_pct"], "mobility_per_s": p["mobility_per_s"]}),
                   "coulomb_pct", nonsmooth=True, band=lambda p: p["coulomb_pct"]),
         Candidate("leakage", [Param("flow_ml_s", 0.0, 0.5 * qmax, "mL/s")],
-                  [{"flow_ml_s": f * qmax} for f in (0.005, 0.02, 0.08)],
+                  [{"flow_ml_s": f * qmax} for f in (0.0, 0.005, 0.02, 0.08)],
                   lambda raw, p: _add_fault(raw, "leakage", {"flow_ml_s": p["flow_ml_s"]}, "valve_flow"),
                   "flow_ml_s"),
         Candidate("valve_gain", [Param("gain", 0.25, 4.0, "1", log=True)],
@@ -259,7 +259,7 @@ def process_candidates(ctx: Context) -> list[Candidate]:
         out.append(Candidate(
             "disturbance_flow", [Param("flow_ml_s", 0.0, 0.5 * q_total, "mL/s"),
                                  Param("onset_s", 0.0, ctx.duration_s * 0.98, "s")],
-            [{"flow_ml_s": 0.05 * q_total, "onset_s": t} for t in onsets],
+            [{"flow_ml_s": 0.0, "onset_s": 0.0}] + [{"flow_ml_s": 0.05 * q_total, "onset_s": t} for t in onsets],
             lambda raw, p, feed=feed: _add_disturbance(raw, feed, p["flow_ml_s"], p["onset_s"], ctx.dt_s),
             "flow_ml_s", variant=feed))
     return out

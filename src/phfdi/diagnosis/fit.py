@@ -176,12 +176,16 @@ class Fitter:
         message = "start point only"
         nonsmooth = any(c.nonsmooth for c in cands)
         if len(x_best) > 0:
-            # refine the two best start points (nonsmooth blocks: coarse then fine finite differences)
-            for cost0, x0, _ in scored[:2 if nonsmooth and len(scored) > 1 else 1]:
-                for step in ((0.02, 0.002) if nonsmooth else (1e-4,)):
+            # refine the best start point (and the runner-up when nearly as good); nonsmooth blocks:
+            # coarse then fine finite differences, so a step does not fall between two samples' switching
+            n_x = len(x_best)
+            refine = [scored[0]] + [t for t in scored[1:2] if t[0] < 1.5 * scored[0][0]]
+            stages = ((0.02, 10), (0.002, 8)) if nonsmooth else ((1e-4, 20),)
+            for i_start, (cost0, x0, _) in enumerate(refine):
+                for step, evals in (stages if i_start == 0 else stages[:1]):
                     res = least_squares(resid, np.clip(x0, lower, upper), bounds=(lower, upper), method="trf",
-                                        diff_step=step, max_nfev=20 * (len(x0) + 1), x_scale=1.0)
-                    nfev += res.nfev + (res.njev or 0) * len(x0)
+                                        diff_step=step, max_nfev=evals * (n_x + 1), x_scale=1.0)
+                    nfev += res.nfev + (res.njev or 0) * n_x
                     cost = float(np.sum(res.fun ** 2))
                     if cost < best_cost:
                         best_cost, x_best, r_best, jac, message = cost, res.x, res.fun, res.jac, res.message

@@ -74,6 +74,7 @@ class Diagnosis:
     extended: list[Prediction] | None = None
     extended_raw: dict | None = None
     noise: dict = field(default_factory=dict)
+    extended_starts: list = field(default_factory=list)
 
 
 def _say(opts: Options, text: str) -> None:
@@ -95,7 +96,7 @@ def split(records_fit: list[Record], records_val: list[Record], blocks: int):
         block = (np.arange(len(r)) * blocks) // len(r)
         train.append(block % 2 == 0)
         val.append(block % 2 == 1)
-    note = (f"each record cut into {blocks} interleaved blocks: odd blocks fit, even blocks held out "
+    note = (f"each record cut into {blocks} interleaved blocks: blocks 1, 3, 5, ... fitted, 2, 4, 6, ... held out "
             f"(the simulation runs through all; held-out measurements are never fitted)")
     return list(records_fit), train, val, note
 
@@ -181,13 +182,21 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     base.update(report)
     base["misfit"] = misfit
     base["nominal"] = {"validation": _val_summary(nom, noise), "train_sse": nom.train_sse,
+                       "combined_rmse_over_noise": math.sqrt(nom.val_cost),
                        "initial_ph": [s.ph for s in nom.starts] if opts.initial == "fit" else None}
+    base["initial"] = opts.initial
+    base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio}
+    if winner is not None and extended_preds is not None:
+        base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
+                                      "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
+                                      if nom.val_nrmse[o] else None} for o in outputs}
     base["skipped"] = local.skipped
     base["seconds"] = time.perf_counter() - t_start
     base["candidates_fitted"] = len(results) + len(pairs)
     del ranking
     return Diagnosis(check_report(base), records, train, val, nominal_preds, extended_preds,
-                     winner.raw if winner is not None and extended_preds is not None else None, noise)
+                     winner.raw if winner is not None and extended_preds is not None else None, noise,
+                     winner.starts if winner is not None else [])
 
 
 def _base_report(model_name: str, records: list[Record], outputs: list[str], noise: dict, notes: list[str]) -> dict:
