@@ -39,9 +39,9 @@ from phfdi.diagnosis.model import nominal_raw  # noqa: E402
 from phfdi.diagnosis.pipeline import Options, diagnose  # noqa: E402
 
 
-def run_case(rng, cause: str, excitation: str, duration_s: float, workers: int | None) -> dict:
+def run_case(case_seed: int, cause: str, excitation: str, duration_s: float, workers: int | None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
-        case = make_case(rng, cause, excitation, Path(tmp), duration_s)
+        case = make_case(np.random.default_rng(case_seed), cause, excitation, Path(tmp), duration_s)
         t0 = time.perf_counter()
         d = diagnose([load_record(case.path)], [], nominal_raw("paper"), "paper", Options(workers=workers))
         seconds = time.perf_counter() - t0
@@ -52,7 +52,11 @@ def run_case(rng, cause: str, excitation: str, duration_s: float, workers: int |
         ok = rep["verdict"] == "explained" and rep["cause"] == cause and case.main_ok(rep["parameters"])
     else:
         ok = rep["verdict"] == "not_explained"
-    return {"hidden": cause, "excitation": excitation, "true": case.params, "main": case.main,
+    winner = next((r for r in rep["ranking"] + rep.get("pairs", []) if r["cause"] == rep["cause"]), None)
+    return {"hidden": cause, "excitation": excitation, "case_seed": case_seed, "true": case.params, "main": case.main,
+            "ratio": winner["validation_rmse_over_noise"] if winner else None,
+            "whiteness_p": winner["validation_whiteness_p"] if winner else None,
+            "nominal_ratio": rep.get("nominal", {}).get("combined_rmse_over_noise"),
             "tolerance": case.tolerance, "verdict": rep["verdict"], "named": rep["cause"],
             "fitted": rep["parameters"], "gain_percent": rep["gain_percent"], "confidence": rep["confidence"],
             "ok": ok, "seconds": seconds}
@@ -68,6 +72,8 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=2400.0, help="record length (s) of the success-rate cases")
     ap.add_argument("--seed", type=int, default=None, help="benchmark RNG seed (never passed to diagnose)")
     ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--case", nargs=3, metavar=("CAUSE", "EXCITATION", "CASE_SEED"), default=None,
+                    help="rerun one case of an earlier run")
     ap.add_argument("--timing-only", action="store_true")
     ap.add_argument("--no-timing", action="store_true")
     ap.add_argument("--json", default=None, help="write all results to this JSON file")
@@ -84,15 +90,19 @@ def main() -> int:
             plan += [("none", e) for e in excitations for _ in range(args.controls)]
         if args.outside:
             plan += [(c, e) for c in ("alkaline_error", "periodic_flow") for e in excitations]
-        for cause, exc in plan:
-            r = run_case(rng, cause, exc, args.duration, args.workers)
+        plan = [(c, e, int(rng.integers(2**31))) for c, e in plan]
+        if args.case:
+            plan = [(args.case[0], args.case[1], int(args.case[2]))]
+        for cause, exc, case_seed in plan:
+            r = run_case(case_seed, cause, exc, args.duration, args.workers)
             results.append(r)
             true = ", ".join(f"{k}={v:.4g}" for k, v in r["true"].items())
             fitted = r["fitted"].get(r["main"]) if r["main"] else None
             print(f"{'ok  ' if r['ok'] else 'FAIL'} {cause:25s} {exc:6s} [{true}] -> {r['verdict']:13s} "
                   f"{r['named']:25s} {r['main']}={fitted if fitted is None else round(fitted, 4)} "
                   f"gain {r['gain_percent'] if r['gain_percent'] is None else round(r['gain_percent'])} % "
-                  f"({r['seconds']:.1f} s)", flush=True)
+                  f"error/noise {r['nominal_ratio'] or 0:.3g} -> {r['ratio'] or 0:.3g} (LB p {r['whiteness_p'] or 0:.2g}) "
+                  f"({r['seconds']:.1f} s, case {case_seed})", flush=True)
         cat = [r for r in results if r["hidden"] in CATALOGUE_CAUSES]
         ctl = [r for r in results if r["hidden"] == "none"]
         out = [r for r in results if r["hidden"] not in CATALOGUE_CAUSES and r["hidden"] != "none"]

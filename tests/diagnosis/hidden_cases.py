@@ -10,8 +10,8 @@ command, measured pH, measured level. The answer stays in the returned
 
 Bounds are stated for this excitation (the paper's plant at 1 s, pH noise
 0.01, level noise 0.02 cm; closed loop: setpoint steps between pH 8 and 11.5
-every 400 s; open loop: valve-command steps of 0.5 to 25 % between 28 and 62 %,
-held 60 to 250 s), after a 600 s warm-up that the data leave out so the plant starts in
+every 400 s; open loop: valve-command steps between 28 and 62 %, 60 % of them
+0.3 to 6 % and the others 6 to 25 %, held 60 to 250 s), after a 600 s warm-up that the data leave out so the plant starts in
 the steady state of the effect.
 """
 
@@ -154,8 +154,10 @@ def _command_sequence(rng, n: int) -> np.ndarray:
         hold = int(WARMUP_S) + 100 if k == 0 else int(rng.uniform(60, 250))
         cmd[k:k + hold] = level
         k += hold
-        # moves of every size, from below a typical dead band to most of the range (log-uniform 0.5..25 %)
-        move = math.exp(rng.uniform(math.log(0.5), math.log(25.0))) * rng.choice([-1.0, 1.0])
+        # moves of every size: small ones (0.3..6 %, a valve's bands) in 60 % of the steps, large ones
+        # (6..25 %) otherwise; a dead band is identified from moves on both sides of its width
+        size = rng.uniform(0.3, 6.0) if rng.random() < 0.6 else math.exp(rng.uniform(math.log(6.0), math.log(25.0)))
+        move = size * rng.choice([-1.0, 1.0])
         level = level + move
         if not 28.0 <= level <= 62.0:
             level = level - 2.0 * move

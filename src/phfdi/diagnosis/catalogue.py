@@ -135,17 +135,16 @@ def _spaced(low: float, high: float, n: int, log: bool = False) -> list[float]:
 
 def actuator_candidates(ctx: Context) -> list[Candidate]:
     cmd = ctx.command_pct
-    # limits split at the lowest commands: a stop below them cannot be seen, one above them can
-    sat_split = min(max(float(np.quantile(cmd, 0.02)), 2.0), 90.0)
+    sat_low = min(max(float(np.min(cmd)), 1.0), 90.0)  # a stop below every command cannot be told from none
     med_cmd = float(np.median(cmd))
     lo_cmd, hi_cmd = float(np.min(cmd)), max(float(np.max(cmd)), float(np.min(cmd)) + 1.0)
     qmax = ctx.valve_max_flow_ml_s
     out = [
-        Candidate("stiction", [Param("s_pct", 0.0, 20.0, "%"), Param("j_pct", 0.0, 20.0, "%")],
+        Candidate("stiction", [Param("s_pct", 0.05, 20.0, "%", log=True), Param("j_pct", 0.0, 20.0, "%")],
                   [{"s_pct": s, "j_pct": s * f} for s in _spaced(0.3, 15.0, 6, log=True) for f in (0.1, 0.4, 0.7, 1.0)],
                   lambda raw, p: _add_fault(raw, "stiction", {"s_pct": p["s_pct"], "j_pct": p["j_pct"]}),
                   "s_pct", nonsmooth=True, band=lambda p: 0.5 * p["s_pct"]),
-        Candidate("backlash", [Param("width_pct", 0.0, 20.0, "%")],
+        Candidate("backlash", [Param("width_pct", 0.02, 20.0, "%", log=True)],
                   [{"width_pct": w} for w in _spaced(0.15, 15.0, 8, log=True)],
                   lambda raw, p: _add_fault(raw, "backlash", {"width_pct": p["width_pct"]}),
                   "width_pct", nonsmooth=True, band=lambda p: 0.5 * p["width_pct"]),
@@ -155,11 +154,12 @@ def actuator_candidates(ctx: Context) -> list[Candidate]:
                   lambda raw, p: _add_fault(raw, "deadzone", {"width_pct": p["width_pct"],
                                                               "center_pct": p["center_pct"]}),
                   "width_pct", nonsmooth=True),
-        Candidate("saturation", [Param("low_pct", 0.0, sat_split, "%"), Param("high_pct", sat_split, 100.0, "%")],
-                  [{"low_pct": 0.0, "high_pct": h} for h in _spaced(sat_split, 100.0, 6)]
-                  + [{"low_pct": l_, "high_pct": 100.0} for l_ in _spaced(0.0, sat_split, 2)],
-                  lambda raw, p: _add_fault(raw, "saturation", {"low_pct": p["low_pct"], "high_pct": p["high_pct"]}),
-                  "high_pct", nonsmooth=True),
+        Candidate("saturation", [Param("high_pct", sat_low, 100.0, "%")],
+                  # where the commands are: a stop only shows when the data ask for more
+                  [{"high_pct": float(np.quantile(cmd, q))} for q in (0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.995)]
+                  + [{"high_pct": 100.0}],
+                  lambda raw, p: _add_fault(raw, "saturation", {"low_pct": 0.0, "high_pct": p["high_pct"]}),
+                  "high_pct", nonsmooth=True, fixed={"low_pct": 0.0}),
         Candidate("coulomb_viscous_friction",
                   [Param("coulomb_pct", 0.0, 20.0, "%"), Param("mobility_per_s", 1e-3, 10.0, "1/s", log=True)],
                   [{"coulomb_pct": c, "mobility_per_s": m} for c in _spaced(0.15, 8.0, 5, log=True)

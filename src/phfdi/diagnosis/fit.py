@@ -15,6 +15,7 @@ nuisance parameter each: the tank pH at their first sample.
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -27,6 +28,7 @@ from phfdi.errors import UserError
 from .catalogue import Candidate, Context, catalogue
 from .data import Record
 from .model import Evaluator, Prediction, Start
+from .residual import ljung_box
 
 Z95 = 1.959963984540054
 
@@ -68,6 +70,7 @@ class FitResult:
     val_cost: float  # mean over outputs of (RMSE / noise floor)^2
     val_sq: np.ndarray  # per held-out sample: summed squared error in noise units
     val_lag1: float  # lag-one autocorrelation of the held-out error (main output)
+    val_whiteness_p: float  # Ljung-Box p-value of the held-out error (main output)
     starts: list  # per record: the fitted Start
     raw: dict  # the extended model mapping
     nfev: int = 0
@@ -112,7 +115,12 @@ class Fitter:
 
     # ---- fitting ------------------------------------------------------------------
     def fit(self, cands: list[Candidate], starts: list[dict] | None = None) -> FitResult:
-        """Least squares fit of one candidate, or of several together (a pair)."""
+        """Least squares fit of one candidate, or of several together (a pair).
+
+        ``starts``: parameter start points (default: the candidate's grid).
+        Record nuisances start at the first measured pH and the valve resting
+        at the first command.
+        """
         t0 = time.perf_counter()
         params = [(c, q) for c in cands for q in c.params]
         n_par = len(params)
@@ -176,11 +184,18 @@ class Fitter:
         message = "start point only"
         nonsmooth = any(c.nonsmooth for c in cands)
         if len(x_best) > 0:
-            # refine the best start point (and the runner-up when nearly as good); nonsmooth blocks:
-            # coarse then fine finite differences, so a step does not fall between two samples' switching
             n_x = len(x_best)
-            refine = [scored[0]] + [t for t in scored[1:2] if t[0] < 1.5 * scored[0][0]]
-            stages = ((0.02, 10), (0.002, 8)) if nonsmooth else ((1e-4, 20),)
+            if nonsmooth and 0 < n_par <= 2:
+                # a valve block's cost is rough at the scale of the command's increments (a threshold 1 % off
+                # moves one slip): zoom in on the best grid point by pattern search, then polish
+                x_best, best_cost, r_best, used = _zoom(resid, x_best, best_cost, r_best, n_par, lower, upper)
+                nfev += used
+                stages = ((0.002, 6),)
+                refine = [(best_cost, x_best, r_best)]
+            else:
+                # refine the best start point (and the runner-up when nearly as good)
+                stages = ((0.02, 10), (0.002, 8)) if nonsmooth else ((1e-4, 20),)
+                refine = [scored[0]] + [t for t in scored[1:2] if t[0] < 1.5 * scored[0][0]]
             for i_start, (cost0, x0, _) in enumerate(refine):
                 for step, evals in (stages if i_start == 0 else stages[:1]):
                     res = least_squares(resid, np.clip(x0, lower, upper), bounds=(lower, upper), method="trf",
@@ -218,7 +233,7 @@ class Fitter:
             variant="+".join(c.variant for c in cands if c.variant), params=flat,
             intervals=intervals, fixed=fixed, main=cands[0].main if len(cands) == 1 else "",
             n_params=n_par, train_sse=sse, n_train=n, aic=aic, bic=bic, val_rmse=res_val["rmse"],
-            val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"], starts=res_val["starts"],
+            val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"], val_whiteness_p=res_val["whiteness_p"], starts=res_val["starts"],
             raw=raw, nfev=nfev, seconds=time.perf_counter() - t0, message=str(message), identified=identified)
 
     def _intervals(self, params, u, jac, r, n, k) -> tuple[dict, dict]:
@@ -277,7 +292,8 @@ class Fitter:
         cost = float(np.mean([(rmse[o] / self.p.noise[o]) ** 2 for o in rmse if math.isfinite(rmse[o])]))
         return {"rmse": rmse, "nrmse": nrmse, "cost": cost,
                 "sq": np.concatenate(sq_parts) if sq_parts else np.zeros(0), "starts": starts,
-                "lag1": float(np.mean([lag1(e) for e in main_parts])) if main_parts else 0.0}
+                "lag1": float(np.mean([lag1(e) for e in main_parts])) if main_parts else 0.0,
+                "whiteness_p": ljung_box(np.concatenate(main_parts))["p_value"] if main_parts else 1.0}
 
     def _start_of(self, i: int, raw: dict, half_band: float) -> Start:
         """Unknown start of a validation-only record, fitted on its first samples."""
@@ -304,6 +320,33 @@ class Fitter:
         if self._nominal is None:
             self._nominal = self.fit([_nominal_candidate()], starts=[{}])
         return self._nominal
+
+
+def _zoom(resid, x, cost, r, n_par, lower, upper, half: float = 0.12, shrink: float = 2.5, stages: int = 6):
+    """Pattern search on the first ``n_par`` coordinates: a 5 (x 5) grid about the best point, shrinking.
+
+    Returns (x, cost, residual, evaluations). Each stage spans +-``half`` of the
+    [0, 1] coordinate, then ``half / shrink``: six stages reach about 1/400 of
+    the range (0.2 % of a log decade's worth of a valve parameter).
+    """
+    used = 0
+    offsets = np.linspace(-1.0, 1.0, 5)
+    for _ in range(stages):
+        grid = itertools.product(*([offsets] * n_par))
+        best = (cost, x, r)
+        for d in grid:
+            if not any(d):
+                continue
+            xt = x.copy()
+            xt[:n_par] = np.clip(x[:n_par] + half * np.asarray(d), lower[:n_par], upper[:n_par])
+            rt = resid(xt)
+            used += 1
+            ct = float(np.sum(rt ** 2))
+            if ct < best[0]:
+                best = (ct, xt, rt)
+        cost, x, r = best
+        half /= shrink
+    return x, cost, r, used
 
 
 def _jacobian(fun, x, f0, lower, upper, step) -> np.ndarray:
@@ -347,3 +390,4 @@ def fit_task(labels: list[str], starts: list[dict] | None = None) -> FitResult:
     fitter = _WORKER
     cands = [fitter.candidates[label] for label in labels]
     return fitter.fit(cands, starts)
+

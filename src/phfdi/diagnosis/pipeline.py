@@ -17,10 +17,12 @@ mapping) and
      a candidate with fewer parameters that the winner does not beat
      significantly (p < 0.05) takes its place (stiction with J = 0 *is*
      backlash);
-   * ``explained`` when the winner's held-out RMSE is within
-     ``explained_ratio`` times the noise floor; otherwise pairs of the best
-     single candidates are fitted, and if none gets there, ``not_explained``
-     with the closest family and its honest gain;
+   * ``explained`` when the winner's held-out error is at the noise floor:
+     within ``floor_ratio`` (1.1) times it, or within ``explained_ratio``
+     (1.5) times it and white (Ljung-Box p >= ``whiteness_alpha``);
+     otherwise pairs of the best single candidates are fitted, and if none
+     gets there, ``not_explained`` with the closest family and its honest
+     gain;
    * ``none`` when the nominal model is already within ``explained_ratio`` of
      the noise floor, or no candidate counts and the misfit is small;
    * ``not_identifiable`` when no input moves (and the records start at rest).
@@ -59,6 +61,8 @@ class Options:
     alpha: float = 0.01
     min_gain: float = 0.05
     explained_ratio: float = 1.5
+    floor_ratio: float = 1.1  # within this of the noise floor, what structure is left is below 17 % of the error
+    whiteness_alpha: float = 1e-3  # Ljung-Box p-value below which a held-out error still has structure
     progress: Callable[[str], None] | None = None
 
 
@@ -185,7 +189,8 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
                        "combined_rmse_over_noise": math.sqrt(nom.val_cost),
                        "initial_ph": [s.ph for s in nom.starts] if opts.initial == "fit" else None}
     base["initial"] = opts.initial
-    base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio}
+    base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio,
+                          "floor_ratio": opts.floor_ratio, "whiteness_alpha": opts.whiteness_alpha}
     if winner is not None and extended_preds is not None:
         base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
                                       "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
@@ -236,9 +241,7 @@ def _workers(opts: Options, tasks: int) -> int:
 
 
 def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options, local: Fitter):
-    """Fit every candidate, then pairs of the best ones when the best alone leaves structure."""
-    results: list[FitResult] = []
-    pairs: list[FitResult] = []
+    """Fit every candidate; when the best leaves structure, try pairs of the best ones."""
     workers = _workers(opts, len(labels))
     t0 = time.perf_counter()
 
@@ -246,28 +249,44 @@ def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options
         _say(opts, f"  {i}/{total} {r.label}: held-out error {math.sqrt(r.val_cost):.3g} x noise "
                    f"({r.seconds:.1f} s, {time.perf_counter() - t0:.0f} s elapsed)")
 
-    if workers == 1:
-        for i, lab in enumerate(labels, 1):
-            results.append(local.fit([local.candidates[lab]]))
-            note(i, len(labels), results[-1])
-        pair_tasks = _pair_tasks(results, nom, opts)
-        for i, (labs, starts) in enumerate(pair_tasks, 1):
-            pairs.append(local.fit([local.candidates[x] for x in labs], starts))
-            note(i, len(pair_tasks), pairs[-1])
-        return results, pairs
-    with ProcessPoolExecutor(max_workers=workers, initializer=init_worker, initargs=(problem,)) as pool:
-        futures = [pool.submit(fit_task, [lab]) for lab in labels]
+    def run_all(pool, jobs: list[tuple]) -> list[FitResult]:
+        out = []
+        if pool is None:
+            for i, (fn, args) in enumerate(jobs, 1):
+                out.append(_local_call(local, fn, args))
+                note(i, len(jobs), out[-1])
+            return out
+        futures = [pool.submit(fn, *args) for fn, args in jobs]
         for i, fut in enumerate(as_completed(futures), 1):
-            results.append(fut.result())
-            note(i, len(labels), results[-1])
+            out.append(fut.result())
+            note(i, len(jobs), out[-1])
+        return out
+
+    pool = None if workers == 1 else ProcessPoolExecutor(max_workers=workers, initializer=init_worker,
+                                                         initargs=(problem,))
+    try:
+        results = run_all(pool, [(fit_task, ([lab],)) for lab in labels])
         pair_tasks = _pair_tasks(results, nom, opts)
+        pairs = []
         if pair_tasks:
             _say(opts, f"fitting {len(pair_tasks)} pairs (the best single candidate leaves structure)")
-            futures = [pool.submit(fit_task, labs, starts) for labs, starts in pair_tasks]
-            for i, fut in enumerate(as_completed(futures), 1):
-                pairs.append(fut.result())
-                note(i, len(pair_tasks), pairs[-1])
+            pairs = run_all(pool, [(fit_task, (labs, starts)) for labs, starts in pair_tasks])
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return results, pairs
+
+
+def _local_call(local: Fitter, fn, args) -> FitResult:
+    labs, *rest = args
+    return local.fit([local.candidates[x] for x in labs], *rest)
+
+
+def _explained(r: FitResult, opts: Options) -> bool:
+    """At the noise floor: held-out RMS error within ``floor_ratio`` of it, or within ``explained_ratio`` of it
+    with no structure left (Ljung-Box p >= ``whiteness_alpha``)."""
+    ratio = math.sqrt(r.val_cost)
+    return ratio <= opts.floor_ratio or (ratio <= opts.explained_ratio and r.val_whiteness_p >= opts.whiteness_alpha)
 
 
 def _best_per_cause(results: list[FitResult]) -> list[FitResult]:
@@ -298,7 +317,7 @@ def _pair_tasks(results: list[FitResult], nom: FitResult, opts: Options) -> list
     if not ranked or math.sqrt(nom.val_cost) <= opts.explained_ratio:
         return []
     best = ranked[0]
-    if math.sqrt(best.val_cost) <= opts.explained_ratio or not _counts(best, nom, opts)[0]:
+    if _explained(best, opts) or not _counts(best, nom, opts)[0]:
         return []
     top = [r for r in ranked[:4] if _counts(r, nom, opts)[0]]
     tasks = []
@@ -323,7 +342,7 @@ def _entry(r: FitResult, nom: FitResult, main: str, noise: dict, opts: Options) 
             "confidence_intervals": r.intervals, "fixed": r.fixed, "main_parameter": r.main,
             "identified": r.identified, "nrmse_validation": r.val_nrmse.get(main),
             "nrmse_validation_by_output": r.val_nrmse,
-            "validation_rmse_over_noise": math.sqrt(r.val_cost),
+            "validation_rmse_over_noise": math.sqrt(r.val_cost), "validation_whiteness_p": r.val_whiteness_p,
             "gain_percent": 100.0 * gain, "p_value_vs_nominal": p, "counts": counts,
             "aic": r.aic, "bic": r.bic, "n_params": r.n_params, "seconds": r.seconds}
 
@@ -376,10 +395,10 @@ def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], lo
     winner = _parsimonious(counting, opts)
     pool = [winner] + [p for p in pairs if _counts(p, winner, opts)[0]]
     best_pair = min((p for p in pool[1:]), key=lambda r: r.val_cost, default=None)
-    explained = math.sqrt(winner.val_cost) <= opts.explained_ratio
+    explained = _explained(winner, opts)
     if not explained and best_pair is not None:
         winner = best_pair
-        explained = math.sqrt(winner.val_cost) <= opts.explained_ratio
+        explained = _explained(winner, opts)
     runner = next((r for r in ranked if r.cause != winner.cause and r.cause not in winner.cause.split("+")), None)
     conf = 1.0 - _better_p(winner, runner) if runner is not None else 1.0 - _better_p(winner, nom)
     ratio = math.sqrt(winner.val_cost)
@@ -393,9 +412,10 @@ def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], lo
                       f"{winner.cause} brings the held-out error from {nom_ratio:.2f} to {ratio:.2f} x the noise "
                       f"floor ({gain:+.0f} % NRMSE on {main}){margin}", True)
     return finish("not_explained", winner, conf,
-                  f"no candidate reaches the noise floor: the closest, {winner.cause}, lowers the held-out error "
-                  f"from {nom_ratio:.2f} to {ratio:.2f} x noise ({gain:+.0f} % NRMSE on {main}) and leaves "
-                  f"structure{margin}", True)
+                  f"no candidate explains the misfit: the closest, {winner.cause}, lowers the held-out error "
+                  f"from {nom_ratio:.2f} to {ratio:.2f} x noise ({gain:+.0f} % NRMSE on {main}) but "
+                  f"{'its error still has structure (Ljung-Box p = ' + format(winner.val_whiteness_p, '.2g') + ')' if ratio <= opts.explained_ratio else 'stays above the noise floor'}"
+                  f"{margin}", True)
 
 
 def _parsimonious(counting: list[FitResult], opts: Options) -> FitResult:
