@@ -151,6 +151,8 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
              options: Options | None = None) -> Diagnosis:
     opts = options or Options()
     t_start = time.perf_counter()
+    for rec in records_fit + records_val:
+        _drop_unknown_feeds(rec, nominal)
     records, train, val, split_note = split(records_fit, records_val, opts.blocks)
     outputs = [o for o in ("ph_measured", "level_measured_cm") if any(o in r.outputs for r in records)]
     noise = {o: float(np.median([noise_floor(r.outputs[o]) for r in records if o in r.outputs])) for o in outputs}
@@ -202,6 +204,20 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     return Diagnosis(check_report(base), records, train, val, nominal_preds, extended_preds,
                      winner.raw if winner is not None and extended_preds is not None else None, noise,
                      winner.starts if winner is not None else [])
+
+
+def _drop_unknown_feeds(rec: Record, nominal: dict) -> None:
+    """Flows of feeds the model does not have are not inputs of it: set aside, and said."""
+    feeds = set(nominal["plant"]["feeds"])
+    valve_feed = nominal["valves"]["ph"]["feed"]
+    for name in [k for k in rec.inputs if k.endswith("_flow_ml_s")]:
+        feed = name[: -len("_flow_ml_s")]
+        if feed not in feeds:
+            del rec.inputs[name]
+            rec.notes.append(f"{name} ignored: the model has no feed {feed!r}")
+        elif feed == valve_feed and "valve_command_pct" in rec.inputs:
+            rec.notes.append(f"{name} not used as an input: the model's valve delivers it from valve_command_pct "
+                             f"(so the valve can be diagnosed)")
 
 
 def _base_report(model_name: str, records: list[Record], outputs: list[str], noise: dict, notes: list[str]) -> dict:
