@@ -398,16 +398,21 @@ def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], lo
                       f"the nominal model's held-out error is {nom_ratio:.2f} x the noise floor (at most "
                       f"{opts.explained_ratio} counts as noise): nothing significant to explain", False)
     if not counting:
-        closest = ranked[0] if ranked else None
+        # the closest cause is the one that lowers the held-out error most; a fit that went back to the nominal
+        # model (a zero flow, a unit gain) is no cause
+        improving = [r for r in ranked if r.val_cost < nom.val_cost * (1.0 - 1e-3) ** 2]
         conf = _none_confidence(nom, ranked, opts)
-        if closest is None:
-            return finish("not_explained", None, conf, "no candidate applies to this model and data", False)
+        if not improving:
+            best = f"; best: {ranked[0].cause} ({100 * _counts(ranked[0], nom, opts)[2]:+.1f} %)" if ranked else ""
+            return finish("not_explained", None, conf,
+                          f"the nominal model misses ({nom_ratio:.2f} x the noise floor held out) and no catalogue "
+                          f"candidate lowers its held-out error{best}; no extended model is claimed", False)
+        closest = improving[0]
         c, p, gain = _counts(closest, nom, opts)
-        out_ = finish("not_explained", closest, conf,
+        return finish("not_explained", closest, conf,
                       f"the nominal model misses ({nom_ratio:.2f} x the noise floor held out) but no candidate "
                       f"lowers the held-out error significantly by {100 * opts.min_gain:.0f} % or more; closest: "
-                      f"{closest.cause} ({100 * gain:+.0f} %, p = {p:.2g}); no extended model is claimed", False)
-        return out_
+                      f"{closest.cause} ({100 * gain:+.1f} %, p = {p:.2g}); no extended model is claimed", False)
     winner = _parsimonious(counting, opts)
     pool = [winner] + [p for p in pairs if _counts(p, winner, opts)[0]]
     best_pair = min((p for p in pool[1:]), key=lambda r: r.val_cost, default=None)
