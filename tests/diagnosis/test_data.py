@@ -73,7 +73,6 @@ def test_bad_input_one_clear_message_exit_2(good, run_cli, case, message):
     tmp, t, op, ph, lev = good
     ph, t = ph.copy(), t.copy()
     header = HEADER
-    map_extra = ""
     if case == "missing_column":
         header = "Time, t (s),OP %,pH value,level mm,,"
     elif case == "misnamed_column":

@@ -73,7 +73,6 @@ class Context:
     valve_max_flow_ml_s: float
     overflow: bool
     has_command: bool
-    measured_feeds: set[str]
     command_pct: np.ndarray  # all records' commands, concatenated (empty without)
     ph_range: tuple[float, float]
     duration_s: float

@@ -3,13 +3,15 @@
 The residual is the open-loop simulation error of every measured output in
 units of that output's noise floor (so a perfect model leaves unit-variance
 white noise, and outputs weigh by how precisely they are measured). Each
-candidate is started from a few points of its catalogue grid; the best start
+candidate is started from the points of its catalogue grid; the best start
 is refined by ``scipy.optimize.least_squares`` (trust-region reflective, in
-[0, 1] coordinates of each parameter's bounds). Confidence intervals come
-from the Jacobian at the optimum, widened for the residual's lag-one
-autocorrelation (an AR(1) effective sample size), since a model error is
-never white. Records that start mid-transient (``initial: fit``) add one
-nuisance parameter each: the tank pH at their first sample.
+[0, 1] coordinates of each parameter's bounds). Valve blocks, whose cost is
+rough at the scale of the command's increments, are first zoomed in on by a
+pattern search. Confidence intervals come from the Jacobian at the optimum,
+widened for the residual's lag-one autocorrelation (an AR(1) effective
+sample size), since a model error is never white. Nuisance parameters per
+record: the tank pH at the first sample (``initial: fit``, records that
+start mid-transient) and the rest point of a valve with a dead band.
 """
 
 from __future__ import annotations
@@ -52,6 +54,8 @@ class Problem:
 
 @dataclass
 class FitResult:
+    """One fitted candidate (or pair): parameters, intervals, training fit and held-out scores."""
+
     label: str
     cause: str
     family: str

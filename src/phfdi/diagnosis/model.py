@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import copy
 import json
-import math
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -39,8 +38,8 @@ from ph_plant_sim.plant import CstrPlant, affine_recurrence, record_sample_maps
 from phfdi.blocks import Chain, Injected
 from phfdi.errors import UserError
 from phfdi.loop import _valve, build_plant, profile, sensor_chain
-from phfdi.scenario import (PlantModelSpec, ScenarioSpec, apply_override, load_plant_model, parse_override,
-                            raw_scenario, validate_scenario)
+from phfdi.scenario import (ScenarioSpec, apply_override, load_plant_model, parse_override, raw_scenario,
+                            validate_scenario)
 
 from .data import Record
 
@@ -388,15 +387,3 @@ def mix_for_ph(plant: CstrPlant, ph: float) -> list[float]:
         return base.tolist()
     x = brentq(lambda x: ph_of(x) - ph, 0.0, 1.0, xtol=1e-14)
     return ((1.0 - x) * acid + x * base).tolist()
-
-
-def plant_spec(raw: dict) -> PlantModelSpec:
-    return load_plant_model(PlantModelSpec.model_validate(raw["plant"]))
-
-
-def feed_names(raw: dict) -> list[str]:
-    return list(raw["plant"]["feeds"])
-
-
-def finite(x: float) -> bool:
-    return isinstance(x, (int, float)) and math.isfinite(x)

@@ -13,7 +13,7 @@ from phfdi.errors import UserError
 from .extend import load_model_file, write_model
 from .figures import plot_fit, plot_ranking, plot_scalogram
 from .pipeline import Diagnosis
-from .report import fmt_num, fmt_params, ranking_table, to_json, verdict_line
+from .report import fmt_num, fmt_params, to_json, verdict_line
 
 #: relative agreement required between the written model and what the diagnosis scored
 REPRODUCE_RTOL = 1e-5
@@ -37,7 +37,21 @@ def write_extended(d: Diagnosis, out_dir: Path, model: str) -> Path | None:
     path = write_model(out_dir / "extended_model.yaml", model, d.extended_raw, header, name)
     _check_reproduces(d, path)
     rep["extended_model"] = str(path)
+    rep["extended_model_closed_loop"] = _check_closed_loop(path)
     return path
+
+
+def _check_closed_loop(path: Path) -> dict:
+    """Can `phfdi simulate --scenario` run the file? (An extended plant may not reach the scenario's setpoints.)"""
+    from phfdi.loop import build_parts
+    from phfdi.scenario import load_scenario
+
+    try:
+        build_parts(load_scenario(str(path)))
+    except UserError as exc:
+        return {"ok": False, "message": f"phfdi simulate cannot run it as written: {exc} (the extended plant; "
+                                        f"give reachable setpoints with --set)"}
+    return {"ok": True, "message": f"phfdi simulate --scenario {path} runs it"}
 
 
 def _check_reproduces(d: Diagnosis, path: Path) -> None:
@@ -154,9 +168,9 @@ def report_markdown(rep: dict, command: str = "") -> str:
     lines += ["## Extended model and gain", ""]
     if rep.get("extended_model"):
         chk = rep.get("extended_model_check", {})
-        lines += [f"Written to `{rep['extended_model']}` (run it: `phfdi simulate --scenario {rep['extended_model']}`); "
-                  f"loaded back, it reproduces the scored predictions to {chk.get('max_relative_difference', 0):.1g} "
-                  f"of each output's spread.", "",
+        lines += [f"Written to `{rep['extended_model']}`; loaded back, it reproduces the scored predictions to "
+                  f"{chk.get('max_relative_difference', 0):.1g} of each output's spread. Closed loop: "
+                  f"{rep['extended_model_closed_loop']['message']}.", "",
                   "| output | held-out NRMSE nominal | held-out NRMSE extended | gain % |", "| --- | ---: | ---: | ---: |"]
         for o, v in rep["gain_by_output"].items():
             lines.append(f"| {o} | {fmt_num(v['nominal'], '.4f')} | {fmt_num(v['extended'], '.4f')} | "
@@ -187,5 +201,3 @@ def terminal_summary(rep: dict) -> str:
         lines.append(f"  report: {Path(rep['report_dir']) / 'REPORT.md'}")
     return "\n".join(lines)
 
-
-__all__ = ["write_all", "terminal_summary", "report_markdown", "ranking_table"]

@@ -39,7 +39,6 @@ from typing import Callable
 
 import numpy as np
 
-from phfdi.errors import UserError
 
 from .catalogue import Context
 from .data import Record
@@ -106,9 +105,9 @@ def split(records_fit: list[Record], records_val: list[Record], blocks: int):
 
 
 def context_for(nominal: dict, records: list[Record], outputs: list[str]) -> Context:
-    from .model import load_plant_model
+    """What the catalogue needs to set its bounds and start points: the nominal model and the data's ranges."""
     from phfdi.loop import build_plant
-    from phfdi.scenario import PlantModelSpec
+    from phfdi.scenario import PlantModelSpec, load_plant_model
 
     model = load_plant_model(PlantModelSpec.model_validate(nominal["plant"]))
     plant = build_plant(model)
@@ -117,13 +116,12 @@ def context_for(nominal: dict, records: list[Record], outputs: list[str]) -> Con
     has_cmd = all("valve_command_pct" in r.inputs for r in records)
     cmd = np.concatenate([r.inputs["valve_command_pct"] for r in records]) if has_cmd else np.zeros(0)
     phs = np.concatenate([r.outputs["ph_measured"] for r in records if "ph_measured" in r.outputs] or [np.zeros(1)])
-    ev = Evaluator(records[0], nominal, "steady" if records[0].inputs else "fit")
-    flows = ev.flows(ev.nominal_spec)[0]
+    ev = Evaluator(records[0], nominal)
+    flows = ev.flows(ev.nominal_spec)[0]  # the nominal feeds' flows: the scale of a disturbance
     strength = {f.name: max(c for c in conc) if conc else 0.0 for f, conc in zip(plant.feeds, plant.feed_conc)}
     return Context(
         feeds=feeds, valve_feed=valve["feed"], valve_max_flow_ml_s=float(valve["max_flow_ml_s"]),
         overflow=plant.tank.overflow, has_command=has_cmd,
-        measured_feeds={k[:-10] for r in records for k in r.inputs if k.endswith("_flow_ml_s")},
         command_pct=cmd, ph_range=(float(np.quantile(phs, 0.01)), float(np.quantile(phs, 0.99))),
         duration_s=max(float(r.time_s[-1] - r.time_s[0]) for r in records), dt_s=records[0].dt_s,
         total_inflow_ml_s=float(np.mean(flows.sum(axis=1))), feed_strength_mol_l=strength, outputs=set(outputs))
@@ -159,7 +157,6 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     scale = {o: float(np.std(np.concatenate([r.outputs[o] for r in records if o in r.outputs]))) or 1.0
              for o in outputs}
     notes = [f"{r.name}: {n}" for r in records for n in r.notes] + [split_note]
-    main = outputs[0]
     why = _identifiable(records, opts.initial, noise)
     if why is not None:
         report = _base_report(model_name, records, outputs, noise, notes)
@@ -178,7 +175,6 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     _say(opts, f"fitting {len(labels)} candidates ({len(set(c.cause for c in local.candidates.values()))} causes)")
     results, pairs = _run_fits(problem, labels, nom, opts, local)
     report = _decide(nom, results, pairs, local, opts)
-    ranking = report.pop("_ranking_results")
     winner: FitResult | None = report.pop("_winner")
     extended_preds = None
     if winner is not None and report.get("_write"):
@@ -200,7 +196,6 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     base["skipped"] = local.skipped
     base["seconds"] = time.perf_counter() - t_start
     base["candidates_fitted"] = len(results) + len(pairs)
-    del ranking
     return Diagnosis(check_report(base), records, train, val, nominal_preds, extended_preds,
                      winner.raw if winner is not None and extended_preds is not None else None, noise,
                      winner.starts if winner is not None else [])
@@ -340,15 +335,10 @@ def _pair_tasks(results: list[FitResult], nom: FitResult, opts: Options) -> list
     for i in range(len(top)):
         for j in range(i + 1, len(top)):
             a, b = top[i], top[j]
-            start = {}
-            start.update(_unprefixed(a))
-            start.update(_unprefixed(b))
+            start = dict(a.params)
+            start.update(b.params)
             tasks.append(([a.label, b.label], [start]))
     return tasks
-
-
-def _unprefixed(r: FitResult) -> dict:
-    return dict(r.params)
 
 
 def _entry(r: FitResult, nom: FitResult, main: str, noise: dict, opts: Options) -> dict:
@@ -372,7 +362,7 @@ def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], lo
     pair_entries = [_entry(r, nom, main, noise, opts) for r in sorted(pairs, key=lambda r: r.val_cost)]
     nom_ratio = math.sqrt(nom.val_cost)
     counting = [r for r in ranked if _counts(r, nom, opts)[0]]
-    out: dict = {"ranking": ranking, "pairs": pair_entries, "_ranking_results": ranked, "_winner": None}
+    out: dict = {"ranking": ranking, "pairs": pair_entries, "_winner": None}
     nominal_main = nom.val_nrmse.get(main)
 
     def finish(verdict: str, winner: FitResult | None, confidence: float | None, reason: str, write: bool):

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Iterable
+from typing import Any
 
 #: verdicts, in the order a reader meets them
 VERDICTS = ("explained", "not_explained", "none", "not_identifiable")
@@ -148,15 +148,3 @@ def verdict_line(report: dict) -> str:
         text += (f"; held-out NRMSE {fmt_num(report['nrmse_nominal'])} -> {fmt_num(report['nrmse_extended'])} "
                  f"({report['gain_percent']:+.0f} %)")
     return text
-
-
-def ranking_table(ranking: Iterable[dict], limit: int | None = None) -> list[str]:
-    """Markdown table of the ranking."""
-    rows = ["| rank | cause | family | held-out NRMSE | BIC | parameters (95 % interval) |",
-            "| ---: | --- | --- | ---: | ---: | --- |"]
-    for i, r in enumerate(ranking):
-        if limit is not None and i >= limit:
-            break
-        rows.append(f"| {i + 1} | {r['cause']} | {r['family']} | {fmt_num(r['nrmse_validation'], '.4f')} | "
-                    f"{fmt_num(r['bic'], '.0f')} | {fmt_params(r['parameters'], r.get('confidence_intervals'))} |")
-    return rows
