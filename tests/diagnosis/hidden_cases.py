@@ -10,10 +10,11 @@ command, measured pH, measured level. The answer stays in the returned
 
 Bounds are stated for this excitation: the paper's plant at 1 s, pH noise
 0.01, level noise 0.02 cm; closed loop: setpoint steps every 400 s between
-pH 8 and 11.5, pH 8 and one of 10.5 to 11.5 among them; open loop: valve
-command steps between 28 and 62 %, 60 % of them 0.3 to 6 % and the others
-6 to 25 %, held 60 to 250 s. A 600 s warm-up that the data leave out puts
-the plant in the steady state of the effect.
+pH 8 and 11.5, pH 8 and one of 10.5 to 11.5 among them; open loop: a valve
+test staircase (reversals of 0.5 to 6 % in 0.5 % steps, 20 s each, 480 s)
+then valve command steps between 28 and 62 %, 60 % of them 0.3 to 6 % and
+the others 6 to 25 %, held 60 to 250 s. A 600 s warm-up that the data leave
+out puts the plant in the steady state of the effect.
 """
 
 from __future__ import annotations
@@ -54,8 +55,8 @@ BOUNDS = {
     "leakage": ("1..6 mL/s (of 40 mL/s)", lambda r: {"flow_ml_s": r.uniform(1.0, 6.0)}, "flow_ml_s", (0.15, 0.2)),
     "valve_gain": ("gain 0.7..0.9 or 1.1..1.4", lambda r: {"gain": _two_sided(r, 0.1, 0.3, 1.0)}, "gain",
                    (0.05, 0.0)),
-    "sensor_delay": ("3..30 s", lambda r: {"delay_s": r.uniform(3.0, 30.0)}, "delay_s", (0.15, 1.0)),
-    "sensor_lag": ("time constant 5..60 s", lambda r: {"tau_s": r.uniform(5.0, 60.0)}, "tau_s", (0.2, 1.0)),
+    "sensor_delay": ("10..30 s", lambda r: {"delay_s": r.uniform(10.0, 30.0)}, "delay_s", (0.15, 1.0)),
+    "sensor_lag": ("time constant 12..60 s", lambda r: {"tau_s": r.uniform(12.0, 60.0)}, "tau_s", (0.2, 1.0)),
     "sensor_bias": ("0.1..0.5 pH either sign", lambda r: {"bias": _two_sided(r, 0.1, 0.5, 0.0)}, "bias",
                     (0.0, 0.03)),
     "sensor_drift": ("0.5..2 pH over the record, either sign", None, "rate_per_s", (0.15, 0.0)),
@@ -145,22 +146,25 @@ def _setpoints(rng, duration_s: float, step_s: float = 400.0) -> dict:
 
 
 def _command_sequence(rng, n: int) -> np.ndarray:
-    cmd = np.empty(n)
-    k = 0
+    """Open-loop valve test: hold through the warm-up, a staircase of reversals, then random steps.
+
+    The staircase (a valve-test pattern: up and back down by 0.5, 1.0, ..., 6 %, each held 20 s) puts command
+    moves on both sides of any dead or stick band in the bounds; the random steps (between 28 and 62 %, 60 % of
+    them 0.3 to 6 % and the others 6 to 25 %, held 60 to 250 s) excite the process.
+    """
     level = 45.0
-    while k < n:
-        hold = int(WARMUP_S) + 100 if k == 0 else int(rng.uniform(60, 250))
-        cmd[k:k + hold] = level
-        k += hold
-        # moves of every size: small ones (0.3..6 %, a valve's bands) in 60 % of the steps, large ones
-        # (6..25 %) otherwise; a dead band is identified from moves on both sides of its width
+    cmd = [level] * (int(WARMUP_S) + 100)
+    for size in np.arange(0.5, 6.01, 0.5):
+        cmd += [level + size] * 20 + [level] * 20
+    while len(cmd) < n:
         size = rng.uniform(0.3, 6.0) if rng.random() < 0.6 else math.exp(rng.uniform(math.log(6.0), math.log(25.0)))
         move = size * rng.choice([-1.0, 1.0])
         level = level + move
         if not 28.0 <= level <= 62.0:
             level = level - 2.0 * move
         level = min(max(level, 28.0), 62.0)
-    return cmd
+        cmd += [level] * int(rng.uniform(60, 250))
+    return np.asarray(cmd[:n], dtype=float)
 
 
 def true_model(rng, cause: str, duration_s: float) -> tuple[dict, dict, str, float]:
