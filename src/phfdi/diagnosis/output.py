@@ -113,7 +113,8 @@ def _misfit_lines(m: dict) -> list[str]:
     scales = sorted(m["scales"], key=lambda s: -s["share"])[:3]
     lines.append("  - scales: " + "; ".join(
         f"{100 * s['share']:.0f} % at periods {s['period_s'][0]:.3g}-"
-        f"{'inf' if not math.isfinite(s['period_s'][1]) else format(s['period_s'][1], '.3g')} s" for s in scales))
+        f"{'inf' if s['period_s'][1] is None or not math.isfinite(s['period_s'][1]) else format(s['period_s'][1], '.3g')} s"
+        for s in scales))
     times = sorted(m["time"], key=lambda s: -s["share"])[:3]
     lines.append("  - time: " + "; ".join(f"{100 * s['share']:.0f} % in {s['start_s']:.0f}-{s['end_s']:.0f} s"
                                           for s in times))
@@ -125,6 +126,19 @@ def _misfit_lines(m: dict) -> list[str]:
     lines.append(f"  - correlation with input changes (99 % bound {next(iter(m['input_correlation'].values()))['bound']:.3f}): "
                  f"{corr}" if m["input_correlation"] else "  - no inputs")
     return lines
+
+
+def _candidate_table(entries: list[dict]) -> list[str]:
+    rows = ["| rank | cause | family | held-out error / noise | held-out NRMSE | gain % | p | BIC | parameters (95 % interval) |",
+            "| ---: | --- | --- | ---: | ---: | ---: | ---: | ---: | --- |"]
+    for i, r in enumerate(entries):
+        params = fmt_params(r["parameters"], r.get("confidence_intervals"))
+        if r.get("fixed"):
+            params += " (" + ", ".join(f"{k}: {v}" for k, v in r["fixed"].items()) + ")"
+        rows.append(f"| {i + 1} | {r['cause']} | {r['family']} | {r['validation_rmse_over_noise']:.3g} | "
+                    f"{fmt_num(r['nrmse_validation'], '.4f')} | {r['gain_percent']:+.1f} | {r['p_value_vs_nominal']:.2g} | "
+                    f"{fmt_num(r['bic'], '.0f')} | {params} |")
+    return rows
 
 
 def report_markdown(rep: dict, command: str = "") -> str:
@@ -148,20 +162,16 @@ def report_markdown(rep: dict, command: str = "") -> str:
         lines += _misfit_lines(m)
     lines += ["", "Figures: " + ", ".join(f"`{Path(f).name}`" for f in rep.get("figures", [])
                                           if "fit_" in f or "scalogram_" in f), ""]
-    lines += ["## Candidates", "", f"Held-out error in multiples of the noise floor (1 = a perfect model); "
-              f"a candidate counts when it lowers the held-out error significantly (p < {rep['thresholds']['alpha']}) "
-              f"by at least {100 * rep['thresholds']['min_gain']:.0f} %; explained when within "
-              f"{rep['thresholds']['explained_ratio']} x the noise floor. Nominal model: "
-              f"{rep['nominal']['combined_rmse_over_noise']:.3g}.", ""]
-    lines += ["| rank | cause | family | held-out error / noise | held-out NRMSE | gain % | p | BIC | parameters (95 % interval) |",
-              "| ---: | --- | --- | ---: | ---: | ---: | ---: | ---: | --- |"]
-    for i, r in enumerate(rep["ranking"] + rep.get("pairs", [])):
-        params = fmt_params(r["parameters"], r.get("confidence_intervals"))
-        if r.get("fixed"):
-            params += " (" + ", ".join(f"{k}: {v}" for k, v in r["fixed"].items()) + ")"
-        lines.append(f"| {i + 1} | {r['cause']} | {r['family']} | {r['validation_rmse_over_noise']:.3g} | "
-                     f"{fmt_num(r['nrmse_validation'], '.4f')} | {r['gain_percent']:+.1f} | {r['p_value_vs_nominal']:.2g} | "
-                     f"{fmt_num(r['bic'], '.0f')} | {params} |")
+    th = rep["thresholds"]
+    lines += ["## Candidates", "", f"Held-out error in multiples of the noise floor (1 = a perfect model); a candidate "
+              f"counts when it lowers the held-out error significantly (p < {th['alpha']}) by at least "
+              f"{100 * th['min_gain']:.0f} %; explained when within {th['floor_ratio']} x the noise floor, or within "
+              f"{th['explained_ratio']} x with a white error (Ljung-Box p >= {th['whiteness_alpha']}). Nominal "
+              f"model: {rep['nominal']['combined_rmse_over_noise']:.3g}.", ""]
+    lines += _candidate_table(rep["ranking"])
+    if rep.get("pairs"):
+        lines += ["", "Pairs (fitted together because the best single candidate leaves structure):", ""]
+        lines += _candidate_table(rep["pairs"])
     if rep.get("skipped"):
         lines += ["", "Not tried: " + "; ".join(f"{k} ({v})" for k, v in rep["skipped"].items())]
     lines += ["", "![ranking](ranking.png)", ""]
