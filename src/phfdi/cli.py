@@ -29,6 +29,7 @@ COMMANDS = [
     "evaluate",
     "analyze",
     "loop_diagnose",
+    "diagnose",
 ]
 
 

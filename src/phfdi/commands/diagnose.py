@@ -1,0 +1,175 @@
+"""phfdi diagnose: what the model gets wrong on measured data, the cause, the extended model and its gain."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from importlib import resources
+from pathlib import Path
+
+from phfdi.errors import UserError
+
+from .common import EPILOG_FORMAT
+
+EXAMPLES = """examples:
+  # a run of the project (CSV, Parquet or .mcap bag) against the paper model, segments held out
+  phfdi diagnose --data runs/plant.csv --model paper --out out/diag
+  # any CSV with a column map; fit on two files, validate on a third; JSON on stdout
+  phfdi diagnose --fit a.csv b.csv --validate c.csv --map my_columns.yaml --model my_loop.yaml --json
+  phfdi diagnose --data log.csv --column time_s=t --column valve_command_pct=OP --column ph_measured=PV
+  # the teaching-lab rig: estimate the nominal model from the titrations, then diagnose the other runs
+  phfdi diagnose --model rig_flask --map ph_rig --initial fit --fit titration1.csv titration2.csv \\
+      --calibrate plant.feeds.acid.recipe.H2SO4 plant.feeds.base.recipe.NaOH plant.tank.volume_ml
+  phfdi diagnose --model out/diagnose/calibrated_model.yaml --map ph_rig --initial fit \\
+      --fit add_base.csv add_acid.csv --validate control.csv
+
+column map (YAML; signal: column, or signal: {column: NAME, unit: UNIT}):
+  time_s: {column: "ElapsedTime (s)", unit: s}        # s, ms, min, h
+  base_flow_ml_s: {column: "Base Flow, mL/s", unit: mL/s}   # mL/s, mL/min, L/min, L/h, m3/h
+  valve_command_pct: OP                                # %, fraction
+  level_controller_output_pct: LIC_OP
+  ph_measured: pH                                      # pH
+  level_measured_cm: {column: level, unit: mm}         # cm, mm, m
+Named maps shipped with phfdi: ph_rig (../shared/data/ph_rig).
+
+catalogue: stiction backlash deadzone saturation coulomb_viscous_friction leakage valve_gain (actuator),
+  sensor_delay sensor_lag sensor_bias sensor_drift sensor_gain (sensor),
+  buffer reagent_concentration holdup disturbance_flow (process); verdicts: explained, not_explained,
+  none, not_identifiable. Bad input exits with status 2 and one line naming the problem.
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("diagnose", help="diagnose a model against measured data: misfit, cause, extended model, gain",
+                       description="Simulate the nominal model open loop on measured inputs, show where and how it "
+                                   "misses the measured outputs, fit a catalogue of model extensions (actuator, "
+                                   "sensor, process), name the cause that explains the held-out data, write the "
+                                   "extended model as a scenario file and measure its gain on held-out data.",
+                       epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
+    src = p.add_argument_group("data")
+    src.add_argument("--data", nargs="+", metavar="FILE", help="records to diagnose: interleaved blocks of each are "
+                                                              "fitted and held out")
+    src.add_argument("--fit", nargs="+", metavar="FILE", help="records to fit on")
+    src.add_argument("--validate", nargs="+", metavar="FILE", help="records held out for validation (with --fit)")
+    src.add_argument("--map", default=None, help="column map: a YAML file or a shipped name (ph_rig)")
+    src.add_argument("--column", action="append", default=[], metavar="SIGNAL=COLUMN",
+                     help="map one column (instead of --map)")
+    src.add_argument("--unit", action="append", default=[], metavar="SIGNAL=UNIT", help="unit of a --column")
+    src.add_argument("--dt", type=float, default=None, metavar="S", help="resample onto this sample time (s)")
+    mod = p.add_argument_group("model")
+    mod.add_argument("--model", default="paper", help="nominal model: scenario preset or .yaml (default: paper)")
+    mod.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                     help="override a model key, e.g. --set plant.tank.volume_ml=900 --set sensors.ph.lag_s=5")
+    mod.add_argument("--initial", choices=["steady", "fit"], default="steady",
+                     help="plant state at each record's start: steady state of its first inputs (default), or "
+                          "fitted (records that start mid-transient, e.g. titrations)")
+    how = p.add_argument_group("diagnosis")
+    how.add_argument("--candidates", nargs="+", default=None, metavar="CAUSE", help="restrict the catalogue")
+    how.add_argument("--no-pairs", action="store_true", help="do not fit pairs of candidates")
+    how.add_argument("--calibrate", nargs="+", default=None, metavar="KEY[=LOW:HIGH]",
+                     help="instead of diagnosing: estimate these model keys from the data and write the calibrated "
+                          "model (calibrated_model.yaml)")
+    how.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
+    how.add_argument("--out", default="out/diagnose", help="report folder (default: out/diagnose)")
+    how.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
+    how.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=run)
+
+
+def _map(args):
+    from phfdi.diagnosis.data import ColumnMap
+
+    if args.map and args.column:
+        raise UserError("give either --map or --column, not both")
+    if args.map:
+        path = Path(args.map)
+        if path.suffix not in (".yaml", ".yml"):
+            shipped = Path(str(resources.files("phfdi.diagnosis"))) / "maps" / f"{args.map}.yaml"
+            if not shipped.exists():
+                raise UserError(f"--map {args.map!r}: not a .yaml file nor a shipped map (ph_rig)")
+            path = shipped
+        return ColumnMap.from_yaml(path)
+    if args.column:
+        return ColumnMap.from_args(args.column, args.unit)
+    if args.unit:
+        raise UserError("--unit goes with --column")
+    return None
+
+
+def _records(files, cmap, dt):
+    from phfdi.diagnosis.data import load_record
+
+    return [load_record(f, cmap, dt) for f in files]
+
+
+def run(args: argparse.Namespace) -> int:
+    from phfdi.diagnosis.model import nominal_raw
+    from phfdi.diagnosis.pipeline import Options
+
+    if args.data and (args.fit or args.validate):
+        raise UserError("give --data, or --fit (and --validate), not both")
+    if not args.data and not args.fit:
+        raise UserError("no data: give --data FILE ... or --fit FILE ... [--validate FILE ...]")
+    if args.validate and not args.fit:
+        raise UserError("--validate needs --fit")
+    cmap = _map(args)
+    fit_records = _records(args.data or args.fit, cmap, args.dt)
+    val_records = _records(args.validate or [], cmap, args.dt)
+    nominal = nominal_raw(args.model, args.overrides)
+    progress = None if args.quiet else (lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True))
+    opts = Options(initial=args.initial, candidates=args.candidates, pairs=not args.no_pairs,
+                   workers=args.workers, progress=progress)
+    command = "phfdi " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv and "phfdi" in sys.argv[0] \
+        else ""
+    if args.calibrate:
+        return _calibrate(args, fit_records, val_records, nominal, opts)
+    from phfdi.diagnosis.output import terminal_summary, write_all
+    from phfdi.diagnosis.pipeline import diagnose
+    from phfdi.diagnosis.report import to_json
+
+    d = diagnose(fit_records, val_records, nominal, args.model, opts)
+    rep = write_all(d, args.out, args.model, command)
+    if args.json:
+        print(to_json(rep))
+    else:
+        print(terminal_summary(rep))
+    if rep["verdict"] == "not_identifiable":
+        print(f"phfdi diagnose: error: nothing identifiable: {rep['reason']}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _calibrate(args, fit_records, val_records, nominal, opts) -> int:
+    from phfdi.diagnosis.calibrate import calibrate
+    from phfdi.diagnosis.extend import write_model
+    from phfdi.diagnosis.report import clean, fmt_num, fmt_params
+
+    if all(r.constant_inputs() for r in fit_records + val_records) and args.initial == "steady":
+        raise UserError("nothing identifiable: every input is constant and the model starts at rest "
+                        "(use --initial fit for records that start mid-transient)")
+    cal = calibrate(fit_records, val_records, nominal, args.calibrate, opts)
+    out = Path(args.out)
+    header = (f"written by phfdi diagnose --calibrate: {args.model!r} with "
+              f"{fmt_params(cal.params, cal.intervals)}\n"
+              f"held-out NRMSE: " + ", ".join(f"{o} {fmt_num(cal.nominal[o], '.4f')} -> {fmt_num(cal.calibrated[o], '.4f')}"
+                                              for o in cal.nominal))
+    path = write_model(out / "calibrated_model.yaml", args.model, cal.raw, header,
+                       f"{Path(args.model).stem}-calibrated")
+    rep = clean({"model": args.model, "calibrated_model": str(path), "parameters": cal.params,
+                 "confidence_intervals": cal.intervals, "nrmse_nominal": cal.nominal,
+                 "nrmse_calibrated": cal.calibrated,
+                 "initial_ph": [s.ph for s in cal.starts] if args.initial == "fit" else None,
+                 "data": [r.name for r in cal.records], "notes": [n for r in cal.records for n in r.notes]})
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "calibration.json").write_text(json.dumps(rep, indent=2), encoding="utf-8")
+    if args.json:
+        print(json.dumps(rep, indent=2))
+    else:
+        print(f"calibrated {args.model} on {', '.join(rep['data'])}")
+        print(f"  {fmt_params(cal.params, cal.intervals)}")
+        for o in cal.nominal:
+            print(f"  held-out NRMSE {o}: {fmt_num(cal.nominal[o], '.4f')} -> {fmt_num(cal.calibrated[o], '.4f')}")
+        print(f"  wrote {path}")
+    return 0

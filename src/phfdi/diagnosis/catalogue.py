@@ -1,0 +1,293 @@
+"""The catalogue of model extensions a diagnosis tries.
+
+Each candidate is one cause of the shared catalogue
+(:data:`phfdi.diagnosis.report.CAUSES`) with its parameters, their search
+bounds and start points, and how it extends a model: every extension is an
+edit of the scenario mapping (a block in ``faults`` or ``sensors.ph.extra``,
+a changed valve or plant-model parameter, an extra feed), so the fitted model
+is a file the simulator loads.
+
+* actuator (the pH valve; needs the valve command in the data): stiction
+  (Kano), backlash, deadzone (about the first command), saturation,
+  coulomb_viscous_friction, leakage (flow blocks of ``valve_actuator``) and
+  valve_gain (the valve's maximum flow);
+* sensor (the pH probe; blocks of ``ph_plant_sim.sensors`` after the
+  model's own): sensor_delay, sensor_lag, sensor_bias, sensor_drift,
+  sensor_gain (about pH 7);
+* process (the plant model): buffer (a monoprotic weak acid of unknown pKa
+  carried by one feed, e.g. carbonate from CO2 absorbed by caustic),
+  reagent_concentration (one feed's concentrations scaled), holdup (vessel
+  area, or volume of an overflow vessel, scaled) and disturbance_flow (an
+  unmeasured extra inflow with one feed's composition, from an onset time).
+
+Candidates whose answer depends on a feed are tried once per feed
+("variants"); the best variant stands for the cause.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .report import CAUSES
+
+BUFFER_COMPONENT = "unmodelled_buffer"
+BUFFER_COMPOUND = "UNMODELLED_BUFFER"
+
+
+@dataclass(frozen=True)
+class Param:
+    """A fitted parameter: physical bounds, linear or logarithmic search scale."""
+
+    name: str
+    low: float
+    high: float
+    unit: str
+    log: bool = False
+
+    def to_unit(self, value: float) -> float:
+        """Physical value -> [0, 1] search coordinate."""
+        if self.log:
+            return (math.log(value) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
+        return (value - self.low) / (self.high - self.low)
+
+    def from_unit(self, u: float) -> float:
+        u = min(max(u, 0.0), 1.0)
+        if self.log:
+            return math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
+        return self.low + u * (self.high - self.low)
+
+    def clip(self, value: float) -> float:
+        return min(max(value, self.low), self.high)
+
+
+@dataclass
+class Context:
+    """What the candidates need to know of the nominal model and the data."""
+
+    feeds: list[str]
+    valve_feed: str
+    valve_max_flow_ml_s: float
+    overflow: bool
+    has_command: bool
+    command_pct: np.ndarray  # all records' commands, concatenated (empty without)
+    ph_range: tuple[float, float]
+    duration_s: float
+    dt_s: float
+    total_inflow_ml_s: float
+    feed_strength_mol_l: dict[str, float]  # largest component concentration per feed
+    outputs: set[str]
+
+
+@dataclass
+class Candidate:
+    """One cause (or one variant of it) with its parameters and how it edits a model."""
+
+    cause: str
+    params: list[Param]
+    starts: list[dict[str, float]]
+    apply: Callable[[dict, dict[str, float]], None]
+    main: str
+    variant: str = ""  # e.g. the feed a process candidate acts on
+    nonsmooth: bool = False  # piecewise in its parameters: coarser finite differences
+    fixed: dict = field(default_factory=dict)  # non-fitted settings reported with the parameters
+    #: half-width (% of span) of the band a valve with memory can rest in, from the parameters; the
+    #: rest point of each record becomes a nuisance parameter within it
+    band: Callable[[dict[str, float]], float] | None = None
+
+    @property
+    def family(self) -> str:
+        return CAUSES[self.cause]
+
+    @property
+    def label(self) -> str:
+        return f"{self.cause}[{self.variant}]" if self.variant else self.cause
+
+    @property
+    def stage(self) -> str:
+        """Which simulation stages the candidate changes (for cost ordering)."""
+        if self.family == "sensor":
+            return "sensor"
+        if self.cause in ("buffer", "reagent_concentration"):
+            return "chemistry"
+        return "flows"
+
+
+# ---- edits of a scenario mapping --------------------------------------------------
+def _add_fault(raw: dict, kind: str, params: dict, where: str = "valve") -> None:
+    raw.setdefault("faults", []).append({"type": kind, "where": where, "params": params, "onset_s": 0.0})
+
+
+def _add_sensor_block(raw: dict, kind: str, params: dict) -> None:
+    ph = raw.setdefault("sensors", {}).setdefault("ph", {})
+    ph.setdefault("extra", []).append({"type": kind, "params": params})
+
+
+def _spaced(low: float, high: float, n: int, log: bool = False) -> list[float]:
+    if log:
+        return [float(v) for v in np.geomspace(low, high, n + 2)[1:-1]]
+    return [float(v) for v in np.linspace(low, high, n + 2)[1:-1]]
+
+
+def actuator_candidates(ctx: Context) -> list[Candidate]:
+    cmd = ctx.command_pct
+    sat_low = min(max(float(np.min(cmd)), 1.0), 90.0)  # a stop below every command cannot be told from none
+    med_cmd = float(np.median(cmd))
+    lo_cmd, hi_cmd = float(np.min(cmd)), max(float(np.max(cmd)), float(np.min(cmd)) + 1.0)
+    qmax = ctx.valve_max_flow_ml_s
+    out = [
+        Candidate("stiction", [Param("s_pct", 0.05, 20.0, "%", log=True), Param("j_pct", 0.0, 20.0, "%")],
+                  [{"s_pct": s, "j_pct": s * f} for s in _spaced(0.3, 15.0, 6, log=True) for f in (0.1, 0.4, 0.7, 1.0)],
+                  lambda raw, p: _add_fault(raw, "stiction", {"s_pct": p["s_pct"], "j_pct": p["j_pct"]}),
+                  "s_pct", nonsmooth=True, band=lambda p: 0.5 * p["s_pct"]),
+        Candidate("backlash", [Param("width_pct", 0.02, 20.0, "%", log=True)],
+                  [{"width_pct": w} for w in _spaced(0.15, 15.0, 8, log=True)],
+                  lambda raw, p: _add_fault(raw, "backlash", {"width_pct": p["width_pct"]}),
+                  "width_pct", nonsmooth=True, band=lambda p: 0.5 * p["width_pct"]),
+        Candidate("deadzone", [Param("width_pct", 0.0, 100.0, "%"), Param("center_pct", lo_cmd, hi_cmd, "%")],
+                  [{"width_pct": w, "center_pct": c} for w in _spaced(0.5, 60.0, 5, log=True)
+                   for c in (float(np.quantile(cmd, 0.25)), med_cmd, float(np.quantile(cmd, 0.75)))],
+                  lambda raw, p: _add_fault(raw, "deadzone", {"width_pct": p["width_pct"],
+                                                              "center_pct": p["center_pct"]}),
+                  "width_pct", nonsmooth=True),
+        Candidate("saturation", [Param("high_pct", sat_low, 100.0, "%")],
+                  # where the commands are: a stop only shows when the data ask for more
+                  [{"high_pct": float(np.quantile(cmd, q))} for q in (0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.995)]
+                  + [{"high_pct": 100.0}],
+                  lambda raw, p: _add_fault(raw, "saturation", {"low_pct": 0.0, "high_pct": p["high_pct"]}),
+                  "high_pct", nonsmooth=True, fixed={"low_pct": 0.0}),
+        Candidate("coulomb_viscous_friction",
+                  [Param("coulomb_pct", 0.0, 20.0, "%"), Param("mobility_per_s", 1e-3, 10.0, "1/s", log=True)],
+                  [{"coulomb_pct": c, "mobility_per_s": m} for c in _spaced(0.15, 8.0, 5, log=True)
+                   for m in (0.02, 0.1, 1.0)],
+                  lambda raw, p: _add_fault(raw, "coulomb_viscous_friction",
+                                            {"coulomb_pct": p["coulomb_pct"], "mobility_per_s": p["mobility_per_s"]}),
+                  "coulomb_pct", nonsmooth=True, band=lambda p: p["coulomb_pct"]),
+        Candidate("leakage", [Param("flow_ml_s", 0.0, 0.5 * qmax, "mL/s")],
+                  [{"flow_ml_s": f * qmax} for f in (0.0, 0.005, 0.02, 0.08)],
+                  lambda raw, p: _add_fault(raw, "leakage", {"flow_ml_s": p["flow_ml_s"]}, "valve_flow"),
+                  "flow_ml_s"),
+        Candidate("valve_gain", [Param("gain", 0.25, 4.0, "1", log=True)],
+                  [{"gain": g} for g in (0.8, 1.25)],
+                  lambda raw, p: _scale_valve(raw, p["gain"]), "gain"),
+    ]
+    return out
+
+
+def _scale_valve(raw: dict, gain: float) -> None:
+    v = raw["valves"]["ph"]
+    v["max_flow_ml_s"] = v["max_flow_ml_s"] * gain
+
+
+def sensor_candidates(ctx: Context) -> list[Candidate]:
+    span = ctx.duration_s
+    longest = max(5.0 * ctx.dt_s, min(600.0, span / 5.0))
+    starts_s = sorted({min(longest * 0.9, max(ctx.dt_s, s)) for s in (1.0, 5.0, 20.0, 80.0)})
+    return [
+        Candidate("sensor_delay", [Param("delay_s", 0.0, longest, "s")], [{"delay_s": s} for s in starts_s],
+                  lambda raw, p: _add_sensor_block(raw, "sensor_delay", {"delay_s": p["delay_s"]}), "delay_s"),
+        Candidate("sensor_lag", [Param("tau_s", 0.0, longest, "s")], [{"tau_s": s} for s in starts_s],
+                  lambda raw, p: _add_sensor_block(raw, "sensor_lag", {"tau_s": p["tau_s"]}), "tau_s"),
+        Candidate("sensor_bias", [Param("bias", -3.0, 3.0, "pH")], [{"bias": 0.0}],
+                  lambda raw, p: _add_sensor_block(raw, "sensor_bias", {"bias": p["bias"]}), "bias"),
+        Candidate("sensor_drift", [Param("rate_per_s", -3.0 / span, 3.0 / span, "pH/s")], [{"rate_per_s": 0.0}],
+                  lambda raw, p: _add_sensor_block(raw, "sensor_drift", {"rate_per_s": p["rate_per_s"]}),
+                  "rate_per_s"),
+        Candidate("sensor_gain", [Param("gain", 0.4, 2.5, "1", log=True)], [{"gain": 1.0}],
+                  lambda raw, p: _add_sensor_block(raw, "sensor_gain", {"gain": p["gain"], "reference": 7.0}),
+                  "gain", fixed={"reference": 7.0}),
+    ]
+
+
+def _add_buffer(raw: dict, feed: str, conc: float, pka: float) -> None:
+    chem = raw["plant"].setdefault("chemistry", {})
+    chem.setdefault("components", []).append({"name": BUFFER_COMPONENT, "charge": 0, "pka": [pka]})
+    chem.setdefault("compounds", {})[BUFFER_COMPOUND] = {BUFFER_COMPONENT: 1.0}
+    raw["plant"]["feeds"][feed]["recipe"][BUFFER_COMPOUND] = conc
+
+
+def _scale_feed(raw: dict, feed: str, factor: float) -> None:
+    recipe = raw["plant"]["feeds"][feed]["recipe"]
+    for k in recipe:
+        recipe[k] = recipe[k] * factor
+
+
+def _scale_holdup(raw: dict, factor: float) -> None:
+    tank = raw["plant"]["tank"]
+    if tank.get("overflow"):
+        tank["volume_ml"] = tank["volume_ml"] * factor
+    else:
+        tank["area_cm2"] = tank["area_cm2"] * factor
+
+
+def _add_disturbance(raw: dict, feed: str, flow: float, onset: float, dt_s: float) -> None:
+    feeds = raw["plant"]["feeds"]
+    name = f"{feed}_disturbance"
+    feeds[name] = {"recipe": dict(feeds[feed]["recipe"]), "flow_ml_s": 0.0}
+    # a ramp over one sample makes the response continuous in the onset time
+    raw.setdefault("feeds", {})[name] = {"initial": 0.0, "changes": [{"at_s": onset, "value": flow, "ramp_s": dt_s}]}
+
+
+def process_candidates(ctx: Context) -> list[Candidate]:
+    lo_ph, hi_ph = ctx.ph_range
+    pka_lo, pka_hi = max(0.5, lo_ph - 1.0), min(13.5, hi_ph + 1.0)
+    pka_starts = _spaced(max(pka_lo, lo_ph - 0.5), min(pka_hi, hi_ph + 0.5), 4)
+    out: list[Candidate] = []
+    for feed in ctx.feeds:
+        strength = ctx.feed_strength_mol_l.get(feed, 0.0) or 1e-3
+        out.append(Candidate(
+            "buffer", [Param("conc_mol_l", strength * 1e-4, strength * 10.0, "mol/L", log=True),
+                       Param("pka", pka_lo, pka_hi, "pH")],
+            [{"conc_mol_l": strength * f, "pka": p} for p in pka_starts for f in (0.05, 0.3)],
+            lambda raw, p, feed=feed: _add_buffer(raw, feed, p["conc_mol_l"], p["pka"]), "pka", variant=feed))
+    for feed in ctx.feeds:
+        out.append(Candidate(
+            "reagent_concentration", [Param("factor", 0.2, 5.0, "1", log=True)],
+            [{"factor": f} for f in (0.75, 1.33)],
+            lambda raw, p, feed=feed: _scale_feed(raw, feed, p["factor"]), "factor", variant=feed))
+    out.append(Candidate(
+        "holdup", [Param("factor", 0.2, 5.0, "1", log=True)], [{"factor": f} for f in (0.6, 1.6)],
+        lambda raw, p: _scale_holdup(raw, p["factor"]), "factor",
+        fixed={"acts_on": "volume_ml" if ctx.overflow else "area_cm2"}))
+    q_total = max(ctx.total_inflow_ml_s, 1e-3)
+    onsets = [ctx.duration_s * f for f in (0.0, 0.15, 0.3, 0.45, 0.6, 0.75, 0.9)]
+    for feed in ctx.feeds:
+        out.append(Candidate(
+            "disturbance_flow", [Param("flow_ml_s", 0.0, 0.5 * q_total, "mL/s"),
+                                 Param("onset_s", 0.0, ctx.duration_s * 0.98, "s")],
+            [{"flow_ml_s": 0.0, "onset_s": 0.0}] + [{"flow_ml_s": 0.05 * q_total, "onset_s": t} for t in onsets],
+            lambda raw, p, feed=feed: _add_disturbance(raw, feed, p["flow_ml_s"], p["onset_s"], ctx.dt_s),
+            "flow_ml_s", variant=feed))
+    return out
+
+
+def catalogue(ctx: Context, only: list[str] | None = None) -> tuple[list[Candidate], dict[str, str]]:
+    """Candidates that apply to this model and data, and why the others do not."""
+    skipped: dict[str, str] = {}
+    cands: list[Candidate] = []
+    if ctx.has_command:
+        cands += actuator_candidates(ctx)
+    else:
+        for c in ("stiction", "backlash", "deadzone", "saturation", "coulomb_viscous_friction", "leakage",
+                  "valve_gain"):
+            skipped[c] = f"the data has the {ctx.valve_feed} flow, not the valve command: the valve is not modelled"
+    if "ph_measured" in ctx.outputs:
+        cands += sensor_candidates(ctx)
+    else:
+        for c in ("sensor_delay", "sensor_lag", "sensor_bias", "sensor_drift", "sensor_gain"):
+            skipped[c] = "no pH measurement in the data"
+    cands += process_candidates(ctx)
+    if only:
+        unknown = [c for c in only if c not in CAUSES or c == "none"]
+        if unknown:
+            from phfdi.errors import UserError
+
+            raise UserError(f"unknown candidate {unknown[0]!r}; catalogue: "
+                            f"{', '.join(c for c in CAUSES if c != 'none')}")
+        for c in {c.cause for c in cands} - set(only):
+            skipped.setdefault(c, "not requested (--candidates)")
+        cands = [c for c in cands if c.cause in only]
+    return cands, skipped

@@ -1,0 +1,455 @@
+"""Model diagnosis: what the nominal model gets wrong, which cause explains it, and the gain.
+
+:func:`diagnose` takes measured records and a nominal model (a scenario
+mapping) and
+
+1. simulates the nominal model open loop on each record and analyses the
+   residual (:mod:`.residual`);
+2. fits every catalogue candidate (:mod:`.catalogue`, :mod:`.fit`) on the
+   training samples, in worker processes, and scores it on held-out samples
+   (interleaved blocks of each record, or separate validation records);
+3. decides (the rules, with their thresholds in :class:`Options`):
+
+   * a candidate *counts* when its held-out squared error is significantly
+     below the nominal's (batch-means t-test, p < ``alpha``) and it lowers
+     the held-out RMSE by at least ``min_gain``;
+   * the winner is the counting candidate with the lowest held-out error;
+     a candidate with fewer parameters that the winner does not beat
+     significantly (p < 0.05) takes its place (stiction with J = 0 *is*
+     backlash);
+   * ``explained`` when the winner's held-out error is at the noise floor:
+     within ``floor_ratio`` (1.1) times it, or within ``explained_ratio``
+     (1.5) times it and white (Ljung-Box p >= ``whiteness_alpha``);
+     otherwise pairs of the best single candidates are fitted, and if none
+     gets there, ``not_explained`` with the closest family and its honest
+     gain;
+   * ``none`` when the nominal model is already within ``explained_ratio`` of
+     the noise floor, or no candidate counts and the misfit is small;
+   * ``not_identifiable`` when no input moves (and the records start at rest).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+
+from .catalogue import Context
+from .data import Record
+from .fit import FitResult, Fitter, Problem, fit_task, init_worker
+from .model import Evaluator, Prediction
+from .report import check_report, family_of
+from .residual import analyse, noise_floor, significance, significance_f
+
+UNITS = {"ph_measured": "pH", "level_measured_cm": "cm"}
+
+
+@dataclass
+class Options:
+    initial: str = "steady"
+    candidates: list[str] | None = None
+    pairs: bool = True
+    workers: int | None = None
+    blocks: int = 8  # interleaved train/validation blocks when no validation record is given
+    alpha: float = 0.01
+    min_gain: float = 0.05
+    explained_ratio: float = 1.5
+    floor_ratio: float = 1.1  # within this of the noise floor, what structure is left is below 17 % of the error
+    whiteness_alpha: float = 1e-3  # Ljung-Box p-value below which a held-out error still has structure
+    progress: Callable[[str], None] | None = None
+
+
+@dataclass
+class Diagnosis:
+    """The report (JSON-ready) and what the figures need."""
+
+    report: dict
+    records: list[Record] = field(default_factory=list)
+    train: list[np.ndarray] = field(default_factory=list)
+    val: list[np.ndarray] = field(default_factory=list)
+    nominal: list[Prediction] = field(default_factory=list)
+    extended: list[Prediction] | None = None
+    extended_raw: dict | None = None
+    noise: dict = field(default_factory=dict)
+    extended_starts: list = field(default_factory=list)
+
+
+def _say(opts: Options, text: str) -> None:
+    if opts.progress is not None:
+        opts.progress(text)
+
+
+def split(records_fit: list[Record], records_val: list[Record], blocks: int):
+    """Records and per-record train/validation masks."""
+    if records_val:
+        records = records_fit + records_val
+        train = [np.ones(len(r), bool) for r in records_fit] + [np.zeros(len(r), bool) for r in records_val]
+        val = [np.zeros(len(r), bool) for r in records_fit] + [np.ones(len(r), bool) for r in records_val]
+        note = (f"fitted on {', '.join(r.name for r in records_fit)}; validated on "
+                f"{', '.join(r.name for r in records_val)}")
+        return records, train, val, note
+    train, val = [], []
+    for r in records_fit:
+        block = (np.arange(len(r)) * blocks) // len(r)
+        train.append(block % 2 == 0)
+        val.append(block % 2 == 1)
+    note = (f"each record cut into {blocks} interleaved blocks: blocks 1, 3, 5, ... fitted, 2, 4, 6, ... held out "
+            f"(the simulation runs through all; held-out measurements are never fitted)")
+    return list(records_fit), train, val, note
+
+
+def context_for(nominal: dict, records: list[Record], outputs: list[str]) -> Context:
+    """What the catalogue needs to set its bounds and start points: the nominal model and the data's ranges."""
+    from phfdi.loop import build_plant
+    from phfdi.scenario import PlantModelSpec, load_plant_model
+
+    model = load_plant_model(PlantModelSpec.model_validate(nominal["plant"]))
+    plant = build_plant(model)
+    feeds = [f.name for f in plant.feeds]
+    valve = nominal["valves"]["ph"]
+    has_cmd = all("valve_command_pct" in r.inputs for r in records)
+    cmd = np.concatenate([r.inputs["valve_command_pct"] for r in records]) if has_cmd else np.zeros(0)
+    phs = np.concatenate([r.outputs["ph_measured"] for r in records if "ph_measured" in r.outputs] or [np.zeros(1)])
+    ev = Evaluator(records[0], nominal)
+    flows = ev.flows(ev.nominal_spec)[0]  # the nominal feeds' flows: the scale of a disturbance
+    strength = {f.name: max(c for c in conc) if conc else 0.0 for f, conc in zip(plant.feeds, plant.feed_conc)}
+    return Context(
+        feeds=feeds, valve_feed=valve["feed"], valve_max_flow_ml_s=float(valve["max_flow_ml_s"]),
+        overflow=plant.tank.overflow, has_command=has_cmd,
+        command_pct=cmd, ph_range=(float(np.quantile(phs, 0.01)), float(np.quantile(phs, 0.99))),
+        duration_s=max(float(r.time_s[-1] - r.time_s[0]) for r in records), dt_s=records[0].dt_s,
+        total_inflow_ml_s=float(np.mean(flows.sum(axis=1))), feed_strength_mol_l=strength, outputs=set(outputs))
+
+
+def _identifiable(records: list[Record], initial: str, noise: dict) -> str | None:
+    """Why nothing can be identified, or None."""
+    moving = [r for r in records if not r.constant_inputs()]
+    if moving:
+        return None
+    names = ", ".join(sorted({k for r in records for k in r.inputs}))
+    if initial == "steady":
+        return (f"every input ({names}) is constant over the data and the model starts at rest: the data cannot "
+                f"tell one model from another, so no cause is named (give a record in which the inputs move, or "
+                f"--initial fit for a record that starts away from steady state)")
+    for r in records:
+        for o, y in r.outputs.items():
+            if float(np.std(y)) > 3.0 * noise.get(o, 0.0):
+                return None
+    return (f"every input ({names}) is constant and no output moves beyond its noise: nothing to identify, "
+            f"no cause is named")
+
+
+def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict, model_name: str,
+             options: Options | None = None) -> Diagnosis:
+    opts = options or Options()
+    t_start = time.perf_counter()
+    for rec in records_fit + records_val:
+        _drop_unknown_feeds(rec, nominal)
+    records, train, val, split_note = split(records_fit, records_val, opts.blocks)
+    outputs = [o for o in ("ph_measured", "level_measured_cm") if any(o in r.outputs for r in records)]
+    noise = {o: float(np.median([noise_floor(r.outputs[o]) for r in records if o in r.outputs])) for o in outputs}
+    scale = {o: float(np.std(np.concatenate([r.outputs[o] for r in records if o in r.outputs]))) or 1.0
+             for o in outputs}
+    notes = [f"{r.name}: {n}" for r in records for n in r.notes] + [split_note]
+    why = _identifiable(records, opts.initial, noise)
+    if why is not None:
+        report = _base_report(model_name, records, outputs, noise, notes)
+        report.update({"verdict": "not_identifiable", "cause": "none", "family": "none", "parameters": {},
+                       "confidence": None, "nrmse_nominal": None, "nrmse_extended": None, "gain_percent": None,
+                       "ranking": [], "reason": why})
+        return Diagnosis(check_report(report), records, train, val, noise=noise)
+    ctx = context_for(nominal, records, outputs)
+    problem = Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, opts.candidates)
+    local = Fitter(problem)
+    _say(opts, "simulating the nominal model")
+    nom = local.nominal()
+    nominal_preds = [local.predict(i, nominal, nom.starts[i]) for i in range(len(records))]
+    misfit = _misfit(records, nominal_preds, outputs, noise)
+    labels = sorted(local.candidates, key=lambda lab: _cost_rank(local.candidates[lab]))
+    _say(opts, f"fitting {len(labels)} candidates ({len(set(c.cause for c in local.candidates.values()))} causes)")
+    results, pairs = _run_fits(problem, labels, nom, opts, local)
+    report = _decide(nom, results, pairs, local, opts)
+    winner: FitResult | None = report.pop("_winner")
+    extended_preds = None
+    if winner is not None and report.get("_write"):
+        extended_preds = [local.predict(i, winner.raw, winner.starts[i]) for i in range(len(records))]
+    report.pop("_write", None)
+    base = _base_report(model_name, records, outputs, noise, notes)
+    base.update(report)
+    base["misfit"] = misfit
+    base["nominal"] = {"validation": _val_summary(nom, noise), "train_sse": nom.train_sse,
+                       "combined_rmse_over_noise": math.sqrt(nom.val_cost),
+                       "initial_ph": [s.ph for s in nom.starts] if opts.initial == "fit" else None}
+    base["initial"] = opts.initial
+    base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio,
+                          "floor_ratio": opts.floor_ratio, "whiteness_alpha": opts.whiteness_alpha}
+    if winner is not None and extended_preds is not None:
+        base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
+                                      "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
+                                      if nom.val_nrmse[o] else None} for o in outputs}
+    base["skipped"] = local.skipped
+    base["seconds"] = time.perf_counter() - t_start
+    base["candidates_fitted"] = len(results) + len(pairs)
+    return Diagnosis(check_report(base), records, train, val, nominal_preds, extended_preds,
+                     winner.raw if winner is not None and extended_preds is not None else None, noise,
+                     winner.starts if winner is not None else [])
+
+
+def _drop_unknown_feeds(rec: Record, nominal: dict) -> None:
+    """Flows of feeds the model does not have are not inputs of it: set aside, and said."""
+    feeds = set(nominal["plant"]["feeds"])
+    valve_feed = nominal["valves"]["ph"]["feed"]
+    for name in [k for k in rec.inputs if k.endswith("_flow_ml_s")]:
+        feed = name[: -len("_flow_ml_s")]
+        if feed not in feeds:
+            del rec.inputs[name]
+            rec.notes.append(f"{name} ignored: the model has no feed {feed!r}")
+        elif feed == valve_feed and "valve_command_pct" in rec.inputs:
+            rec.notes.append(f"{name} not used as an input: the model's valve delivers it from valve_command_pct "
+                             f"(so the valve can be diagnosed)")
+
+
+def _base_report(model_name: str, records: list[Record], outputs: list[str], noise: dict, notes: list[str]) -> dict:
+    return {"model": model_name,
+            "data": [{"name": r.name, "samples": len(r), "sample_time_s": r.dt_s,
+                      "duration_s": float(r.time_s[-1] - r.time_s[0]), "inputs": sorted(r.inputs),
+                      "outputs": sorted(r.outputs)} for r in records],
+            "outputs": outputs, "main_output": outputs[0], "noise_floor": noise, "notes": notes}
+
+
+def _cost_rank(c) -> tuple:
+    order = {"flows": 0, "chemistry": 1, "sensor": 2}
+    return (order[c.stage], -len(c.starts), c.label)
+
+
+def _misfit(records, preds, outputs, noise) -> list[dict]:
+    out = []
+    for rec, pred in zip(records, preds):
+        for o in outputs:
+            if o not in rec.outputs:
+                continue
+            a = analyse(rec.outputs[o], pred.outputs[o], rec.time_s, rec.inputs, noise[o], UNITS[o])
+            a.update({"record": rec.name, "output": o})
+            out.append(a)
+    return out
+
+
+def _val_summary(r: FitResult, noise: dict) -> dict:
+    return {o: {"rmse": r.val_rmse[o], "nrmse": r.val_nrmse[o],
+                "rmse_over_noise": r.val_rmse[o] / noise[o] if math.isfinite(r.val_rmse[o]) else None}
+            for o in r.val_rmse}
+
+
+def _workers(opts: Options, tasks: int) -> int:
+    n = opts.workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    return max(1, min(n, tasks))
+
+
+def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options, local: Fitter):
+    """Fit every candidate; when the best leaves structure, try pairs of the best ones."""
+    workers = _workers(opts, len(labels))
+    t0 = time.perf_counter()
+
+    def note(i: int, total: int, r: FitResult) -> None:
+        _say(opts, f"  {i}/{total} {r.label}: held-out error {math.sqrt(r.val_cost):.3g} x noise "
+                   f"({r.seconds:.1f} s, {time.perf_counter() - t0:.0f} s elapsed)")
+
+    def run_all(pool, jobs: list[tuple]) -> list[FitResult]:
+        out = []
+        if pool is None:
+            for i, (fn, args) in enumerate(jobs, 1):
+                out.append(_local_call(local, fn, args))
+                note(i, len(jobs), out[-1])
+            return out
+        futures = [pool.submit(fn, *args) for fn, args in jobs]
+        for i, fut in enumerate(as_completed(futures), 1):
+            out.append(fut.result())
+            note(i, len(jobs), out[-1])
+        return out
+
+    pool = None if workers == 1 else ProcessPoolExecutor(max_workers=workers, initializer=init_worker,
+                                                         initargs=(problem,))
+    try:
+        results = run_all(pool, [(fit_task, ([lab],)) for lab in labels])
+        pair_tasks = _pair_tasks(results, nom, opts)
+        pairs = []
+        if pair_tasks:
+            _say(opts, f"fitting {len(pair_tasks)} pairs (the best single candidate leaves structure)")
+            pairs = run_all(pool, [(fit_task, (labs, starts)) for labs, starts in pair_tasks])
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return results, pairs
+
+
+def _local_call(local: Fitter, fn, args) -> FitResult:
+    labs, *rest = args
+    return local.fit([local.candidates[x] for x in labs], *rest)
+
+
+def _explained(r: FitResult, opts: Options) -> bool:
+    """At the noise floor: held-out RMS error within ``floor_ratio`` of it, or within ``explained_ratio`` of it
+    with no structure left (Ljung-Box p >= ``whiteness_alpha``)."""
+    ratio = math.sqrt(r.val_cost)
+    return ratio <= opts.floor_ratio or (ratio <= opts.explained_ratio and r.val_whiteness_p >= opts.whiteness_alpha)
+
+
+def _best_per_cause(results: list[FitResult]) -> list[FitResult]:
+    best: dict[str, FitResult] = {}
+    for r in results:
+        if r.cause not in best or r.val_cost < best[r.cause].val_cost:
+            best[r.cause] = r
+    return sorted(best.values(), key=lambda r: r.val_cost)
+
+
+def _counts(r: FitResult, ref: FitResult, opts: Options) -> tuple[bool, float, float]:
+    """(counts, p-value, RMSE gain) of a candidate against a reference on held-out samples.
+
+    The p-value is the smaller of two tests (batch means, robust to coloured errors but weak when few
+    stretches carry the misfit; F with the candidate's error as noise model, strong when it leaves white
+    noise), times two for the choice (Bonferroni).
+    """
+    p = min(1.0, 2.0 * min(significance(ref.val_sq, r.val_sq),
+                           significance_f(ref.val_sq, r.val_sq, r.val_lag1, max(r.n_params - ref.n_params, 1))))
+    gain = 1.0 - math.sqrt(r.val_cost / ref.val_cost) if ref.val_cost > 0 else 0.0
+    return p < opts.alpha and gain >= opts.min_gain, p, gain
+
+
+def _pair_tasks(results: list[FitResult], nom: FitResult, opts: Options) -> list[tuple[list[str], list[dict]]]:
+    if not opts.pairs:
+        return []
+    ranked = _best_per_cause(results)
+    if not ranked or math.sqrt(nom.val_cost) <= opts.explained_ratio:
+        return []
+    best = ranked[0]
+    if _explained(best, opts) or not _counts(best, nom, opts)[0]:
+        return []
+    top = [r for r in ranked[:4] if _counts(r, nom, opts)[0]]
+    tasks = []
+    for i in range(len(top)):
+        for j in range(i + 1, len(top)):
+            a, b = top[i], top[j]
+            start = dict(a.params)
+            start.update(b.params)
+            tasks.append(([a.label, b.label], [start]))
+    return tasks
+
+
+def _entry(r: FitResult, nom: FitResult, main: str, noise: dict, opts: Options) -> dict:
+    counts, p, gain = _counts(r, nom, opts)
+    params = dict(r.params)
+    return {"cause": r.cause, "family": family_of(r.cause), "parameters": params,
+            "confidence_intervals": r.intervals, "fixed": r.fixed, "main_parameter": r.main,
+            "identified": r.identified, "nrmse_validation": r.val_nrmse.get(main),
+            "nrmse_validation_by_output": r.val_nrmse,
+            "validation_rmse_over_noise": math.sqrt(r.val_cost), "validation_whiteness_p": r.val_whiteness_p,
+            "gain_percent": 100.0 * gain, "p_value_vs_nominal": p, "counts": counts,
+            "aic": r.aic, "bic": r.bic, "n_params": r.n_params, "seconds": r.seconds}
+
+
+def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], local: Fitter,
+            opts: Options) -> dict:
+    main = local.p.outputs[0]
+    noise = local.p.noise
+    ranked = _best_per_cause(results)
+    ranking = [_entry(r, nom, main, noise, opts) for r in ranked]
+    pair_entries = [_entry(r, nom, main, noise, opts) for r in sorted(pairs, key=lambda r: r.val_cost)]
+    nom_ratio = math.sqrt(nom.val_cost)
+    counting = [r for r in ranked if _counts(r, nom, opts)[0]]
+    out: dict = {"ranking": ranking, "pairs": pair_entries, "_winner": None}
+    nominal_main = nom.val_nrmse.get(main)
+
+    def finish(verdict: str, winner: FitResult | None, confidence: float | None, reason: str, write: bool):
+        out.update({"verdict": verdict, "reason": reason, "confidence": confidence,
+                    "nrmse_nominal": nominal_main})
+        if winner is None:
+            out.update({"cause": "none", "family": "none", "parameters": {}, "confidence_intervals": {},
+                        "nrmse_extended": None, "gain_percent": None})
+        else:
+            ext = winner.val_nrmse.get(main)
+            out.update({"cause": winner.cause, "family": family_of(winner.cause), "parameters": winner.params,
+                        "confidence_intervals": winner.intervals, "fixed": winner.fixed,
+                        "nrmse_extended": ext,
+                        "gain_percent": 100.0 * (1.0 - ext / nominal_main) if nominal_main else None,
+                        "validation_rmse_over_noise": math.sqrt(winner.val_cost)})
+            out["_winner"] = winner
+        out["_write"] = write
+        return out
+
+    if nom_ratio <= opts.explained_ratio:
+        conf = _none_confidence(nom, ranked, opts)
+        return finish("none", None, conf,
+                      f"the nominal model's held-out error is {nom_ratio:.2f} x the noise floor (at most "
+                      f"{opts.explained_ratio} counts as noise): nothing significant to explain", False)
+    if not counting:
+        # the closest cause is the one that lowers the held-out error most; a fit that went back to the nominal
+        # model (a zero flow, a unit gain) is no cause
+        improving = [r for r in ranked if r.val_cost < nom.val_cost * (1.0 - 1e-3) ** 2]
+        conf = _none_confidence(nom, ranked, opts)
+        if not improving:
+            best = f"; best: {ranked[0].cause} ({100 * _counts(ranked[0], nom, opts)[2]:+.1f} %)" if ranked else ""
+            return finish("not_explained", None, conf,
+                          f"the nominal model misses ({nom_ratio:.2f} x the noise floor held out) and no catalogue "
+                          f"candidate lowers its held-out error{best}; no extended model is claimed", False)
+        closest = improving[0]
+        c, p, gain = _counts(closest, nom, opts)
+        return finish("not_explained", closest, conf,
+                      f"the nominal model misses ({nom_ratio:.2f} x the noise floor held out) but no candidate "
+                      f"lowers the held-out error significantly by {100 * opts.min_gain:.0f} % or more; closest: "
+                      f"{closest.cause} ({100 * gain:+.1f} %, p = {p:.2g}); no extended model is claimed", False)
+    winner = _parsimonious(counting, opts)
+    pool = [winner] + [p for p in pairs if _counts(p, winner, opts)[0]]
+    best_pair = min((p for p in pool[1:]), key=lambda r: r.val_cost, default=None)
+    explained = _explained(winner, opts)
+    if not explained and best_pair is not None:
+        winner = best_pair
+        explained = _explained(winner, opts)
+    runner = next((r for r in ranked if r.cause != winner.cause and r.cause not in winner.cause.split("+")), None)
+    conf = 1.0 - _better_p(winner, runner) if runner is not None else 1.0 - _better_p(winner, nom)
+    ratio = math.sqrt(winner.val_cost)
+    gain = 100.0 * (1.0 - winner.val_nrmse[main] / nominal_main) if nominal_main else math.nan
+    margin = ""
+    if runner is not None:
+        margin = (f"; runner-up {runner.cause} ({math.sqrt(runner.val_cost):.2f} x noise, "
+                  f"confidence {conf:.2f} that {winner.cause} is better)")
+    if explained:
+        return finish("explained", winner, conf,
+                      f"{winner.cause} brings the held-out error from {nom_ratio:.2f} to {ratio:.2f} x the noise "
+                      f"floor ({gain:+.0f} % NRMSE on {main}){margin}", True)
+    return finish("not_explained", winner, conf,
+                  f"no candidate explains the misfit: the closest, {winner.cause}, lowers the held-out error "
+                  f"from {nom_ratio:.2f} to {ratio:.2f} x noise ({gain:+.0f} % NRMSE on {main}) but "
+                  f"{'its error still has structure (Ljung-Box p = ' + format(winner.val_whiteness_p, '.2g') + ')' if ratio <= opts.explained_ratio else 'stays above the noise floor'}"
+                  f"{margin}", True)
+
+
+def _parsimonious(counting: list[FitResult], opts: Options) -> FitResult:
+    """Best held-out error, unless a simpler candidate is not significantly worse."""
+    best = counting[0]
+    simpler = [r for r in counting[1:] if r.n_params < best.n_params and _better_p(best, r) >= 0.05]
+    return min(simpler, key=lambda r: (r.n_params, r.val_cost)) if simpler else best
+
+
+def _better_p(a: FitResult, b: FitResult) -> float:
+    """p-value that ``a`` is not better than ``b`` on held-out samples (both tests, Bonferroni)."""
+    return min(1.0, 2.0 * min(significance(b.val_sq, a.val_sq),
+                              significance_f(b.val_sq, a.val_sq, a.val_lag1, max(a.n_params - b.n_params, 1))))
+
+
+def _none_confidence(nom: FitResult, ranked: list[FitResult], opts: Options) -> float | None:
+    if not ranked:
+        return None
+    return 1.0 - _margin_p(nom, ranked[0], opts.min_gain)
+
+
+def _margin_p(nom: FitResult, cand: FitResult, min_gain: float) -> float:
+    """p-value that the candidate lowers the squared error by at least the margin ((1 - g)^2 of nominal's)."""
+    keep = (1.0 - min_gain) ** 2
+    # H0 for "none": the candidate's squared error is below keep * nominal's; reject it when it is not
+    return significance(cand.val_sq, nom.val_sq * keep)

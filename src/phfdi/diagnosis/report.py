@@ -1,0 +1,150 @@
+"""The diagnosis report format shared by ``phfdi diagnose`` and ``phfdi loop-diagnose``.
+
+Both commands answer the same question (what does the model get wrong, and
+which catalogued cause explains it) and emit the same JSON keys:
+
+``verdict``
+    ``explained`` (a catalogued cause brings the held-out misfit down to the
+    noise floor), ``not_explained`` (a misfit remains; ``cause`` is then the
+    closest candidate and its family), ``none`` (nothing significant to
+    explain) or ``not_identifiable`` (the data cannot tell: constant inputs).
+``cause``, ``family``
+    catalogue identifier (:data:`CAUSES`; pairs are joined with ``+``) and its
+    family (``actuator``, ``sensor``, ``process``, or ``none``).
+``parameters``
+    fitted values of the winner, ``{name: value}`` in the units of the block.
+``confidence``
+    number in [0, 1]: one minus the p-value of the held-out comparison between
+    the answer and the best alternative answer (the runner-up cause, or for
+    ``none`` the best candidate's gain); ``None`` when not applicable.
+``nrmse_nominal``, ``nrmse_extended``, ``gain_percent``
+    held-out NRMSE (root-mean-square error over the standard deviation of the
+    measurement) of the main output for the nominal and the extended model,
+    and 100 (1 - extended / nominal).
+``ranking``
+    every candidate, best first: ``cause``, ``family``, ``parameters``,
+    ``confidence_intervals`` (``{name: [low, high]}``, 95 %),
+    ``nrmse_validation``, ``aic``, ``bic`` (training, Gaussian likelihood),
+    and any extra keys a command adds.
+``reason``
+    one sentence that says why this verdict.
+
+This module holds the vocabulary and formatting only; it computes nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+#: verdicts, in the order a reader meets them
+VERDICTS = ("explained", "not_explained", "none", "not_identifiable")
+
+#: catalogue identifier -> family
+CAUSES: dict[str, str] = {
+    "stiction": "actuator",
+    "backlash": "actuator",
+    "deadzone": "actuator",
+    "saturation": "actuator",
+    "coulomb_viscous_friction": "actuator",
+    "leakage": "actuator",
+    "valve_gain": "actuator",
+    "sensor_delay": "sensor",
+    "sensor_lag": "sensor",
+    "sensor_bias": "sensor",
+    "sensor_drift": "sensor",
+    "sensor_gain": "sensor",
+    "buffer": "process",
+    "reagent_concentration": "process",
+    "holdup": "process",
+    "disturbance_flow": "process",
+    "none": "none",
+}
+
+FAMILIES = ("actuator", "sensor", "process", "none")
+
+#: keys every report carries (commands may add more)
+REPORT_KEYS = ("verdict", "cause", "family", "parameters", "confidence", "nrmse_nominal", "nrmse_extended",
+               "gain_percent", "ranking", "reason")
+
+#: keys every ranking entry carries
+RANKING_KEYS = ("cause", "family", "parameters", "confidence_intervals", "nrmse_validation", "aic", "bic")
+
+
+def family_of(cause: str) -> str:
+    """Family of a cause or of a pair ``a+b`` (``actuator+sensor``; one name when both agree)."""
+    parts = cause.split("+")
+    fams = []
+    for p in parts:
+        if p not in CAUSES:
+            raise ValueError(f"unknown cause {p!r}; catalogue: {', '.join(CAUSES)}")
+        if CAUSES[p] not in fams:
+            fams.append(CAUSES[p])
+    return "+".join(fams)
+
+
+def check_report(report: dict) -> dict:
+    """Raise ValueError if a report lacks a shared key or uses an unknown verdict/cause."""
+    missing = [k for k in REPORT_KEYS if k not in report]
+    if missing:
+        raise ValueError(f"report lacks {', '.join(missing)}")
+    if report["verdict"] not in VERDICTS:
+        raise ValueError(f"unknown verdict {report['verdict']!r}; use one of {', '.join(VERDICTS)}")
+    if report["family"] != family_of(report["cause"]):
+        raise ValueError(f"family {report['family']!r} does not match cause {report['cause']!r}")
+    for i, entry in enumerate(report["ranking"]):
+        lacking = [k for k in RANKING_KEYS if k not in entry]
+        if lacking:
+            raise ValueError(f"ranking entry {i} lacks {', '.join(lacking)}")
+    return report
+
+
+def clean(o: Any) -> Any:
+    """JSON-safe copy: numpy scalars and arrays to Python, non-finite floats to None."""
+    if isinstance(o, dict):
+        return {str(k): clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [clean(v) for v in o]
+    if hasattr(o, "tolist") and not isinstance(o, (str, bytes)):
+        return clean(o.tolist())
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    return o
+
+
+def to_json(report: dict) -> str:
+    return json.dumps(clean(report), indent=2, allow_nan=False)
+
+
+def fmt_num(v: Any, fmt: str = ".3f") -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
+
+
+def fmt_params(params: dict, intervals: dict | None = None) -> str:
+    """'width_pct = 1.02 [0.98, 1.06]' style, in the dict's order."""
+    out = []
+    for k, v in params.items():
+        text = f"{k} = {v:.4g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+        ci = (intervals or {}).get(k)
+        if ci and all(isinstance(c, (int, float)) and math.isfinite(c) for c in ci):
+            text += f" [{ci[0]:.3g}, {ci[1]:.3g}]"
+        out.append(text)
+    return ", ".join(out)
+
+
+def verdict_line(report: dict) -> str:
+    """One line: verdict, cause (family) [parameters], confidence, gain."""
+    v = report["verdict"]
+    text = f"verdict: {v.replace('_', ' ')}"
+    if report["cause"] != "none":
+        label = "cause" if v == "explained" else "closest"
+        text += f"; {label} {report['cause']} ({report['family']})"
+        if report.get("parameters"):
+            text += f" [{fmt_params(report['parameters'])}]"
+    if report.get("confidence") is not None:
+        text += f"; confidence {report['confidence']:.2f}"
+    if report.get("gain_percent") is not None:
+        text += (f"; held-out NRMSE {fmt_num(report['nrmse_nominal'])} -> {fmt_num(report['nrmse_extended'])} "
+                 f"({report['gain_percent']:+.0f} %)")
+    return text
