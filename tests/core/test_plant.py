@@ -77,9 +77,11 @@ def test_batch_equals_step():
 
 
 def test_overflow_vessel_keeps_its_volume():
-    plant = build_plant(load_plant_model("rig_flask"))
+    model = load_plant_model("rig_flask")
+    plant = build_plant(model)
     plant.set_steady_state([0.5, 0.4])
-    for _ in range(100):
-        plant.step([1.0, 0.2], 1.0, 0.5)
-    assert plant.volume_ml == 500.0
-    assert plant.ph < 3.0  # acid-rich inflow
+    ph_start = plant.ph
+    for _ in range(400):
+        plant.step([2.0, 0.02], 1.0, 5.0)  # acid-rich inflow
+    assert plant.volume_ml == model.tank.volume_ml  # exactly: the overflow takes all the inflow
+    assert plant.ph < ph_start - 1.0

@@ -71,11 +71,22 @@ def test_effect_outside_the_catalogue_is_not_explained(hidden_rng, diagnose_json
     rep = _diagnose(diagnose_json, case, tmp_path)
     assert rep["verdict"] == "not_explained", f"{_what(case)}: {rep['verdict']} {rep['cause']}: {rep['reason']}"
     # the nearest family is the data's answer (a pH-dependent probe error is often closest to a buffer,
-    # which bends the titration curve in one pH range), so it is only required to be named
-    assert set(rep["family"].split("+")) <= {"actuator", "sensor", "process"}
+    # which bends the titration curve in one pH range), so it is only required to be named when a candidate
+    # counts (significant and large enough); when none does (a periodic feed disturbance often: no catalogue
+    # entry moves the held-out error), the honest answer is 'none'
+    th = rep["thresholds"]
+    counts = [r for r in rep["ranking"] + rep.get("pairs", [])
+              if r["p_value_vs_nominal"] < th["alpha"] and r["gain_percent"] >= 100 * th["min_gain"]]
+    if counts:
+        assert set(rep["family"].split("+")) <= {"actuator", "sensor", "process"}
+    else:
+        assert rep["family"] == "none" and "no catalogue candidate" in rep["reason"]
+        assert rep["gain_percent"] is None and rep["nrmse_extended"] is None and "extended_model" not in rep
     # honest gain: the numbers it reports are what the nominal model scores on the held-out blocks,
     # recomputed here with the project's own open-loop simulation
-    assert rep["gain_percent"] == pytest.approx(100 * (1 - rep["nrmse_extended"] / rep["nrmse_nominal"]), rel=1e-9)
+    if counts:
+        assert rep["gain_percent"] == pytest.approx(100 * (1 - rep["nrmse_extended"] / rep["nrmse_nominal"]),
+                                                    rel=1e-9)
     data = Run.from_csv(case.path)
     inputs = Run({k: data[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
     spec = load_scenario("paper", overrides=["sensors.ph.noise_std=0", "sensors.level.noise_std=0"])
