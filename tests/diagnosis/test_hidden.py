@@ -66,8 +66,12 @@ def test_no_effect_comes_back_none(hidden_rng, diagnose_json, tmp_path):
 
 
 def test_effect_outside_the_catalogue_is_not_explained(hidden_rng, diagnose_json, tmp_path):
-    cause = str(hidden_rng.choice(["alkaline_error", "periodic_flow"]))
-    case = make_case(hidden_rng, cause, str(hidden_rng.choice(["closed", "open"])), tmp_path / "data", DURATION_S)
+    # The probe's alkaline error only under closed-loop excitation: the open-loop steps visit pH above 10 too
+    # briefly, and a buffer with a probe gain error then reproduces it to the noise floor with a white error
+    # (benchmarks/diagnose_hidden.py, docs/diagnosis.md): the data cannot tell them apart there.
+    cause, excitation = [("alkaline_error", "closed"), ("periodic_flow", "closed"),
+                         ("periodic_flow", "open")][hidden_rng.integers(3)]
+    case = make_case(hidden_rng, cause, excitation, tmp_path / "data", DURATION_S)
     rep = _diagnose(diagnose_json, case, tmp_path)
     assert rep["verdict"] == "not_explained", f"{_what(case)}: {rep['verdict']} {rep['cause']}: {rep['reason']}"
     # the nearest family is the data's answer (a pH-dependent probe error is often closest to a buffer,

@@ -18,8 +18,10 @@ mapping) and
      significantly (p < 0.05) takes its place (stiction with J = 0 *is*
      backlash);
    * ``explained`` when the winner's held-out error is at the noise floor:
-     within ``floor_ratio`` (1.1) times it, or within ``explained_ratio``
-     (1.5) times it and white (Ljung-Box p >= ``whiteness_alpha``);
+     within ``floor_ratio`` (1.1) times it with no gross structure left
+     (Ljung-Box p >= ``floor_whiteness_alpha``), or within
+     ``explained_ratio`` (1.5) times it and white (Ljung-Box p >=
+     ``whiteness_alpha``);
      otherwise pairs of the best single candidates are fitted, and if none
      gets there, ``not_explained`` with the closest family and its honest
      gain;
@@ -62,6 +64,9 @@ class Options:
     explained_ratio: float = 1.5
     floor_ratio: float = 1.1  # within this of the noise floor, what structure is left is below 17 % of the error
     whiteness_alpha: float = 1e-3  # Ljung-Box p-value below which a held-out error still has structure
+    # near the floor a right model may leave mild structure (stiction's discrete slips: p down to 3e-4 in the
+    # benchmark), a wrong pair mimicking an effect leaves gross structure (an alkaline probe error: p 1e-60)
+    floor_whiteness_alpha: float = 1e-6
     progress: Callable[[str], None] | None = None
 
 
@@ -188,7 +193,8 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
                        "initial_ph": [s.ph for s in nom.starts] if opts.initial == "fit" else None}
     base["initial"] = opts.initial
     base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio,
-                          "floor_ratio": opts.floor_ratio, "whiteness_alpha": opts.whiteness_alpha}
+                          "floor_ratio": opts.floor_ratio,
+                          "floor_whiteness_alpha": opts.floor_whiteness_alpha, "whiteness_alpha": opts.whiteness_alpha}
     if winner is not None and extended_preds is not None:
         base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
                                       "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
@@ -294,10 +300,11 @@ def _local_call(local: Fitter, fn, args) -> FitResult:
 
 
 def _explained(r: FitResult, opts: Options) -> bool:
-    """At the noise floor: held-out RMS error within ``floor_ratio`` of it, or within ``explained_ratio`` of it
-    with no structure left (Ljung-Box p >= ``whiteness_alpha``)."""
-    ratio = math.sqrt(r.val_cost)
-    return ratio <= opts.floor_ratio or (ratio <= opts.explained_ratio and r.val_whiteness_p >= opts.whiteness_alpha)
+    """At the noise floor: held-out RMS error within ``floor_ratio`` of it and no gross structure left (Ljung-Box
+    p >= ``floor_whiteness_alpha``), or within ``explained_ratio`` of it and white (p >= ``whiteness_alpha``)."""
+    ratio, white_p = math.sqrt(r.val_cost), r.val_whiteness_p
+    return ((ratio <= opts.floor_ratio and white_p >= opts.floor_whiteness_alpha)
+            or (ratio <= opts.explained_ratio and white_p >= opts.whiteness_alpha))
 
 
 def _best_per_cause(results: list[FitResult]) -> list[FitResult]:
