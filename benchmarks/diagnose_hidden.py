@@ -56,6 +56,7 @@ def run_case(case_seed: int, cause: str, excitation: str, duration_s: float, wor
     return {"hidden": cause, "excitation": excitation, "case_seed": case_seed, "true": case.params, "main": case.main,
             "ratio": winner["validation_rmse_over_noise"] if winner else None,
             "whiteness_p": winner["validation_whiteness_p"] if winner else None,
+            "structure": winner["validation_structure"] if winner else None,
             "nominal_ratio": rep.get("nominal", {}).get("combined_rmse_over_noise"),
             "tolerance": case.tolerance, "verdict": rep["verdict"], "named": rep["cause"],
             "fitted": rep["parameters"], "gain_percent": rep["gain_percent"], "confidence": rep["confidence"],
@@ -101,7 +102,8 @@ def main() -> int:
             print(f"{'ok  ' if r['ok'] else 'FAIL'} {cause:25s} {exc:6s} [{true}] -> {r['verdict']:13s} "
                   f"{r['named']:25s} {r['main']}={fitted if fitted is None else round(fitted, 4)} "
                   f"gain {r['gain_percent'] if r['gain_percent'] is None else round(r['gain_percent'])} % "
-                  f"error/noise {r['nominal_ratio'] or 0:.3g} -> {r['ratio'] or 0:.3g} (LB p {r['whiteness_p'] or 0:.2g}) "
+                  f"error/noise {r['nominal_ratio'] or 0:.3g} -> {r['ratio'] or 0:.3g} (LB p {r['whiteness_p'] or 0:.2g}, "
+                  f"structure {r['structure'] or 0:.3f}) "
                   f"({r['seconds']:.1f} s, case {case_seed})", flush=True)
         cat = [r for r in results if r["hidden"] in CATALOGUE_CAUSES]
         ctl = [r for r in results if r["hidden"] == "none"]

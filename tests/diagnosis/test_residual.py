@@ -27,6 +27,17 @@ def test_ljung_box_tells_white_from_coloured(rng):
     assert not ljung_box(lfilter([1.0], [1.0, -0.8], e))["white"]
 
 
+@pytest.mark.parametrize("n", [1000, 10000])
+def test_structure_index_measures_the_structured_share_whatever_the_length(rng, n):
+    """A slow error holding a share f of the variance gives an index near 20 f^2 at any record length."""
+    white = rng.normal(size=n)
+    assert ljung_box(white)["structure"] < 0.03
+    slow = np.sin(2 * np.pi * np.arange(n) / 400.0)
+    for share in (0.05, 0.2):
+        e = np.sqrt(1 - share) * white + np.sqrt(share) * slow / np.std(slow)
+        assert ljung_box(e)["structure"] == pytest.approx(20 * share ** 2, rel=0.35, abs=0.02)
+
+
 @pytest.mark.parametrize("kind", ["offset", "gain", "lag"])
 def test_characterise_names_the_shape(rng, kind):
     t = np.arange(3000.0)

@@ -75,6 +75,7 @@ class FitResult:
     val_sq: np.ndarray  # per held-out sample: summed squared error in noise units
     val_lag1: float  # lag-one autocorrelation of the held-out error (main output)
     val_whiteness_p: float  # Ljung-Box p-value of the held-out error (main output)
+    val_structure: float  # (Ljung-Box Q - lags) / n of the held-out error (main output): structure, any length
     starts: list  # per record: the fitted Start
     raw: dict  # the extended model mapping
     nfev: int = 0
@@ -237,7 +238,8 @@ class Fitter:
             variant="+".join(c.variant for c in cands if c.variant), params=flat,
             intervals=intervals, fixed=fixed, main=cands[0].main if len(cands) == 1 else "",
             n_params=n_par, train_sse=sse, n_train=n, aic=aic, bic=bic, val_rmse=res_val["rmse"],
-            val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"], val_whiteness_p=res_val["whiteness_p"], starts=res_val["starts"],
+            val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"], val_whiteness_p=res_val["whiteness_p"],
+            val_structure=res_val["structure"], starts=res_val["starts"],
             raw=raw, nfev=nfev, seconds=time.perf_counter() - t0, message=str(message), identified=identified)
 
     def _intervals(self, params, u, jac, r, n, k) -> tuple[dict, dict]:
@@ -297,7 +299,7 @@ class Fitter:
         return {"rmse": rmse, "nrmse": nrmse, "cost": cost,
                 "sq": np.concatenate(sq_parts) if sq_parts else np.zeros(0), "starts": starts,
                 "lag1": float(np.mean([lag1(e) for e in main_parts])) if main_parts else 0.0,
-                "whiteness_p": ljung_box(np.concatenate(main_parts))["p_value"] if main_parts else 1.0}
+                **_whiteness(main_parts)}
 
     def _start_of(self, i: int, raw: dict, half_band: float) -> Start:
         """Unknown start of a validation-only record, fitted on its first samples."""
@@ -395,3 +397,10 @@ def fit_task(labels: list[str], starts: list[dict] | None = None) -> FitResult:
     cands = [fitter.candidates[label] for label in labels]
     return fitter.fit(cands, starts)
 
+
+def _whiteness(main_parts: list[np.ndarray]) -> dict[str, float]:
+    """Ljung-Box p-value and structure index of the held-out error of the main output."""
+    if not main_parts:
+        return {"whiteness_p": 1.0, "structure": 0.0}
+    lb = ljung_box(np.concatenate(main_parts))
+    return {"whiteness_p": lb["p_value"], "structure": lb["structure"]}

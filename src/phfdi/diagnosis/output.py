@@ -165,8 +165,8 @@ def report_markdown(rep: dict, command: str = "") -> str:
     th = rep["thresholds"]
     lines += ["## Candidates", "", f"Held-out error in multiples of the noise floor (1 = a perfect model); a candidate "
               f"counts when it lowers the held-out error significantly (p < {th['alpha']}) by at least "
-              f"{100 * th['min_gain']:.0f} %; explained when within {th['floor_ratio']} x the noise floor (Ljung-Box "
-              f"p >= {th['floor_whiteness_alpha']}), or within "
+              f"{100 * th['min_gain']:.0f} %; explained when within {th['floor_ratio']} x the noise floor (structure "
+              f"index (Q - lags) / n <= {th['floor_max_structure']}), or within "
               f"{th['explained_ratio']} x with a white error (Ljung-Box p >= {th['whiteness_alpha']}). Nominal "
               f"model: {rep['nominal']['combined_rmse_over_noise']:.3g}.", ""]
     lines += _candidate_table(rep["ranking"])

@@ -19,7 +19,7 @@ mapping) and
      backlash);
    * ``explained`` when the winner's held-out error is at the noise floor:
      within ``floor_ratio`` (1.1) times it with no gross structure left
-     (Ljung-Box p >= ``floor_whiteness_alpha``), or within
+     (structure index (Q - lags) / n <= ``floor_max_structure``), or within
      ``explained_ratio`` (1.5) times it and white (Ljung-Box p >=
      ``whiteness_alpha``);
      otherwise pairs of the best single candidates are fitted, and if none
@@ -64,9 +64,10 @@ class Options:
     explained_ratio: float = 1.5
     floor_ratio: float = 1.1  # within this of the noise floor, what structure is left is below 17 % of the error
     whiteness_alpha: float = 1e-3  # Ljung-Box p-value below which a held-out error still has structure
-    # near the floor a right model may leave mild structure (stiction's discrete slips: p down to 3e-4 in the
-    # benchmark), a wrong pair mimicking an effect leaves gross structure (an alkaline probe error: p 1e-60)
-    floor_whiteness_alpha: float = 1e-6
+    # Near the floor a right model may leave mild structure (in the benchmark: index up to 0.07, Ljung-Box p down
+    # to 1e-9), a wrong pair mimicking an effect gross structure (an alkaline probe error: 0.27 and 0.86). The
+    # index, unlike p, does not grow with the record length.
+    floor_max_structure: float = 0.15
     progress: Callable[[str], None] | None = None
 
 
@@ -194,7 +195,7 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     base["initial"] = opts.initial
     base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio,
                           "floor_ratio": opts.floor_ratio,
-                          "floor_whiteness_alpha": opts.floor_whiteness_alpha, "whiteness_alpha": opts.whiteness_alpha}
+                          "floor_max_structure": opts.floor_max_structure, "whiteness_alpha": opts.whiteness_alpha}
     if winner is not None and extended_preds is not None:
         base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
                                       "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
@@ -300,11 +301,11 @@ def _local_call(local: Fitter, fn, args) -> FitResult:
 
 
 def _explained(r: FitResult, opts: Options) -> bool:
-    """At the noise floor: held-out RMS error within ``floor_ratio`` of it and no gross structure left (Ljung-Box
-    p >= ``floor_whiteness_alpha``), or within ``explained_ratio`` of it and white (p >= ``whiteness_alpha``)."""
-    ratio, white_p = math.sqrt(r.val_cost), r.val_whiteness_p
-    return ((ratio <= opts.floor_ratio and white_p >= opts.floor_whiteness_alpha)
-            or (ratio <= opts.explained_ratio and white_p >= opts.whiteness_alpha))
+    """At the noise floor: held-out RMS error within ``floor_ratio`` of it and no gross structure left (index
+    <= ``floor_max_structure``), or within ``explained_ratio`` of it and white (Ljung-Box p >= ``whiteness_alpha``)."""
+    ratio = math.sqrt(r.val_cost)
+    return ((ratio <= opts.floor_ratio and r.val_structure <= opts.floor_max_structure)
+            or (ratio <= opts.explained_ratio and r.val_whiteness_p >= opts.whiteness_alpha))
 
 
 def _best_per_cause(results: list[FitResult]) -> list[FitResult]:
@@ -356,6 +357,7 @@ def _entry(r: FitResult, nom: FitResult, main: str, noise: dict, opts: Options) 
             "identified": r.identified, "nrmse_validation": r.val_nrmse.get(main),
             "nrmse_validation_by_output": r.val_nrmse,
             "validation_rmse_over_noise": math.sqrt(r.val_cost), "validation_whiteness_p": r.val_whiteness_p,
+            "validation_structure": r.val_structure,
             "gain_percent": 100.0 * gain, "p_value_vs_nominal": p, "counts": counts,
             "aic": r.aic, "bic": r.bic, "n_params": r.n_params, "seconds": r.seconds}
 

@@ -58,7 +58,10 @@ def ljung_box(e: np.ndarray, lags: int = 20) -> dict:
     acf = np.array([np.dot(e[:-k], e[k:]) / den for k in range(1, lags + 1)])
     q = float(n * (n + 2) * np.sum(acf ** 2 / (n - np.arange(1, lags + 1))))
     p = float(stats.chi2.sf(q, lags))
-    return {"q": q, "p_value": p, "lags": lags, "white": p > 0.01}
+    # how much structure, whatever the record length: (Q - lags) / n ~ sum of squared autocorrelations beyond
+    # what white noise of this length shows (about 0 when white; 20 f^2 for a slow error holding a share f of
+    # the variance)
+    return {"q": q, "p_value": p, "lags": lags, "white": p > 0.01, "structure": max(0.0, (q - lags) / n)}
 
 
 def input_correlation(e: np.ndarray, inputs: dict[str, np.ndarray], dt_s: float, max_lag: int = 50) -> dict:
