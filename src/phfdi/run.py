@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+from operator import itemgetter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -207,6 +208,10 @@ class RunRecorder:
 
     def run(self, metadata: dict) -> Run:
         rows = self.rows
-        signals = {n: np.fromiter((r.get(n, math.nan) for r in rows), dtype=float, count=len(rows))
-                   for n in self.names}
-        return Run(signals, metadata)
+        if not rows:
+            return Run({n: np.zeros(0) for n in self.names}, metadata)
+        try:  # every row has every signal (the usual case): one C-level pass
+            table = np.array(list(map(itemgetter(*self.names), rows)), dtype=float).reshape(len(rows), -1)
+        except KeyError:  # some rows lack a signal: NaN there
+            table = np.array([[r.get(n, math.nan) for n in self.names] for r in rows], dtype=float)
+        return Run({n: table[:, i].copy() for i, n in enumerate(self.names)}, metadata)
