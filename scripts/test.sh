@@ -4,6 +4,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 unset _ROS_WHEELS_BOOTSTRAP_COMPLETE || true
-# Two workers (the machine has 2 cores); ROS tests reserve a ROS domain each, so they run side by side.
-# Pass -n 0 to run in one process, or pytest arguments to pick tests: bash scripts/test.sh tests/core -n 0
-exec .venv/bin/python -m pytest -q -n 2 "$@"
+# Two workers (the machine has 2 cores): the tests that start ROS 2 graphs run one after another on one of
+# them (tests/conftest.py groups them), everything else on both. Pass -n 0 to run in one process, or pytest
+# arguments to pick tests: bash scripts/test.sh tests/core -n 0
+exec .venv/bin/python -m pytest -q -n 2 --dist loadgroup "$@"

@@ -17,3 +17,16 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real data folder not found at {SHARED_DATA} (set PHFDI_SHARED_DATA)")
     return SHARED_DATA
+
+
+GRAPH_TEST_DIRS = {"ros", "detector_node"}
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests that start ROS 2 graphs run one after another on one xdist worker (``--dist loadgroup``), the rest
+    beside them: two graphs at once on 2 cores slow each other's lock step, and Fast DDS's per-participant
+    shared-memory ports (7000 + i) are shared across ROS domains, so one test's killed node would show up in
+    the other's shared-memory check."""
+    for item in items:
+        if item.get_closest_marker("ros") or Path(str(item.fspath)).parent.name in GRAPH_TEST_DIRS:
+            item.add_marker(pytest.mark.xdist_group("ros_graph"))

@@ -146,16 +146,20 @@ def _setpoints(rng, duration_s: float, step_s: float = 400.0) -> dict:
 
 
 def _command_sequence(rng, n: int) -> np.ndarray:
-    """Open-loop valve test: hold through the warm-up, a staircase of reversals, then random steps.
+    """Open-loop valve test: hold through the warm-up, a staircase of reversals, a stroke to both ends of the
+    range, then random steps.
 
     The staircase (a valve-test pattern: up and back down by 0.5, 1.0, ..., 6 %, each held 20 s) puts command
-    moves on both sides of any dead or stick band in the bounds; the random steps (between 28 and 62 %, 60 % of
-    them 0.3 to 6 % and the others 6 to 25 %, held 60 to 250 s) excite the process.
+    moves on both sides of any dead or stick band in the bounds; the stroke (62 % then 28 %, 60 s each) shows
+    any stop within the range (without it the random walk stayed below a drawn saturation limit in about one
+    1700 s record in four); the random steps (between 28 and 62 %, 60 % of them 0.3 to 6 % and the others 6 to
+    25 %, held 60 to 250 s) excite the process.
     """
     level = 45.0
     cmd = [level] * (int(WARMUP_S) + 100)
     for size in np.arange(0.5, 6.01, 0.5):
         cmd += [level + size] * 20 + [level] * 20
+    cmd += [62.0] * 60 + [28.0] * 60 + [level] * 60
     while len(cmd) < n:
         size = rng.uniform(0.3, 6.0) if rng.random() < 0.6 else math.exp(rng.uniform(math.log(6.0), math.log(25.0)))
         move = size * rng.choice([-1.0, 1.0])

@@ -91,14 +91,21 @@ def _owned(name: str) -> bool:
         return True
 
 
-def stale_shm_files(domain_id: int, used: set[str] = frozenset()) -> list[str]:
+def ownerless_shm_files() -> set[str]:
+    """Fast DDS shared-memory files on disk that no live process owns (e.g. left by an earlier run)."""
+    return {f.name for f in Path("/dev/shm").glob("fastrtps_*")
+            if not f.name.endswith(("_el", "_sl")) and not _owned(f.name)}
+
+
+def stale_shm_files(domain_id: int, used: set[str] = frozenset(), before: set[str] = frozenset()) -> list[str]:
     """Shared-memory files of a finished graph still on disk: the domain's port segments
-    nobody owns, and any file the graph used (``shm_files_used``) whose owner is gone."""
+    nobody owns, and any file the graph used (``shm_files_used``) whose owner is gone; files that
+    were already ownerless before the graph started (``before``) are not the graph's."""
     from phfdi.ros.launcher import ownerless_port_segments
 
     stale = {f.name for f in ownerless_port_segments(domain_id, since=float("inf"))}
     stale |= {n for n in used if (Path("/dev/shm") / n).exists() and not _owned(n)}
-    return sorted(stale)
+    return sorted(stale - set(before))
 
 
 def domain_of(launch_stderr: str) -> int:

@@ -19,6 +19,7 @@ from phfdi.ros import topics as T
 from .conftest import (
     SHORT_RUN,
     domain_of,
+    ownerless_shm_files,
     phfdi_cmd,
     processes_with,
     read_until,
@@ -33,6 +34,7 @@ def _start_paced(tmp_path, *extra):
     """A launch slow enough (20 x real time: 30 s for 600 s) to be stopped in the middle."""
     logs = tmp_path / "logs"
     bag = tmp_path / "run.mcap"
+    before = ownerless_shm_files()
     proc = subprocess.Popen(phfdi_cmd("launch", *SHORT_RUN, "--pace", "20", "--record", str(bag),
                                       "--log-dir", str(logs), *extra),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -40,7 +42,7 @@ def _start_paced(tmp_path, *extra):
     time.sleep(2.0)  # let some samples through
     used = shm_files_used(processes_with(str(logs)))
     assert used, "the graph's processes map no Fast DDS shared memory: the check below would be empty"
-    return proc, bag, logs, (domain_of(seen), used)
+    return proc, bag, logs, (domain_of(seen), used, before)
 
 
 def _pid_of(logs, module: str) -> int:
