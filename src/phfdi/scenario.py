@@ -21,6 +21,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .errors import UserError
+from .yamlfile import read_mapping
 
 NonNeg = Field(ge=0.0, allow_inf_nan=False)
 
@@ -203,36 +204,20 @@ SCENARIO_DIR = _package_dir("phfdi", "scenarios")
 PLANT_DIR = _package_dir("ph_plant_sim", "presets")
 
 
-def _read_yaml(path: Path) -> dict:
-    try:
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
-    except FileNotFoundError:
-        raise UserError(f"no such file: {path}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or "parse error"
-        raise UserError(f"{path}: not valid YAML{where} ({problem})") from None
-    if not isinstance(data, dict):
-        raise UserError(f"{path}: expected a mapping at the top level")
-    return data
-
-
 def list_presets(directory: Path) -> dict[str, str]:
     """name -> description of the YAML presets in a directory."""
     out = {}
     for p in sorted(directory.glob("*.yaml")):
         if p.stem == "faults":
             continue
-        out[p.stem] = str(_read_yaml(p).get("description", "")).strip().splitlines()[0:1]
+        out[p.stem] = str(read_mapping(p).get("description", "")).strip().splitlines()[0:1]
         out[p.stem] = out[p.stem][0] if out[p.stem] else ""
     return out
 
 
 def fault_library() -> dict[str, dict]:
     """Named fault presets (the paper's severities), from faults.yaml."""
-    return _read_yaml(SCENARIO_DIR / "faults.yaml")["faults"]
+    return read_mapping(SCENARIO_DIR / "faults.yaml")["faults"]
 
 
 def deep_merge(base: dict, over: dict) -> dict:
@@ -298,7 +283,7 @@ def load_plugins(plugins: list[str]) -> None:
 def raw_scenario(name_or_path: str, _seen: tuple = ()) -> dict:
     """Scenario mapping with ``extends`` resolved (not yet validated)."""
     path = _resolve(name_or_path, SCENARIO_DIR, "scenario")
-    data = _read_yaml(path)
+    data = read_mapping(path)
     _absolutise(data, path.parent)
     parent = data.pop("extends", None)
     if parent:
@@ -333,7 +318,7 @@ def load_plant_model(plant: str | PlantModelSpec) -> PlantModelSpec:
         return plant
     path = _resolve(plant, PLANT_DIR, "plant model")
     try:
-        return PlantModelSpec.model_validate(_read_yaml(path))
+        return PlantModelSpec.model_validate(read_mapping(path))
     except ValidationError as exc:
         raise UserError(_format_validation(exc, str(path))) from None
 

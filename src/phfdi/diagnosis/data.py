@@ -25,9 +25,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from phfdi.errors import UserError
+from phfdi.yamlfile import read_mapping
 
 OUTPUTS = ("ph_measured", "level_measured_cm")
 COMMAND_INPUTS = ("valve_command_pct", "level_controller_output_pct")
@@ -106,15 +106,7 @@ class ColumnMap:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "ColumnMap":
-        try:
-            with open(path, encoding="utf-8") as fh:
-                data = yaml.safe_load(fh)
-        except FileNotFoundError:
-            raise UserError(f"no such column map: {path}") from None
-        except yaml.YAMLError as exc:
-            raise UserError(f"{path}: not valid YAML ({exc})") from None
-        if not isinstance(data, dict):
-            raise UserError(f"{path}: a column map is a mapping 'signal: column' or 'signal: {{column:, unit:}}'")
+        data = read_mapping(path, "column map", "a mapping 'signal: column' or 'signal: {column:, unit:}'")
         return cls.from_dict(data, str(path))
 
     @classmethod

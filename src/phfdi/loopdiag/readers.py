@@ -32,6 +32,7 @@ import numpy as np
 
 from phfdi.errors import UserError
 from phfdi.run import Run
+from phfdi.yamlfile import read_mapping
 
 #: fewer samples than this cannot hold a training and a validation part
 MIN_SAMPLES = 100
@@ -79,14 +80,8 @@ class ColumnMap:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "ColumnMap":
-        import yaml
-
         path = Path(path)
-        if not path.is_file():
-            raise UserError(f"no such column mapping file: {path}")
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-        if not isinstance(data, dict):
-            raise UserError(f"{path}: expected a mapping with 'columns' (op, pv, sp, time)")
+        data = read_mapping(path, "column mapping file", "a mapping with 'columns' (op, pv, sp, time)")
         items = dict(data.get("columns") or {})
         for key in ("sample_time_s", "loop_tag", "time_format"):
             if key in data:

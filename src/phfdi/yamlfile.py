@@ -1,0 +1,30 @@
+"""Reading the small YAML files users hand us (scenarios, plant models, column maps): one clear error each."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from .errors import UserError
+
+
+def read_mapping(path: str | Path, what: str = "file", expected: str = "a mapping at the top level") -> dict:
+    """The YAML mapping in ``path``; a :class:`UserError` naming the file and the problem otherwise.
+
+    ``what`` names the file in the not-found message ("no such column map: ..."); ``expected`` says what the
+    top level must be when it is not a mapping.
+    """
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except (FileNotFoundError, IsADirectoryError):
+        raise UserError(f"no such {what}: {path}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or "parse error"
+        raise UserError(f"{path}: not valid YAML{where} ({problem})") from None
+    if not isinstance(data, dict):
+        raise UserError(f"{path}: expected {expected}")
+    return data
