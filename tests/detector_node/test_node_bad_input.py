@@ -13,6 +13,7 @@ import pytest
 
 from phfdi.ros import topics as T
 
+from ..ros.conftest import close_context
 from .conftest import ROOT, node_cmd, stop
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
@@ -99,8 +100,7 @@ def feeder(detector, ros_domain):
                  and f.node.count_publishers(T.FAULT_ALARM.name) >= 1
                  and f.node.count_subscribers(T.FAULT_ALARM.name) >= 2, timeout_s=120)
     yield f
-    f.node.destroy_node()
-    rclpy.try_shutdown(context=context)
+    close_context(context, f.node, f.executor)
 
 
 def test_garbage_is_counted_reported_and_survived(detector, feeder):

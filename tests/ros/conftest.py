@@ -46,7 +46,21 @@ def rclpy_context(ros_domain):
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=ros_domain)
     yield ctx
-    rclpy.try_shutdown(context=ctx)
+    close_context(ctx)
+
+
+def close_context(context, node=None, executor=None) -> None:
+    """End a test's rclpy context with its DDS participant. ``shutdown`` alone leaves the participant alive
+    until garbage collection; it keeps writing to the ports of nodes that have stopped and re-creates their
+    shared-memory files, ownerless, during later tests of this process (seen as port7000/7001 left behind)."""
+    import rclpy
+
+    if node is not None:
+        node.destroy_node()
+    if executor is not None:
+        executor.shutdown()
+    rclpy.try_shutdown(context=context)
+    context.destroy()
 
 
 def processes_with(text: str) -> list[int]:

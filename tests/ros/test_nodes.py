@@ -10,7 +10,7 @@ import pytest
 
 from phfdi.ros import topics as T
 
-from .conftest import node_cmd, phfdi_cmd
+from .conftest import close_context, node_cmd, phfdi_cmd
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 
@@ -141,8 +141,7 @@ def driver(valve_node):
     d.spin_until(lambda: d.pub.get_subscription_count() >= 1 and
                  d.node.count_publishers(T.VALVE_STATE.name) >= 1, timeout_s=120)
     yield d
-    d.node.destroy_node()
-    rclpy.try_shutdown(context=context)
+    close_context(context, d.node, d.executor)
 
 
 def test_valve_holds_non_finite_and_out_of_range_commands(driver):
