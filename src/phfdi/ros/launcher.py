@@ -339,6 +339,10 @@ class Launcher:
             # a node that died while the others ran leaves shared memory behind
             time.sleep(1.0)
             result.notes.append(clean_shared_memory(result.domain_id, self.wall_t0))
+        else:
+            # a clean stop too: the nodes still running write to the ports of those already stopped (the
+            # recorder last), re-creating them without an owner
+            remove_ownerless_ports(result.domain_id, self.wall_t0)
         recorder = self.procs.get(RECORDER)
         if recorder is not None:
             path = Path(recorder.spec.params["path"])
@@ -429,6 +433,18 @@ def ownerless_port_segments(domain_id: int, since: float) -> list[Path]:
     return out
 
 
+def remove_ownerless_ports(domain_id: int, since: float) -> int:
+    """Remove this graph's ownerless port segments (:func:`ownerless_port_segments`); how many."""
+    ports = ownerless_port_segments(domain_id, since)
+    for f in ports:
+        for path in (f, SHM_DIR / f"sem.{f.name}_mutex"):
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                pass
+    return len(ports)
+
+
 def clean_shared_memory(domain_id: int, since: float) -> str:
     """Remove the Fast DDS shared memory a killed node left: zombie segments and ownerless ports."""
     tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
@@ -437,12 +453,5 @@ def clean_shared_memory(domain_id: int, since: float) -> str:
         out = subprocess.run([sys.executable, str(tool), "shm", "clean"], capture_output=True, text=True,
                              timeout=60)
         summary += [ln.strip() for ln in out.stdout.splitlines() if "cleaned" in ln]
-    ports = ownerless_port_segments(domain_id, since)
-    for f in ports:
-        for path in (f, SHM_DIR / f"sem.{f.name}_mutex"):
-            try:
-                path.unlink()
-            except FileNotFoundError:
-                pass
-    summary.append(f"{len(ports)} ownerless port segments removed")
+    summary.append(f"{remove_ownerless_ports(domain_id, since)} ownerless port segments removed")
     return "shared memory of the stopped graph cleaned (" + ", ".join(summary) + ")"
