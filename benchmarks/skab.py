@@ -1,0 +1,100 @@
+"""SKAB benchmark: our detector and label-free baselines under the benchmark's protocol.
+
+    .venv/bin/python benchmarks/skab.py ../shared/data/skab --out out/skab
+
+For every file found under DATA_DIR: fit on its first 400 rows (labels are
+never an input), predict each later row causally, write
+OUT/predictions/<group>/<n>.csv (``datetime;anomaly;changepoint``, the test
+rows; ``;``-separated), then print F1, FAR, MAR and the NAB scores from our own
+scorer (phfdi.benchmarks.scoring) next to the published leaderboard, plus the
+same scores for trivial label-free baselines: a detector that never alarms,
+one that always alarms, a random toggler and Hotelling's T^2. Files without
+labels (anomaly-free.csv) are predicted but not scored. Scores per group are
+printed too (``--by-group``). OUT/scores.json holds every number printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from phfdi.benchmarks import skab
+from phfdi.errors import UserError
+
+TOGGLE_PROBABILITIES = (0.02, 0.1)
+
+
+def baselines() -> dict[str, skab.Detector]:
+    out: dict[str, skab.Detector] = {
+        "never alarms": skab.null_detector,
+        "always alarms": skab.always_detector,
+    }
+    for p in TOGGLE_PROBABILITIES:
+        out[f"random toggler p={p}"] = skab.random_toggler(p, seed=0)
+    out["Hotelling T^2 (99 % of training)"] = skab.hotelling_t2(0.99)
+    return out
+
+
+def table(results: list[skab.BenchmarkResult], leaderboard: bool = True) -> str:
+    head = (f"{'algorithm':<36} {'F1':>5} {'FAR %':>7} {'MAR %':>7} {'NAB std':>8} {'NAB lowFP':>9} "
+            f"{'NAB lowFN':>9} {'missed':>7} {'FP':>5}")
+    lines = [head, "-" * len(head)]
+    for r in results:
+        s = r.nab.scores
+        lines.append(f"{r.name:<36} {r.binary.f1:5.2f} {r.binary.far_pct:7.2f} {r.binary.mar_pct:7.2f} "
+                     f"{s['standard']:8.2f} {s['low_fp']:9.2f} {s['low_fn']:9.2f} "
+                     f"{r.nab.missed:>3}/{r.nab.windows:<3} {r.nab.false_positives:5d}")
+    if leaderboard:
+        lines.append("published leaderboard (whole benchmark, 34 files):")
+        for name, v in skab.LEADERBOARD.items():
+            lines.append(f"  {name:<34} {v[0]:5.2f} {v[1]:7.2f} {v[2]:7.2f} {v[3]:8.2f} {v[4]:9.2f} {v[5]:9.2f}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 epilog="example: benchmarks/skab.py ../shared/data/skab --out out/skab")
+    ap.add_argument("data_dir", help="SKAB data directory (its groups as subdirectories of .csv files)")
+    ap.add_argument("--out", required=True, help="output directory")
+    ap.add_argument("--by-group", action="store_true", help="also score each group (subdirectory) alone")
+    args = ap.parse_args(argv)
+    try:
+        paths = skab.find_files(args.data_dir)
+        files = [skab.read_skab_csv(p) for p in paths]
+    except UserError as exc:
+        print(f"skab: error: {exc}", file=sys.stderr)
+        return 2
+    labelled = [f for f in files if f.labelled]
+    print(f"{len(files)} files under {args.data_dir}, {len(labelled)} labelled (scored): "
+          f"{sum(len(f.values) - skab.TRAIN_ROWS for f in labelled)} test rows", flush=True)
+    out = Path(args.out)
+    results, report = [], {}
+    detectors = dict(baselines())
+    for i, (name, det) in enumerate(detectors.items()):
+        t0 = time.perf_counter()
+        per_file = skab.run_detector(det, files)
+        res = skab.score(name, per_file)
+        results.append(res)
+        report[name] = {"all": res.row(), "seconds": time.perf_counter() - t0}
+        if args.by_group:
+            for g in sorted({f.group for f in labelled}):
+                report[name][g] = skab.score(name, [r for r in per_file if r.file.group == g]).row()
+        print(f"[{i + 1}/{len(detectors)}] {name}: {time.perf_counter() - t0:.2f} s", file=sys.stderr, flush=True)
+    print(table(results))
+    if args.by_group:
+        for g in sorted({f.group for f in labelled}):
+            print(f"\ngroup {g}:")
+            print(table([skab.score(r.name, [x for x in r.files if x.file.group == g]) for r in results], False))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scores.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
+    print(f"\nscores: {out / 'scores.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,253 @@
+"""SKAB (Skoltech Anomaly Benchmark): its files, its protocol, its leaderboard.
+
+Protocol (../shared/data/skab/PROVENANCE.md, as the public leaderboard
+applies it): per experiment file the first 400 rows are the training part, the
+rest the test part. A detector is fitted on the training part of that file
+only (labels are never an input) and then predicts 0/1 for each test row,
+causally. Scores: :func:`binary_scores` (F1, FAR, MAR over all test rows of
+all files pooled) and the NAB score of the predicted change points (the rows
+where the 0/1 prediction switches) with a 60 s window to the right of each
+true change point of the test part (:mod:`phfdi.benchmarks.scoring`).
+
+Files: every ``*.csv`` under the data directory that has ``anomaly`` and
+``changepoint`` columns is scored; a file without them (``anomaly-free.csv``)
+is not part of the score (the leaderboard's 34 files exclude it) but can be
+run for its false-alarm rate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from phfdi.errors import UserError
+
+from .scoring import BinaryScores, NabResult, binary_scores, match_changepoints, nab_scores, switches
+
+TRAIN_ROWS = 400
+WINDOW_S = 60.0
+SENSOR_COLUMNS = ("Accelerometer1RMS", "Accelerometer2RMS", "Current", "Pressure", "Temperature", "Thermocouple",
+                  "Voltage", "Volume Flow RateRMS")
+LABEL_COLUMNS = ("anomaly", "changepoint")
+
+#: the published leaderboard on the whole benchmark (34 files), as PROVENANCE.md copies it:
+#: F1, FAR %, MAR %, NAB standard, NAB low FP, NAB low FN
+LEADERBOARD: dict[str, tuple[float, float, float, float, float, float]] = {
+    "Conv-AE": (0.78, 13.55, 28.02, 23.61, 21.54, 27.55),
+    "MSET": (0.78, 39.73, 14.13, 13.84, 10.22, 17.37),
+    "T-squared+Q (PCA)": (0.76, 26.62, 24.92, 25.35, 14.51, 31.33),
+    "LSTM-AE": (0.74, 29.96, 25.92, 23.51, 20.11, 25.91),
+    "T-squared": (0.66, 19.21, 42.6, 19.54, 10.2, 24.31),
+    "MSCRED": (0.36, 49.94, 69.88, 32.42, 16.53, 40.28),
+    "Isolation forest": (0.29, 2.56, 82.89, 26.16, 19.5, 30.82),
+    "Null detector": (0.0, 0.0, 100.0, 0.0, 0.0, 0.0),
+}
+
+
+@dataclass
+class SkabFile:
+    """One experiment: sensor matrix (rows x 8), time stamps (s since the epoch) and, if present, labels."""
+
+    path: Path
+    group: str
+    name: str
+    datetime: list[str]
+    time_s: np.ndarray
+    values: np.ndarray
+    columns: tuple[str, ...]
+    anomaly: np.ndarray | None = None
+    changepoint: np.ndarray | None = None
+
+    @property
+    def key(self) -> str:
+        return f"{self.group}/{self.name}"
+
+    @property
+    def labelled(self) -> bool:
+        return self.anomaly is not None
+
+    def split(self, train_rows: int = TRAIN_ROWS) -> tuple[np.ndarray, np.ndarray]:
+        return self.values[:train_rows], self.values[train_rows:]
+
+
+def read_skab_csv(path: str | Path) -> SkabFile:
+    """Read one SKAB file (``;``-separated, header row, ``datetime`` first); bad content is a UserError."""
+    p = Path(path)
+    try:
+        lines = p.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{p}: cannot read ({exc})") from None
+    lines = [ln for ln in lines if ln.strip()]
+    if len(lines) < 2:
+        raise UserError(f"{p}: no data rows")
+    header = [h.strip() for h in lines[0].split(";")]
+    if header[0] != "datetime":
+        raise UserError(f"{p}: first column must be 'datetime', got {header[0]!r}")
+    missing = [c for c in SENSOR_COLUMNS if c not in header]
+    if missing:
+        raise UserError(f"{p}: missing column(s) {', '.join(missing)}")
+    stamps, rows = [], []
+    for i, ln in enumerate(lines[1:], start=2):
+        cells = ln.split(";")
+        if len(cells) != len(header):
+            raise UserError(f"{p}: line {i} has {len(cells)} fields, the header {len(header)}")
+        stamps.append(cells[0].strip())
+        try:
+            rows.append([float(c) for c in cells[1:]])
+        except ValueError:
+            bad = next(j for j, c in enumerate(cells[1:], start=1) if not _is_float(c))
+            raise UserError(f"{p}: line {i}, column {header[bad]!r}: {cells[bad]!r} is not a number") from None
+    try:
+        t = np.array(stamps, dtype="datetime64[s]").astype(np.int64).astype(float)
+    except ValueError:
+        raise UserError(f"{p}: a datetime is not of the form YYYY-MM-DD hh:mm:ss") from None
+    table = np.array(rows, dtype=float)
+    col = {h: k - 1 for k, h in enumerate(header) if k}
+    values = table[:, [col[c] for c in SENSOR_COLUMNS]]
+    labels = {c: table[:, col[c]] for c in LABEL_COLUMNS if c in col}
+    if len(labels) == 1:
+        raise UserError(f"{p}: has only one of the label columns {', '.join(LABEL_COLUMNS)}")
+    for c, v in labels.items():
+        if not np.isin(v, (0.0, 1.0)).all():
+            raise UserError(f"{p}: column {c!r} must hold only 0 and 1")
+    return SkabFile(p, p.parent.name, p.stem, stamps, t, values, SENSOR_COLUMNS,
+                    labels["anomaly"].astype(np.int8) if labels else None,
+                    labels["changepoint"].astype(np.int8) if labels else None)
+
+
+def _is_float(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
+
+
+def _natural(p: Path) -> tuple:
+    return (p.parent.name, int(p.stem) if p.stem.isdigit() else math.inf, p.stem)
+
+
+def find_files(data_dir: str | Path) -> list[Path]:
+    d = Path(data_dir)
+    if not d.is_dir():
+        raise UserError(f"{d}: not a directory")
+    files = sorted(d.rglob("*.csv"), key=_natural)
+    if not files:
+        raise UserError(f"{d}: no .csv files found")
+    return files
+
+
+#: a detector under the protocol: (training rows, test rows, test times in s) -> 0/1 per test row
+Detector = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass
+class FileResult:
+    file: SkabFile
+    prediction: np.ndarray  # 0/1 per test row
+
+    @property
+    def test_slice(self) -> slice:
+        return slice(TRAIN_ROWS, None)
+
+    def labels(self) -> np.ndarray:
+        return self.file.anomaly[TRAIN_ROWS:]
+
+    def true_changepoints(self) -> np.ndarray:
+        return self.file.changepoint[TRAIN_ROWS:]
+
+
+@dataclass
+class BenchmarkResult:
+    name: str
+    binary: BinaryScores
+    nab: NabResult
+    files: list[FileResult] = field(default_factory=list)
+
+    def row(self) -> dict:
+        return {"algorithm": self.name, "f1": self.binary.f1, "far_pct": self.binary.far_pct,
+                "mar_pct": self.binary.mar_pct, **{f"nab_{k}": v for k, v in self.nab.scores.items()},
+                "missed_cp": self.nab.missed, "false_positives": self.nab.false_positives,
+                "windows": self.nab.windows}
+
+
+def run_detector(detector: Detector, files: Iterable[SkabFile]) -> list[FileResult]:
+    """Fit on each file's first 400 rows and predict its test rows (labels are not passed)."""
+    out = []
+    for f in files:
+        if len(f.values) <= TRAIN_ROWS:
+            raise UserError(f"{f.path}: {len(f.values)} rows; the protocol needs more than {TRAIN_ROWS}")
+        train, test = f.split()
+        pred = np.asarray(detector(train, test, f.time_s[TRAIN_ROWS:]))
+        if pred.shape != (len(test),) or not np.isin(pred, (0, 1)).all():
+            raise ValueError(f"{f.key}: the detector must return 0/1 per test row, got shape {pred.shape}")
+        out.append(FileResult(f, pred.astype(np.int8)))
+    return out
+
+
+def score(name: str, results: Sequence[FileResult], width_s: float = WINDOW_S) -> BenchmarkResult:
+    """F1/FAR/MAR and NAB over the labelled files of ``results``."""
+    scored = [r for r in results if r.file.labelled]
+    binary = binary_scores([r.labels() for r in scored], [r.prediction for r in scored])
+    matched = [match_changepoints(r.file.time_s[TRAIN_ROWS:], r.true_changepoints(), switches(r.prediction), width_s)
+               for r in scored]
+    return BenchmarkResult(name, binary, nab_scores(matched), list(results))
+
+
+def write_predictions(results: Sequence[FileResult], out_dir: str | Path) -> list[Path]:
+    """OUT/predictions/<group>/<n>.csv: ``datetime;anomaly;changepoint`` for the test rows."""
+    written = []
+    for r in results:
+        p = Path(out_dir) / "predictions" / r.file.group / f"{r.file.name}.csv"
+        p.parent.mkdir(parents=True, exist_ok=True)
+        cp = switches(r.prediction)
+        stamps = r.file.datetime[TRAIN_ROWS:]
+        lines = ["datetime;anomaly;changepoint"] + [f"{s};{int(a)};{int(c)}" for s, a, c in
+                                                     zip(stamps, r.prediction, cp)]
+        p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        written.append(p)
+    return written
+
+
+# ---- label-free baselines ---------------------------------------------------------------
+def null_detector(train: np.ndarray, test: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """Never alarms."""
+    return np.zeros(len(test), dtype=np.int8)
+
+
+def always_detector(train: np.ndarray, test: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """Alarms on every test row."""
+    return np.ones(len(test), dtype=np.int8)
+
+
+def random_toggler(p_flip: float, seed: int = 0) -> Detector:
+    """Flips its 0/1 output with probability p_flip at each row (ignores the data; one generator per run)."""
+    rng = np.random.default_rng(seed)
+
+    def detect(train: np.ndarray, test: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        flips = rng.random(len(test)) < p_flip
+        return (np.cumsum(flips) % 2).astype(np.int8)
+
+    return detect
+
+
+def hotelling_t2(quantile: float = 0.99) -> Detector:
+    """Hotelling's T^2 of each test row against the training rows' mean and covariance; threshold: the
+    training rows' empirical quantile (the leaderboard's 'T-squared' in its simplest form)."""
+
+    def detect(train: np.ndarray, test: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        mu = train.mean(axis=0)
+        cov = np.cov(train, rowvar=False) + 1e-9 * np.eye(train.shape[1])
+        inv = np.linalg.pinv(cov)
+
+        def t2(x: np.ndarray) -> np.ndarray:
+            d = x - mu
+            return np.einsum("ij,jk,ik->i", d, inv, d)
+
+        return (t2(test) > np.quantile(t2(train), quantile)).astype(np.int8)
+
+    return detect

@@ -1,0 +1,99 @@
+"""Cells -> numbers: what is missing and why (empty, NaN, inf, text), and time stamps -> seconds."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from datetime import datetime
+
+import numpy as np
+
+MISSING_WORDS = frozenset({"", "nan", "na", "n/a", "null", "none", "-", "#n/a", "nat"})
+#: stamp formats tried after ISO 8601 (the pH rig's export is the second)
+STAMP_FORMATS = ("%Y-%m-%d %H:%M:%S", "%m/%d/%Y %I:%M:%S %p", "%d.%m.%Y %H:%M:%S", "%Y/%m/%d %H:%M:%S",
+                 "%d/%m/%Y %H:%M:%S")
+
+
+@dataclass
+class Numbers:
+    """A column as floats (NaN where missing) and, for each missing cell, why."""
+
+    values: np.ndarray
+    empty: np.ndarray  # bool: empty cell or a missing-value word (NA, null, ...)
+    nan: np.ndarray  # bool: NaN in the file
+    inf: np.ndarray  # bool: +-inf (set to NaN in ``values``)
+    text: np.ndarray  # bool: text that is not a number
+
+    @property
+    def missing(self) -> np.ndarray:
+        return self.empty | self.nan | self.inf | self.text
+
+
+def to_numbers(cells: list | np.ndarray) -> Numbers:
+    """Floats from a column of strings or numbers; inf and unreadable cells become NaN (and are marked)."""
+    n = len(cells)
+    if isinstance(cells, np.ndarray) and cells.dtype.kind in "fiub":
+        x = cells.astype(float)
+        nan, inf = np.isnan(x), np.isinf(x)
+        x[inf] = math.nan
+        zero = np.zeros(n, bool)
+        return Numbers(x, zero, nan, inf, zero.copy())
+    x = np.empty(n)
+    empty, nan, inf, text = (np.zeros(n, bool) for _ in range(4))
+    for i, c in enumerate(cells):
+        s = str(c).strip()
+        try:
+            v = float(s)
+        except ValueError:
+            x[i] = math.nan
+            (empty if s.lower() in MISSING_WORDS else text)[i] = True
+            continue
+        x[i] = v
+        if math.isnan(v):
+            nan[i] = True
+        elif math.isinf(v):
+            inf[i], x[i] = True, math.nan
+    return Numbers(x, empty, nan, inf, text)
+
+
+def parse_stamps(cells: list | np.ndarray, fmt: str | None = None) -> tuple[np.ndarray, str | None]:
+    """Seconds of each stamp (NaN where unreadable) and the datetime format used (None: plain numbers).
+
+    Plain numbers are taken as seconds as they are; date-time stamps as seconds since the first readable one.
+    """
+    nums = to_numbers(cells)
+    readable = ~nums.missing
+    if fmt is None and (readable.sum() >= 0.5 * len(cells) or isinstance(cells, np.ndarray)):
+        return nums.values, None
+    texts = [str(c).strip() for c in cells]
+    used = fmt or _guess_format(texts)
+    if used is None:
+        return nums.values, None
+    out = np.full(len(texts), math.nan)
+    t0 = None
+    for i, s in enumerate(texts):
+        d = _parse(s, used)
+        if d is None:
+            continue
+        t0 = d if t0 is None else t0
+        out[i] = (d - t0).total_seconds()
+    return out, used
+
+
+def _guess_format(texts: list[str]) -> str | None:
+    sample = [s for s in texts[:50] if s]
+    for fmt in ("iso", *STAMP_FORMATS):
+        if sample and sum(_parse(s, fmt) is not None for s in sample) >= 0.8 * len(sample):
+            return fmt
+    return None
+
+
+def _parse(text: str, fmt: str) -> datetime | None:
+    try:
+        d = datetime.fromisoformat(text) if fmt == "iso" else datetime.strptime(text, fmt)
+    except (ValueError, OverflowError):
+        return None
+    return d.replace(tzinfo=None) - (d.utcoffset() or _ZERO) if d.tzinfo else d
+
+
+_ZERO = datetime(2000, 1, 1) - datetime(2000, 1, 1)

@@ -1,0 +1,26 @@
+"""The one error a record reader raises: a :class:`~phfdi.errors.UserError` that names file, line and column."""
+
+from __future__ import annotations
+
+from phfdi.errors import UserError
+
+
+class ReadError(UserError):
+    """A record that cannot be read or used; the message is one line ``FILE: line N, column 'X': problem``."""
+
+    def __init__(self, path: object, problem: str, line: int | None = None, column: str | None = None,
+                 where: str = "line") -> None:
+        super().__init__(f"{place(path, line, column, where)}: {problem}")
+        self.path = str(path)
+        self.line = line
+        self.column = column
+
+
+def place(path: object, line: int | None = None, column: str | None = None, where: str = "line") -> str:
+    """``FILE``, ``FILE: line N``, ``FILE: column 'X'`` or ``FILE: line N, column 'X'`` (``where``: line/row/sample)."""
+    parts = []
+    if line is not None:
+        parts.append(f"{where} {line}")
+    if column is not None:
+        parts.append(f"column {column!r}")
+    return f"{path}: {', '.join(parts)}" if parts else str(path)

@@ -1,0 +1,220 @@
+"""read_record: any supported file -> :class:`Record` under the reading policy (see :mod:`.policy`)."""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+
+import numpy as np
+
+from phfdi.run import unit_of
+
+from . import policy as P
+from .cells import parse_stamps, to_numbers
+from .columns import PROJECT_UNIT, ColumnMap, ColumnSpec, kind_of, normal_cell
+from .errors import ReadError
+from .notes import counted, places
+from .record import Record
+from .sources import Table, read_table
+
+#: column names taken as time when no column map says which (case-insensitive)
+TIME_NAMES = ("time_s", "timestamp", "time", "datetime", "date")
+DEFAULT_SOURCE = "the file's header"
+
+
+def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | None = None, *,
+                policy: str = "run", channels: list[str] | tuple[str, ...] | None = None,
+                encoding: str | None = None, min_samples: int = 2) -> Record:
+    """Read a record (CSV, Parquet or an MCAP bag), repair what the policy repairs, refuse the rest.
+
+    ``column_map``: a :class:`ColumnMap`, its dict form or a YAML file; None reads every column under its
+    own name (time from ``time_s``, ``timestamp`` or ``time``). ``channels``: only these signals (each
+    must exist). ``policy``: "run" (a clock reset is refused) or "historian" (it starts a new segment).
+    Raises :class:`ReadError` (one line naming file, line and column) for what cannot be used.
+    """
+    if policy not in P.POLICIES:
+        raise ValueError(f"policy must be one of {P.POLICIES}, got {policy!r}")
+    path = Path(path)
+    table = read_table(path, encoding)
+    cmap = _resolve_map(column_map, table, channels)
+    rows = _rows(table, cmap)
+    columns = {name: spec.column for name, spec in cmap.signals.items() if name != "time_s"}
+    units = {name: _unit(name, spec, table) for name, spec in cmap.signals.items() if name != "time_s"}
+    _apply_policy(rows, policy)
+    if cmap.source == DEFAULT_SOURCE and channels is None:
+        _drop_empty_channels(rows, columns, units)
+    _refuse_unusable(rows, columns, min_samples, table.where)
+    P.note_holds_and_steps(rows, units, columns)
+    meta = dict(table.metadata)
+    if cmap.loop_tag:
+        meta["loop_tag"] = cmap.loop_tag
+    return Record(str(path), rows.time_s, rows.values, units, columns, rows.lines, table.where, policy,
+                  [*table.notes, *rows.notes], rows.automatic, rows.boundaries, meta)
+
+
+def _apply_policy(rows: P.Rows, policy: str) -> None:
+    P.drop_exact_duplicates(rows)
+    P.split_backwards(rows, policy)
+    P.respace_repeats(rows)
+    P.average_repeats(rows)
+    P.split_jumps(rows, policy)
+
+
+# ---- which columns -----------------------------------------------------------------------
+def _resolve_map(cmap: ColumnMap | dict | str | Path | None, table: Table, channels) -> ColumnMap:
+    if isinstance(cmap, (str, Path)):
+        cmap = ColumnMap.load(cmap)
+    elif isinstance(cmap, dict):
+        cmap = ColumnMap.from_mapping(cmap)
+    if cmap is None:
+        cmap = _default_map(table)
+    if channels is not None:
+        absent = [c for c in channels if c not in cmap.signals]
+        if absent:
+            if cmap.source == DEFAULT_SOURCE:
+                _no_column(table, absent[0], absent[0])
+            raise ReadError(cmap.source, f"no column mapped for {absent[0]!r}")
+        keep = {"time_s", *channels}
+        cmap = ColumnMap({k: v for k, v in cmap.signals.items() if k in keep}, cmap.sample_time_s,
+                         cmap.time_format, cmap.loop_tag, cmap.mode, cmap.quality, cmap.source)
+    for name, spec in cmap.signals.items():
+        if spec.column not in table.columns:
+            _no_column(table, spec.column, name)
+    for column in ([cmap.mode.column] if cmap.mode else []) + [q.column for q in cmap.quality]:
+        if column not in table.columns:
+            _no_column(table, column, "mode/quality")
+    if cmap.time is None and not (cmap.sample_time_s or table.metadata.get("sample_time_s")):
+        raise ReadError(table.path, f"no time column ({', '.join(TIME_NAMES[:3])}); give a column map with "
+                                    f"time_s or sample_time_s", line=1 if table.where == "line" else None)
+    if not cmap.channels():
+        raise ReadError(table.path, "no signal column besides time", line=1 if table.where == "line" else None)
+    return cmap
+
+
+def _default_map(table: Table) -> ColumnMap:
+    low = {c.lower(): c for c in table.columns}
+    time = next((low[n] for n in TIME_NAMES if n in low), None)
+    signals = {"time_s": ColumnSpec(time)} if time else {}
+    signals.update({c: ColumnSpec(c) for c in table.columns if c != time})
+    return ColumnMap(signals, source=DEFAULT_SOURCE)
+
+
+def _no_column(table: Table, column: str, signal: str) -> None:
+    close = [c for c in table.columns if c.lower().replace(" ", "") == column.lower().replace(" ", "")] \
+        or difflib.get_close_matches(column, list(table.columns), n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    names = ", ".join(repr(c) for c in list(table.columns)[:12])
+    raise ReadError(table.path, f"no such column (for {signal}){hint}; the file has: {names}",
+                    line=1 if table.where == "line" else None, column=column)
+
+
+def _unit(name: str, spec: ColumnSpec, table: Table) -> str:
+    """The project's unit for signals of a known kind, else the map's unit, the file's, or the name's."""
+    kind = kind_of(name)
+    if spec.unit is not None:
+        return PROJECT_UNIT[kind] if kind is not None else spec.unit
+    return table.units.get(spec.column) or unit_of(name)
+
+
+# ---- cells -> rows -------------------------------------------------------------------------
+def _rows(table: Table, cmap: ColumnMap) -> P.Rows:
+    time_s, stamps = _time(table, cmap)
+    values = {}
+    for name, spec in cmap.signals.items():
+        if name == "time_s":
+            continue
+        nums = to_numbers(table.columns[spec.column])
+        _note_missing_cells(table, spec.column, nums)
+        values[name] = nums.values * spec.factor
+    rows = P.Rows(table.path, table.where, time_s, values, table.lines.copy(), stamps)
+    _apply_quality(rows, table, cmap)
+    _apply_mode(rows, table, cmap)
+    readable = ~np.isnan(rows.time_s)
+    if not readable.all():
+        bad = np.flatnonzero(~readable)
+        rows.note(f"{places(table.where, spans_of(table, bad))}, column {cmap.time.column!r}: {len(bad)} "
+                  f"{'row' if len(bad) == 1 else 'rows'} without a readable time stamp, dropped")
+        rows.keep(readable)
+    return rows
+
+
+def spans_of(table: Table, index: np.ndarray) -> list[tuple[int, int]]:
+    return P.spans(table.lines, index)
+
+
+def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None]:
+    spec = cmap.time
+    if spec is None:
+        dt = float(cmap.sample_time_s or table.metadata["sample_time_s"])
+        return dt * np.arange(len(table)), None
+    cells = table.columns[spec.column]
+    t, fmt = parse_stamps(cells, cmap.time_format)
+    bad = np.isnan(t) | np.isinf(t)
+    if bad.sum() > 0.5 * len(t):
+        i = int(np.argmax(bad))
+        raise ReadError(table.path, f"{str(cells[i])[:40]!r} is not a time (seconds, or a date-time: give "
+                                    f"time_format in the column map)", line=int(table.lines[i]),
+                        column=spec.column, where=table.where)
+    t = np.where(bad, np.nan, t)
+    if fmt is None:
+        return t * spec.factor, None
+    return t, [str(c).strip() for c in cells]
+
+
+def _note_missing_cells(table: Table, column: str, nums) -> None:
+    kinds = {"empty": nums.empty, "NaN": nums.nan, "inf": nums.inf, "text": nums.text}
+    total = int(nums.missing.sum())
+    if total == 0:
+        return
+    first = int(np.argmax(nums.missing))
+    counts = counted({k: int(v.sum()) for k, v in kinds.items()})
+    example = ""
+    if nums.text.any():
+        example = f" (e.g. {str(table.columns[column][int(np.argmax(nums.text))])[:20]!r})"
+    table.notes.append(f"{table.path}: column {column!r}: {total} {'cell' if total == 1 else 'cells'} not a number "
+                       f"({counts}){example}, first at {table.where} {table.lines[first]}: marked missing")
+
+
+def _apply_quality(rows: P.Rows, table: Table, cmap: ColumnMap) -> None:
+    for q in cmap.quality:
+        good = np.array([normal_cell(c) in q.good for c in table.columns[q.column]])
+        if good.all():
+            continue
+        targets = [s for s in (q.signals or rows.values) if s in rows.values]
+        for s in targets:
+            rows.values[s] = np.where(good, rows.values[s], np.nan)
+        bad = np.flatnonzero(~good)
+        rows.note(f"{places(table.where, P.spans(table.lines, bad))}, column {q.column!r}: {len(bad)} samples "
+                  f"flagged bad: {', '.join(targets)} marked missing")
+
+
+def _apply_mode(rows: P.Rows, table: Table, cmap: ColumnMap) -> None:
+    if cmap.mode is None:
+        return
+    auto = np.array([cmap.mode.is_automatic(c) for c in table.columns[cmap.mode.column]])
+    rows.automatic = auto
+    if not auto.all():
+        manual = np.flatnonzero(~auto)
+        rows.note(f"{places(table.where, P.spans(table.lines, manual))}, column {cmap.mode.column!r}: "
+                  f"{len(manual)} samples not in automatic (mode {str(table.columns[cmap.mode.column][manual[0]])!r}"
+                  f"{' ...' if len(manual) > 1 else ''}): not judged where only automatic stretches are used")
+
+
+def _drop_empty_channels(rows: P.Rows, columns: dict[str, str], units: dict[str, str]) -> None:
+    """Columns nobody asked for that hold no value at all are dropped (noted), not refused."""
+    for name in [n for n, v in rows.values.items() if np.isnan(v).all()]:
+        if len(rows.values) == 1:
+            return  # the last one: refused below
+        del rows.values[name]
+        units.pop(name, None)
+        rows.note(f"column {columns.pop(name)!r}: no value at all, left out")
+
+
+def _refuse_unusable(rows: P.Rows, columns: dict[str, str], min_samples: int, where: str) -> None:
+    if len(rows) < min_samples:
+        raise ReadError(rows.path, f"only {len(rows)} usable {'sample' if len(rows) == 1 else 'samples'} "
+                                   f"after reading; at least {min_samples} are needed")
+    for name, v in rows.values.items():
+        if np.isnan(v).all():
+            raise ReadError(rows.path, f"no usable value in any of the {len(v)} rows (all missing)",
+                            line=int(rows.lines[0]), column=columns[name], where=where)

@@ -1,0 +1,173 @@
+"""A measured record after the reading policy: samples, what is missing, and every repair made."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from phfdi.run import Run
+
+from .errors import ReadError
+from .notes import places
+from .policy import interval_s, spans
+
+
+@dataclass
+class Record:
+    """Samples of one file in the project's names and units.
+
+    ``time_s`` in seconds (not necessarily uniform; see :meth:`on_grid`); ``signals`` name -> float array
+    with NaN where a sample is missing; ``lines`` the source line (text), row (Parquet) or sample (bag)
+    of each sample, ``where`` which of the three; ``columns`` signal -> the file's column name;
+    ``automatic`` True where the controller was in automatic (None: no MODE column);
+    ``boundaries`` indices where a new segment starts (historian policy: clock resets and jumps).
+    """
+
+    path: str
+    time_s: np.ndarray
+    signals: dict[str, np.ndarray]
+    units: dict[str, str]
+    columns: dict[str, str]
+    lines: np.ndarray
+    where: str = "line"
+    policy: str = "run"
+    notes: list[str] = field(default_factory=list)
+    automatic: np.ndarray | None = None
+    boundaries: list[int] = field(default_factory=list)
+    metadata: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.signals)
+
+    @property
+    def missing(self) -> dict[str, np.ndarray]:
+        """Per channel, True where the sample is missing."""
+        return {k: np.isnan(v) for k, v in self.signals.items()}
+
+    @property
+    def dt_s(self) -> float:
+        """Median sample interval (s)."""
+        return interval_s(self.time_s)
+
+    # ---- reporting ------------------------------------------------------------------------
+    def note_lines(self) -> list[str]:
+        """Every repair and observation, one line each (for stderr and reports)."""
+        return list(self.notes)
+
+    def summary(self) -> dict:
+        """What was read, for JSON output: file, rows, channels with units and missing counts, segments, notes."""
+        return {"file": self.path, "policy": self.policy, "samples": len(self),
+                "time_s": [float(self.time_s[0]), float(self.time_s[-1])] if len(self) else None,
+                "channels": {k: {"column": self.columns.get(k, k), "unit": self.units.get(k, ""),
+                                 "missing": int(np.isnan(v).sum())} for k, v in self.signals.items()},
+                "segments": len(self.boundaries) + 1, "notes": self.note_lines()}
+
+    # ---- conversions ----------------------------------------------------------------------
+    def to_run(self) -> Run:
+        """The project's :class:`~phfdi.run.Run` (NaN where missing; notes and units in the metadata)."""
+        if self.boundaries:
+            raise ReadError(self.path, f"{len(self.boundaries) + 1} segments (the clock resets or jumps); "
+                                       f"take one with segments()")
+        meta = {**self.metadata, "source": self.path, "notes": self.note_lines(), "units": dict(self.units)}
+        return Run({"time_s": self.time_s.copy(), **{k: v.copy() for k, v in self.signals.items()}}, meta)
+
+    def select(self, channels: list[str]) -> "Record":
+        """Only these channels (in this order)."""
+        return replace(self, signals={c: self.signals[c] for c in channels},
+                       units={c: self.units.get(c, "") for c in channels})
+
+    def _subset(self, index: np.ndarray | slice, **changes) -> "Record":
+        auto = None if self.automatic is None else self.automatic[index]
+        return replace(self, time_s=self.time_s[index], lines=self.lines[index], automatic=auto,
+                       signals={k: v[index] for k, v in self.signals.items()}, notes=list(self.notes), **changes)
+
+    def segments(self, automatic_only: bool = True, min_samples: int = 1) -> list["Record"]:
+        """Stretches on one clock (and, with a MODE column, in automatic), each a record of its own."""
+        out = []
+        edges = [0, *self.boundaries, len(self)]
+        for a, b in zip(edges[:-1], edges[1:]):
+            keep = np.ones(b - a, bool) if self.automatic is None or not automatic_only else self.automatic[a:b]
+            padded = np.diff(np.concatenate([[0], keep.astype(np.int8), [0]]))
+            for s, e in zip(np.flatnonzero(padded == 1), np.flatnonzero(padded == -1)):
+                if e - s >= min_samples:
+                    seg = self._subset(slice(a + s, a + e), boundaries=[])
+                    seg.notes.append(f"{self.path}: segment {self.where}s {self.lines[a + s]}-{self.lines[a + e - 1]} "
+                                     f"({e - s} samples)")
+                    out.append(seg)
+        return out
+
+    def longest_segment(self, automatic_only: bool = True) -> "Record":
+        """The longest segment; a :class:`ReadError` when none is left."""
+        segs = self.segments(automatic_only)
+        if not segs:
+            raise ReadError(self.path, "no usable stretch: the controller is never in automatic"
+                            if self.automatic is not None else "no sample left")
+        return max(segs, key=len)
+
+    def on_grid(self, dt_s: float | None = None) -> "Record":
+        """Samples on the uniform grid t0 + k dt (nearest within dt/2); empty slots missing, extra samples dropped."""
+        if self.boundaries:
+            raise ValueError("on_grid needs one segment: call segments() first")
+        dt = float(dt_s or self.dt_s)
+        slot = np.round((self.time_s - self.time_s[0]) / dt).astype(np.int64)
+        first = np.concatenate([[True], slot[1:] != slot[:-1]])
+        n = int(slot[-1]) + 1
+        notes = list(self.notes)
+        if not first.all():
+            notes.append(f"{self.path}: {int((~first).sum())} samples share a {dt:g} s grid slot with the one before, "
+                         f"dropped (first at {self.where} {self.lines[np.argmin(first)]})")
+        empty = n - int(first.sum())
+        if empty:
+            notes.append(f"{self.path}: {empty} slots of the {dt:g} s grid have no sample: missing")
+        idx = slot[first]
+
+        def put(v: np.ndarray, fill: float) -> np.ndarray:
+            out = np.full(n, fill, dtype=v.dtype if v.dtype != bool else bool)
+            out[idx] = v[first]
+            return out
+
+        return replace(self, time_s=self.time_s[0] + dt * np.arange(n), lines=put(self.lines, 0),
+                       signals={k: put(v, np.nan) for k, v in self.signals.items()}, notes=notes,
+                       automatic=None if self.automatic is None else put(self.automatic, False))
+
+    def filled(self, max_gap_s: float, channels: list[str] | None = None) -> "Record":
+        """Interior gaps of at most ``max_gap_s`` seconds filled by linear interpolation in time (noted)."""
+        signals, notes = dict(self.signals), list(self.notes)
+        dt = self.dt_s
+        for name in channels or self.names:
+            v = signals[name]
+            bad = np.isnan(v)
+            if not bad.any() or bad.all():
+                continue
+            d = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+            starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+            inner = (starts > 0) & (stops < len(v))
+            short = inner & ((self.time_s[np.minimum(stops, len(v) - 1)] - self.time_s[np.maximum(starts - 1, 0)]
+                              - dt) <= max_gap_s + 1e-9 * dt)
+            if not short.any():
+                continue
+            fill = np.concatenate([np.arange(a, b) for a, b in zip(starts[short], stops[short])])
+            good = ~bad
+            v = v.copy()
+            v[fill] = np.interp(self.time_s[fill], self.time_s[good], v[good])
+            signals[name] = v
+            where = places(self.where, [(int(self.lines[a]), int(self.lines[b - 1]))
+                                        for a, b in zip(starts[short], stops[short])])
+            notes.append(f"{self.path}: {where}, column {self.columns.get(name, name)!r}: {len(fill)} missing samples "
+                         f"in {int(short.sum())} gap(s) of up to {max_gap_s:g} s filled by linear interpolation")
+        return replace(self, signals=signals, notes=notes)
+
+    def refuse_missing(self, channel: str, hint: str = "") -> "Record":
+        """This record, or a :class:`ReadError` naming the first missing sample of ``channel``."""
+        bad = np.flatnonzero(np.isnan(self.signals[channel]))
+        if len(bad):
+            where = places(self.where, spans(self.lines, bad))
+            raise ReadError(self.path, f"{len(bad)} missing {'value' if len(bad) == 1 else 'values'} ({where})"
+                            + (f"; {hint}" if hint else ""), line=int(self.lines[bad[0]]),
+                            column=self.columns.get(channel, channel), where=self.where)
+        return self

@@ -1,0 +1,183 @@
+"""File formats -> a raw :class:`Table` of columns (cells as found), with the source line of each row.
+
+CSV/TSV text (any delimiter, see :mod:`.text`), the plant_loops historian export (``PROCESSDATA``
+title line), Parquet (pyarrow) and MCAP bags of the node graph (:func:`phfdi.bagio.load_run`).
+Damaged files give a :class:`ReadError`, never the parser's own exception.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from phfdi.errors import UserError
+
+from .errors import ReadError
+from .text import TextTable, decode, parse_csv
+
+PARQUET_MAGIC = b"PAR1"
+MCAP_MAGIC = b"\x89MCAP"
+
+
+@dataclass
+class Table:
+    """Columns of one file: strings (text files) or arrays (Parquet, bags), one entry per row."""
+
+    path: str
+    columns: dict[str, list | np.ndarray]
+    lines: np.ndarray  # source line (text) or row/sample number (1-based) of each row
+    where: str  # "line", "row" or "sample": what ``lines`` counts
+    metadata: dict = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.lines)
+
+
+def read_table(path: Path, encoding: str | None = None) -> Table:
+    """The raw table of any supported file, by extension and then by its first bytes."""
+    if path.is_dir():
+        if (path / "metadata.yaml").exists():
+            return read_bag(path)
+        raise ReadError(path, "a folder, not a record file (CSV, Parquet or MCAP)")
+    if not path.is_file():
+        raise ReadError(path, "no such file")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ReadError(path, f"cannot read the file ({exc.strerror})") from None
+    suffix = path.suffix.lower()
+    if suffix == ".mcap" or data.startswith(MCAP_MAGIC):
+        return read_bag(path)
+    if suffix in (".parquet", ".pq") or data.startswith(PARQUET_MAGIC):
+        return read_parquet(path, data)
+    return read_text(path, data, encoding)
+
+
+# ---- text ---------------------------------------------------------------------------------
+def read_text(path: Path, data: bytes, encoding: str | None = None) -> Table:
+    """A CSV (or the plant_loops export, detected by its title line)."""
+    if not data.strip():
+        raise ReadError(path, "empty file", line=1)
+    head = data[:16].lstrip(b"\xef\xbb\xbf")
+    if head.startswith(b"PROCESSDATA"):
+        return read_processdata(path, data, encoding)
+    table = parse_csv(data, path, encoding)
+    return _text_columns(path, table, table.header)
+
+
+def _text_columns(path: Path, table: TextTable, header: list[str], metadata: dict | None = None) -> Table:
+    columns: dict[str, list] = {}
+    notes = list(table.notes)
+    for i, name in enumerate(header):
+        if not name:
+            continue  # trailing empty columns (",,,," at the end of every line)
+        if name in columns:
+            notes.append(f"{path}: line 1: column {name!r} appears twice; the first is read")
+            continue
+        columns[name] = [r[i] if i < len(r) else "" for r in table.rows]
+    if not columns:
+        raise ReadError(path, "the header names no column", line=1)
+    if not table.rows:
+        raise ReadError(path, "no data rows after the header", line=2)
+    meta = {"encoding": table.encoding, "delimiter": table.delimiter, **(metadata or {})}
+    return Table(str(path), columns, np.asarray(table.lines, dtype=np.int64), "line", meta, {}, notes)
+
+
+def read_processdata(path: Path, data: bytes, encoding: str | None = None) -> Table:
+    """The refinery historian export of ../shared/data/plant_loops (see its PROVENANCE.md)."""
+    text, used, notes = decode(data, path, encoding)
+    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    if len(lines) < 6:
+        raise ReadError(path, "export ends before its data: expected 5 header lines, then rows", line=len(lines))
+    title, head, tags, descs = (ln.split("\t") for ln in lines[:4])
+    try:
+        sample_time_s, declared = float(head[1]), int(head[3])
+    except (IndexError, ValueError):
+        raise ReadError(path, f"expected '<n> <Ts> <start> <rows>', got {lines[1][:60]!r}", line=2) from None
+    if tags[0].strip() != "tagname":
+        raise ReadError(path, f"expected tag names after 'tagname', got {lines[2][:60]!r}", line=3)
+    header = ["timestamp", *(t.strip() for t in tags[1:])]
+    rows, numbers = [], []
+    for k, ln in enumerate(lines[5:], start=6):
+        if ln.strip():
+            rows.append([c.strip() for c in ln.split("\t")])
+            numbers.append(k)
+    meta = {"loop_tag": title[1].strip().removesuffix(" Data").strip() if len(title) > 1 else path.stem,
+            "sample_time_s": sample_time_s, "declared_rows": declared,
+            "descriptions": {t: descs[i].strip() for i, t in enumerate(header) if 0 < i < len(descs)}}
+    if len(rows) != declared:
+        notes.append(f"{path}: line 2: the header declares {declared} rows, the file has {len(rows)}")
+    table = TextTable(header, rows, numbers, used, "\t", notes)
+    return _text_columns(path, table, header, meta)
+
+
+# ---- Parquet ------------------------------------------------------------------------------
+def read_parquet(path: Path, data: bytes | None = None) -> Table:
+    """Columns of a Parquet file; numbers as float arrays, time stamps as seconds, the rest as text."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(pa.BufferReader(data) if data is not None else path)
+    except Exception as exc:  # noqa: BLE001 - pyarrow raises several types for damaged files
+        raise ReadError(path, f"not a readable Parquet file ({type(exc).__name__}: {_short(exc)})") from None
+    columns, units = {}, {}
+    for fld in table.schema:
+        columns[fld.name] = _arrow_column(table.column(fld.name), fld.type)
+        meta = fld.metadata or {}
+        if b"unit" in meta:
+            units[fld.name] = meta[b"unit"].decode("utf-8", "replace")
+    if not columns:
+        raise ReadError(path, "the Parquet file has no column")
+    try:
+        metadata = json.loads((table.schema.metadata or {}).get(b"phfdi_run", b"{}"))
+    except ValueError:
+        metadata = {}
+    n = table.num_rows
+    if n == 0:
+        raise ReadError(path, "no rows", where="row")
+    return Table(str(path), columns, np.arange(1, n + 1), "row",
+                 metadata if isinstance(metadata, dict) else {}, units)
+
+
+def _arrow_column(col, typ) -> list | np.ndarray:
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if pa.types.is_integer(typ) or pa.types.is_floating(typ) or pa.types.is_boolean(typ) \
+            or pa.types.is_decimal(typ):
+        return np.asarray(pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False), dtype=float)
+    if pa.types.is_timestamp(typ):
+        ns = pc.cast(pc.cast(col, pa.timestamp("ns")), pa.int64()).to_numpy(zero_copy_only=False)
+        return np.asarray(ns, dtype=float) * 1e-9
+    return ["" if v is None else str(v) for v in col.to_pylist()]
+
+
+def _short(exc: BaseException, limit: int = 160) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# ---- bags ---------------------------------------------------------------------------------
+def read_bag(path: Path) -> Table:
+    """The run signals of a bag of the node graph (time from /plant/measurement's stamps)."""
+    from phfdi.bagio import load_run
+
+    try:
+        run = load_run(path)
+    except ReadError:
+        raise
+    except UserError as exc:
+        raise ReadError(path, str(exc).removeprefix(f"{path}: ")) from None
+    except Exception as exc:  # noqa: BLE001 - rosbags/mcap raise many types on damaged bags
+        raise ReadError(path, f"not a readable MCAP bag ({type(exc).__name__}: {_short(exc)}); if its "
+                              f"recorder was killed, run: phfdi bag recover {path} FIXED.mcap") from None
+    if len(run) == 0:
+        raise ReadError(path, "the bag holds no sample of /plant/measurement")
+    units = run.units()
+    return Table(str(path), dict(run.signals), np.arange(1, len(run) + 1), "sample", dict(run.metadata), units)
