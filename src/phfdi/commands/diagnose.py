@@ -24,6 +24,11 @@ EXAMPLES = """examples:
       --calibrate plant.feeds.acid.recipe.H2SO4 plant.feeds.base.recipe.NaOH plant.tank.volume_ml
   phfdi diagnose --model out/diagnose/calibrated_model.yaml --map ph_rig --initial fit \\
       --fit add_base.csv add_acid.csv --validate control.csv
+  # structure search (mixing zone, feed dead times, pump curves, carbonate, probe dynamics and calibration
+  # added one at a time while the held-out gain is significant); reagent strengths and probe offsets per day
+  # (the date in the file name); a day absent from the fit gets those from the first 20 % of its record
+  phfdi diagnose --model rig_flask --map ph_rig --initial fit --structure --group '^([0-9.]{10})' \\
+      --adapt 0.2 --fit 2025.02.24-*.csv 2025.03.03-*.csv --validate 2025.04.07-*.csv
 
 column map (YAML; signal: column, or signal: {column: NAME, unit: UNIT}):
   time_s: {column: "ElapsedTime (s)", unit: s}        # s, ms, min, h
@@ -37,7 +42,8 @@ Named maps shipped with phfdi: ph_rig (../shared/data/ph_rig).
 catalogue: stiction backlash deadzone saturation coulomb_viscous_friction leakage valve_gain (actuator),
   sensor_delay sensor_lag sensor_bias sensor_drift sensor_gain (sensor),
   buffer reagent_concentration holdup disturbance_flow (process); verdicts: explained, not_explained,
-  none, not_identifiable. Bad input exits with status 2 and one line naming the problem.
+  none, not_identifiable. Structural candidates (--structure, or by name with --candidates): mixing_zone
+  feed_delay carbonate (process), pump_curve (actuator), probe_asymmetric_lag two_point_calibration (sensor). Bad input exits with status 2 and one line naming the problem.
 """
 
 
@@ -73,6 +79,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                           "model (calibrated_model.yaml)")
     how.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
     how.add_argument("--out", default="out/diagnose", help="report folder (default: out/diagnose)")
+    how.add_argument("--structure", action="store_true",
+                     help="forward structure search: add the effect with the largest held-out gain, refit all "
+                          "jointly, stop when the next addition is not significant; writes structure_model.yaml")
+    how.add_argument("--search-width", type=int, default=6, metavar="N",
+                     help="candidates tried at each step of the structure search (default 6)")
+    how.add_argument("--search-steps", type=int, default=5, metavar="N", help="at most N effects (default 5)")
+    how.add_argument("--group", default=None, metavar="REGEX",
+                     help="group records by a pattern of their file name (its first parenthesised group, else the "
+                          "match): declared parameters (reagent strengths, probe offset) are fitted per group")
+    how.add_argument("--adapt", type=float, default=0.0, metavar="FRACTION",
+                     help="with --group: a validation record of a group absent from the fit gets its start and its "
+                          "group's declared parameters from this first fraction of it (not scored); e.g. 0.2")
     how.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     how.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
@@ -98,6 +116,23 @@ def _map(args):
     return None
 
 
+def _groups(pattern: str, files: list[str]) -> list[str]:
+    """Group of each file: the first parenthesised group of ``pattern`` in its name, else the whole match."""
+    import re
+
+    try:
+        rx = re.compile(pattern)
+    except re.error as exc:
+        raise UserError(f"--group {pattern!r}: not a regular expression ({exc})") from None
+    out = []
+    for f in files:
+        m = rx.search(Path(f).name)
+        if m is None:
+            raise UserError(f"--group {pattern!r}: no match in the file name {Path(f).name!r}")
+        out.append(m.group(1) if rx.groups else m.group(0))
+    return out
+
+
 def _records(files, cmap, dt):
     from phfdi.diagnosis.data import load_record
 
@@ -119,8 +154,16 @@ def run(args: argparse.Namespace) -> int:
     val_records = _records(args.validate or [], cmap, args.dt)
     nominal = nominal_raw(args.model, args.overrides)
     progress = None if args.quiet else (lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True))
+    if not 0.0 <= args.adapt < 1.0:
+        raise UserError(f"--adapt {args.adapt}: a fraction in [0, 1)")
+    if args.adapt and not args.group:
+        raise UserError("--adapt needs --group (it adapts the parameters of a group the fit has not seen)")
+    if args.search_width < 1 or args.search_steps < 1:
+        raise UserError("--search-width and --search-steps must be at least 1")
+    groups = _groups(args.group, (args.data or args.fit) + (args.validate or [])) if args.group else None
     opts = Options(initial=args.initial, candidates=args.candidates, pairs=not args.no_pairs,
-                   workers=args.workers, progress=progress)
+                   workers=args.workers, progress=progress, structure=args.structure,
+                   search_width=args.search_width, search_steps=args.search_steps, groups=groups, adapt=args.adapt)
     command = "phfdi " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv and "phfdi" in sys.argv[0] \
         else ""
     if args.calibrate:

@@ -80,6 +80,9 @@ class Context:
     total_inflow_ml_s: float
     feed_strength_mol_l: dict[str, float]  # largest component concentration per feed
     outputs: set[str]
+    vessel_volume_ml: float = 1000.0  # liquid volume of the nominal vessel (mixing-zone bounds)
+    feed_max_flow_ml_s: dict[str, float] = field(default_factory=dict)  # largest flow of each feed in the data
+    basic_feeds: tuple[str, ...] = ()  # feeds above pH 7 (carbonate is carried by caustic)
 
 
 @dataclass
@@ -97,6 +100,11 @@ class Candidate:
     #: half-width (% of span) of the band a valve with memory can rest in, from the parameters; the
     #: rest point of each record becomes a nuisance parameter within it
     band: Callable[[dict[str, float]], float] | None = None
+    #: parameters that may differ per group of records (a reagent batch, a day, a probe calibration): with
+    #: ``--group`` one value per group, and for a group the fit has not seen, the only ones fitted (``--adapt``)
+    per_group: tuple[str, ...] = ()
+    structural: bool = False  # tried by the structure search (or when named), not by the single-cause catalogue
+    polish_evals: int = 20  # least-squares evaluations per parameter when refining the best start
 
     @property
     def family(self) -> str:
@@ -111,7 +119,7 @@ class Candidate:
         """Which simulation stages the candidate changes (for cost ordering)."""
         if self.family == "sensor":
             return "sensor"
-        if self.cause in ("buffer", "reagent_concentration"):
+        if self.cause in ("buffer", "reagent_concentration", "carbonate", "mixing_zone"):
             return "chemistry"
         return "flows"
 
@@ -192,7 +200,8 @@ def sensor_candidates(ctx: Context) -> list[Candidate]:
         Candidate("sensor_lag", [Param("tau_s", 0.0, longest, "s")], [{"tau_s": s} for s in starts_s],
                   lambda raw, p: _add_sensor_block(raw, "sensor_lag", {"tau_s": p["tau_s"]}), "tau_s"),
         Candidate("sensor_bias", [Param("bias", -3.0, 3.0, "pH")], [{"bias": 0.0}],
-                  lambda raw, p: _add_sensor_block(raw, "sensor_bias", {"bias": p["bias"]}), "bias"),
+                  lambda raw, p: _add_sensor_block(raw, "sensor_bias", {"bias": p["bias"]}), "bias",
+                  per_group=("bias",)),
         Candidate("sensor_drift", [Param("rate_per_s", -3.0 / span, 3.0 / span, "pH/s")], [{"rate_per_s": 0.0}],
                   lambda raw, p: _add_sensor_block(raw, "sensor_drift", {"rate_per_s": p["rate_per_s"]}),
                   "rate_per_s"),
@@ -242,12 +251,14 @@ def process_candidates(ctx: Context) -> list[Candidate]:
             "buffer", [Param("conc_mol_l", strength * 1e-4, strength * 10.0, "mol/L", log=True),
                        Param("pka", pka_lo, pka_hi, "pH")],
             [{"conc_mol_l": strength * f, "pka": p} for p in pka_starts for f in (0.05, 0.3)],
-            lambda raw, p, feed=feed: _add_buffer(raw, feed, p["conc_mol_l"], p["pka"]), "pka", variant=feed))
+            lambda raw, p, feed=feed: _add_buffer(raw, feed, p["conc_mol_l"], p["pka"]), "pka", variant=feed,
+            per_group=("conc_mol_l",)))
     for feed in ctx.feeds:
         out.append(Candidate(
             "reagent_concentration", [Param("factor", 0.2, 5.0, "1", log=True)],
             [{"factor": f} for f in (0.75, 1.33)],
-            lambda raw, p, feed=feed: _scale_feed(raw, feed, p["factor"]), "factor", variant=feed))
+            lambda raw, p, feed=feed: _scale_feed(raw, feed, p["factor"]), "factor", variant=feed,
+            per_group=("factor",)))
     out.append(Candidate(
         "holdup", [Param("factor", 0.2, 5.0, "1", log=True)], [{"factor": f} for f in (0.6, 1.6)],
         lambda raw, p: _scale_holdup(raw, p["factor"]), "factor",
@@ -264,8 +275,91 @@ def process_candidates(ctx: Context) -> list[Candidate]:
     return out
 
 
-def catalogue(ctx: Context, only: list[str] | None = None) -> tuple[list[Candidate], dict[str, str]]:
-    """Candidates that apply to this model and data, and why the others do not."""
+CARBONATE_COMPONENT = "absorbed_co2"
+CARBONATE_COMPOUND = "ABSORBED_CO2"
+CARBONATE_PKA = (6.35, 10.33)  # H2CO3*/HCO3-, HCO3-/CO3-- at 25 C
+
+
+def _add_carbonate(raw: dict, feed: str, conc: float) -> None:
+    """CO2 taken up by a caustic feed: carbonate added, its sodium unchanged (2 NaOH + CO2 -> Na2CO3 + H2O)."""
+    chem = raw["plant"].setdefault("chemistry", {})
+    comps = chem.setdefault("components", [])
+    if not any(c["name"] == CARBONATE_COMPONENT for c in comps):
+        comps.append({"name": CARBONATE_COMPONENT, "charge": 0, "pka": list(CARBONATE_PKA)})
+    chem.setdefault("compounds", {})[CARBONATE_COMPOUND] = {CARBONATE_COMPONENT: 1.0}
+    raw["plant"]["feeds"][feed]["recipe"][CARBONATE_COMPOUND] = conc
+
+
+def _add_line_block(raw: dict, feed: str, kind: str, params: dict) -> None:
+    raw["plant"]["feeds"][feed].setdefault("line", []).append({"type": kind, "params": params})
+
+
+def _set_mixing(raw: dict, feeds: list[str], volume: float, exchange: float) -> None:
+    raw["plant"]["mixing"] = {"zone_volume_ml": volume, "exchange_ml_s": exchange, "feeds": list(feeds)}
+
+
+def structural_candidates(ctx: Context) -> list[Candidate]:
+    """Structure a stirred-tank model of a real plant often lacks: imperfect mixing, feed lines, reagent
+    carbonate, probe dynamics and calibration."""
+    out: list[Candidate] = []
+    vol = max(ctx.vessel_volume_ml, 1.0)
+    q_total = max(ctx.total_inflow_ml_s, 1e-3)
+    zone_sets = [[f] for f in ctx.feeds] + ([list(ctx.feeds)] if len(ctx.feeds) > 1 else [])
+    for feeds in zone_sets:
+        out.append(Candidate(
+            "mixing_zone", [Param("zone_volume_ml", 0.002 * vol, 0.5 * vol, "mL", log=True),
+                            Param("exchange_ml_s", 0.05 * q_total, 300.0 * q_total, "mL/s", log=True)],
+            [{"zone_volume_ml": v * vol, "exchange_ml_s": x * q_total} for v in (0.005, 0.015, 0.04, 0.1, 0.25)
+             for x in (0.3, 1.0, 3.0, 10.0, 40.0)],
+            lambda raw, p, feeds=feeds: _set_mixing(raw, feeds, p["zone_volume_ml"], p["exchange_ml_s"]),
+            # ill-conditioned (volume and exchange trade off along a valley): pattern-search zoom, then polish
+            "zone_volume_ml", variant="+".join(feeds), structural=True, polish_evals=100))
+    longest = max(5.0 * ctx.dt_s, min(120.0, ctx.duration_s / 5.0))
+    for feed in ctx.feeds:
+        out.append(Candidate(
+            "feed_delay", [Param("delay_s", 0.0, longest, "s")],
+            [{"delay_s": d} for d in sorted({min(longest * 0.9, d) for d in (1.0, 4.0, 15.0, 40.0)})],
+            lambda raw, p, feed=feed: _add_line_block(raw, feed, "line_delay", {"delay_s": p["delay_s"]}),
+            "delay_s", variant=feed, structural=True))
+    for feed in ctx.feeds:
+        qmax = max(ctx.feed_max_flow_ml_s.get(feed, 0.0), 1e-3)
+        out.append(Candidate(
+            "pump_curve", [Param("gain", 0.4, 2.5, "1", log=True), Param("threshold_ml_s", 0.0, 0.6 * qmax, "mL/s")],
+            # a narrow valley (the pH near equivalence is steep in the delivered flow): a dense start grid
+            [{"gain": g, "threshold_ml_s": t * qmax} for g in (0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.35)
+             for t in (0.0, 0.05, 0.1, 0.17, 0.25, 0.35)],
+            lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_curve", {
+                "gain": p["gain"], "threshold_ml_s": p["threshold_ml_s"]}),
+            "threshold_ml_s", variant=feed, structural=True, polish_evals=100))
+    for feed in ctx.basic_feeds:
+        strength = ctx.feed_strength_mol_l.get(feed, 0.0) or 1e-2
+        out.append(Candidate(
+            "carbonate", [Param("conc_mol_l", strength * 1e-3, strength * 2.0, "mol/L", log=True)],
+            [{"conc_mol_l": strength * f} for f in (0.01, 0.05, 0.2, 0.6)],
+            lambda raw, p, feed=feed: _add_carbonate(raw, feed, p["conc_mol_l"]), "conc_mol_l", variant=feed,
+            fixed={"pka": list(CARBONATE_PKA)}, per_group=("conc_mol_l",), structural=True))
+    if "ph_measured" in ctx.outputs:
+        longest = max(5.0 * ctx.dt_s, min(300.0, ctx.duration_s / 5.0))
+        out.append(Candidate(
+            "probe_asymmetric_lag", [Param("tau_up_s", 0.0, longest, "s"), Param("tau_down_s", 0.0, longest, "s")],
+            [{"tau_up_s": a, "tau_down_s": b} for a in (1.0, 10.0, 40.0) for b in (1.0, 10.0, 40.0) if a != b],
+            lambda raw, p: _add_sensor_block(raw, "sensor_asymmetric_lag", {
+                "tau_up_s": p["tau_up_s"], "tau_down_s": p["tau_down_s"]}), "tau_up_s", structural=True))
+        out.append(Candidate(
+            "two_point_calibration", [Param("slope", 0.6, 1.5, "1", log=True), Param("offset", -1.5, 1.5, "pH")],
+            [{"slope": s_, "offset": o} for s_ in (0.9, 1.1) for o in (-0.2, 0.2)],
+            lambda raw, p: _add_sensor_block(raw, "two_point_calibration", {
+                "slope": p["slope"], "offset": p["offset"]}), "slope", per_group=("offset",), structural=True))
+    return out
+
+
+def catalogue(ctx: Context, only: list[str] | None = None,
+              structure: bool = False) -> tuple[list[Candidate], dict[str, str]]:
+    """Candidates that apply to this model and data, and why the others do not.
+
+    ``structure``: add the structural candidates (:func:`structural_candidates`); they are also added when
+    ``only`` names one of them.
+    """
     skipped: dict[str, str] = {}
     cands: list[Candidate] = []
     if ctx.has_command:
@@ -280,6 +374,12 @@ def catalogue(ctx: Context, only: list[str] | None = None) -> tuple[list[Candida
         for c in ("sensor_delay", "sensor_lag", "sensor_bias", "sensor_drift", "sensor_gain"):
             skipped[c] = "no pH measurement in the data"
     cands += process_candidates(ctx)
+    structural = structural_candidates(ctx)
+    if structure or (only and any(c.cause in only for c in structural)):
+        cands += structural
+    else:
+        for c in dict.fromkeys(c.cause for c in structural):
+            skipped.setdefault(c, "structural: tried by --structure (or name it with --candidates)")
     if only:
         unknown = [c for c in only if c not in CAUSES or c == "none"]
         if unknown:

@@ -50,6 +50,12 @@ class Problem:
     context: Context
     only: list[str] | None = None
     init_window: int = 20  # samples that set the start of a record used for validation only
+    structure: bool = False  # the structural candidates join the catalogue
+    #: per record, the group it belongs to (a day, a reagent batch); None: one group, every parameter shared
+    groups: list[str] | None = None
+    #: for a validation record of a group absent from the fit: the fraction of its start on which its start
+    #: and its group's declared parameters (Candidate.per_group) are fitted; 0: they take the fitted groups' mean
+    adapt: float = 0.0
 
 
 @dataclass
@@ -82,6 +88,12 @@ class FitResult:
     seconds: float = 0.0
     message: str = ""
     identified: dict[str, bool] = field(default_factory=dict)
+    #: per record, the model simulated on it (differs from ``raw`` where parameters differ per group)
+    record_raws: list = field(default_factory=list)
+    #: held-out NRMSE of the main output per record (RMSE / the record's own spread over its scored samples)
+    val_by_record: dict = field(default_factory=dict)
+    #: what was fitted where: group -> parameters (per-group ones), and per adapted record its samples
+    fitted_where: dict = field(default_factory=dict)
 
 
 class Fitter:
@@ -92,7 +104,9 @@ class Fitter:
         self.evaluators = [Evaluator(r, problem.nominal, problem.initial) for r in problem.records]
         self.fit_init = problem.initial == "fit"
         self.train_records = [i for i, m in enumerate(problem.train) if m.any()]
-        cands, self.skipped = catalogue(problem.context, problem.only)
+        cands, self.skipped = catalogue(problem.context, problem.only, problem.structure)
+        self.groups = list(problem.groups) if problem.groups else ["all"] * len(problem.records)
+        self.grouped = problem.groups is not None
         self.candidates = {c.label: c for c in cands}
         self._nominal: FitResult | None = None
         self._n_resid = sum(int(problem.train[i].sum()) * sum(o in problem.records[i].outputs
@@ -106,10 +120,11 @@ class Fitter:
         rec = self.p.records[i]
         return {o: (pred.outputs[o] - rec.outputs[o]) / self.p.noise[o] for o in self.p.outputs if o in rec.outputs}
 
-    def train_residual(self, raw: dict, starts: list[Start]) -> np.ndarray:
+    def train_residual(self, raw: dict | list, starts: list[Start]) -> np.ndarray:
+        """Training errors (noise units); ``raw`` one model, or one per record."""
         parts = []
         for i in self.train_records:
-            err = self._errors(i, self.predict(i, raw, starts[i]))
+            err = self._errors(i, self.predict(i, raw[i] if isinstance(raw, list) else raw, starts[i]))
             m = self.p.train[i]
             parts.extend(e[m] for e in err.values())
         return np.concatenate(parts)
@@ -127,8 +142,12 @@ class Fitter:
         at the first command.
         """
         t0 = time.perf_counter()
-        params = [(c, q) for c in cands for q in c.params]
+        train_groups = sorted({self.groups[i] for i in self.train_records})
+        # (candidate, parameter, group): group None for a shared parameter, else one entry per fitted group
+        params = [(c, q, g) for c in cands for q in c.params
+                  for g in (train_groups if self.grouped and q.name in c.per_group else [None])]
         n_par = len(params)
+        dup = {c.cause for c in cands if sum(d.cause == c.cause for d in cands) > 1}
         banded = [c for c in cands if c.band is not None]
         # nuisances per training record: start pH (initial: fit), valve rest offset (valve with memory)
         nuis: list[tuple[int, str]] = []
@@ -138,11 +157,23 @@ class Fitter:
             if banded:
                 nuis.append((i, "offset"))
 
-        def values(x: np.ndarray) -> list[dict]:
+        def values(x: np.ndarray, group: str | None = None) -> list[dict]:
+            """Parameter values of one group (a group the fit has not seen: the fitted groups' mean)."""
             vals = [dict() for _ in cands]
-            for j, (c, q) in enumerate(params):
-                vals[cands.index(c)][q.name] = q.from_unit(float(x[j]))
+            pooled: dict[tuple, list[float]] = {}
+            for j, (c, q, g) in enumerate(params):
+                if g is None or g == group:
+                    vals[cands.index(c)][q.name] = q.from_unit(float(x[j]))
+                else:
+                    pooled.setdefault((cands.index(c), q.name, id(q)), []).append(float(x[j]))
+            for (ci, name, _), us in pooled.items():
+                if name not in vals[ci]:
+                    q = next(q for c, q, g in params if cands.index(c) == ci and q.name == name)
+                    vals[ci][name] = q.from_unit(float(np.mean(us)))
             return vals
+
+        def group_of(i: int) -> str | None:
+            return self.groups[i] if self.grouped else None
 
         def half_band(vals: list[dict]) -> float:
             return max((c.band(vals[cands.index(c)]) for c in banded), default=0.0)
@@ -164,17 +195,32 @@ class Fitter:
                 c.apply(raw, v)
             return raw
 
+        def raws_of(x: np.ndarray) -> list[dict]:
+            if not self.grouped or n_par == 0 or not any(g is not None for _, _, g in params):
+                one = model(values(x))
+                return [one] * len(self.p.records)
+            by_group = {g: model(values(x, g)) for g in set(self.groups)}
+            return [by_group[self.groups[i]] for i in range(len(self.p.records))]
+
         def resid(x: np.ndarray) -> np.ndarray:
-            vals = values(x)
+            vals = values(x, train_groups[0] if self.grouped else None)
             try:
-                r = self.train_residual(model(vals), starts_of(x, vals))
+                r = self.train_residual(raws_of(x), starts_of(x, vals))
             except (UserError, ValueError, FloatingPointError):
                 return np.full(self._n_resid, 1e3)
             return np.where(np.isfinite(r), r, 1e3)
 
         nuis0 = [self.first_ph(i) if kind == "ph" else 0.0 for i, kind in nuis]
         grid = starts if starts is not None else list(cands[0].starts)
-        x_starts = [np.array([q.to_unit(q.clip(s[q.name])) for c, q in params] + nuis0, dtype=float) for s in grid]
+
+        def start_unit(s: dict, c: Candidate, q, g: str | None) -> float:
+            for key in (f"{c.label}.{q.name}", f"{c.cause}.{q.name}", q.name):
+                for k in ((f"{key}[{g}]", key) if g is not None else (key,)):
+                    if k in s:
+                        return q.to_unit(q.clip(s[k]))
+            return q.to_unit(q.clip(c.starts[0][q.name])) if c.starts and q.name in c.starts[0] else 0.5
+
+        x_starts = [np.array([start_unit(s, c, q, g) for c, q, g in params] + nuis0, dtype=float) for s in grid]
         lower = np.r_[np.zeros(n_par), [0.0 if k == "ph" else -1.0 for _, k in nuis]]
         upper = np.r_[np.ones(n_par), [14.0 if k == "ph" else 1.0 for _, k in nuis]]
         nfev = 0
@@ -199,8 +245,10 @@ class Fitter:
                 refine = [(best_cost, x_best, r_best)]
             else:
                 # refine the best start point (and the runner-up when nearly as good)
-                stages = ((0.02, 10), (0.002, 8)) if nonsmooth else ((1e-4, 20),)
-                refine = [scored[0]] + [t for t in scored[1:2] if t[0] < 1.5 * scored[0][0]]
+                polish = max(c.polish_evals for c in cands)
+                stages = ((0.02, 10), (0.002, 8)) if nonsmooth else ((1e-4, polish),)
+                # the best start, and the next ones when nearly as good (a narrow valley: more of them)
+                refine = [scored[0]] + [t for t in scored[1:2 if polish <= 20 else 3] if t[0] < 1.5 * scored[0][0]]
             for i_start, (cost0, x0, _) in enumerate(refine):
                 for step, evals in (stages if i_start == 0 else stages[:1]):
                     res = least_squares(resid, np.clip(x0, lower, upper), bounds=(lower, upper), method="trf",
@@ -213,18 +261,27 @@ class Fitter:
             if not np.any(jac):
                 jac = _jacobian(resid, x_best, r_best, lower, upper, 0.02 if nonsmooth else 1e-4)
                 nfev += len(x_best)
-        vals = values(x_best)
+        vals = values(x_best, train_groups[0] if self.grouped else None)
         start_list = starts_of(x_best, vals)
         raw = model(vals)
         sse = float(np.sum(r_best ** 2))
         n = len(r_best)
         k = n_par + len(nuis)
-        intervals, identified = self._intervals(params, x_best[:n_par], jac[:, :n_par], r_best, n, k)
+        intervals, identified = self._intervals(params, x_best[:n_par], jac[:, :n_par], r_best, n, k, dup)
         flat = {}
-        for c, v in zip(cands, vals):
-            for name, value in v.items():
-                flat[name if len(cands) == 1 else f"{c.cause}.{name}"] = value
-        res_val = self.validate(raw, start_list, banded_half=half_band(vals))
+        for j, (c, q, g) in enumerate(params):
+            flat[_pname(c, q, g, len(cands) > 1, dup)] = q.from_unit(float(x_best[j]))
+        record_raws = raws_of(x_best)
+        adapt = None
+        if self.grouped and any(g is not None for _, _, g in params):
+            adapt = (params, x_best[:n_par], model, values)
+        res_val = self.validate(record_raws, start_list, banded_half=half_band(vals), adapt=adapt)
+        fitted_where = {}
+        if self.grouped:
+            fitted_where = {"groups_fitted": train_groups,
+                            "per_group": sorted({_pname(c, q, None, len(cands) > 1, dup) for c, q, g in params
+                                                 if g is not None}),
+                            "adapted": res_val.get("adapted", {})}
         fixed = {}
         for c in cands:
             fixed.update({(k_ if len(cands) == 1 else f"{c.cause}.{k_}"): v for k_, v in c.fixed.items()})
@@ -240,9 +297,11 @@ class Fitter:
             n_params=n_par, train_sse=sse, n_train=n, aic=aic, bic=bic, val_rmse=res_val["rmse"],
             val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"], val_whiteness_p=res_val["whiteness_p"],
             val_structure=res_val["structure"], starts=res_val["starts"],
-            raw=raw, nfev=nfev, seconds=time.perf_counter() - t0, message=str(message), identified=identified)
+            raw=raw, nfev=nfev, seconds=time.perf_counter() - t0, message=str(message), identified=identified,
+            record_raws=res_val.get("raws", record_raws), fitted_where=fitted_where,
+            val_by_record=res_val.get("by_record", {}))
 
-    def _intervals(self, params, u, jac, r, n, k) -> tuple[dict, dict]:
+    def _intervals(self, params, u, jac, r, n, k, dup=frozenset()) -> tuple[dict, dict]:
         out, ident = {}, {}
         if not params:
             return out, ident
@@ -250,9 +309,9 @@ class Fitter:
         rho = lag1(r)
         inflate = min((1 + rho) / (1 - rho), 1e4) if rho > 0 else 1.0
         cov = np.linalg.pinv(jac.T @ jac) * s2 * inflate
-        multi = len({id(c) for c, _ in params}) > 1
-        for j, (c, q) in enumerate(params):
-            name = f"{c.cause}.{q.name}" if multi else q.name
+        multi = len({id(c) for c, _, _ in params}) > 1
+        for j, (c, q, g) in enumerate(params):
+            name = _pname(c, q, g, multi, dup)
             var = cov[j, j]
             if float(np.linalg.norm(jac[:, j])) < 1e-12 or not np.isfinite(var):
                 out[name] = [q.low, q.high]
@@ -264,29 +323,46 @@ class Fitter:
         return out, ident
 
     # ---- held-out scoring ---------------------------------------------------------
-    def validate(self, raw: dict, starts: list[Start], banded_half: float = 0.0) -> dict:
+    def validate(self, raw: dict | list, starts: list[Start], banded_half: float = 0.0, adapt=None) -> dict:
         """Held-out errors of a model: RMSE and NRMSE per output, and per-sample squared errors (noise units).
 
         A record used for validation only gets its unknown start (pH, valve rest point) from its first
-        ``init_window`` samples, which are then left out of the score.
+        ``init_window`` samples, which are then left out of the score. A record of a group the fit has not
+        seen (``adapt``: the fit's per-group parameters, with ``Problem.adapt`` > 0) gets its start and its
+        group's declared parameters from its first ``adapt`` fraction instead, also left out of the score.
         """
         starts = list(starts)
+        raws = list(raw) if isinstance(raw, list) else [raw] * len(self.p.records)
         sq_parts, acc = [], {o: [0.0, 0] for o in self.p.outputs}
         main_parts = []
+        by_record: dict[str, float] = {}
+        adapted: dict[str, dict] = {}
+        seen = {self.groups[i] for i in self.train_records}
         for i, rec in enumerate(self.p.records):
             mask = self.p.val[i].copy()
             if not mask.any():
                 continue
-            if i not in self.train_records and (self.fit_init or banded_half > 0):
-                starts[i] = self._start_of(i, raw, banded_half)
+            unseen = i not in self.train_records and self.grouped and self.groups[i] not in seen
+            if unseen and adapt is not None and self.p.adapt > 0:
+                n_fit = max(self.p.init_window, int(round(self.p.adapt * len(rec))))
+                raws[i], starts[i], info = self._adapt(i, adapt, n_fit, banded_half)
+                adapted[rec.name] = info
+                mask[:n_fit] = False
+            elif i not in self.train_records and (self.fit_init or banded_half > 0):
+                starts[i] = self._start_of(i, raws[i], banded_half)
                 mask[: self.p.init_window] = False
+            elif unseen and self.p.adapt > 0:
+                adapted[rec.name] = {"samples": 0, "parameters": {}, "note": "no per-group parameter in this model"}
             try:
-                err = self._errors(i, self.predict(i, raw, starts[i]))
+                err = self._errors(i, self.predict(i, raws[i], starts[i]))
             except (UserError, ValueError, FloatingPointError):
                 err = {o: np.full(len(rec), 1e3) for o in self.p.outputs if o in rec.outputs}
             sq = np.zeros(int(mask.sum()))
-            if self.p.outputs[0] in err:
-                main_parts.append(err[self.p.outputs[0]][mask])
+            main = self.p.outputs[0]
+            if main in err:
+                main_parts.append(err[main][mask])
+                spread = float(np.std(rec.outputs[main][mask])) or 1.0
+                by_record[rec.name] = float(np.sqrt(np.mean((err[main][mask] * self.p.noise[main]) ** 2))) / spread
             for o, e in err.items():
                 ev = e[mask]
                 sq += ev ** 2
@@ -296,10 +372,55 @@ class Fitter:
         rmse = {o: math.sqrt(s / c) if c else math.nan for o, (s, c) in acc.items()}
         nrmse = {o: rmse[o] / self.p.scale[o] for o in rmse}
         cost = float(np.mean([(rmse[o] / self.p.noise[o]) ** 2 for o in rmse if math.isfinite(rmse[o])]))
-        return {"rmse": rmse, "nrmse": nrmse, "cost": cost,
+        return {"rmse": rmse, "nrmse": nrmse, "cost": cost, "raws": raws, "adapted": adapted, "by_record": by_record,
                 "sq": np.concatenate(sq_parts) if sq_parts else np.zeros(0), "starts": starts,
                 "lag1": float(np.mean([lag1(e) for e in main_parts])) if main_parts else 0.0,
                 **_whiteness(main_parts)}
+
+    def _adapt(self, i: int, adapt, n_fit: int, half_band: float) -> tuple[dict, Start, dict]:
+        """Start and the declared per-group parameters of record i's (unseen) group, fitted on its first n_fit
+        samples; every shared parameter stays as fitted."""
+        params, x_fit, model, values = adapt
+        window = np.zeros(len(self.p.records[i]), bool)
+        window[:n_fit] = True
+        group = self.groups[i]
+        own = [(c, q) for c, q, g in params if g is not None]
+        own = list({(id(c), q.name): (c, q) for c, q in own}.values())
+        base = values(x_fit, group)  # shared as fitted, per-group at the fitted groups' mean
+
+        cands: list = []
+        for c, _, _ in params:
+            if not any(c is d for d in cands):
+                cands.append(c)
+
+        def vals_of(x):
+            vals = [dict(v) for v in base]
+            for j, (c, q) in enumerate(own):
+                vals[cands.index(c)][q.name] = q.from_unit(float(x[j]))
+            return vals
+
+        x0 = [q.to_unit(base[cands.index(c)][q.name]) for c, q in own]
+        lo, hi = [0.0] * len(own), [1.0] * len(own)
+        if self.fit_init:
+            x0.append(self.first_ph(i)), lo.append(0.0), hi.append(14.0)
+
+        def start(x) -> Start:
+            return Start(float(x[len(own)]) if self.fit_init else None, 0.0)
+
+        def r(x):
+            try:
+                err = self._errors(i, self.predict(i, model(vals_of(x)), start(x)))
+            except (UserError, ValueError, FloatingPointError):
+                return np.full(int(window.sum()) * len(self.p.outputs), 1e3)
+            return np.concatenate([np.where(np.isfinite(e[window]), e[window], 1e3) for e in err.values()])
+
+        sol = least_squares(r, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=60 * (len(x0) + 1))
+        vals = vals_of(sol.x)
+        info = {"samples": n_fit, "parameters": {f"{c.label}.{q.name}": vals[cands.index(c)][q.name]
+                                                 for c, q in own}}
+        if self.fit_init:
+            info["initial_ph"] = float(sol.x[len(own)])
+        return model(vals), start(sol.x), info
 
     def _start_of(self, i: int, raw: dict, half_band: float) -> Start:
         """Unknown start of a validation-only record, fitted on its first samples."""
@@ -364,6 +485,13 @@ def _jacobian(fun, x, f0, lower, upper, step) -> np.ndarray:
         xj[j] = x[j] + h if x[j] + h <= upper[j] else x[j] - h
         jac[:, j] = (fun(xj) - f0) / (xj[j] - x[j])
     return jac
+
+
+def _pname(c: Candidate, q, g: str | None, multi: bool, dup=frozenset()) -> str:
+    """Reported name of a parameter: ``name``, ``cause.name`` in a set (``cause[feed].name`` when a cause
+    appears twice), ``...[group]`` for a per-group value."""
+    name = q.name if not multi else f"{c.label if c.cause in dup else c.cause}.{q.name}"
+    return f"{name}[{g}]" if g is not None else name
 
 
 def _nominal_candidate() -> Candidate:

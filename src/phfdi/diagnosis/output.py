@@ -60,6 +60,9 @@ def _check_reproduces(d: Diagnosis, path: Path) -> None:
     raw = load_model_file(path)
     worst = 0.0
     for i, rec in enumerate(d.records):
+        if d.extended_record_raws and d.extended_record_raws[i] is not d.extended_raw \
+                and d.extended_record_raws[i] != d.extended_raw:
+            continue  # a record of another group: its per-group parameters are in the report, not this file
         ev = Evaluator(rec, raw, d.report.get("initial", "steady"))
         pred = ev.predict(raw, d.extended_starts[i])
         for o, y in d.extended[i].outputs.items():
@@ -91,10 +94,29 @@ def write_figures(d: Diagnosis, out_dir: Path) -> list[str]:
     return files
 
 
+def write_structure(d: Diagnosis, out_dir: Path, model: str) -> Path | None:
+    """The structure search's final model as a scenario file (the first fitted group's values)."""
+    search = d.report.get("structure_search")
+    if d.structure is None or search is None:
+        return None
+    final = search["path"][[s["accepted"] for s in search["path"]].index(False) - 1] \
+        if not all(s["accepted"] for s in search["path"]) else search["path"][-1]
+    header = (f"written by phfdi diagnose --structure: the nominal model {model!r} plus "
+              f"{' + '.join(search['chosen'])}\n"
+              f"{fmt_params(final['parameters'], final.get('confidence_intervals'))}\n"
+              f"held-out NRMSE {fmt_num(search['nrmse_nominal'])} -> {fmt_num(search['nrmse_final'])}\n"
+              f"run it: phfdi simulate --scenario {out_dir / 'structure_model.yaml'}")
+    path = write_model(out_dir / "structure_model.yaml", model, d.structure.raw, header,
+                       f"{Path(model).stem}-structure")
+    search["model_file"] = str(path)
+    return path
+
+
 def write_all(d: Diagnosis, out_dir: str | Path, model: str, command: str = "") -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_extended(d, out, model)
+    write_structure(d, out, model)
     write_figures(d, out)
     (out / "report.json").write_text(to_json(d.report), encoding="utf-8")
     (out / "REPORT.md").write_text(report_markdown(d.report, command), encoding="utf-8")
@@ -189,6 +211,8 @@ def report_markdown(rep: dict, command: str = "") -> str:
     else:
         lines.append("No extended model: no candidate lowered the held-out error significantly.")
     lines.append("")
+    if rep.get("structure_search"):
+        lines += ["## Structure search", "", "```"] + structure_lines(rep) + ["```", ""]
     return "\n".join(lines) + "\n"
 
 
@@ -208,7 +232,35 @@ def terminal_summary(rep: dict) -> str:
     lines.append(f"  {rep['reason']}")
     if rep.get("extended_model"):
         lines.append(f"  extended model: {rep['extended_model']}")
+    lines += structure_lines(rep)
     if rep.get("report_dir"):
         lines.append(f"  report: {Path(rep['report_dir']) / 'REPORT.md'}")
     return "\n".join(lines)
 
+
+
+def structure_lines(rep: dict) -> list[str]:
+    """The structure search's path: each step's held-out error and parameters with their 95 % intervals."""
+    search = rep.get("structure_search")
+    if not search:
+        return []
+    lines = ["  structure search (forward: add the largest held-out gain, refit jointly, stop when not significant):"]
+    for s in search["path"]:
+        mark = "" if s["accepted"] else "  [rejected]"
+        gain = "" if s["gain_percent_vs_previous"] is None else \
+            f", {s['gain_percent_vs_previous']:+.1f} % (p = {fmt_num(s['p_value_vs_previous'], '.2g')})"
+        lines.append(f"    {s['model']:45s} held-out NRMSE {fmt_num(s['nrmse_validation'], '.4f')}, "
+                     f"{s['validation_rmse_over_noise']:.3g} x noise{gain}{mark}")
+        if s["parameters"] and s["accepted"]:
+            lines.append(f"      {fmt_params(s['parameters'], s.get('confidence_intervals'))}")
+        if s["nrmse_by_record"]:
+            lines.append("      per record: " + ", ".join(f"{k} {v:.3f}" for k, v in s["nrmse_by_record"].items()))
+        adapted = (s.get("fitted_where") or {}).get("adapted")
+        if adapted:
+            for name, info in adapted.items():
+                lines.append(f"      adapted {name} on its first {info['samples']} samples: "
+                             f"{fmt_params(info['parameters'])}")
+    lines.append(f"    stopped: {search['stopped']}")
+    if search.get("model_file"):
+        lines.append(f"    model: {search['model_file']}")
+    return lines

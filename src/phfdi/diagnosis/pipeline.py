@@ -69,6 +69,13 @@ class Options:
     # index, unlike p, does not grow with the record length.
     floor_max_structure: float = 0.15
     progress: Callable[[str], None] | None = None
+    #: forward structure search: the structural candidates join the catalogue, and effects are added one at a
+    #: time (the one with the largest held-out gain, all refitted jointly) while the addition counts
+    structure: bool = False
+    search_width: int = 6  # candidates (best single held-out gains) tried at each step of the search
+    search_steps: int = 5  # at most this many effects
+    groups: list[str] | None = None  # per record (fit records, then validation records): its group
+    adapt: float = 0.0  # fraction of an unseen group's record on which its declared parameters are fitted
 
 
 @dataclass
@@ -84,6 +91,9 @@ class Diagnosis:
     extended_raw: dict | None = None
     noise: dict = field(default_factory=dict)
     extended_starts: list = field(default_factory=list)
+    extended_record_raws: list = field(default_factory=list)
+    structure: FitResult | None = None  # the structure search's final model (None: nominal, or no search)
+    structure_preds: list[Prediction] | None = None
 
 
 def _say(opts: Options, text: str) -> None:
@@ -125,12 +135,21 @@ def context_for(nominal: dict, records: list[Record], outputs: list[str]) -> Con
     ev = Evaluator(records[0], nominal)
     flows = ev.flows(ev.nominal_spec)[0]  # the nominal feeds' flows: the scale of a disturbance
     strength = {f.name: max(c for c in conc) if conc else 0.0 for f, conc in zip(plant.feeds, plant.feed_conc)}
+    all_flows = [Evaluator(r, nominal).flows(ev.nominal_spec)[0] for r in records]
+    flow_max = {f: float(max(np.max(q[:, j]) for q in all_flows)) for j, f in enumerate(feeds)}
+    basic = tuple(f.name for f, conc in zip(plant.feeds, plant.feed_conc) if plant.balance.ph(conc) > 7.0)
+    if plant.tank.overflow:
+        volume = float(plant.tank.volume_ml)
+    else:  # a gravity tank at the level that passes the mean inflow with the outlet half open
+        q = max(float(np.mean(flows.sum(axis=1))), 1e-6)
+        volume = max(plant.tank.outlet.level_for_flow(q, 0.5), 1.0) * plant.tank.area_cm2
     return Context(
         feeds=feeds, valve_feed=valve["feed"], valve_max_flow_ml_s=float(valve["max_flow_ml_s"]),
         overflow=plant.tank.overflow, has_command=has_cmd,
         command_pct=cmd, ph_range=(float(np.quantile(phs, 0.01)), float(np.quantile(phs, 0.99))),
         duration_s=max(float(r.time_s[-1] - r.time_s[0]) for r in records), dt_s=records[0].dt_s,
-        total_inflow_ml_s=float(np.mean(flows.sum(axis=1))), feed_strength_mol_l=strength, outputs=set(outputs))
+        total_inflow_ml_s=float(np.mean(flows.sum(axis=1))), feed_strength_mol_l=strength, outputs=set(outputs),
+        vessel_volume_ml=volume, feed_max_flow_ml_s=flow_max, basic_feeds=basic)
 
 
 def _identifiable(records: list[Record], initial: str, noise: dict) -> str | None:
@@ -171,7 +190,8 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
                        "ranking": [], "reason": why})
         return Diagnosis(check_report(report), records, train, val, noise=noise)
     ctx = context_for(nominal, records, outputs)
-    problem = Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, opts.candidates)
+    problem = Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, opts.candidates,
+                      structure=opts.structure, groups=opts.groups, adapt=opts.adapt)
     local = Fitter(problem)
     _say(opts, "simulating the nominal model")
     nom = local.nominal()
@@ -179,12 +199,12 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     misfit = _misfit(records, nominal_preds, outputs, noise)
     labels = sorted(local.candidates, key=lambda lab: _cost_rank(local.candidates[lab]))
     _say(opts, f"fitting {len(labels)} candidates ({len(set(c.cause for c in local.candidates.values()))} causes)")
-    results, pairs = _run_fits(problem, labels, nom, opts, local)
+    results, pairs, search = _run_fits(problem, labels, nom, opts, local)
     report = _decide(nom, results, pairs, local, opts)
     winner: FitResult | None = report.pop("_winner")
     extended_preds = None
     if winner is not None and report.get("_write"):
-        extended_preds = [local.predict(i, winner.raw, winner.starts[i]) for i in range(len(records))]
+        extended_preds = [local.predict(i, _raw_of(winner, i), winner.starts[i]) for i in range(len(records))]
     report.pop("_write", None)
     base = _base_report(model_name, records, outputs, noise, notes)
     base.update(report)
@@ -201,11 +221,31 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
                                       "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
                                       if nom.val_nrmse[o] else None} for o in outputs}
     base["skipped"] = local.skipped
+    if opts.groups is not None:
+        base["groups"] = {r.name: g for r, g in zip(records, opts.groups)}
+        base["adapt"] = opts.adapt
+    structure_final = None
+    structure_preds = None
+    if search is not None:
+        base["structure_search"] = _search_report(search, nom, main=outputs[0], opts=opts)
+        structure_final = search["final"]
+        if structure_final is not None:
+            structure_preds = [local.predict(i, _raw_of(structure_final, i), structure_final.starts[i])
+                               for i in range(len(records))]
     base["seconds"] = time.perf_counter() - t_start
-    base["candidates_fitted"] = len(results) + len(pairs)
-    return Diagnosis(check_report(base), records, train, val, nominal_preds, extended_preds,
-                     winner.raw if winner is not None and extended_preds is not None else None, noise,
-                     winner.starts if winner is not None else [])
+    base["candidates_fitted"] = len(results) + len(pairs) + (search["fits"] if search else 0)
+    d = Diagnosis(check_report(base), records, train, val, nominal_preds, extended_preds,
+                  winner.raw if winner is not None and extended_preds is not None else None, noise,
+                  winner.starts if winner is not None else [])
+    d.extended_record_raws = [_raw_of(winner, i) for i in range(len(records))] if extended_preds else []
+    d.structure = structure_final
+    d.structure_preds = structure_preds
+    return d
+
+
+def _raw_of(r: FitResult, i: int) -> dict:
+    """The model a fit simulated on record i (per-group parameters differ between records)."""
+    return r.record_raws[i] if r.record_raws else r.raw
 
 
 def _drop_unknown_feeds(rec: Record, nominal: dict) -> None:
@@ -284,15 +324,100 @@ def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options
                                                          initargs=(problem,))
     try:
         results = run_all(pool, [(fit_task, ([lab],)) for lab in labels])
-        pair_tasks = _pair_tasks(results, nom, opts)
+        named = set(opts.candidates or [])
+        # the single-cause answer keeps its catalogue; structural candidates join it when named (--candidates)
+        singles = [r for r in results if not local.candidates[r.label].structural or local.candidates[r.label].cause in named]
+        pair_tasks = _pair_tasks(singles, nom, opts)
         pairs = []
         if pair_tasks:
             _say(opts, f"fitting {len(pair_tasks)} pairs (the best single candidate leaves structure)")
             pairs = run_all(pool, [(fit_task, (labs, starts)) for labs, starts in pair_tasks])
+        search = _structure_search(results, nom, opts, local, lambda jobs: run_all(pool, jobs)) \
+            if opts.structure else None
     finally:
         if pool is not None:
             pool.shutdown()
-    return results, pairs
+    return singles, pairs, search
+
+
+#: causes that set one thing of the model (a second variant would overwrite the first)
+_EXCLUSIVE = {"mixing_zone", "holdup", "valve_gain", "sensor_gain", "sensor_bias", "two_point_calibration",
+              "sensor_lag", "sensor_delay", "probe_asymmetric_lag", "sensor_drift"}
+
+
+def _compatible(label: str, chosen: list[str], local: Fitter) -> bool:
+    c = local.candidates[label]
+    for other in chosen:
+        o = local.candidates[other]
+        if other == label or (o.cause == c.cause and (c.cause in _EXCLUSIVE or not c.variant)):
+            return False
+        if {o.cause, c.cause} <= {"sensor_bias", "two_point_calibration"} or \
+                {o.cause, c.cause} <= {"sensor_gain", "two_point_calibration"}:
+            return False  # the same probe calibration twice
+    return True
+
+
+def _structure_search(singles: list[FitResult], nom: FitResult, opts: Options, local: Fitter, run) -> dict:
+    """Forward selection: add the candidate with the largest held-out gain, refit all selected jointly, stop when
+    the next addition does not count (significant at ``alpha`` and at least ``min_gain``) against the model so
+    far. Each step tries the ``search_width`` candidates of best single held-out gain that fit with the chosen."""
+    by_gain = sorted(singles, key=lambda r: r.val_cost)
+    params_of = {r.label: r.params for r in singles}
+    current, chosen = nom, []
+    path = [{"model": "nominal", "fit": nom}]
+    fits = 0
+    stopped = f"at most {opts.search_steps} effects (--search-steps)"
+    for step in range(opts.search_steps):
+        options = [r.label for r in by_gain if _compatible(r.label, chosen, local)][: opts.search_width]
+        if not options:
+            stopped = "no candidate left to add"
+            break
+        if not chosen:
+            tried = [r for r in singles if r.label in options]
+        else:
+            jobs = []
+            for lab in options:
+                start = dict(current.params)
+                start.update({f"{lab}.{k}": v for k, v in params_of[lab].items()})
+                start.update({f"{local.candidates[lab].cause}.{k}": v for k, v in params_of[lab].items()})
+                jobs.append((fit_task, (chosen + [lab], [start])))
+            _say(opts, f"structure search step {step + 1}: {' + '.join(chosen)} + one of {len(jobs)} candidates")
+            tried = run(jobs)
+            fits += len(tried)
+        best = min(tried, key=lambda r: r.val_cost)
+        counts, p, gain = _counts(best, current, opts)
+        added = best.label.split("+")[-1]
+        if not counts:
+            stopped = (f"adding {added} does not count: held-out gain {100 * gain:+.1f} % (p = {p:.2g}); "
+                       f"needs >= {100 * opts.min_gain:.0f} % at p < {opts.alpha}")
+            path.append({"model": best.label, "fit": best, "rejected": True, "p": p, "gain": gain})
+            break
+        chosen = chosen + [added]
+        current = best
+        path.append({"model": best.label, "fit": best, "p": p, "gain": gain})
+        _say(opts, f"  + {added}: held-out error {math.sqrt(best.val_cost):.3g} x noise ({100 * gain:+.1f} %)")
+    return {"path": path, "final": current if chosen else None, "chosen": chosen, "stopped": stopped, "fits": fits}
+
+
+def _search_report(search: dict, nom: FitResult, main: str, opts: Options) -> dict:
+    steps = []
+    for s in search["path"]:
+        r: FitResult = s["fit"]
+        steps.append({"model": s["model"], "accepted": not s.get("rejected", False),
+                      "nrmse_validation": r.val_nrmse.get(main), "validation_rmse_over_noise": math.sqrt(r.val_cost),
+                      "gain_percent_vs_previous": 100.0 * s["gain"] if "gain" in s else None,
+                      "p_value_vs_previous": s.get("p"), "parameters": r.params,
+                      "confidence_intervals": r.intervals, "n_params": r.n_params, "bic": r.bic,
+                      "fitted_where": r.fitted_where, "nrmse_by_record": _per_record(r)})
+    final = search["final"]
+    return {"path": steps, "chosen": search["chosen"], "stopped": search["stopped"],
+            "nrmse_nominal": nom.val_nrmse.get(main),
+            "nrmse_final": final.val_nrmse.get(main) if final is not None else nom.val_nrmse.get(main),
+            "nrmse_by_record_nominal": _per_record(nom)}
+
+
+def _per_record(r: FitResult) -> dict:
+    return getattr(r, "val_by_record", {}) or {}
 
 
 def _local_call(local: Fitter, fn, args) -> FitResult:
@@ -359,7 +484,8 @@ def _entry(r: FitResult, nom: FitResult, main: str, noise: dict, opts: Options) 
             "validation_rmse_over_noise": math.sqrt(r.val_cost), "validation_whiteness_p": r.val_whiteness_p,
             "validation_structure": r.val_structure,
             "gain_percent": 100.0 * gain, "p_value_vs_nominal": p, "counts": counts,
-            "aic": r.aic, "bic": r.bic, "n_params": r.n_params, "seconds": r.seconds}
+            "aic": r.aic, "bic": r.bic, "n_params": r.n_params, "seconds": r.seconds,
+            "nrmse_by_record": r.val_by_record}
 
 
 def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], local: Fitter,

@@ -59,6 +59,14 @@ CAUSES: dict[str, str] = {
     "reagent_concentration": "process",
     "holdup": "process",
     "disturbance_flow": "process",
+    # structural candidates (ph_plant_sim.mixing, ph_plant_sim.feedlines, probe blocks): tried by the structure
+    # search (--structure) or when named with --candidates
+    "mixing_zone": "process",
+    "feed_delay": "process",
+    "pump_curve": "actuator",
+    "carbonate": "process",
+    "probe_asymmetric_lag": "sensor",
+    "two_point_calibration": "sensor",
     "none": "none",
 }
 

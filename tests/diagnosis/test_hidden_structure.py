@@ -1,0 +1,120 @@
+"""Hide a structural effect of a real dosing rig in simulated data; the diagnosis must name it with its parameter.
+
+The plant is the teaching-lab rig's model (``rig_flask``: H2SO4 and NaOH pumped into a stirred overflow flask,
+1 L here). The acid pump steps between rates, the base pump doses in on/off pulses at several speeds (the
+excitation a pump curve and a dead time need), and the pH meter reads with noise. Hidden, one at a time: a mixing
+zone the base is dosed into, a dead time of the base line, the base pump's delivery curve, carbonate carried by the
+base. Only a CSV (neutral name; time, both measured pump flows, pH) and the nominal model reach `phfdi diagnose`,
+through its command line; the candidates it chooses among include the structural ones and the usual causes a rig
+engineer would suspect first (probe delay and lag, reagent strength, a buffer, the flask volume). A fresh seed per
+run (printed; PHFDI_HIDDEN_SEED reproduces).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phfdi.diagnosis.model import nominal_raw
+from phfdi.loop import simulate_open_loop
+from phfdi.run import Run
+from phfdi.scenario import validate_scenario
+
+DT_S = 1.0
+DURATION_S = 700.0
+NOISE_PH = 0.02
+NOMINAL = ["plant.tank.volume_ml=1000"]
+CANDIDATES = ["mixing_zone", "feed_delay", "pump_curve", "carbonate", "sensor_delay", "sensor_lag",
+              "reagent_concentration", "buffer", "holdup"]
+
+
+def inputs(rng) -> Run:
+    """Acid steps between 2 and 6 mL/s; base pulses of 15..50 s at 2..6.45 mL/s, 30..110 s apart."""
+    t = np.arange(0.0, DURATION_S + DT_S / 2, DT_S)
+    acid = np.empty_like(t)
+    k = 0
+    while k < len(t):
+        n = int(rng.uniform(80, 160) / DT_S)
+        acid[k:k + n] = rng.uniform(2.0, 6.0)
+        k += n
+    base = np.zeros_like(t)
+    k = int(rng.uniform(20, 60) / DT_S)
+    while k < len(t):
+        n = int(rng.uniform(15, 50) / DT_S)
+        base[k:k + n] = rng.choice([2.0, 3.5, 5.0, 6.45])
+        k += n + int(rng.uniform(30, 110) / DT_S)
+    return Run({"time_s": t, "acid_flow_ml_s": acid, "base_flow_ml_s": base})
+
+
+def draw(rng, cause: str) -> tuple[dict, str, float, float]:
+    """(scenario edit, main parameter, true value, tolerance)."""
+    if cause == "mixing_zone":
+        v = float(rng.uniform(20.0, 60.0))  # 2..6 % of the flask
+        x = float(rng.uniform(3.0, 8.0))  # mL/s: a few times the inflow
+        return ({"mixing": {"zone_volume_ml": v, "exchange_ml_s": x, "feeds": ["base"]}},
+                "zone_volume_ml", v, 0.25 * v)
+    if cause == "feed_delay":
+        d = float(rng.uniform(5.0, 20.0))
+        return {"line": [{"type": "line_delay", "params": {"delay_s": d}}]}, "delay_s", d, max(1.0, 0.1 * d)
+    if cause == "pump_curve":
+        thr = float(rng.uniform(0.6, 1.4))
+        gain = float(rng.choice([rng.uniform(0.75, 0.9), rng.uniform(1.1, 1.25)]))
+        return ({"line": [{"type": "pump_curve", "params": {"gain": gain, "threshold_ml_s": thr}}]},
+                "threshold_ml_s", thr, 0.2)
+    if cause == "carbonate":
+        c = float(rng.uniform(0.002, 0.006))  # mol/L carbonate in 20 mM caustic
+        return {"carbonate": c}, "conc_mol_l", c, 0.2 * c
+    raise ValueError(cause)
+
+
+def make_case(rng, cause: str, folder):
+    raw = nominal_raw("rig_flask", NOMINAL)
+    raw["sensors"]["ph"]["noise_std"] = 0.0
+    edit, main, value, tol = draw(rng, cause) if cause != "none" else ({}, "", 0.0, 0.0)
+    if "mixing" in edit:
+        raw["plant"]["mixing"] = edit["mixing"]
+    if "line" in edit:
+        raw["plant"]["feeds"]["base"]["line"] = edit["line"]
+    if "carbonate" in edit:
+        from phfdi.diagnosis.catalogue import _add_carbonate
+
+        _add_carbonate(raw, "base", edit["carbonate"])
+    inp = inputs(rng)
+    raw["duration_s"] = DURATION_S
+    run = simulate_open_loop(validate_scenario(raw), inp)
+    ph = run["ph_true"] + rng.normal(0.0, NOISE_PH, len(run["ph_true"]))
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "record.csv"
+    cols = {"time_s": inp["time_s"], "acid_flow_ml_s": inp["acid_flow_ml_s"], "base_flow_ml_s": inp["base_flow_ml_s"],
+            "ph_measured": ph}
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
+               fmt="%.6g")
+    return path, main, value, tol
+
+
+def _diagnose(diagnose_json, path, tmp_path) -> dict:
+    return diagnose_json("--data", path, "--model", "rig_flask", "--set", NOMINAL[0],
+                         "--candidates", *CANDIDATES, "--no-pairs", "--out", tmp_path / "report")
+
+
+@pytest.mark.parametrize("cause", ["mixing_zone", "feed_delay", "pump_curve", "carbonate"])
+def test_structural_effect_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
+    path, main, value, tol = make_case(hidden_rng, cause, tmp_path / "data")
+    rep = _diagnose(diagnose_json, path, tmp_path)
+    what = f"hidden {cause} {main} = {value:.4g}"
+    assert rep["nominal"]["combined_rmse_over_noise"] > 3.0, f"{what}: the effect is too small to test"
+    # named, with its parameter; the fit gets within a few times the noise floor (a pump curve or a mixing zone
+    # in strong acid-strong base sits in a narrow valley where the polish may stop short of the floor: then
+    # the verdict is not_explained with this closest cause, docs/diagnosis.md)
+    assert rep["cause"] == cause, f"{what}: named {rep['cause']} ({rep['reason']})"
+    assert rep["verdict"] == "explained" or rep["validation_rmse_over_noise"] < 5.0, f"{what}: {rep['reason']}"
+    fitted = rep["parameters"][main]
+    assert abs(fitted - value) <= tol, f"{what}: fitted {fitted:.4g} +- {tol:.3g}"
+    assert rep["fixed"]["feed"] == "base", f"{what}: found on the {rep['fixed']['feed']} feed"
+
+
+def test_no_structural_effect_comes_back_none(hidden_rng, diagnose_json, tmp_path):
+    path, *_ = make_case(hidden_rng, "none", tmp_path / "data")
+    rep = _diagnose(diagnose_json, path, tmp_path)
+    assert rep["verdict"] == "none", rep["reason"]
+    assert rep["cause"] == "none"
