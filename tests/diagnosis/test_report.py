@@ -12,7 +12,10 @@ from phfdi.diagnosis.report import CAUSES, REPORT_KEYS, VERDICTS, check_report, 
 def test_catalogue_identifiers():
     assert set(CAUSES) == {"stiction", "backlash", "deadzone", "saturation", "coulomb_viscous_friction", "leakage",
                            "valve_gain", "sensor_delay", "sensor_lag", "sensor_bias", "sensor_drift", "sensor_gain",
-                           "buffer", "reagent_concentration", "holdup", "disturbance_flow", "none"}
+                           "buffer", "reagent_concentration", "holdup", "disturbance_flow", "none",
+                           # structural (--structure, or named with --candidates)
+                           "mixing_zone", "feed_delay", "pump_curve", "carbonate", "probe_asymmetric_lag",
+                           "two_point_calibration"}
     assert VERDICTS == ("explained", "not_explained", "none", "not_identifiable")
     assert family_of("backlash+sensor_lag") == "actuator+sensor"
     assert family_of("buffer+holdup") == "process"
