@@ -21,7 +21,7 @@ wavelet_fdi/calibrations/paper_sym4_L3.yaml (made with the defaults).
 
 def parse_seeds(text: str) -> list[int]:
     """'1001-1016' or '1,2,5' -> list of seeds."""
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     out: list[int] = []
     try:

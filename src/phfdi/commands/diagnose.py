@@ -9,7 +9,7 @@ import sys
 from importlib import resources
 from pathlib import Path
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .common import EPILOG_FORMAT
 

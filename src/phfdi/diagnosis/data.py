@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.errors import UserError
-from phfdi.yamlfile import read_mapping
+from phfdi_base.errors import UserError
+from phfdi_base.yamlfile import read_mapping
 
 OUTPUTS = ("ph_measured", "level_measured_cm")
 COMMAND_INPUTS = ("valve_command_pct", "level_controller_output_pct")
