@@ -29,6 +29,7 @@ from phfdi_base.spec import (  # noqa: F401
     FaultSite,
     FaultSpec,
     FeedSpec,
+    MixingSpec,
     OutletSpec,
     PISpec,
     PlantModelSpec,
