@@ -162,6 +162,14 @@ class Record:
                          f"in {int(short.sum())} gap(s) of up to {max_gap_s:g} s filled by linear interpolation")
         return replace(self, signals=signals, notes=notes)
 
+    def refuse_empty(self, channel: str) -> "Record":
+        """This record, or a :class:`ReadError` when ``channel`` has no value at all."""
+        if np.isnan(self.signals[channel]).all():
+            raise ReadError(self.path, f"no usable value in any of the {len(self)} rows (all missing)",
+                            line=int(self.lines[0]) if len(self) else None,
+                            column=self.columns.get(channel, channel), where=self.where)
+        return self
+
     def refuse_missing(self, channel: str, hint: str = "") -> "Record":
         """This record, or a :class:`ReadError` naming the first missing sample of ``channel``."""
         bad = np.flatnonzero(np.isnan(self.signals[channel]))
