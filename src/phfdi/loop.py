@@ -18,9 +18,11 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
+import ph_plant_sim.feedlines  # noqa: F401  (registers feed-line blocks)
 import ph_plant_sim.sensors  # noqa: F401  (registers sensor blocks)
 import valve_actuator.blocks as vblocks
 from ph_plant_sim.chemistry import Chemistry, Component
+from ph_plant_sim.mixing import MixingZone, ZonedPlant
 from ph_plant_sim.plant import CstrPlant, Feed, GravityOutlet, Tank
 from ph_plant_sim.process import PlantProcess
 from pi_controllers.loops import ControllerBank
@@ -51,7 +53,28 @@ def build_plant(model: PlantModelSpec) -> CstrPlant:
     feeds = [Feed(name, dict(f.recipe), f.flow_ml_s) for name, f in model.feeds.items()]
     t = model.tank
     outlet = GravityOutlet(t.outlet.cv, t.outlet.z_cm, t.outlet.n) if t.outlet else None
-    return CstrPlant(chemistry, feeds, Tank(t.area_cm2, outlet, t.overflow, t.volume_ml))
+    plant = CstrPlant(chemistry, feeds, Tank(t.area_cm2, outlet, t.overflow, t.volume_ml))
+    if model.mixing is not None:  # the probe reads a zone exchanging with the bulk
+        m = model.mixing
+        return ZonedPlant(plant, MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds)))
+    return plant
+
+
+def feed_lines(model: PlantModelSpec, dt_s: float) -> dict[str, Chain]:
+    """Each feed's line blocks (``feeds.<name>.line``) as a chain; feeds without a line are left out."""
+    out = {}
+    for name, f in model.feeds.items():
+        if f.line:
+            out[name] = Chain([_line_block(b.type, b.params, f"plant.feeds.{name}.line.{i}", dt_s)
+                               for i, b in enumerate(f.line)])
+    return out
+
+
+def _line_block(kind: str, params: dict, where: str, dt_s: float):
+    try:
+        return make_block(kind, params, dt_s=dt_s)
+    except (ValueError, TypeError) as exc:
+        raise UserError(f"{where}: {exc}") from None
 
 
 def profile(spec: ProfileSpec) -> Profile:
@@ -174,7 +197,8 @@ def _valve(vspec: ValveSpec, spec: ScenarioSpec, site: str) -> Valve:
 def build_parts(spec: ScenarioSpec) -> LoopParts:
     """Plant, valves and controllers for a scenario, at its initial steady state."""
     load_plugins(spec.plugins)
-    plant = build_plant(load_plant_model(spec.plant))
+    model = load_plant_model(spec.plant)
+    plant = build_plant(model)
     check_reachable(spec, plant)
     start = operating_point(spec, plant)
     plant.set_steady_state(start.flows_ml_s, start.outlet_opening)
@@ -186,8 +210,12 @@ def build_parts(spec: ScenarioSpec) -> LoopParts:
         sensor_chain(spec.sensors.level, dt, spec.seed * 2 + 1, "level", _faults(spec, "level_sensor", None)),
         {name: profile(p) for name, p in spec.feeds.items()},
         dt,
+        feed_lines(model, dt),
     )
+    if process.feed_lines:  # at rest the vessel receives what the lines deliver
+        plant.set_steady_state(process.steady_delivery(start.flows_ml_s), start.outlet_opening)
     process.reset_sensors()
+    process.reset_lines(start.flows_ml_s)
     valve = _valve(spec.valves.ph, spec, "valve")
     valve.reset(start.valve_command_pct)
     outlet_valve = None
@@ -241,12 +269,15 @@ def advance_plant(process: PlantProcess, valve_feed: str, t_s: float, valve_flow
                   outlet_opening: float) -> tuple[list[float], float]:
     """Plant side of a tick: feed flows and outlet flow of t_s, then integrate to t_s + dt.
 
-    Returns (feed flows in plant feed order, outlet flow), both mL/s, as they
-    were during the sample. The plant node calls this too.
+    Returns (commanded feed flows in plant feed order, outlet flow), both mL/s,
+    as they were during the sample: the feeds' line blocks (dead time, pump
+    curve) lie between the commanded flow and the vessel, and a run records
+    the commanded flow, as a pump's historian does. The plant node calls this too.
     """
     flows = process.feed_flows(t_s, {valve_feed: valve_flow_ml_s})
-    outlet_flow = process.plant.outlet_flow(flows, outlet_opening)
-    process.plant.step(flows, outlet_opening, process.dt_s)
+    delivered = process.deliver(flows, t_s)
+    outlet_flow = process.plant.outlet_flow(delivered, outlet_opening)
+    process.plant.step(delivered, outlet_opening, process.dt_s)
     return flows, outlet_flow
 
 
@@ -358,8 +389,10 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inpu
         o_cmd0 = float(outlet_cmd[0]) if outlet_cmd is not None else parts.start.outlet_command_pct
         o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
         opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
-        plant.set_steady_state(flows_at(0, v0.flow_ml_s if v0 else 0.0), opening0)
+        q0 = flows_at(0, v0.flow_ml_s if v0 else 0.0)
+        plant.set_steady_state(parts.process.steady_delivery(q0), opening0)
         parts.process.reset_sensors()
+        parts.process.reset_lines(q0)
 
     rec = RunRecorder(signal_names(parts), len(t))
     for k in range(len(t)):
@@ -378,11 +411,12 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inpu
         else:
             oc, opos, opening = math.nan, math.nan, parts.start.outlet_opening
         flows = flows_at(k, vflow)
+        delivered = parts.process.deliver(flows, tk)
         row = {
             "time_s": float(t[k]), "ph_setpoint": math.nan, "level_setpoint_cm": math.nan,
             "ph_controller_output_pct": cmd, "level_controller_output_pct": oc,
             "valve_command_pct": cmd, "valve_position_pct": pos, "outlet_valve_position_pct": opos,
-            "outlet_flow_ml_s": plant.outlet_flow(flows, opening),
+            "outlet_flow_ml_s": plant.outlet_flow(delivered, opening),
             "ph_true": m.ph_true, "ph_measured": m.ph_measured,
             "level_true_cm": m.level_true_cm, "level_measured_cm": m.level_measured_cm,
             "fault_severity": max(sev, m.sensor_fault_severity),
@@ -391,7 +425,7 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inpu
             row[f"{name}_flow_ml_s"] = q
         rec.append(row)
         try:
-            plant.step(flows, opening, dt)
+            plant.step(delivered, opening, dt)
         except FloatingPointError as exc:
             raise UserError(f"open-loop simulation stopped at t = {t[k]:g} s: {exc}") from None
     return rec.run(run_metadata(spec, "open_loop"))

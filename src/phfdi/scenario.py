@@ -43,9 +43,17 @@ class ChemistrySpec(Strict):
     compounds: dict[str, dict[str, float]] = {}
 
 
+class BlockSpec(Strict):
+    type: str
+    params: dict[str, Any] = {}
+
+
 class FeedSpec(Strict):
     recipe: dict[str, float] = Field(description="compound -> concentration (mol/L)")
     flow_ml_s: float = Field(0.0, ge=0.0, description="nominal flow when no valve drives the feed (mL/s)")
+    line: list[BlockSpec] = Field([], description=(
+        "blocks between the commanded flow and the vessel (ph_plant_sim.feedlines: line_delay, pump_curve, "
+        "pump_lag), stepped per sample on the flow in mL/s"))
 
     @field_validator("recipe")
     @classmethod
@@ -77,12 +85,28 @@ class TankSpec(Strict):
         return self
 
 
+class MixingSpec(Strict):
+    """A zone around the inlets and the probe exchanging with the bulk (ph_plant_sim.mixing)."""
+
+    zone_volume_ml: float = Field(gt=0.0)
+    exchange_ml_s: float = Field(ge=0.0, allow_inf_nan=False)
+    feeds: list[str] = Field(description="feeds dosed into the zone; the others enter the bulk")
+
+
 class PlantModelSpec(Strict):
     name: str
     description: str = ""
     chemistry: ChemistrySpec = ChemistrySpec()
     feeds: dict[str, FeedSpec]
     tank: TankSpec
+    mixing: MixingSpec | None = None
+
+    @model_validator(mode="after")
+    def _zone_feeds(self) -> "PlantModelSpec":
+        for f in (self.mixing.feeds if self.mixing else []):
+            if f not in self.feeds:
+                raise ValueError(f"mixing.feeds: no feed {f!r} (feeds: {', '.join(self.feeds)})")
+        return self
 
 
 # ---- loop ------------------------------------------------------------------------
@@ -113,11 +137,6 @@ class ValveSpec(Strict):
     max_flow_ml_s: float | None = Field(None, gt=0.0)
     characteristic: Literal["linear", "equal_percentage"] = "linear"
     rangeability: float = Field(50.0, gt=1.0)
-
-
-class BlockSpec(Strict):
-    type: str
-    params: dict[str, Any] = {}
 
 
 class SensorSpec(Strict):

@@ -34,10 +34,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from ph_plant_sim.plant import CstrPlant, affine_recurrence, record_sample_maps
 from phfdi.blocks import Chain, Injected
 from phfdi.errors import UserError
-from phfdi.loop import _valve, build_plant, profile, sensor_chain
+from phfdi.loop import _valve, build_plant, feed_lines, profile, sensor_chain
 from phfdi.scenario import (ScenarioSpec, apply_override, load_plant_model, parse_override, raw_scenario,
                             validate_scenario)
 
@@ -214,6 +215,10 @@ class Evaluator:
                 flows[:, j] = [prof.value(t) for t in self.t_rel.tolist()]
             else:
                 flows[:, j] = f.flow_ml_s
+        lines = feed_lines(load_plant_model(spec.plant), self.dt_s)
+        for j, f in enumerate(plant.feeds):  # commanded flow -> flow entering the vessel
+            if f.name in lines:
+                flows[:, j] = np.maximum(_run_chain(lines[f.name], flows[:, j], self.t_rel.tolist()), 0.0)
         if np.any(flows < 0) or not np.all(np.isfinite(flows)):
             raise UserError("model: a feed flow went negative or non-finite")
         openings = self._openings(spec)
@@ -221,8 +226,10 @@ class Evaluator:
 
     @staticmethod
     def _flows_key(spec: ScenarioSpec, plant: CstrPlant) -> str:
+        model = load_plant_model(spec.plant)
         return _key(spec.valves.model_dump(), [f.model_dump() for f in spec.faults if not f.where.endswith("sensor")],
-                    {k: v.model_dump() for k, v in spec.feeds.items()}, [(f.name, f.flow_ml_s) for f in plant.feeds])
+                    {k: v.model_dump() for k, v in spec.feeds.items()}, [(f.name, f.flow_ml_s) for f in plant.feeds],
+                    {k: [b.model_dump() for b in v.line] for k, v in model.feeds.items()})
 
     def _valve_flows(self, spec: ScenarioSpec, command: np.ndarray, offset_pct: float = 0.0) -> np.ndarray:
         valve = _valve(spec.valves.ph, spec, "valve")
@@ -304,6 +311,11 @@ class Evaluator:
         inflow = flows @ feed_conc  # mmol/s per component
         amounts = affine_recurrence(coef[:, 0], coef[:, 1:2] * inflow, np.asarray(conc0) * v0)
         conc = amounts / volume[:, None]
+        if model.mixing is not None:  # the probe reads the zone (ph_plant_sim.mixing)
+            m = model.mixing
+            conc, _ = zone_trajectory(MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds)),
+                                      [f.name for f in plant.feeds], feed_conc, flows, volume, self.dt_s,
+                                      np.asarray(conc0, dtype=float))
         ph0 = plant.balance.ph(conc0)
         # a nearby trajectory (the first one simulated) saves Newton iterations; the root does not depend on it
         guess = self._ph_guess if self._ph_guess is not None and len(self._ph_guess) == len(conc) else ph0

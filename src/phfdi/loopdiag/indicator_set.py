@@ -1,0 +1,36 @@
+"""Every stiction indicator of one loop, by name (what :mod:`.classifier` combines)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .baselines import he_curve_fit, horch_ccf
+from .bicoherence import apparent_stiction, ngi_nli
+from .indicators import (Indicator, area_peak_ratio, horch_histogram, kano_stuck_index, not_applicable,
+                         relay_shape)
+
+HORCH_CCF_REF = "Horch (1999), Control Eng. Practice 7, 1221-1231: OP-PV cross-correlation odd = stiction"
+HE_REF = "He, Wang, Pottmann & Qin (2007), Ind. Eng. Chem. Res. 46, 4549-4560: triangle vs sinusoid fit"
+
+
+def compute_indicators(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt_s: float,
+                       process_type: str) -> dict[str, Indicator]:
+    """The published indicators (Hammerstein S/J come from :mod:`.hammerstein` separately)."""
+    out: dict[str, Indicator] = {}
+    h = horch_ccf(op, pv, sp, dt_s, process_type)
+    out["horch_ccf"] = (Indicator("horch_ccf", h.index, h.decision, dict(h.detail), HORCH_CCF_REF)
+                        if h.index is not None else
+                        not_applicable("horch_ccf", str(h.detail.get("reason", h.decision)), HORCH_CCF_REF))
+    out["horch_histogram"] = horch_histogram(pv, sp, dt_s, process_type)
+    he = he_curve_fit(op, pv, sp, dt_s, process_type)
+    out["he_curve_fit"] = (Indicator("he_curve_fit", he.index, he.decision, dict(he.detail), HE_REF)
+                           if he.index is not None else
+                           not_applicable("he_curve_fit", str(he.detail.get("reason", he.decision)), HE_REF))
+    out["kano_stuck"] = kano_stuck_index(op, pv, dt_s, process_type)
+    out["area_peak_ratio"] = area_peak_ratio(pv, sp, dt_s, process_type)
+    out["relay_shape"] = relay_shape(pv, sp, dt_s, process_type)
+    ngi, nli = ngi_nli(pv, sp, dt_s)
+    out["bicoherence_ngi"] = ngi
+    out["bicoherence_nli"] = nli
+    out["ellipse_apparent_stiction"] = apparent_stiction(op, pv, sp, dt_s)
+    return out

@@ -1,0 +1,128 @@
+"""Each stiction indicator on closed loops whose answer is known by construction.
+
+A Kano stiction limit cycle (the valve block of the simulator, S 3 %, J 1 %), the same loop with a
+healthy valve and a sinusoidal disturbance on PV, and a healthy loop with noise only; for level
+(integrating) loops a stiction limit cycle against a sinusoidal disturbance. The indicators must
+point the published way on each: they are computed from OP, PV and SP only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from phfdi.loopdiag.bicoherence import apparent_stiction, ellipse_geometry, fit_ellipse, ngi_nli
+from phfdi.loopdiag.indicators import area_peak_ratio, horch_histogram, kano_stuck_index, relay_shape
+from phfdi.loopdiag.synthetic import SyntheticLoop, simulate_loop
+
+SELF = "self_regulating"
+INTEG = "integrating"
+
+
+def _loop(**kw):
+    base = dict(dt_s=4.0, duration_s=3000.0, setpoint_steps=[(100, 51)])
+    base.update(kw)
+    run = simulate_loop(SyntheticLoop(**base))
+    return run["op_pct"], run["pv"], run["sp"], run.dt_s
+
+
+@pytest.fixture(scope="module")
+def loops():
+    return {
+        "stiction": _loop(valve=("stiction", {"s_pct": 3.0, "j_pct": 1.0}), ti_s=30),
+        "sine": _loop(disturbance_amplitude=1.0, disturbance_period_s=200, setpoint_steps=[]),
+        "clean": _loop(),
+        "stiction_level": _loop(process="integrating", gain=0.02, kp=3.0, ti_s=300.0,
+                                valve=("stiction", {"s_pct": 2.0, "j_pct": 0.5})),
+        "sine_level": _loop(process="integrating", gain=0.02, kp=3.0, ti_s=300.0, disturbance_amplitude=1.0,
+                            disturbance_period_s=400, setpoint_steps=[]),
+    }
+
+
+def test_horch_histogram_gaussian_under_stiction_camel_under_a_sinusoid(loops):
+    st = horch_histogram(*_pv_sp_dt(loops["stiction"]), SELF)
+    sine = horch_histogram(*_pv_sp_dt(loops["sine"]), SELF)
+    assert st.decision == "stiction" and st.value < 0.2
+    assert sine.decision == "no_stiction" and sine.value > 0.8
+    assert st.detail["derivative_order"] == 1
+    assert horch_histogram(*_pv_sp_dt(loops["stiction_level"]), INTEG).detail["derivative_order"] == 2
+
+
+def test_kano_stuck_sections_only_under_stiction(loops):
+    op, pv, _, dt = loops["stiction"]
+    st = kano_stuck_index(op, pv, dt, SELF).value
+    others = [kano_stuck_index(loops[k][0], loops[k][1], dt, SELF).value for k in ("sine", "clean")]
+    assert st > 0.5
+    assert max(others) < 0.35
+    op, pv, _, dt = loops["stiction_level"]
+    st_level = kano_stuck_index(op, pv, dt, INTEG).value
+    op, pv, _, dt = loops["sine_level"]
+    assert st_level > 0.4 > kano_stuck_index(op, pv, dt, INTEG).value
+
+
+def test_area_peak_ratio_above_one_under_stiction_one_for_a_sinusoid(loops):
+    st = area_peak_ratio(*_pv_sp_dt(loops["stiction"]), SELF)
+    sine = area_peak_ratio(*_pv_sp_dt(loops["sine"]), SELF)
+    assert st.decision == "stiction" and st.detail["ratio_R"] > 2.0
+    assert abs(sine.value) < 0.15  # R = 1 for a sinusoid
+
+
+def test_relay_shape_relay_under_stiction_sinusoid_otherwise(loops):
+    assert relay_shape(*_pv_sp_dt(loops["stiction"]), SELF).value > 0.21
+    assert relay_shape(*_pv_sp_dt(loops["sine"]), SELF).value < -0.21
+    assert relay_shape(*_pv_sp_dt(loops["stiction_level"]), INTEG).value > 0.1
+    assert relay_shape(*_pv_sp_dt(loops["sine_level"]), INTEG).value < 0.05
+
+
+def test_bicoherence_nonlinear_limit_cycle_gaussian_noise_and_sinusoid(loops):
+    ngi, nli = ngi_nli(*_pv_sp_dt(loops["stiction"]))
+    assert ngi.value > 0.05 and nli.value > 0.01 and nli.decision == "stiction"
+    ngi, nli = ngi_nli(*_pv_sp_dt(loops["sine"]))
+    assert abs(ngi.value) < 0.02 and nli.value == 0.0
+    rng = np.random.default_rng(3)
+    noise = np.convolve(rng.standard_normal(1500), [1.0, 0.6, 0.3], mode="same")
+    ngi, nli = ngi_nli(noise, None, 1.0)
+    assert abs(ngi.value) < 0.01 and nli.decision == "no_stiction"
+
+
+def test_ellipse_width_is_the_chord_along_op():
+    t = np.linspace(0, 2 * math.pi, 400, endpoint=False)
+    for phase_deg in (20.0, 45.0, 70.0):
+        op = 3.0 * np.cos(t)
+        pv = 1.5 * np.cos(t - math.radians(phase_deg))
+        coef = fit_ellipse(op, pv)
+        xc, yc, width = ellipse_geometry(coef)
+        assert width == pytest.approx(2 * 3.0 * math.sin(math.radians(phase_deg)), rel=1e-3)
+        assert abs(xc) < 1e-6 and abs(yc) < 1e-6
+
+
+def test_apparent_stiction_wide_under_stiction_narrow_when_pv_follows_op(loops):
+    op, pv, sp, dt = loops["stiction"]
+    st = apparent_stiction(op, pv, sp, dt)
+    assert st.value > 0.5
+    # the stem follows OP through a short lag: PV nearly in phase with OP
+    rng = np.random.default_rng(5)
+    k = np.arange(1500)
+    op2 = 50 + 2 * np.sin(2 * math.pi * k / 100) + 0.05 * rng.standard_normal(1500)
+    pv2 = 10 + 0.5 * np.sin(2 * math.pi * (k - 2) / 100) + 0.01 * rng.standard_normal(1500)
+    assert apparent_stiction(op2, pv2, None, 1.0).value < 0.2
+
+
+def _pv_sp_dt(loop):
+    op, pv, sp, dt = loop
+    return pv, sp, dt
+
+
+def test_indicator_set_names_every_method_with_its_reference(loops):
+    from phfdi.loopdiag.indicator_set import compute_indicators
+
+    op, pv, sp, dt = loops["stiction"]
+    ind = compute_indicators(op, pv, sp, dt, SELF)
+    assert set(ind) == {"horch_ccf", "horch_histogram", "he_curve_fit", "kano_stuck", "area_peak_ratio",
+                        "relay_shape", "bicoherence_ngi", "bicoherence_nli", "ellipse_apparent_stiction"}
+    assert all(i.reference for i in ind.values())
+    assert ind["horch_ccf"].decision == "stiction"  # an odd CCF for a self-regulating stiction loop
+    level = compute_indicators(*loops["stiction_level"], INTEG)
+    assert level["horch_ccf"].decision == "not_applicable"  # Horch: not for integrating processes
