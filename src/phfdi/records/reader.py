@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import difflib
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -22,13 +23,13 @@ TIME_NAMES = ("time_s", "timestamp", "time", "datetime", "date")
 DEFAULT_SOURCE = "the file's header"
 
 
-def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | None = None, *,
+def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Callable | None = None, *,
                 policy: str = "run", channels: list[str] | tuple[str, ...] | None = None,
                 encoding: str | None = None, min_samples: int = 2, required: tuple[str, ...] = ()) -> Record:
     """Read a record (CSV, Parquet or an MCAP bag), repair what the policy repairs, refuse the rest.
 
-    ``column_map``: a :class:`ColumnMap`, its dict form or a YAML file; None reads every column under its
-    own name (time from ``time_s``, ``timestamp`` or ``time``). ``channels``: only these signals (each
+    ``column_map``: a :class:`ColumnMap`, its dict form, a YAML file, or a function (header, file metadata) ->
+    ColumnMap; None reads every column under its own name (time from ``time_s``, ``timestamp`` or ``time``). ``channels``: only these signals (each
     must exist); ``required``: signals that must exist and hold values even when ``channels`` is None. ``policy``: "run" (a clock reset is refused) or "historian" (it starts a new segment).
     Raises :class:`ReadError` (one line naming file, line and column) for what cannot be used.
     """
@@ -61,6 +62,8 @@ def _apply_policy(rows: P.Rows, policy: str) -> None:
 
 # ---- which columns -----------------------------------------------------------------------
 def _resolve_map(cmap: ColumnMap | dict | str | Path | None, table: Table, channels, required=()) -> ColumnMap:
+    if callable(cmap):  # a resolver that chooses the columns from the header and the file's metadata
+        cmap = cmap(list(table.columns), dict(table.metadata))
     if isinstance(cmap, (str, Path)):
         cmap = ColumnMap.load(cmap)
     elif isinstance(cmap, dict):

@@ -96,8 +96,9 @@ class Record:
             for s, e in zip(np.flatnonzero(padded == 1), np.flatnonzero(padded == -1)):
                 if e - s >= min_samples:
                     seg = self._subset(slice(a + s, a + e), boundaries=[])
-                    seg.notes.append(f"{self.path}: segment {self.where}s {self.lines[a + s]}-{self.lines[a + e - 1]} "
-                                     f"({e - s} samples)")
+                    if e - s < len(self):
+                        seg.notes.append(f"{self.path}: segment {self.where}s {self.lines[a + s]}-{self.lines[a + e - 1]} "
+                                         f"({e - s} samples)")
                     out.append(seg)
         return out
 
