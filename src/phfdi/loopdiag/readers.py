@@ -159,29 +159,30 @@ def guess_columns(header: list[str]) -> ColumnMap | None:
 # ---- reading -------------------------------------------------------------------------------
 def read_loop(path: str | Path, columns: ColumnMap | None = None) -> Run:
     """The longest usable stretch of one loop file (plant_loops export or CSV), checked for diagnosis."""
-    runs, why, pieces = _stretches(Path(path), columns)
+    runs, why, pieces, cuts = _stretches(Path(path), columns)
     if not runs:
         raise LoopDataError(why)
     run = max(runs, key=len)
     if pieces > 1:
         a, b = run.metadata["lines"]
-        run.metadata["notes"].append(f"{pieces} stretches ({len(runs)} of at least {MIN_SAMPLES} samples); the "
-                                     f"longest, lines {a}-{b} ({len(run)} samples), is diagnosed")
+        cut = f"; cut where {cuts[0]}" + (f" and {len(cuts) - 1} more" if len(cuts) > 1 else "") if cuts else ""
+        run.metadata["notes"].append(f"{pieces} stretches ({len(runs)} of at least {MIN_SAMPLES} samples){cut}; "
+                                     f"the longest, lines {a}-{b} ({len(run)} samples), is diagnosed")
     check_loop_run(run)
     return run
 
 
 def read_loop_segments(path: str | Path, columns: ColumnMap | None = None) -> list[Run]:
     """Every usable stretch of one loop file (at least ``MIN_SAMPLES``), not yet checked."""
-    runs, why, _ = _stretches(Path(path), columns)
+    runs, why, _, _ = _stretches(Path(path), columns)
     if not runs:
         raise LoopDataError(why)
     return runs
 
 
-def _stretches(path: Path, columns: ColumnMap | None) -> tuple[list[Run], str, int]:
-    """Runs of the stretches with at least MIN_SAMPLES samples, why there is none when so, and how many
-    stretches there are in all."""
+def _stretches(path: Path, columns: ColumnMap | None) -> tuple[list[Run], str, int, list[str]]:
+    """Runs of the stretches with at least MIN_SAMPLES samples, why there is none when so, how many
+    stretches there are in all and the gaps that cut them."""
     try:
         rec = records.read_record(path, lambda header, meta: _mapping(path, columns, header, meta),
                                   policy="historian", min_samples=1)
@@ -199,7 +200,7 @@ def _stretches(path: Path, columns: ColumnMap | None) -> tuple[list[Run], str, i
     if cuts or len(pieces) > 1 or rec.boundaries or rec.automatic is not None and not rec.automatic.all():
         why = (f"{path}: no usable stretch of {MIN_SAMPLES} samples (longest {longest})"
                + (f": {cuts[0]}" if cuts else "; the record breaks at manual mode or time jumps (see notes)"))
-    return runs, why, len(pieces)
+    return runs, why, len(pieces), cuts
 
 
 def _mapping(path: Path, columns: ColumnMap | None, header: list[str], meta: dict) -> records.ColumnMap:
