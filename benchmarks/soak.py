@@ -245,16 +245,16 @@ def stop_load(procs: list[subprocess.Popen]) -> None:
 # ---- report ------------------------------------------------------------------------------------------
 def print_table(summary: dict) -> None:
     mem = summary["memory"]
-    print(f"\n{'node':12s} {'RSS start':>10s} {'middle':>10s} {'end':>10s} {'max':>10s} {'mid->end':>9s} "
+    print(f"\nVmRSS in MiB\n{'node':12s} {'start':>10s} {'middle':>10s} {'end':>10s} {'max':>10s} {'mid->end':>9s} "
           f"{'anon mid->end':>14s} {'slope 2nd half':>15s}")
     for name, m in mem.items():
         if not m.get("samples"):
             print(f"{name:12s} (no sample during the run)")
             continue
         r = m["VmRSS"]
-        print(f"{name:12s} {r['start_kb'] / 1024:8.1f}MB {r['middle_kb'] / 1024:8.1f}MB {r['end_kb'] / 1024:8.1f}MB "
-              f"{r['max_kb'] / 1024:8.1f}MB {100 * m['growth_middle_to_end']:+8.2f}% "
-              f"{100 * m['anon_growth_middle_to_end']:+13.2f}% {m['rss_slope_kb_per_h'] / 1024:+10.2f} MB/h")
+        print(f"{name:12s} {r['start_kb'] / 1024:10.1f} {r['middle_kb'] / 1024:10.1f} {r['end_kb'] / 1024:10.1f} "
+              f"{r['max_kb'] / 1024:10.1f} {100 * m['growth_middle_to_end']:+8.2f}% "
+              f"{100 * m['anon_growth_middle_to_end']:+13.2f}% {m['rss_slope_kb_per_h'] / 1024:+9.2f} MiB/h")
     msgs = summary["messages"]
     print(f"\n{'topic':22s} {'published':>10s} {'recorded':>10s} {'lost':>6s} {'missing stamps':>15s} "
           f"{'duplicates':>10s}")
@@ -272,7 +272,7 @@ def print_table(summary: dict) -> None:
     ld = summary["load"]
     print(f"ring: {msgs['samples_done']} of {msgs['samples']} samples; messages lost in all: {msgs['lost_total']}")
     print(f"wall: start-up {w['connect_s']:.1f} s, run {w['run_s']:.1f} s ({summary['sim_s'] / w['run_s']:.0f} x "
-          f"real time), total {w['total_s']:.1f} s; bag {summary['bag_bytes'] / 1e6:.2f} MB; load average "
+          f"real time), total {w['total_s']:.1f} s; bag {summary['bag_bytes'] / 1e6:.2f} MB ({summary['bag_messages']} messages); load average "
           f"min {ld['load1_min']:.1f} median {ld['load1_median']:.1f} max {ld['load1_max']:.1f} on "
           f"{os.cpu_count()} cores (+{ld['busy_processes']} busy processes of ours)")
     v = summary["acceptance"]
@@ -297,7 +297,12 @@ def plot(summary: dict, rows: list[dict], system: list[dict], path: Path) -> Non
         x = (summary["wall"][key] - t0) / scale
         ax.axvline(x, color="0.5", ls="--", lw=0.8)
         ax.annotate(label, (x, 1.0), xycoords=("data", "axes fraction"), ha="right", va="top", fontsize=8)
-    ax.set_ylabel("resident memory VmRSS (MB)")
+    for a in summary.get("alarms_wall", []):
+        x = (a["wall_s"] - t0) / scale
+        ax.axvline(x, color="tab:red", ls=":", lw=0.8)
+        ax.annotate(f"detector {a['kind']}", (x, 0.02), xycoords=("data", "axes fraction"), rotation=90,
+                    ha="right", va="bottom", fontsize=7, color="tab:red")
+    ax.set_ylabel("resident memory VmRSS (MiB)")
     ax.set_title(summary["title"], fontsize=10)
     ax.legend(fontsize=8, ncol=3)
     ax.grid(alpha=0.3)
@@ -328,6 +333,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--out", default="benchmarks/results/soak", help="folder for the JSON, CSV, figure and bag")
     ap.add_argument("--name", default=None, help="file name stem (default soak_<lockstep|paceF>_<sim>s)")
     ap.add_argument("--keep-bag", action="store_true", help="keep the bag (default: deleted after measuring)")
+    ap.add_argument("--replot", metavar="RUN.json", default=None,
+                    help="only redraw the figure and reprint the table of a finished run")
     args = ap.parse_args(argv)
     if args.wall_s is not None:
         if args.pace <= 0:
@@ -347,8 +354,23 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def replot(json_path: Path) -> None:
+    """Redraw the figure and reprint the table of a finished run from its JSON and CSV."""
+    summary = json.loads(json_path.read_text())
+    stem = json_path.with_suffix("")
+    with open(f"{stem}_rss.csv", newline="") as f:
+        rows = [{k: (v if k == "node" else float(v)) for k, v in r.items()} for r in csv.DictReader(f)]
+    system = list({r["wall_s"]: {"wall_s": r["wall_s"], "load1": r["load1"]} for r in rows}.values())
+    print_table(summary)
+    plot(summary, rows, system, Path(f"{stem}_rss.png"))
+    print(f"wrote {stem}_rss.png")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.replot is not None:
+        replot(Path(args.replot))
+        return 0
     from phfdi.errors import UserError
     from phfdi.ros.launcher import Launcher, loop_graph
     from phfdi.ros.topics import sample_period_ns
@@ -396,7 +418,7 @@ def main(argv: list[str] | None = None) -> int:
         elapsed = now - marks.get("connected", t_start)
         eta = elapsed * (1 - fraction) / fraction if fraction > 0 else math.nan
         print(f"[{100 * fraction:5.1f} %] {fraction * args.sim_s:9.0f} s simulated, {elapsed:7.0f} s wall, "
-              f"ETA {eta:6.0f} s; load {os.getloadavg()[0]:.1f}; RSS MB "
+              f"ETA {eta:6.0f} s; load {os.getloadavg()[0]:.1f}; RSS MiB "
               + " ".join(f"{k} {v / 1024:.0f}" for k, v in mem.items()), flush=True)
 
     def status(text: str) -> None:
@@ -404,8 +426,15 @@ def main(argv: list[str] | None = None) -> int:
             marks["connected"] = time.monotonic()
         print(f"soak: {text}", flush=True)
 
+    alarms_at: list[dict] = []  # wall time of the detector's alarms and diagnoses (the isolation runs before)
+
+    def on_event(node: str, event: dict) -> None:
+        if event.get("event") == "fault_alarm" and event.get("kind") in ("alarm", "diagnosis"):
+            alarms_at.append({"wall_s": time.monotonic() - t_start, "kind": event["kind"],
+                              "time_s": event.get("time_s")})
+
     launcher = Launcher(nodes, domain_id=args.domain_id, log_dir=out / f"{args.name}_logs", progress=progress,
-                        status=status)
+                        status=status, on_event=on_event)
     sampler = Sampler(launcher, args.sample_s, bag, out / f"{args.name}_rss.csv")
     sampler.t0 = t_start
     sampler_box.append(sampler)
@@ -439,7 +468,7 @@ def main(argv: list[str] | None = None) -> int:
                  "load1_median": loads[len(loads) // 2], "load1_max": loads[-1]},
         "bag_bytes": bag.stat().st_size if bag.exists() else 0,
         "bag_messages": (result.bag or {}).get("messages"),
-        "memory": memory, "messages": messages,
+        "memory": memory, "messages": messages, "alarms_wall": alarms_at,
     }
     summary["acceptance"] = {
         "memory": bool(memory) and all(m.get("samples") and m["growth_middle_to_end"] < GROWTH_LIMIT
