@@ -109,37 +109,18 @@ class Run:
 
     @classmethod
     def load(cls, path: str | Path) -> "Run":
+        """A run file (.csv or .parquet) read by :func:`phfdi.records.read_record` under the run policy.
+
+        Repairs (duplicate rows, repeated stamps, cells that are not numbers: NaN) are listed in
+        ``metadata["notes"]``; what cannot be repaired is a one-line :class:`UserError`.
+        """
         path = Path(path)
-        if not path.exists():
-            raise UserError(f"no such file: {path}")
-        suffix = path.suffix.lower()
-        if suffix in (".parquet", ".pq"):
-            return cls.from_parquet(path)
-        if suffix == ".csv":
-            return cls.from_csv(path)
-        raise UserError(f"cannot read a run from {path}: expected .csv or .parquet")
+        if path.suffix.lower() not in (".csv", ".parquet", ".pq"):
+            raise UserError(f"cannot read a run from {path}: expected .csv or .parquet")
+        from .records import read_record
 
-    @classmethod
-    def from_parquet(cls, path: str | Path) -> "Run":
-        import pyarrow.parquet as pq
+        return read_record(path, policy="run").to_run()
 
-        table = pq.read_table(path)
-        meta = table.schema.metadata or {}
-        metadata = json.loads(meta.get(b"phfdi_run", b"{}"))
-        return cls({n: table.column(n).to_numpy().astype(float) for n in table.column_names}, metadata)
-
-    @classmethod
-    def from_csv(cls, path: str | Path) -> "Run":
-        path = Path(path)
-        with open(path, encoding="utf-8") as fh:
-            header = fh.readline().strip().split(",")
-        try:
-            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-        except ValueError as exc:
-            raise UserError(f"{path}: not a numeric run CSV ({exc})") from None
-        if data.shape[1] != len(header):
-            raise UserError(f"{path}: header has {len(header)} columns, rows have {data.shape[1]}")
-        return cls({n: data[:, i].copy() for i, n in enumerate(header)}, {"source": str(path)})
 
 
 class RunRecorder:
