@@ -182,7 +182,7 @@ def stamp_check(bags: list[Path], topics: list[str], n_samples: int, dt_ns: int)
 
 def message_summary(result, n_samples: int, dt_ns: int) -> dict:
     """Messages lost: published vs recorded per topic, stamps of per-sample topics, the detector's inputs."""
-    from phfdi.ros.topics import BY_NAME, CONTROLLER, MEASUREMENT
+    from phfdi_base.topics import BY_NAME, CONTROLLER, MEASUREMENT
 
     recorded = {t["topic"]: t["count"] for t in (result.bag or {}).get("topics", [])}
     topics = {}
@@ -378,10 +378,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.replot is not None:
         replot(Path(args.replot))
         return 0
-    from phfdi.errors import UserError
     from phfdi.ros.launcher import Launcher, loop_graph
-    from phfdi.ros.topics import sample_period_ns
     from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
+    from phfdi_base.topics import sample_period_ns
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

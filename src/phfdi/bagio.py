@@ -1,6 +1,6 @@
 """Bags (MCAP files, ros2 profile) and runs: write, read, inspect, recover.
 
-A bag of the graph holds one channel per topic of :mod:`phfdi.ros.topics`
+A bag of the graph holds one channel per topic of :mod:`phfdi_base.topics`
 (cdr messages, ``ros2msg`` schemas, the offered QoS in the channel metadata
 as rosbag2 writes it), every message logged at its simulated time stamp, and
 the run's metadata (scenario, seed, faults) in an MCAP metadata record named
@@ -30,10 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
+from phfdi_base import topics as T
+from phfdi_base.errors import UserError
+
 from . import __version__
-from .errors import UserError
-from .ros import topics as T
-from .run import SIGNALS, Run
+from phfdi_base.signals import SIGNALS
+from phfdi.run import Run
 
 RUN_METADATA = "phfdi_run"
 INTERFACES_PACKAGE = "phfdi_interfaces"

@@ -25,17 +25,17 @@ from ph_plant_sim.chemistry import Chemistry, Component
 from ph_plant_sim.mixing import MixingZone, ZonedPlant
 from ph_plant_sim.plant import CstrPlant, Feed, GravityOutlet, Tank
 from ph_plant_sim.process import PlantProcess
+from phfdi.scenario import load_plant_model
+from phfdi_base.blocks import Chain, Injected, make_block
+from phfdi_base.errors import UserError
+from phfdi_base.profiles import Change, Profile
+from phfdi_base.spec import PlantModelSpec, ProfileSpec, ScenarioSpec, SensorSpec, ValveSpec, load_plugins
 from pi_controllers.loops import ControllerBank
 from pi_controllers.pi import PIController
 from valve_actuator.valve import Valve, ValveOutput, inherent_characteristic
 
 from . import __version__
-from .blocks import Chain, Injected, make_block
-from .errors import UserError
-from .profiles import Change, Profile
 from .run import Run, RunRecorder
-from .scenario import (PlantModelSpec, ProfileSpec, ScenarioSpec, SensorSpec, ValveSpec, load_plant_model,
-                       load_plugins)
 
 
 # ---- construction -----------------------------------------------------------------
@@ -237,7 +237,7 @@ def build_parts(spec: ScenarioSpec) -> LoopParts:
 
 # ---- running ----------------------------------------------------------------------
 def signal_names(parts: LoopParts) -> list[str]:
-    from .run import SIGNALS
+    from phfdi_base.signals import SIGNALS
 
     names = [s.name for s in SIGNALS]
     i = names.index("outlet_valve_position_pct")

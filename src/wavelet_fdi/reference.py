@@ -32,11 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from phfdi.loop import build_parts
-from phfdi.scenario import ScenarioSpec
 from ph_plant_sim.plant import CstrPlant
+from phfdi.loop import build_parts
+from phfdi_base.spec import ScenarioSpec
 from valve_actuator.valve import Valve
-
 
 RESTART_LEVEL_CM = 1.0
 
@@ -106,7 +105,7 @@ class HealthyReference:
 
     def new_valve(self, position_blocks=None) -> Valve:
         """A valve like the reference's, optionally with position blocks (isolation hypotheses)."""
-        from phfdi.blocks import Chain
+        from phfdi_base.blocks import Chain
 
         v = self.valve_spec
         return Valve(v.max_flow_ml_s, v.characteristic, v.rangeability, position_blocks or Chain())

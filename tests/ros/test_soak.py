@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from phfdi import bagio
-from phfdi.ros import topics as T
+from phfdi_base import topics as T
 
 from .conftest import processes_with
 

@@ -55,7 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     if not (math.isfinite(args.pace) and 0.0 <= args.pace <= 1e6):
         raise UserError(f"--pace {args.pace}: use 0 (lock-step, as fast as possible) or a factor up to 1e6")
@@ -81,7 +81,7 @@ def detector_params(items: list[str]) -> dict:
     """--detector-param NAME=VALUE items as typed node parameters (VALUE read as YAML: 2.0, true, [ph, level])."""
     import yaml
 
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     out = {}
     for item in items:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import EPILOG_FORMAT
+from .common import EPILOG_FORMAT, print_notes
 
 EXAMPLES = """examples:
   phfdi loop-diagnose ../shared/data/plant_loops/stiction/stic_2111FIC46005_0614_0003.txt
@@ -17,9 +17,15 @@ file formats: the tab-separated historian export of ../shared/data/plant_loops (
 'PROCESSDATA' title line) and CSV with a header line. CSV columns are guessed from names (time_s,
 op_pct, pv, sp; or tags ending .OP/.MV, .PV, .SP/.SV) unless --columns maps them; a YAML mapping is
 
-  columns: {time: Timestamp, op: FIC101.OP, pv: FIC101.PV, sp: FIC101.SP}
+  columns: {time: Timestamp, op: FIC101.OP, pv: FIC101.PV, sp: FIC101.SP, mode: FIC101.MODE}
   loop_tag: FIC101          # optional
   sample_time_s: 10         # when there is no time column
+
+reading: the historian policy of docs/records.md. Repeated stamps are repaired, NaN/text cells are
+missing, gaps of up to 3 samples are filled; a MODE column (the export's .MODE tag, or mode= in
+--columns) keeps only automatic stretches, and a clock reset, a time jump or a longer gap ends a
+stretch. The longest usable stretch (at least 100 samples) is diagnosed, or each of them with
+--segments each. Every repair is a note on stderr, in the report and in --json.
 
 exit status: 0 when at least one file was diagnosed (a file that cannot be read gets one line on
 stderr and the batch goes on), 2 when every file failed or the arguments are wrong.
@@ -36,7 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     p.add_argument("files", nargs="+", metavar="FILE", help="loop records (plant_loops export or CSV)")
     p.add_argument("--columns", default=None, metavar="MAP",
-                   help="CSV column mapping: op=NAME,pv=NAME[,sp=NAME][,time=NAME] or a .yaml file")
+                   help="CSV column mapping: op=NAME,pv=NAME[,sp=NAME][,time=NAME][,mode=NAME] or a .yaml file")
+    p.add_argument("--segments", choices=("longest", "each"), default="longest",
+                   help="diagnose the longest usable stretch of each file (default) or each stretch")
     p.add_argument("--process", choices=("auto", "self_regulating", "integrating"), default="auto",
                    help="process type (default auto: level loops, tags with LIC, integrate)")
     p.add_argument("--gain-threshold", type=float, default=None, metavar="PCT",
@@ -52,12 +60,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.errors import UserError
     from phfdi.loopdiag.batch import diagnose_files, stderr_progress
     from phfdi.loopdiag.diagnose import Settings
     from phfdi.loopdiag.hammerstein import ACTUATOR_CAUSES
     from phfdi.loopdiag.readers import ColumnMap
     from phfdi.loopdiag.report import format_report, format_summary, to_json
+    from phfdi_base.errors import UserError
 
     columns = ColumnMap.parse(args.columns) if args.columns else None
     settings = Settings(baselines=not args.no_baselines,
@@ -76,10 +84,12 @@ def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
     reports = diagnose_files(args.files, columns, settings, args.workers, stderr_progress(),
-                             figure_dir=args.figure)
+                             figure_dir=args.figure, each_segment=args.segments == "each")
     for r in reports:
         if "error" in r:
             print(f"phfdi loop-diagnose: {r['error']}", file=sys.stderr)
+        else:
+            print_notes("loop-diagnose", [f"{r['file']}: {n}" for n in r.get("reading_notes", [])])
     if args.json:
         print(to_json(reports))
     else:

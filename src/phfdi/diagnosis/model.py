@@ -36,11 +36,11 @@ from scipy.optimize import brentq
 
 from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from ph_plant_sim.plant import CstrPlant, affine_recurrence, record_sample_maps
-from phfdi.blocks import Chain, Injected
-from phfdi.errors import UserError
 from phfdi.loop import _valve, build_plant, feed_lines, profile, sensor_chain
-from phfdi.scenario import (ScenarioSpec, apply_override, load_plant_model, parse_override, raw_scenario,
-                            validate_scenario)
+from phfdi.scenario import apply_override, load_plant_model, parse_override, raw_scenario
+from phfdi_base.blocks import Chain, Injected
+from phfdi_base.errors import UserError
+from phfdi_base.spec import ScenarioSpec, validate_scenario
 
 from .data import Record
 
@@ -355,7 +355,7 @@ class Evaluator:
 
 
 def _bare(block):
-    """The block inside an :class:`~phfdi.blocks.Injected` that is fully on from t = 0 (one call less per sample)."""
+    """The block inside an :class:`~phfdi_base.blocks.Injected` that is fully on from t = 0 (one call less per sample)."""
     if isinstance(block, Injected) and block.onset_s <= 0.0 and block.ramp_s <= 0.0:
         if hasattr(block.block, "severity"):
             block.block.severity = 1.0

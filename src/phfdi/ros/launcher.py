@@ -34,10 +34,10 @@ from typing import Callable
 
 import yaml
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
+from phfdi_base.topics import CONTROLLERS, DETECTOR, PLANT, PLANT_STATE, RECORDER, VALVE
 
 from .env import graph_env, reserve_domain_id
-from .topics import CONTROLLERS, DETECTOR, PLANT, PLANT_STATE, RECORDER, VALVE
 
 LOOP, OBSERVER = "loop", "observer"
 

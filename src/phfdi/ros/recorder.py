@@ -1,6 +1,6 @@
 """ROS 2 node that records the graph's topics to an MCAP bag (ros2 profile).
 
-Subscribes (reliable, keep all) to the topics of :data:`phfdi.ros.topics.RECORDED`
+Subscribes (reliable, keep all) to the topics of :data:`phfdi_base.topics.RECORDED`
 as raw CDR and writes each message at its simulated time stamp with
 :class:`phfdi.bagio.BagWriter`: 16 KB chunks reach the disk as they fill, and
 the chunk in progress is flushed every ``flush_period_s`` of wall time, so a
@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main
-from phfdi.ros.topics import BY_NAME, RECORDED, RECORDER
+from phfdi_base.topics import BY_NAME, RECORDED, RECORDER
 
 PARAMS = (
     ParamSpec("path", "", "bag file to write (.mcap); its folder is created"),
