@@ -11,7 +11,7 @@ import pytest
 from mcap.reader import make_reader
 
 from phfdi import bagio
-from phfdi.ros import topics as T
+from phfdi_base import topics as T
 
 from .conftest import SHORT_RUN, phfdi_cmd
 
