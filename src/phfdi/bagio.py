@@ -514,3 +514,20 @@ def recover(src: str | Path, dst: str | Path) -> dict:
         w.finish()
     return {"path": str(dst), "messages": n, "last_s": None if last_ns is None else last_ns * 1e-9,
             "complete_input": error is None, "stopped_at": error}
+
+
+# ---- split bags (the recorder's split_after_s) ------------------------------------------
+
+def part_path(path: str | Path, index: int) -> Path:
+    """File ``index`` of a split bag: the path itself for 0, then ``<stem>.<index>.mcap``."""
+    path = Path(path)
+    return path if index == 0 else path.with_name(f"{path.stem}.{index}{path.suffix}")
+
+
+def bag_parts(path: str | Path) -> list[Path]:
+    """The files of a (possibly split) bag, in order: the path, then ``<stem>.1.mcap``, ... while they exist."""
+    parts = []
+    while part_path(path, len(parts)).exists():
+        parts.append(part_path(path, len(parts)))
+    return parts
+
