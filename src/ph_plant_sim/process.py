@@ -7,11 +7,12 @@ with the valve flows of sample k.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from typing import Mapping
 
-from phfdi.blocks import Chain, Injected
-from phfdi.profiles import Profile
+from phfdi_base.blocks import Chain, Injected
+from phfdi_base.profiles import Profile
 
 from .plant import CstrPlant
 
@@ -39,6 +40,8 @@ class PlantProcess:
     level_sensor: Chain = field(default_factory=Chain)
     feed_schedules: dict[str, Profile] = field(default_factory=dict)
     dt_s: float = 1.0
+    #: per feed, the blocks between the commanded flow and the vessel (dead time, pump curve, pump lag)
+    feed_lines: dict[str, Chain] = field(default_factory=dict)
 
     def feed_flows(self, t_s: float, valve_flows: Mapping[str, float]) -> list[float]:
         flows = []
@@ -50,6 +53,37 @@ class PlantProcess:
             else:
                 flows.append(feed.flow_ml_s)
         return flows
+
+    def reset_lines(self, flows_ml_s: list[float]) -> None:
+        """Put every feed line at rest, passing the given commanded flows."""
+        for feed, q in zip(self.plant.feeds, flows_ml_s):
+            if feed.name in self.feed_lines:
+                self.feed_lines[feed.name].reset(q)
+
+    def steady_delivery(self, flows_ml_s: list[float]) -> list[float]:
+        """Flows a line delivers after resting at constant commanded flows (its static map: the pump curve)."""
+        if not self.feed_lines:
+            return list(flows_ml_s)
+        out = []
+        for feed, q in zip(self.plant.feeds, flows_ml_s):
+            line = self.feed_lines.get(feed.name)
+            if line is None:
+                out.append(q)
+                continue
+            probe = copy.deepcopy(line)
+            probe.reset(q)
+            out.append(max(0.0, probe.step(q, 0.0)))
+        return out
+
+    def deliver(self, flows_ml_s: list[float], t_s: float) -> list[float]:
+        """Commanded flows -> flows entering the vessel, through each feed's line (call once per sample)."""
+        if not self.feed_lines:
+            return list(flows_ml_s)
+        out = []
+        for feed, q in zip(self.plant.feeds, flows_ml_s):
+            line = self.feed_lines.get(feed.name)
+            out.append(max(0.0, line.step(q, t_s)) if line is not None else q)
+        return out
 
     def __post_init__(self) -> None:
         self._sensor_faults = [b for b in self.ph_sensor.blocks + self.level_sensor.blocks if isinstance(b, Injected)]
@@ -67,7 +101,7 @@ class PlantProcess:
                            self.level_sensor.step(level, t_s), sev)
 
     def advance(self, t_s: float, valve_flows: Mapping[str, float], outlet_opening: float) -> list[float]:
-        """Integrate from t_s to t_s + dt_s; returns the feed flows applied (mL/s)."""
+        """Integrate from t_s to t_s + dt_s; returns the commanded feed flows (mL/s)."""
         flows = self.feed_flows(t_s, valve_flows)
-        self.plant.step(flows, outlet_opening, self.dt_s)
+        self.plant.step(self.deliver(flows, t_s), outlet_opening, self.dt_s)
         return flows

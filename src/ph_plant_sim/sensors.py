@@ -1,6 +1,6 @@
-"""Sensor effects as blocks (see :mod:`phfdi.blocks`), stepped once per sample.
+"""Sensor effects as blocks (see :mod:`phfdi_base.blocks`), stepped once per sample.
 
-A sensor is a :class:`~phfdi.blocks.Chain` of these, applied to the true
+A sensor is a :class:`~phfdi_base.blocks.Chain` of these, applied to the true
 value: for example transport delay, then first-order probe lag, then noise.
 """
 
@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from phfdi.blocks import register_block
+from phfdi_base.blocks import register_block
 
 
 def _check(name: str, value: float, positive: bool = False) -> None:
@@ -167,3 +167,83 @@ class Gain:
     def step(self, x: float, t_s: float) -> float:
         g = 1.0 + self.severity * (self.gain - 1.0)
         return self.reference + g * (x - self.reference)
+
+
+@register_block("sensor_asymmetric_lag")
+@dataclass
+class AsymmetricLag:
+    """First-order lag with one time constant for a rising and another for a falling reading.
+
+    A glass electrode can answer a step towards alkaline faster or slower than one towards acid
+    (hydration of the gel layer); exact for an input held over each sample.
+    """
+
+    tau_up_s: float
+    tau_down_s: float
+    dt_s: float = 1.0
+    severity: float = 1.0
+    _y: float | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        _check("tau_up_s", self.tau_up_s)
+        _check("tau_down_s", self.tau_down_s)
+        _check("dt_s", self.dt_s, positive=True)
+
+    def reset(self, x0: float) -> None:
+        self._y = x0
+
+    def step(self, x: float, t_s: float) -> float:
+        if self._y is None:
+            self._y = x
+            return x
+        tau = self.severity * (self.tau_up_s if x > self._y else self.tau_down_s)
+        if tau <= 0.0:
+            self._y = x
+        else:
+            self._y += (1.0 - math.exp(-self.dt_s / tau)) * (x - self._y)
+        return self._y
+
+
+@register_block("sensor_second_order")
+@dataclass
+class SecondOrderLag:
+    """Two first-order lags in series (tau1_s, tau2_s): a probe whose step response starts with zero slope."""
+
+    tau1_s: float
+    tau2_s: float
+    dt_s: float = 1.0
+    severity: float = 1.0
+    _a: FirstOrderLag | None = field(default=None, repr=False)
+    _b: FirstOrderLag | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        self._a = FirstOrderLag(self.tau1_s, self.dt_s, self.severity)
+        self._b = FirstOrderLag(self.tau2_s, self.dt_s, self.severity)
+
+    def reset(self, x0: float) -> None:
+        self._a.reset(x0)
+        self._b.reset(x0)
+
+    def step(self, x: float, t_s: float) -> float:
+        self._a.severity = self._b.severity = self.severity
+        return self._b.step(self._a.step(x, t_s), t_s)
+
+
+@register_block("two_point_calibration")
+@dataclass
+class TwoPointCalibration:
+    """A probe calibrated with two buffers that were off: y = 7 + slope (x - 7) + offset (pH).
+
+    ``slope`` is the electrode's response relative to Nernst (1 = ideal), ``offset`` the reading at pH 7 minus 7.
+    """
+
+    slope: float = 1.0
+    offset: float = 0.0
+    severity: float = 1.0
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        s = 1.0 + self.severity * (self.slope - 1.0)
+        return 7.0 + s * (x - 7.0) + self.severity * self.offset

@@ -30,8 +30,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from phfdi.errors import UserError
-from phfdi.scenario import ScenarioSpec, load_scenario
+from phfdi.scenario import load_scenario
+from phfdi_base.errors import UserError
+from phfdi_base.spec import ScenarioSpec
 
 from .config import Calibration, DetectorSettings
 
@@ -134,14 +135,16 @@ def healthy_traces(spec_for_seed: Callable[[int], ScenarioSpec], seeds: Sequence
 
 
 def calibrate_from_runs(paths: Sequence[str], spec: ScenarioSpec, settings: DetectorSettings | None = None,
-                        progress: Callable[[float], None] | None = None) -> Calibration:
-    """Calibrate on recorded healthy runs of a plant (its model: ``spec``) instead of simulations."""
+                        progress: Callable[[float], None] | None = None, runs: Sequence | None = None) -> Calibration:
+    """Calibrate on recorded healthy runs of a plant (its model: ``spec``) instead of simulations.
+
+    ``runs``: the runs of ``paths`` already read (e.g. with a column map); read here when None."""
     from .replay import load_any
 
     settings = settings or DetectorSettings()
     traces = []
     for i, path in enumerate(paths):
-        traces.append(front_end_trace(spec, load_any(path), settings))
+        traces.append(front_end_trace(spec, runs[i] if runs is not None else load_any(path), settings))
         if progress:
             progress((i + 1) / len(paths))
     cal = calibrate_from_traces(traces, settings, spec.name, spec.sample_time_s, [])

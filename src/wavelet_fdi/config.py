@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .filterbank import wavelet_filters
 from .statistics import energy_reference

@@ -25,10 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.blocks import register_block
+from ph_plant_sim.build import load_plant_model
 from phfdi.loop import simulate, simulate_open_loop
 from phfdi.run import Run
-from phfdi.scenario import load_plant_model, raw_scenario, validate_scenario
+from phfdi.scenario import raw_scenario
+from phfdi_base.blocks import register_block
+from phfdi_base.spec import validate_scenario
 
 WARMUP_S = 600.0
 COLUMNS = ["time_s", "valve_command_pct", "level_controller_output_pct", "ph_measured", "level_measured_cm"]
@@ -128,11 +130,12 @@ class PeriodicFlow:
         return max(0.0, x + self.severity * self.amplitude_ml_s * math.sin(2 * math.pi * t_s / self.period_s))
 
 
-def _setpoints(rng, duration_s: float, step_s: float = 400.0) -> dict:
-    """Setpoint steps every 400 s, visiting pH 8 (the valve near 65 %) and pH 10.5 or above (near 30 %)."""
+def _setpoints(rng, duration_s: float, step_s: float = 400.0,
+               high: tuple[float, ...] = (10.5, 11.0, 11.5)) -> dict:
+    """Setpoint steps every 400 s, visiting pH 8 (the valve near 65 %) and one of ``high`` (near 30 %)."""
     levels = [8.0, 8.5, 9.0, 9.5, 10.0, 10.5, 11.0, 11.5]
     n = max(1, int((duration_s - 100.0) // step_s))
-    seq = [8.0, float(rng.choice([10.5, 11.0, 11.5]))][:n]
+    seq = [8.0, float(rng.choice(list(high)))][:n]
     while len(seq) < n:
         seq.append(float(rng.choice([v for v in levels if v != seq[-1]])))
     order = rng.permutation(n)
@@ -242,7 +245,10 @@ def make_case(rng: np.random.Generator, cause: str, excitation: str, out_dir: Pa
     raw["duration_s"] = WARMUP_S + duration_s
     raw["sample_time_s"] = 1.0
     if excitation == "closed":
-        raw["setpoints"]["ph"] = _setpoints(rng, duration_s)
+        # an alkaline error reads a (x - 10)^2 low above pH 10: at a pH 10.5 step it is 0.04 pH or less, which a
+        # buffer with a probe gain error matches to the noise floor; the experiment has to go where it shows
+        high = (11.0, 11.5) if cause == "alkaline_error" else (10.5, 11.0, 11.5)
+        raw["setpoints"]["ph"] = _setpoints(rng, duration_s, high=high)
         run = simulate(validate_scenario(raw))
     elif excitation == "open":
         raw["setpoints"]["ph"] = {"initial": 10.0}

@@ -57,9 +57,19 @@ def run_recover(args: argparse.Namespace) -> int:
 
 
 def run_to_run(args: argparse.Namespace) -> int:
-    from phfdi.bagio import load_run
+    from pathlib import Path
 
-    run = load_run(args.input)
+    from phfdi.records import read_record
+    from phfdi_base.errors import UserError
+
+    from .common import print_notes
+
+    if Path(args.output).suffix.lower() not in (".csv", ".parquet", ".pq"):
+        raise UserError(f"cannot write a run to {args.output}: use a .csv or .parquet file name")
+    if Path(args.input).suffix.lower() != ".mcap" and not (Path(args.input) / "metadata.yaml").exists():
+        raise UserError(f"{args.input}: to-run converts a bag: give an .mcap file")
+    run = read_record(args.input, policy="run").to_run()
+    print_notes("bag", run.metadata["notes"])
     path = run.save(args.output)
     print(f"wrote {len(run)} samples of {len(run.names)} signals to {path}")
     return 0

@@ -4,24 +4,27 @@ from __future__ import annotations
 
 import argparse
 
-from .common import EPILOG_FORMAT, Progress
+from .common import EPILOG_FORMAT, Progress, add_record_args, column_map_from_args, print_notes
 
 EXAMPLES = """examples:
   phfdi calibrate --out my_calibration.yaml                 # paper scenario, sym4 level 3, ARL0 1e5 samples
   phfdi calibrate --wavelet db8 --level 3 --out db8.yaml
   phfdi calibrate --scenario my_loop.yaml --seeds 2001-2032 --arl0 1e6 --out my_loop.yaml
   phfdi calibrate --scenario my_loop.yaml --runs healthy1.parquet healthy2.parquet --out plant.yaml
+  phfdi calibrate --scenario my_loop.yaml --runs h1.csv h2.csv --map plant_columns.yaml --out plant.yaml
 
 The seeds default to 1001-1016, disjoint from the evaluation's (1-99). The file
 records the seeds, the noise level per band and each threshold; pass it to
 phfdi replay --calibration. The shipped default for the paper scenario is
 wavelet_fdi/calibrations/paper_sym4_L3.yaml (made with the defaults).
+Recorded runs are read under the reading policy of docs/records.md (--map,
+--column, --encoding as in phfdi replay); every repair is printed as a note.
 """
 
 
 def parse_seeds(text: str) -> list[int]:
     """'1001-1016' or '1,2,5' -> list of seeds."""
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     out: list[int] = []
     try:
@@ -68,18 +71,28 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="calibrate on these recorded healthy runs (.csv, .parquet, .mcap) instead of simulating; "
                         "--scenario is then the plant's model")
     add_detector_args(p)
+    add_record_args(p)
     p.add_argument("--out", required=True, help="calibration file to write (.yaml or .json)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
     from wavelet_fdi.calibration import calibrate, calibrate_from_runs
+    from wavelet_fdi.replay import load_any
 
     settings = settings_from_args(args)
+    cmap = column_map_from_args(args)
+    if not args.runs and (cmap is not None or args.encoding):
+        raise UserError("--map, --column and --encoding read recorded runs: give them with --runs")
     if args.runs:
         spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
-        cal = calibrate_from_runs(args.runs, spec, settings,
+        runs = []
+        for path in args.runs:
+            runs.append(load_any(path, cmap, args.encoding))
+            print_notes("calibrate", runs[-1].metadata.get("notes", []))
+        cal = calibrate_from_runs(args.runs, spec, settings, runs=runs,
                                   progress=Progress(f"calibrate on {len(args.runs)} recorded runs", enabled=True))
         source = f"{len(args.runs)} recorded runs"
     else:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import EPILOG_FORMAT
+from .common import EPILOG_FORMAT, print_notes
 
 EXAMPLES = """examples:
   phfdi loop-diagnose ../shared/data/plant_loops/stiction/stic_2111FIC46005_0614_0003.txt
@@ -26,9 +26,15 @@ file formats: the tab-separated historian export of ../shared/data/plant_loops (
 'PROCESSDATA' title line) and CSV with a header line. CSV columns are guessed from names (time_s,
 op_pct, pv, sp; or tags ending .OP/.MV, .PV, .SP/.SV) unless --columns maps them; a YAML mapping is
 
-  columns: {time: Timestamp, op: FIC101.OP, pv: FIC101.PV, sp: FIC101.SP}
+  columns: {time: Timestamp, op: FIC101.OP, pv: FIC101.PV, sp: FIC101.SP, mode: FIC101.MODE}
   loop_tag: FIC101          # optional
   sample_time_s: 10         # when there is no time column
+
+reading: the historian policy of docs/records.md. Repeated stamps are repaired, NaN/text cells are
+missing, gaps of up to 3 samples are filled; a MODE column (the export's .MODE tag, or mode= in
+--columns) keeps only automatic stretches, and a clock reset, a time jump or a longer gap ends a
+stretch. The longest usable stretch (at least 100 samples) is diagnosed, or each of them with
+--segments each. Every repair is a note on stderr, in the report and in --json.
 
 exit status: 0 when at least one file was diagnosed (a file that cannot be read gets one line on
 stderr and the batch goes on), 2 when every file failed or the arguments are wrong.
@@ -46,7 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("files", nargs="+", metavar="PATH",
                    help="loop records (plant_loops export or CSV), folders of them, or wide historian exports")
     p.add_argument("--columns", default=None, metavar="MAP",
-                   help="CSV column mapping: op=NAME,pv=NAME[,sp=NAME][,time=NAME] or a .yaml file")
+                   help="CSV column mapping: op=NAME,pv=NAME[,sp=NAME][,time=NAME][,mode=NAME] or a .yaml file")
+    p.add_argument("--segments", choices=("longest", "each"), default="longest",
+                   help="diagnose the longest usable stretch of each file (default) or each stretch")
     p.add_argument("--process", choices=("auto", "self_regulating", "integrating"), default="auto",
                    help="process type (default auto: level loops, tags with LIC, integrate)")
     p.add_argument("--gain-threshold", type=float, default=None, metavar="PCT",
@@ -68,12 +76,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.errors import UserError
     from phfdi.loopdiag.diagnose import Settings
     from phfdi.loopdiag.plantwide import diagnose_jobs, expand, format_worst, write_table
     from phfdi.loopdiag.hammerstein import ACTUATOR_CAUSES
     from phfdi.loopdiag.readers import ColumnMap
     from phfdi.loopdiag.report import format_report, format_summary, to_json
+    from phfdi_base.errors import UserError
 
     columns = ColumnMap.parse(args.columns) if args.columns else None
     settings = Settings(baselines=not args.no_baselines,
@@ -94,10 +102,13 @@ def run(args: argparse.Namespace) -> int:
     if args.top < 1:
         raise UserError(f"--top must be at least 1, got {args.top}")
     jobs = expand(args.files, columns)
-    reports = diagnose_jobs(jobs, settings, args.figure, args.scheduler, args.workers, _progress(len(jobs)))
+    reports = diagnose_jobs(jobs, settings, args.figure, args.scheduler, args.workers, _progress(len(jobs)),
+                            each_segment=args.segments == "each")
     for r in reports:
         if "error" in r:
             print(f"phfdi loop-diagnose: {r['error']}", file=sys.stderr)
+        else:
+            print_notes("loop-diagnose", [f"{r['file']}: {n}" for n in r.get("reading_notes", [])])
     ok = any("error" not in r for r in reports)
     if args.out:
         pq_path, csv_path = write_table(reports, args.out)

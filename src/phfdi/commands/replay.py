@@ -8,19 +8,26 @@ import sys
 import time
 
 from .calibrate import add_detector_args, settings_from_args
-from .common import EPILOG_FORMAT
+from .common import EPILOG_FORMAT, add_record_args, column_map_from_args, print_notes
 
 EXAMPLES = """examples:
   phfdi simulate --fault backlash --out runs/backlash.parquet && phfdi replay runs/backlash.parquet
   phfdi replay runs/backlash.csv --json                 # machine-readable list of alarms
   phfdi replay bags/run.mcap --calibration my.yaml      # a bag recorded by phfdi launch, own calibration
   phfdi replay --live bags/run.mcap                     # through a detector NODE, over ROS topics
+  phfdi replay plant.csv --column time_s=t --column ph_measured=pH --column valve_command_pct=OP
 
 The detector sees only what a plant would measure: time_s, ph_measured,
 valve_command_pct (or ph_controller_output_pct), level_measured_cm,
 level_controller_output_pct, ph_setpoint and the flows of feeds the valve does
 not drive. The plant model comes from the run's metadata (simulated runs),
 else from --scenario; the faults in it are ignored.
+
+The file is read under the reading policy of docs/records.md: exact duplicate
+rows dropped, a repeated stamp next to a skipped one re-spaced, other repeated
+stamps averaged, NaN/inf/text cells missing (the detector holds its statistics
+there); time going back is refused. Every repair is printed on stderr as a
+note and listed in --json ("notes").
 
 --live plays the bag's topics (raw CDR, each message at its simulated time
 stamp, and /clock) into a ROS graph of two processes started for the
@@ -45,6 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_detector_args(p)
     p.add_argument("--no-isolation", action="store_true", help="detect only (no fault class)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
+    add_record_args(p)
     live = p.add_argument_group("live replay (ROS 2)")
     live.add_argument("--live", action="store_true",
                       help="play the bag over ROS topics into a detector node instead (.mcap only)")
@@ -56,16 +64,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.errors import UserError
     from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
     from wavelet_fdi.config import Calibration
     from wavelet_fdi.replay import load_any, replay_run, scenario_of
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
     if args.live:
+        if args.map or args.column or args.encoding:
+            raise UserError("--map, --column and --encoding apply to an offline replay, not to --live")
         return run_live(args)
-    run_ = load_any(args.file)
+    run_ = load_any(args.file, column_map_from_args(args), args.encoding)
+    notes = run_.metadata.get("notes", [])
+    print_notes("replay", notes)
     spec = load_scenario(args.scenario, fault="healthy") if args.scenario else scenario_of(run_)
     settings = settings_from_args(args)
     cal = Calibration.load(args.calibration) if args.calibration else None
@@ -75,10 +87,25 @@ def run(args: argparse.Namespace) -> int:
     print(f"replayed {result.samples} samples in {elapsed:.2f} s ({result.samples / max(elapsed, 1e-9):.0f} "
           f"samples/s, isolation included)", file=sys.stderr)
     if args.json:
-        print(json.dumps([a.summary() for a in result.alarms], indent=2))
+        print(json.dumps(replay_json(args.file, result.samples, notes, result.diagnostics,
+                                     [a.summary() for a in result.alarms]), indent=2))
         return 0
     print(format_alarms(result.alarms, result.diagnostics))
     return 0
+
+
+def replay_json(file: str, samples: int, notes: list[str], diagnostics: dict, alarms: list[dict]) -> dict:
+    """--json output: the file, what the reader repaired, what the detector counted as bad input, the alarms."""
+    return {"file": file, "samples": samples, "notes": notes, "input_problems": input_problems(diagnostics),
+            "alarms": alarms}
+
+
+def input_problems(diagnostics: dict) -> dict:
+    """The detector's bad-input counters that are not zero."""
+    return {k: v for k, v in diagnostics.items()
+            if k in ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
+                     "gap_resets", "time_resets", "nonfinite_ph", "out_of_range_ph", "nonfinite_command",
+                     "command_stale_episodes", "reference_resets") and v}
 
 
 def _scenario_file(bag: str, fallback: str | None, folder: str) -> str:
@@ -88,7 +115,8 @@ def _scenario_file(bag: str, fallback: str | None, folder: str) -> str:
     import yaml
 
     from phfdi import bagio
-    from phfdi.scenario import load_scenario, validate_scenario
+    from phfdi.scenario import load_scenario
+    from phfdi_base.spec import validate_scenario
 
     meta = json.loads(bagio.read_metadata(Path(bag)).get(bagio.RUN_METADATA, {}).get("json", "{}"))
     if fallback or not isinstance(meta.get("spec"), dict):
@@ -107,10 +135,10 @@ def run_live(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from phfdi import bagio
-    from phfdi.errors import UserError
     from phfdi.ros.launcher import Launcher, NodeSpec, detector_spec
     from phfdi.ros.player import PLAYER
-    from phfdi.ros.topics import DETECTOR
+    from phfdi_base.errors import UserError
+    from phfdi_base.topics import DETECTOR
 
     from .common import Progress
     from .launch import alarm_event_line
@@ -157,7 +185,8 @@ def run_live(args: argparse.Namespace) -> int:
         f"({result.run_wall_s:.1f} s after the graph connected; ROS domain {result.domain_id})")
     alarms = report["alarms"]
     if args.json:
-        print(json.dumps([{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms], indent=2))
+        print(json.dumps(replay_json(args.file, report["samples"], [], report["diagnostics"],
+                                     [{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms]), indent=2))
     else:
         print(format_alarms(alarms, report["diagnostics"]))
     return result.status
@@ -185,10 +214,11 @@ def format_alarms(alarms: list, diagnostics: dict) -> str:
                      f"{s['dominant_level']}, severity {s['severity']:.3g} pH RMS")
         if s["cleared_time"] is not None:
             lines.append(f"  cleared {s['cleared_time']:g} s")
-    problems = {k: v for k, v in diagnostics.items()
-                if k in ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
-                         "gap_resets", "time_resets", "nonfinite_ph", "out_of_range_ph", "nonfinite_command",
-                         "command_stale_episodes", "reference_resets") and v}
+    problems = input_problems(diagnostics)
     if problems:
         lines.append("input problems: " + ", ".join(f"{k} {v}" for k, v in problems.items()))
+    held = problems.get("nonfinite_ph", 0) + problems.get("out_of_range_ph", 0)
+    if held:
+        lines.append(f"  {held} pH samples missing or out of range: no residual there, the statistics held "
+                     f"(not fed as numbers)")
     return "\n".join(lines)

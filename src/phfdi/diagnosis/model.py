@@ -34,12 +34,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from ph_plant_sim.build import build_plant, feed_lines, load_plant_model, plant_start, sensor_chain
+from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from ph_plant_sim.plant import CstrPlant, affine_recurrence, record_sample_maps
-from phfdi.blocks import Chain, Injected
-from phfdi.errors import UserError
-from phfdi.loop import _valve, build_plant, profile, sensor_chain
-from phfdi.scenario import (ScenarioSpec, apply_override, load_plant_model, parse_override, raw_scenario,
-                            validate_scenario)
+from phfdi.scenario import raw_scenario
+from phfdi_base.blocks import Chain, Injected
+from phfdi_base.errors import UserError
+from phfdi_base.spec import ScenarioSpec, apply_override, injected_faults, parse_override, profile, validate_scenario
+from valve_actuator.build import build_valve
 
 from .data import Record
 
@@ -186,9 +188,7 @@ class Evaluator:
         plant = self.plant(spec)
         if plant.tank.overflow or "level_controller_output_pct" in self.record.inputs:
             return 1.0
-        from phfdi.loop import operating_point
-
-        return operating_point(spec, plant).outlet_opening
+        return plant_start(spec, plant).outlet_opening
 
     # ---- stages -----------------------------------------------------------------
     def flows(self, spec: ScenarioSpec, start: Start = Start()) -> tuple[np.ndarray, np.ndarray]:
@@ -214,6 +214,10 @@ class Evaluator:
                 flows[:, j] = [prof.value(t) for t in self.t_rel.tolist()]
             else:
                 flows[:, j] = f.flow_ml_s
+        lines = feed_lines(load_plant_model(spec.plant), self.dt_s)
+        for j, f in enumerate(plant.feeds):  # commanded flow -> flow entering the vessel
+            if f.name in lines:
+                flows[:, j] = np.maximum(_run_chain(lines[f.name], flows[:, j], self.t_rel.tolist()), 0.0)
         if np.any(flows < 0) or not np.all(np.isfinite(flows)):
             raise UserError("model: a feed flow went negative or non-finite")
         openings = self._openings(spec)
@@ -221,11 +225,13 @@ class Evaluator:
 
     @staticmethod
     def _flows_key(spec: ScenarioSpec, plant: CstrPlant) -> str:
+        model = load_plant_model(spec.plant)
         return _key(spec.valves.model_dump(), [f.model_dump() for f in spec.faults if not f.where.endswith("sensor")],
-                    {k: v.model_dump() for k, v in spec.feeds.items()}, [(f.name, f.flow_ml_s) for f in plant.feeds])
+                    {k: v.model_dump() for k, v in spec.feeds.items()}, [(f.name, f.flow_ml_s) for f in plant.feeds],
+                    {k: [b.model_dump() for b in v.line] for k, v in model.feeds.items()})
 
     def _valve_flows(self, spec: ScenarioSpec, command: np.ndarray, offset_pct: float = 0.0) -> np.ndarray:
-        valve = _valve(spec.valves.ph, spec, "valve")
+        valve = build_valve(spec.valves.ph, spec, "valve")
         # the faults of a diagnosis model act from the start: step the blocks themselves
         pos_blocks = [_bare(b) for b in valve.position_blocks.blocks]
         flow_blocks = [_bare(b) for b in valve.flow_blocks.blocks]
@@ -258,7 +264,7 @@ class Evaluator:
                                                      if f.where.startswith("outlet_valve")])
         if key == getattr(self, "_openings_key", None):
             return self._openings_cached
-        outlet = _valve(spec.valves.outlet, spec, "outlet_valve")
+        outlet = build_valve(spec.valves.outlet, spec, "outlet_valve")
         cmd = rec.inputs["level_controller_output_pct"].tolist()
         outlet.reset(cmd[0])
         t = self.t_rel.tolist()
@@ -304,6 +310,11 @@ class Evaluator:
         inflow = flows @ feed_conc  # mmol/s per component
         amounts = affine_recurrence(coef[:, 0], coef[:, 1:2] * inflow, np.asarray(conc0) * v0)
         conc = amounts / volume[:, None]
+        if model.mixing is not None:  # the probe reads the zone (ph_plant_sim.mixing)
+            m = model.mixing
+            conc, _ = zone_trajectory(MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds)),
+                                      [f.name for f in plant.feeds], feed_conc, flows, volume, self.dt_s,
+                                      np.asarray(conc0, dtype=float))
         ph0 = plant.balance.ph(conc0)
         # a nearby trajectory (the first one simulated) saves Newton iterations; the root does not depend on it
         guess = self._ph_guess if self._ph_guess is not None and len(self._ph_guess) == len(conc) else ph0
@@ -343,7 +354,7 @@ class Evaluator:
 
 
 def _bare(block):
-    """The block inside an :class:`~phfdi.blocks.Injected` that is fully on from t = 0 (one call less per sample)."""
+    """The block inside an :class:`~phfdi_base.blocks.Injected` that is fully on from t = 0 (one call less per sample)."""
     if isinstance(block, Injected) and block.onset_s <= 0.0 and block.ramp_s <= 0.0:
         if hasattr(block.block, "severity"):
             block.block.severity = 1.0
@@ -352,9 +363,8 @@ def _bare(block):
 
 
 def _sensor_faults(spec: ScenarioSpec, site: str, dt_s: float) -> list:
-    from phfdi.loop import _faults
 
-    return [_bare(b) for b in _faults(spec, site, None)]
+    return [_bare(b) for b in injected_faults(spec, site)]
 
 
 def _run_chain(chain: Chain, x: np.ndarray, t: list[float]) -> np.ndarray:

@@ -6,29 +6,33 @@ import sys
 from pathlib import Path
 from typing import Callable, Iterable
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .diagnose import Settings, report
 from .features import loop_evidence, stiction_verdict
-from .readers import ColumnMap, read_loop
+from .readers import ColumnMap, check_loop_run, read_loop, read_loop_segments
 
 
 def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Settings | None = None,
                   figure_dir: str | None = None) -> dict:
-    """The report of one file, or ``{"file": ..., "error": message}`` for a file that cannot be diagnosed."""
+    """The report of one file (its longest usable stretch), or ``{"file": ..., "error": message}``."""
     try:
         run = read_loop(path, columns)
     except UserError as exc:
         return {"file": str(path), "error": str(exc)}
-    return diagnose_loop_run(run, settings, figure_dir)
+    return diagnose_run(run, settings, figure_dir)
 
 
-def diagnose_loop_run(run, settings: Settings | None = None, figure_dir: str | None = None) -> dict:
-    """The report of one loop: the Hammerstein diagnosis (cause, S and J) and the stiction
-    classifier's verdict with its evidence (``report["stiction"]``)."""
-    settings = settings or Settings()
-    le = loop_evidence(run, settings)
-    rep = report(run, le.evidence, settings)
+def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None = None) -> dict:
+    """The report of one loop run: the Hammerstein diagnosis (cause, S and J) and the stiction
+    classifier's verdict with its evidence (``report["stiction"]``), or ``{"file": ..., "error": message}``
+    when it cannot be diagnosed."""
+    try:
+        settings = settings or Settings()
+        le = loop_evidence(run, settings)
+        rep = report(run, le.evidence, settings)
+    except UserError as exc:
+        return {"file": run.metadata.get("file"), "error": str(exc)}
     if not settings.baselines:
         rep["baselines"] = {}
     rep["stiction"] = stiction_verdict(le)
@@ -40,15 +44,39 @@ def diagnose_loop_run(run, settings: Settings | None = None, figure_dir: str | N
     return rep
 
 
+def diagnose_file_segments(path: str, columns: ColumnMap | None = None, settings: Settings | None = None,
+                           figure_dir: str | None = None) -> list[dict]:
+    """One report per usable stretch of the file (each with its source lines), or one error."""
+    try:
+        runs = read_loop_segments(path, columns)
+    except UserError as exc:
+        return [{"file": str(path), "error": str(exc)}]
+    out = []
+    for run in runs:
+        a, b = run.metadata["lines"]
+        try:
+            check_loop_run(run)
+        except UserError as exc:
+            out.append({"file": str(path), "lines": [a, b], "error": str(exc)})
+            continue
+        rep = diagnose_run(run, settings, figure_dir)
+        rep["lines"] = [a, b]
+        out.append(rep)
+    return out
+
+
 def diagnose_files(paths: Iterable[str], columns: ColumnMap | None = None, settings: Settings | None = None,
                    workers: int | None = None, progress: Callable[[int, int, str], None] | None = None,
-                   figure_dir: str | None = None, scheduler: str | None = None) -> list[dict]:
-    """Reports in the order of ``paths``, on Dask (:mod:`.plantwide`; one file runs in this process)."""
+                   figure_dir: str | None = None, each_segment: bool = False,
+                   scheduler: str | None = None) -> list[dict]:
+    """Reports in the order of ``paths`` (with ``each_segment``, one per usable stretch), on Dask
+    (:mod:`.plantwide`; a single file runs in this process)."""
     from .plantwide import Job, diagnose_jobs
 
     paths = [str(p) for p in paths]
     show = (lambda done, total: progress(done, total, "")) if progress else None
-    return diagnose_jobs([Job(p, columns) for p in paths], settings, figure_dir, scheduler, workers, show)
+    return diagnose_jobs([Job(p, columns) for p in paths], settings, figure_dir, scheduler, workers, show,
+                         each_segment=each_segment)
 
 
 def stderr_progress(enabled: bool | None = None) -> Callable[[int, int, str], None]:
@@ -61,4 +89,3 @@ def stderr_progress(enabled: bool | None = None) -> Callable[[int, int, str], No
                   file=sys.stderr, flush=True)
 
     return show
-

@@ -11,7 +11,7 @@ import contextlib
 import os
 from typing import Callable, Iterable, Iterator
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 
 def default_workers() -> int:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 from phfdi.run import Run
 
 from .diagnose import Settings

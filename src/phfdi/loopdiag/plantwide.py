@@ -20,13 +20,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .diagnose import Settings
 from .readers import ColumnMap, read_loop
 
 SUFFIXES = (".txt", ".csv", ".parquet")
-_ROLE = {"OP": "op", "MV": "op", "OUT": "op", "PV": "pv", "SP": "sp", "SV": "sp"}
+_ROLE = {"OP": "op", "MV": "op", "OUT": "op", "PV": "pv", "SP": "sp", "SV": "sp", "MODE": "mode"}
 _TIME = ("time_s", "timestamp", "time", "datetime", "date", "tagname")
 
 
@@ -44,7 +44,7 @@ class Job:
 
 
 def wide_loops(header: list[str]) -> dict[str, dict[str, str]]:
-    """Loop tag -> {op, pv[, sp]} column names, from ``<tag>.<ROLE>`` headers; only tags with OP and PV."""
+    """Loop tag -> {op, pv[, sp][, mode]} column names, from ``<tag>.<ROLE>`` headers; only tags with OP and PV."""
     loops: dict[str, dict[str, str]] = {}
     for name in header:
         m = re.match(r"^(.+)[._]([A-Za-z]+)$", name.strip())
@@ -90,45 +90,57 @@ def _jobs_of_file(f: Path, columns: ColumnMap | None) -> list[Job]:
     if len(loops) < 2:
         return [Job(str(f))]
     time_col = next((h for h in header if h.strip().lower() in _TIME), None)
-    return [Job(str(f), ColumnMap(op=c["op"], pv=c["pv"], sp=c.get("sp"), time=time_col, loop_tag=tag), tag)
+    return [Job(str(f), ColumnMap(op=c["op"], pv=c["pv"], sp=c.get("sp"), time=time_col, loop_tag=tag,
+                                  mode=c.get("mode")), tag)
             for tag, c in sorted(loops.items())]
 
 
-def diagnose_job(job: Job, settings: Settings | None = None, figure_dir: str | None = None) -> dict:
-    """Report of one job (``error`` set when it cannot be read or diagnosed); runs on a worker."""
-    from .batch import diagnose_loop_run
+def diagnose_job(job: Job, settings: Settings | None = None, figure_dir: str | None = None,
+                 each_segment: bool = False) -> list[dict]:
+    """Reports of one job: its longest usable stretch, or with ``each_segment`` every stretch
+    (``error`` set when it cannot be read or diagnosed); runs on a worker."""
+    from .batch import diagnose_file_segments, diagnose_run
 
-    try:
-        run = read_loop(job.path, job.columns)
-    except UserError as exc:
-        return {"file": job.path, "loop_tag": job.loop_tag, "error": str(exc)}
-    if job.loop_tag:
-        run.metadata["loop_tag"] = job.loop_tag
-    return diagnose_loop_run(run, settings, figure_dir)
+    if each_segment:
+        reps = diagnose_file_segments(job.path, job.columns, settings, figure_dir)
+    else:
+        try:
+            run = read_loop(job.path, job.columns)
+        except UserError as exc:
+            return [{"file": job.path, "loop_tag": job.loop_tag, "error": str(exc)}]
+        if job.loop_tag:
+            run.metadata["loop_tag"] = job.loop_tag
+        reps = [diagnose_run(run, settings, figure_dir)]
+    for r in reps:
+        if job.loop_tag:
+            r["loop_tag"] = job.loop_tag
+    return reps
 
 
-def _job_args(args: tuple) -> dict:
+def _job_args(args: tuple) -> list[dict]:
     return diagnose_job(*args)
 
 
 def diagnose_jobs(jobs: list[Job], settings: Settings | None = None, figure_dir: str | None = None,
                   scheduler: str | None = None, workers: int | None = None,
-                  progress: Callable[[int, int], None] | None = None, processes: bool = True) -> list[dict]:
-    """Every job on Dask (one job in this process: no cluster for a single loop)."""
+                  progress: Callable[[int, int], None] | None = None, processes: bool = True,
+                  each_segment: bool = False) -> list[dict]:
+    """Every job on Dask (one job in this process: no cluster for a single loop); reports in job order."""
     from .dask_run import dask_client, map_ordered
 
-    args = [(j, settings, figure_dir) for j in jobs]
+    args = [(j, settings, figure_dir, each_segment) for j in jobs]
     if len(jobs) == 1 and not scheduler:
-        out = [_job_args(args[0])]
+        nested = [_job_args(args[0])]
         if progress:
             progress(1, 1)
-        return out
-    with dask_client(scheduler, workers, processes) as client:
-        return map_ordered(client, _job_args, args, progress)
+    else:
+        with dask_client(scheduler, workers, processes) as client:
+            nested = map_ordered(client, _job_args, args, progress)
+    return [r for reps in nested for r in reps]
 
 
 # ---- the table ---------------------------------------------------------------------------------
-COLUMNS = ("file", "loop_tag", "samples", "sample_time_s", "process_type", "stiction", "stiction_probability",
+COLUMNS = ("file", "loop_tag", "lines", "samples", "sample_time_s", "process_type", "stiction", "stiction_probability",
            "kano_s_pct", "kano_j_pct", "oscillating", "period_s", "regularity", "hammerstein_cause",
            "hammerstein_verdict", "gain_percent", "top_evidence", "notes", "error")
 
@@ -138,6 +150,8 @@ def table_row(rep: dict) -> dict:
     row = {c: None for c in COLUMNS}
     row["file"] = rep.get("file")
     row["loop_tag"] = rep.get("loop_tag")
+    if rep.get("lines"):
+        row["lines"] = f"{rep['lines'][0]}-{rep['lines'][1]}"
     if "error" in rep:
         row["error"] = rep["error"]
         return row
@@ -154,7 +168,7 @@ def table_row(rep: dict) -> dict:
         "hammerstein_cause": rep.get("cause"), "hammerstein_verdict": rep.get("verdict"),
         "gain_percent": rep.get("gain_percent"),
         "top_evidence": "; ".join(f"{e['feature']} {e['value']:.3g} ({e['contribution']:+.2f})" for e in top),
-        "notes": " | ".join(rep.get("notes") or []),
+        "notes": " | ".join(dict.fromkeys([*(rep.get("reading_notes") or []), *(rep.get("notes") or [])])),
     })
     return row
 

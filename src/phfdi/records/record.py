@@ -96,8 +96,9 @@ class Record:
             for s, e in zip(np.flatnonzero(padded == 1), np.flatnonzero(padded == -1)):
                 if e - s >= min_samples:
                     seg = self._subset(slice(a + s, a + e), boundaries=[])
-                    seg.notes.append(f"{self.path}: segment {self.where}s {self.lines[a + s]}-{self.lines[a + e - 1]} "
-                                     f"({e - s} samples)")
+                    if e - s < len(self):
+                        seg.notes.append(f"{self.path}: segment {self.where}s {self.lines[a + s]}-{self.lines[a + e - 1]} "
+                                         f"({e - s} samples)")
                     out.append(seg)
         return out
 
@@ -161,6 +162,14 @@ class Record:
             notes.append(f"{self.path}: {where}, column {self.columns.get(name, name)!r}: {len(fill)} missing samples "
                          f"in {int(short.sum())} gap(s) of up to {max_gap_s:g} s filled by linear interpolation")
         return replace(self, signals=signals, notes=notes)
+
+    def refuse_empty(self, channel: str) -> "Record":
+        """This record, or a :class:`ReadError` when ``channel`` has no value at all."""
+        if np.isnan(self.signals[channel]).all():
+            raise ReadError(self.path, f"no usable value in any of the {len(self)} rows (all missing)",
+                            line=int(self.lines[0]) if len(self) else None,
+                            column=self.columns.get(channel, channel), where=self.where)
+        return self
 
     def refuse_missing(self, channel: str, hint: str = "") -> "Record":
         """This record, or a :class:`ReadError` naming the first missing sample of ``channel``."""

@@ -1,0 +1,85 @@
+"""Blocks of a feed line: what happens to a commanded flow before it reaches the vessel.
+
+A feed's ``line`` in the plant model (``feeds.<name>.line``) is a chain of
+these blocks, stepped once per sample on the flow the pump or valve is asked
+to deliver (mL/s); its output is the flow that enters the vessel. They follow
+the block protocol of :mod:`phfdi_base.blocks` (``reset``, ``step``), so a line
+can also hold any user block.
+
+* ``line_delay``: transport dead time of the tubing between pump and vessel;
+* ``pump_curve``: a pump's delivery curve ``q = gain * max(0, q_cmd - threshold_ml_s)``
+  (a diaphragm pump delivers less than its nominal rate, and nothing below a
+  minimum stroke rate);
+* ``pump_lag``: first-order start-up and stop dynamics of on/off dosing,
+  with separate time constants for rising and falling flow.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from phfdi_base.blocks import register_block
+
+from .sensors import TransportDelay, _check
+
+
+@register_block("line_delay")
+@dataclass
+class LineDelay(TransportDelay):
+    """Transport dead time of a feed line: q_in(t) = q_cmd(t - delay_s) (interpolated between samples)."""
+
+
+@register_block("pump_curve")
+@dataclass
+class PumpCurve:
+    """Delivered flow q = gain * max(0, q_cmd - threshold_ml_s), mL/s; zero command delivers zero."""
+
+    gain: float = 1.0
+    threshold_ml_s: float = 0.0
+    severity: float = 1.0
+
+    def __post_init__(self) -> None:
+        _check("gain", self.gain)
+        _check("threshold_ml_s", self.threshold_ml_s)
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        g = 1.0 + self.severity * (self.gain - 1.0)
+        return g * max(0.0, x - self.severity * self.threshold_ml_s)
+
+
+@register_block("pump_lag")
+@dataclass
+class PumpLag:
+    """First-order approach of the delivered flow to its target: tau_start_s while rising, tau_stop_s while falling.
+
+    Exact for a target held over each sample: y_k = y_k-1 + (1 - exp(-dt/tau)) (x_k - y_k-1).
+    """
+
+    tau_start_s: float = 0.0
+    tau_stop_s: float = 0.0
+    dt_s: float = 1.0
+    severity: float = 1.0
+    _y: float | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        _check("tau_start_s", self.tau_start_s)
+        _check("tau_stop_s", self.tau_stop_s)
+        _check("dt_s", self.dt_s, positive=True)
+
+    def reset(self, x0: float) -> None:
+        self._y = x0
+
+    def step(self, x: float, t_s: float) -> float:
+        if self._y is None:
+            self._y = x
+            return x
+        tau = self.severity * (self.tau_start_s if x > self._y else self.tau_stop_s)
+        if tau <= 0.0:
+            self._y = x
+        else:
+            self._y += (1.0 - math.exp(-self.dt_s / tau)) * (x - self._y)
+        return self._y
