@@ -69,6 +69,9 @@ class LearnedSettings:
     #: observer on AJ: time constant (0: off); frozen above this fraction of a threshold
     observer_time_constant_s: float = 300.0
     freeze_ratio: float = 0.5
+    #: while an alarm is up the observer keeps learning with this (longer) time constant, so that a
+    #: lasting new operating point stops alarming eventually; 0: frozen until the alarm clears
+    observer_alarm_time_constant_s: float = 10000.0
     #: observer updates and in-alarm CUSUM restarts happen every this many samples; an alarm clears
     #: after this many samples without a crossing
     block_samples: int = 32
@@ -88,8 +91,9 @@ class LearnedSettings:
             raise UserError("energy_variance_ratio must be 0 (off) or above 1")
         if self.block_samples < 1:
             raise UserError("block_samples must be at least 1")
-        if self.observer_time_constant_s < 0 or not 0 < self.freeze_ratio <= 1:
-            raise UserError("observer_time_constant_s must be >= 0 and freeze_ratio in (0, 1]")
+        if self.observer_time_constant_s < 0 or self.observer_alarm_time_constant_s < 0 \
+                or not 0 < self.freeze_ratio <= 1:
+            raise UserError("observer time constants must be >= 0 and freeze_ratio in (0, 1]")
         if not self.sample_time_s > 0:
             raise UserError("sample_time_s must be positive")
         return self
@@ -309,8 +313,9 @@ class LearnedDetector:
         at_boundary = (g0 + nb) % s.block_samples == 0
         if at_boundary:
             frozen = self.alarms_enabled and (self.in_alarm or bool((ratio[:, -1] > s.freeze_ratio).any()))
-            if s.observer_time_constant_s > 0 and not frozen and not warm and self._acc_n:
-                gain = min(1.0, s.block_samples * s.sample_time_s / s.observer_time_constant_s)
+            tau = s.observer_alarm_time_constant_s if frozen else s.observer_time_constant_s
+            if s.observer_time_constant_s > 0 and tau > 0 and not warm and self._acc_n:
+                gain = min(1.0, s.block_samples * s.sample_time_s / tau)
                 self.bias = self.bias + gain * self._acc / self._acc_n
             self._acc[:] = 0.0
             self._acc_n = 0
@@ -413,9 +418,10 @@ class LearnedDetector:
         return out
 
 
-def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = None
+def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096
                ) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
-    """A whole record through a fresh detector (in chunks of ``chunk`` rows; None: at once)."""
+    """A whole record through a fresh detector, in chunks of ``chunk`` rows (None: at once; the
+    result is the same, chunks of a few thousand rows are fastest)."""
     det = LearnedDetector(model)
     n = len(x)
     step = n if not chunk else int(chunk)
