@@ -37,7 +37,11 @@ def run(args: argparse.Namespace) -> int:
 
     spec = scenario_from_args(args)
     if args.inputs:
-        result = simulate_open_loop(spec, Run.load(args.inputs))
+        from .common import print_notes
+
+        inputs = Run.load(args.inputs)
+        print_notes("simulate", inputs.metadata["notes"])
+        result = simulate_open_loop(spec, inputs)
     else:
         result = simulate(spec, progress=Progress(f"simulate {spec.name}"))
     summary = summarize(result)
