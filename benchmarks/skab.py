@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from phfdi.benchmarks import skab
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 TOGGLE_PROBABILITIES = (0.02, 0.1)
 

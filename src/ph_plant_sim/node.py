@@ -16,12 +16,12 @@ import json
 import sys
 import time
 
-from phfdi.loop import advance_plant
-from phfdi.ros.node import GraphNode, ParamSpec, main, to_time
-from phfdi.ros.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_STATE
-
 from phfdi_interfaces.msg import Measurement, PlantState, ValveState
 from rosgraph_msgs.msg import Clock
+
+from phfdi.loop import advance_plant
+from phfdi.ros.node import GraphNode, ParamSpec, main, to_time
+from phfdi_base.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_STATE
 
 PARAMS = (
     ParamSpec("pace", 0.0, "0: lock-step as fast as the graph answers; F > 0: F times real time (demos)",

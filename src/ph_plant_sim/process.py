@@ -11,8 +11,8 @@ import copy
 from dataclasses import dataclass, field
 from typing import Mapping
 
-from phfdi.blocks import Chain, Injected
-from phfdi.profiles import Profile
+from phfdi_base.blocks import Chain, Injected
+from phfdi_base.profiles import Profile
 
 from .plant import CstrPlant
 

@@ -1,6 +1,6 @@
 """Bags (MCAP files, ros2 profile) and runs: write, read, inspect, recover.
 
-A bag of the graph holds one channel per topic of :mod:`phfdi.ros.topics`
+A bag of the graph holds one channel per topic of :mod:`phfdi_base.topics`
 (cdr messages, ``ros2msg`` schemas, the offered QoS in the channel metadata
 as rosbag2 writes it), every message logged at its simulated time stamp, and
 the run's metadata (scenario, seed, faults) in an MCAP metadata record named
@@ -30,10 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
+from phfdi_base import topics as T
+from phfdi_base.errors import UserError
+
 from . import __version__
-from .errors import UserError
-from .ros import topics as T
-from .run import SIGNALS, Run
+from phfdi_base.signals import SIGNALS
+from phfdi.run import Run
 
 RUN_METADATA = "phfdi_run"
 INTERFACES_PACKAGE = "phfdi_interfaces"
@@ -530,3 +532,20 @@ def recover(src: str | Path, dst: str | Path) -> dict:
         w.finish()
     return {"path": str(dst), "messages": n, "last_s": None if last_ns is None else last_ns * 1e-9,
             "complete_input": error is None, "stopped_at": error}
+
+
+# ---- split bags (the recorder's split_after_s) ------------------------------------------
+
+def part_path(path: str | Path, index: int) -> Path:
+    """File ``index`` of a split bag: the path itself for 0, then ``<stem>.<index>.mcap``."""
+    path = Path(path)
+    return path if index == 0 else path.with_name(f"{path.stem}.{index}{path.suffix}")
+
+
+def bag_parts(path: str | Path) -> list[Path]:
+    """The files of a (possibly split) bag, in order: the path, then ``<stem>.1.mcap``, ... while they exist."""
+    parts = []
+    while part_path(path, len(parts)).exists():
+        parts.append(part_path(path, len(parts)))
+    return parts
+

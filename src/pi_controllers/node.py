@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import sys
 
-from phfdi.ros.node import GraphNode, ParamSpec, main
-from phfdi.ros.topics import CONTROLLER, CONTROLLERS, MEASUREMENT
-
 from phfdi_interfaces.msg import ControllerOutput, Measurement
+
+from phfdi.ros.node import GraphNode, ParamSpec, main
+from phfdi_base.topics import CONTROLLER, CONTROLLERS, MEASUREMENT
 
 KP_RANGE = (1e-3, 1e4)  # % of span per unit of the process value
 TI_RANGE = (1e-2, 1e6)  # s

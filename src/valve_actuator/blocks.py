@@ -1,4 +1,4 @@
-"""Control valve nonlinearities as blocks (see :mod:`phfdi.blocks`).
+"""Control valve nonlinearities as blocks (see :mod:`phfdi_base.blocks`).
 
 Position blocks take the valve command and return the stem position, both in
 % of span; they are stepped once per sample. Terms follow ANSI/ISA-S51.1 as
@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from phfdi.blocks import register_block
+from phfdi_base.blocks import register_block
 
 
 def _positive(name: str, value: float, allow_zero: bool = True) -> None:

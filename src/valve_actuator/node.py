@@ -21,12 +21,12 @@ from __future__ import annotations
 import math
 import sys
 
-from phfdi.loop import step_valves
-from phfdi.ros.node import GraphNode, ParamSpec, main
-from phfdi.ros.topics import CONTROLLER, DIAGNOSTICS, VALVE, VALVE_STATE
-
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, ValveState
+
+from phfdi.loop import step_valves
+from phfdi.ros.node import GraphNode, ParamSpec, main
+from phfdi_base.topics import CONTROLLER, DIAGNOSTICS, VALVE, VALVE_STATE
 
 #: fault sites this node owns (sensor faults belong to the plant node)
 VALVE_SITES = ("valve", "valve_flow", "outlet_valve", "outlet_valve_flow")

@@ -52,7 +52,7 @@ def to_dict(msg) -> dict:
 def from_bag(path: str | Path) -> list[dict]:
     """Every /fault_alarm message a bag holds, in order."""
     from phfdi.bagio import read_messages
-    from phfdi.ros.topics import FAULT_ALARM
+    from phfdi_base.topics import FAULT_ALARM
 
     return [to_dict(m) for m in read_messages(path, FAULT_ALARM.name)]
 

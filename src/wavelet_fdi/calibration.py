@@ -30,8 +30,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from phfdi.errors import UserError
-from phfdi.scenario import ScenarioSpec, load_scenario
+from phfdi.scenario import load_scenario
+from phfdi_base.errors import UserError
+from phfdi_base.spec import ScenarioSpec
 
 from .config import Calibration, DetectorSettings
 

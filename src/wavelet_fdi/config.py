@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .filterbank import wavelet_filters
 from .statistics import energy_reference
@@ -200,7 +200,7 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":
-        from phfdi.yamlfile import read_mapping
+        from phfdi_base.yamlfile import read_mapping
 
         path = Path(path)
         if path.suffix.lower() == ".json":

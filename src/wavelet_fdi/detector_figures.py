@@ -12,6 +12,7 @@ import numpy as np  # noqa: E402
 
 from .config import DetectorSettings  # noqa: E402
 from .filterbank import coefficient_residuals  # noqa: E402
+from .peers import DETECTORS, LABELS  # noqa: E402
 
 COLORS = {"wavelet": "tab:blue", "wavelet_bands": "tab:cyan", "cusum": "tab:orange", "focus": "tab:green", "page_hinkley": "tab:red",
           "adwin": "tab:purple"}
@@ -25,8 +26,6 @@ def _save(fig, path: Path) -> Path:
 
 
 def plot_delays(summary: dict, path: Path) -> Path:
-    from .evaluation import DETECTORS, LABELS
-
     faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
     cols = 3
     rows = (len(faults) + cols - 1) // cols
@@ -55,8 +54,6 @@ def plot_delays(summary: dict, path: Path) -> Path:
 
 
 def plot_false_alarms(summary: dict, path: Path) -> Path:
-    from .evaluation import DETECTORS, LABELS
-
     fig, ax = plt.subplots(figsize=(7, 4))
     vals = [summary["false_per_hour"][d] or 0.0 for d in DETECTORS]
     ax.bar([LABELS[d] for d in DETECTORS], vals, color=[COLORS[d] for d in DETECTORS])

@@ -23,10 +23,10 @@ from typing import Callable
 
 import numpy as np
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .config import Calibration, DetectorSettings
-from .peers import PEER_LABELS, PEERS, Peer
+from .peers import DETECTORS, LABELS, PEERS, Peer  # noqa: F401  (DETECTORS: part of this module's API)
 
 #: fault -> (main parameter, three severities: mild, the paper's, strong); other params scale along
 SEVERITIES: dict[str, tuple[str, list[dict]]] = {
@@ -45,8 +45,6 @@ CUSTOM_FAULTS = {"probe_noise": {"type": "sensor_noise", "where": "ph_sensor", "
 #: what isolation should answer: probe_noise is in no hypothesis, so "unknown"
 EXPECTED_CLASS = {"probe_noise": "unknown"}
 PAPER_SEVERITY = 1  # index of the paper's value in each list
-DETECTORS = ("wavelet", "wavelet_bands") + PEERS
-LABELS = {"wavelet": "wavelet (ours)", "wavelet_bands": "bands only", **PEER_LABELS}
 
 
 @dataclass

@@ -41,13 +41,12 @@ import traceback
 from collections import deque
 
 import numpy as np
-
-from phfdi.errors import UserError
-from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main, to_time
-from phfdi.ros.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
-
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
+
+from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main, to_time
+from phfdi_base.errors import UserError
+from phfdi_base.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
 
 from .alarm_messages import severity_of
 

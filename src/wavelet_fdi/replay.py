@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.errors import UserError
 from phfdi.run import Run
-from phfdi.scenario import ScenarioSpec, load_scenario, validate_scenario
+from phfdi.scenario import load_scenario
+from phfdi_base.errors import UserError
+from phfdi_base.spec import ScenarioSpec, validate_scenario
 
 from .config import Calibration, DetectorSettings, load_default_calibration
 from .detector import Event, StreamingDetector

@@ -9,9 +9,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from phfdi.blocks import Chain, Injected, make_block
-from valve_actuator.blocks import (Backlash, Blocking, CoulombViscousFriction, DeadZone, Leakage, Quantization,
-                                   Saturation, Stiction)
+from phfdi_base.blocks import Chain, Injected, make_block
+from valve_actuator.blocks import (
+    Backlash,
+    Blocking,
+    CoulombViscousFriction,
+    DeadZone,
+    Leakage,
+    Quantization,
+    Saturation,
+    Stiction,
+)
 from valve_actuator.valve import Valve, inherent_characteristic
 
 

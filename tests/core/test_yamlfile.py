@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from phfdi.cli import main
-from phfdi.errors import UserError
-from phfdi.yamlfile import read_mapping
+from phfdi_base.errors import UserError
+from phfdi_base.yamlfile import read_mapping
 
 
 @pytest.mark.parametrize("text, message", [

@@ -9,7 +9,7 @@ import subprocess
 import pytest
 
 from phfdi import bagio
-from phfdi.ros import topics as T
+from phfdi_base import topics as T
 from wavelet_fdi import alarm_messages
 
 from .conftest import SHORT_FAULTY, phfdi_cmd, processes_with

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from phfdi.ros import topics as T
+from phfdi_base import topics as T
 
 from ..ros.conftest import close_context
 from .conftest import ROOT, node_cmd, stop

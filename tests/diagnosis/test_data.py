@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from phfdi.diagnosis.data import ColumnMap, load_record
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 HEADER = "Time, t (s),OP %,PV,level mm,,"
 

@@ -15,13 +15,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from .hidden_cases import CATALOGUE_CAUSES, COLUMNS, make_case
 
 from phfdi.diagnosis.extend import load_model_file
 from phfdi.diagnosis.report import CAUSES, check_report
 from phfdi.loop import simulate_open_loop
 from phfdi.run import Run
-from phfdi.scenario import load_scenario, validate_scenario
+from phfdi.scenario import load_scenario
+from phfdi_base.spec import validate_scenario
+
+from .hidden_cases import CATALOGUE_CAUSES, COLUMNS, make_case
 
 DURATION_S = 1700.0
 PACKAGE = Path(__file__).resolve().parents[2] / "src" / "phfdi" / "diagnosis"

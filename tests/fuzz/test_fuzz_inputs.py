@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .conftest import SHORT
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from phfdi.errors import UserError
 from phfdi.records import ColumnMap, ReadError, read_record
 from phfdi.run import Run
+from phfdi_base.errors import UserError
 
 
 def write(tmp_path, text: str, name: str = "r.csv", encoding: str = "utf-8") -> str:

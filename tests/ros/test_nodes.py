@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from phfdi.ros import topics as T
+from phfdi_base import topics as T
 
 from .conftest import close_context, node_cmd, phfdi_cmd
 

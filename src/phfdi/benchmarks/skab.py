@@ -24,7 +24,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .scoring import BinaryScores, NabResult, binary_scores, match_changepoints, nab_scores, switches
 

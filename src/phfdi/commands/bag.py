@@ -59,8 +59,8 @@ def run_recover(args: argparse.Namespace) -> int:
 def run_to_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from phfdi.errors import UserError
     from phfdi.records import read_record
+    from phfdi_base.errors import UserError
 
     from .common import print_notes
 

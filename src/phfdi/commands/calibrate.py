@@ -24,7 +24,7 @@ Recorded runs are read under the reading policy of docs/records.md (--map,
 
 def parse_seeds(text: str) -> list[int]:
     """'1001-1016' or '1,2,5' -> list of seeds."""
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     out: list[int] = []
     try:
@@ -78,9 +78,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
     from wavelet_fdi.calibration import calibrate, calibrate_from_runs
-
-    from phfdi.errors import UserError
     from wavelet_fdi.replay import load_any
 
     settings = settings_from_args(args)

@@ -67,8 +67,8 @@ def shipped_map(name: str):
 
 def column_map_from_args(args: argparse.Namespace):
     """The :class:`phfdi.records.ColumnMap` of --map or --column/--unit; None when neither is given."""
-    from phfdi.errors import UserError
     from phfdi.records import ColumnMap
+    from phfdi_base.errors import UserError
 
     units = getattr(args, "unit", [])
     if args.map and args.column:

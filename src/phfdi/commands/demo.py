@@ -72,8 +72,8 @@ def _ros_available() -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.errors import UserError
     from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
 
     spec = load_scenario("paper", fault=args.fault, overrides=args.overrides, onset_s=args.onset)
     if args.fault in ("healthy", "none"):

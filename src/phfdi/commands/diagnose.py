@@ -8,7 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .common import EPILOG_FORMAT, column_map_from_args, print_notes
 

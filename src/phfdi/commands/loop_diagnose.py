@@ -60,12 +60,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.errors import UserError
     from phfdi.loopdiag.batch import diagnose_files, stderr_progress
     from phfdi.loopdiag.diagnose import Settings
     from phfdi.loopdiag.hammerstein import ACTUATOR_CAUSES
     from phfdi.loopdiag.readers import ColumnMap
     from phfdi.loopdiag.report import format_report, format_summary, to_json
+    from phfdi_base.errors import UserError
 
     columns = ColumnMap.parse(args.columns) if args.columns else None
     settings = Settings(baselines=not args.no_baselines,

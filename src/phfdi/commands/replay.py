@@ -64,8 +64,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.errors import UserError
     from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
     from wavelet_fdi.config import Calibration
     from wavelet_fdi.replay import load_any, replay_run, scenario_of
 
@@ -115,7 +115,8 @@ def _scenario_file(bag: str, fallback: str | None, folder: str) -> str:
     import yaml
 
     from phfdi import bagio
-    from phfdi.scenario import load_scenario, validate_scenario
+    from phfdi.scenario import load_scenario
+    from phfdi_base.spec import validate_scenario
 
     meta = json.loads(bagio.read_metadata(Path(bag)).get(bagio.RUN_METADATA, {}).get("json", "{}"))
     if fallback or not isinstance(meta.get("spec"), dict):
@@ -134,10 +135,10 @@ def run_live(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from phfdi import bagio
-    from phfdi.errors import UserError
     from phfdi.ros.launcher import Launcher, NodeSpec, detector_spec
     from phfdi.ros.player import PLAYER
-    from phfdi.ros.topics import DETECTOR
+    from phfdi_base.errors import UserError
+    from phfdi_base.topics import DETECTOR
 
     from .common import Progress
     from .launch import alarm_event_line

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from phfdi import records
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 OUTPUTS = ("ph_measured", "level_measured_cm")
 COMMAND_INPUTS = ("valve_command_pct", "level_controller_output_pct")

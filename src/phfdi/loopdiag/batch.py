@@ -8,7 +8,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Callable, Iterable
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .diagnose import Settings, gather_evidence, report
 from .readers import ColumnMap, check_loop_run, read_loop, read_loop_segments

@@ -34,9 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from phfdi import records
-from phfdi.errors import UserError
 from phfdi.run import Run
-from phfdi.yamlfile import read_mapping
+from phfdi_base.errors import UserError
+from phfdi_base.yamlfile import read_mapping
 
 #: fewer samples than this cannot hold a training and a validation part
 MIN_SAMPLES = 100

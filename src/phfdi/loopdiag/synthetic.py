@@ -19,11 +19,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from phfdi.blocks import make_block
-from phfdi.run import Run
-from pi_controllers.pi import PIController
-
 import valve_actuator.blocks  # noqa: F401  (registers the valve blocks)
+from phfdi.run import Run
+from phfdi_base.blocks import make_block
+from pi_controllers.pi import PIController
 
 
 @dataclass

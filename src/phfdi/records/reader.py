@@ -8,7 +8,7 @@ from typing import Callable
 
 import numpy as np
 
-from phfdi.run import unit_of
+from phfdi_base.signals import unit_of
 
 from . import policy as P
 from .cells import parse_stamps, to_numbers

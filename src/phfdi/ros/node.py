@@ -25,10 +25,10 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
+from phfdi_base.topics import GRAPH_READY, LOOP_NODES, sample_period_ns
 
 from .env import ensure_localhost
-from .topics import GRAPH_READY, LOOP_NODES, sample_period_ns
 
 try:
     ensure_localhost()  # before rclpy creates any DDS participant

@@ -18,11 +18,11 @@ import json
 import sys
 import time
 
+from rosgraph_msgs.msg import Clock
+
 from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main
 from phfdi.ros.recorder import _message_class
-from phfdi.ros.topics import CLOCK, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
-
-from rosgraph_msgs.msg import Clock
+from phfdi_base.topics import CLOCK, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
 
 PLAYER = "player"
 #: produced by a live graph's own nodes: not replayed

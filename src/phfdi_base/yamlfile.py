@@ -31,3 +31,27 @@ def read_mapping(path: str | Path, what: str = "file", expected: str = "a mappin
     if not isinstance(data, dict):
         raise UserError(f"{path}: expected {expected}")
     return data
+
+
+def list_presets(directory: Path) -> dict[str, str]:
+    """name -> first line of the description of each YAML preset in a directory (``faults.yaml`` left out)."""
+    out = {}
+    for p in sorted(directory.glob("*.yaml")):
+        if p.stem == "faults":
+            continue
+        lines = str(read_mapping(p).get("description", "")).strip().splitlines()
+        out[p.stem] = lines[0] if lines else ""
+    return out
+
+
+def resolve_preset(name_or_path: str, directory: Path, kind: str) -> Path:
+    """A .yaml/.yml path as given, or the preset of that name in ``directory``; a :class:`UserError` listing
+    the presets otherwise."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml"):
+        return p
+    candidate = directory / f"{name_or_path}.yaml"
+    if not candidate.exists():
+        known = ", ".join(list_presets(directory))
+        raise UserError(f"unknown {kind} {name_or_path!r}; presets: {known} (or give a .yaml path)")
+    return candidate
