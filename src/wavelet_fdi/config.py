@@ -211,7 +211,8 @@ class Calibration:
             except (UnicodeDecodeError, json.JSONDecodeError) as exc:
                 raise UserError(f"{path}: not a calibration file ({type(exc).__name__})") from None
         else:
-            data = read_mapping(path, "calibration file", "a mapping (a calibration written by phfdi calibrate)")
+            data = read_mapping(path, "calibration file",
+                                "a mapping: not a calibration file written by phfdi calibrate")
         if not isinstance(data, dict):
             raise UserError(f"{path}: not a calibration file (expected a mapping)")
         try:
