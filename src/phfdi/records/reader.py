@@ -28,9 +28,11 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
                 encoding: str | None = None, min_samples: int = 2, required: tuple[str, ...] = ()) -> Record:
     """Read a record (CSV, Parquet or an MCAP bag), repair what the policy repairs, refuse the rest.
 
-    ``column_map``: a :class:`ColumnMap`, its dict form, a YAML file, or a function (header, file metadata) ->
-    ColumnMap; None reads every column under its own name (time from ``time_s``, ``timestamp`` or ``time``). ``channels``: only these signals (each
-    must exist); ``required``: signals that must exist and hold values even when ``channels`` is None. ``policy``: "run" (a clock reset is refused) or "historian" (it starts a new segment).
+    ``column_map``: a :class:`ColumnMap`, its dict form, a YAML file, or a function (header, file metadata)
+    -> ColumnMap; None reads every column under its own name (time from ``time_s``, ``timestamp`` or ``time``).
+    ``channels``: only these signals (each must exist); ``required``: signals that must exist and hold values
+    even when ``channels`` is None. ``policy``: "run" (a clock reset is refused) or "historian" (it starts a
+    new segment). ``min_samples``: fewer usable samples are refused.
     Raises :class:`ReadError` (one line naming file, line and column) for what cannot be used.
     """
     if policy not in P.POLICIES:
