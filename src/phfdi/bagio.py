@@ -264,7 +264,7 @@ def load_run(path: str | Path) -> Run:
         raise UserError(f"no such file: {path}")
     if path.suffix.lower() != ".mcap" and not (path / "metadata.yaml").exists():
         raise UserError(f"cannot read a run from {path}: expected .mcap, .csv or .parquet")
-    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.highlevel import AnyReader
 
     rows: dict[int, dict] = defaultdict(dict)
     measured: set[int] = set()
@@ -282,17 +282,17 @@ def load_run(path: str | Path) -> Run:
                     measured.add(ns)
                 elif feeds is None and conn.topic == T.PLANT_STATE.name:
                     feeds = list(msg.feed_names)  # the plant's feed order
-    except AnyReaderError as exc:
-        raise UserError(f"{path}: cannot read the bag ({exc}); if its recorder was killed, "
-                        f"run: phfdi bag recover {path} FIXED.mcap") from None
-    meta = read_metadata(path)
-    metadata = json.loads(meta.get(RUN_METADATA, {}).get("json", "{}"))
-    metadata.update({"source": str(path), "mode": "graph"})
+    except UserError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - rosbags, mcap and zstd raise many types (even MemoryError) on damage
+        raise UserError(f"{path}: cannot read the bag ({type(exc).__name__}: {_one_line(exc)}); if its recorder "
+                        f"was killed, run: phfdi bag recover {path} FIXED.mcap") from None
+    metadata = _run_metadata(path)
     stamps = sorted(measured)
     dt = metadata.get("sample_time_s")
     try:
-        dt_ns = T.sample_period_ns(dt) if dt else None
-    except ValueError:
+        dt_ns = T.sample_period_ns(float(dt)) if dt else None
+    except (TypeError, ValueError, OverflowError):
         dt_ns = None
     if dt_ns and all(ns % dt_ns == 0 for ns in stamps):
         time_s = [(ns // dt_ns) * dt for ns in stamps]  # k * dt exactly as the simulation
@@ -311,9 +311,27 @@ def load_run(path: str | Path) -> Run:
     return Run(signals, metadata)
 
 
+def _one_line(exc: BaseException, limit: int = 160) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _run_metadata(path: Path) -> dict:
+    """The run's metadata record (scenario, seed, sample time); a damaged one is a UserError, not a guess."""
+    text = read_metadata(path).get(RUN_METADATA, {}).get("json", "{}")
+    try:
+        metadata = json.loads(text)
+    except ValueError as exc:
+        raise UserError(f"{path}: the bag's run metadata ({RUN_METADATA}) is damaged ({exc})") from None
+    if not isinstance(metadata, dict):
+        raise UserError(f"{path}: the bag's run metadata ({RUN_METADATA}) is not a mapping")
+    metadata.update({"source": str(path), "mode": "graph"})
+    return metadata
+
+
 def read_messages(path: str | Path, topic: str) -> list:
     """Every message of one topic, decoded (rosbags objects with the message's field names), in log-time order."""
-    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.highlevel import AnyReader
 
     path = Path(path)
     if not path.exists():
@@ -322,9 +340,9 @@ def read_messages(path: str | Path, topic: str) -> list:
         with AnyReader([path]) as reader:
             conns = [c for c in reader.connections if c.topic == topic]
             return [reader.deserialize(raw, conn.msgtype) for conn, _t, raw in reader.messages(connections=conns)]
-    except AnyReaderError as exc:
-        raise UserError(f"{path}: cannot read the bag ({exc}); if its recorder was killed, "
-                        f"run: phfdi bag recover {path} FIXED.mcap") from None
+    except Exception as exc:  # noqa: BLE001 - rosbags, mcap and zstd raise many types on damaged bags
+        raise UserError(f"{path}: cannot read the bag ({type(exc).__name__}: {_one_line(exc)}); if its recorder "
+                        f"was killed, run: phfdi bag recover {path} FIXED.mcap") from None
 
 
 def _time(store, ns: int):
