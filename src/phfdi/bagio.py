@@ -402,6 +402,34 @@ def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES)
     return path
 
 
+def write_measured(time_s: np.ndarray, x: np.ndarray, channels: list[str], path: str | Path, source: str = "",
+                   metadata: dict | None = None, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
+    """A measured record as a bag: one phfdi_interfaces/MeasuredSample per row on /measured/sample,
+    stamped with the row's time (s from the first row), schemas embedded (ros2 profile)."""
+    store = typestore()
+    msg_type = store.types[T.MEASURED_SAMPLE.type]
+    t = np.asarray(time_s, dtype=float)
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim != 2 or x.shape != (len(t), len(channels)):
+        raise UserError(f"measured record: {x.shape} values for {len(t)} times and {len(channels)} channels")
+    stamps = np.round((t - t[0]) * 1e9).astype(np.int64) if len(t) else np.zeros(0, dtype=np.int64)
+    if len(t) > 1 and np.any(np.diff(stamps) <= 0):
+        raise UserError("measured record: time stamps must increase")
+    names = [str(c) for c in channels]
+    bag = BagWriter(Path(path), chunk_size=chunk_size)
+    try:
+        cid = bag.add_topic(T.MEASURED_SAMPLE.name, T.MEASURED_SAMPLE.type)
+        bag.add_metadata(RUN_METADATA, {"json": json.dumps({"kind": "measured", "source": source,
+                                                            "channels": names, **(metadata or {})}, default=str)})
+        for i in range(len(t)):
+            ns = int(stamps[i])
+            msg = msg_type(stamp=_time(store, ns), source=source, names=names, values=x[i].copy())
+            bag.write(cid, ns, bytes(store.serialize_cdr(msg, T.MEASURED_SAMPLE.type)))
+    finally:
+        bag.close()
+    return Path(path)
+
+
 # ---- inspecting and recovering ---------------------------------------------------------------
 def _scan(path: Path, validate: bool = True):
     """Records of an MCAP file in order, chunks opened, up to the first incomplete or damaged one.

@@ -44,6 +44,7 @@ from .reference_learned import LearnedReference, load_json, save_json
 from .statistics import CusumBank, energy_reference
 
 FORMAT = "phfdi-learned-detector/1"
+TIME_RING = 1 << 16  # sample times kept to date an alarm's onset
 
 
 @dataclass
@@ -230,7 +231,7 @@ class LearnedDetector:
         self.alarms: list[dict] = []
         self._missing_open = np.zeros(m, dtype=bool)
         self.samples_processed = 0
-        self._t_last = -math.inf
+        self._times = np.full(TIME_RING, np.nan)  # times of the last TIME_RING samples (onset times)
         self._trace: dict[str, list] | None = {"coef": [], "stat": [], "state": []} if record_trace else None
 
     # ---- public API ------------------------------------------------------------------
@@ -246,6 +247,8 @@ class LearnedDetector:
         states = np.zeros(len(x), dtype=np.int8)
         if not len(x):
             return events, states
+        g = self.samples_processed + np.arange(len(x))
+        self._times[g % TIME_RING] = t
         r = self.stream.residuals(x)
         missing = ~np.isfinite(r)
         events += self._missing_events(missing, t)
@@ -314,7 +317,8 @@ class LearnedDetector:
         if at_boundary:
             frozen = self.alarms_enabled and (self.in_alarm or bool((ratio[:, -1] > s.freeze_ratio).any()))
             tau = s.observer_alarm_time_constant_s if frozen else s.observer_time_constant_s
-            if s.observer_time_constant_s > 0 and tau > 0 and not warm and self._acc_n:
+            block_warm = g0 + nb - s.block_samples < self.fill_samples  # by global index: chunking-proof
+            if s.observer_time_constant_s > 0 and tau > 0 and not block_warm and self._acc_n:
                 gain = min(1.0, s.block_samples * s.sample_time_s / tau)
                 self.bias = self.bias + gain * self._acc / self._acc_n
             self._acc[:] = 0.0
@@ -382,8 +386,11 @@ class LearnedDetector:
     def _raise(self, t_s: float, index: int, ratio: np.ndarray) -> dict:
         top = int(np.argmax(ratio))
         cont = self._contributions(ratio)
+        onset = min(int(self.cusum.last_zero[top]) + 1, int(index))
+        onset_t = float(self._times[onset % TIME_RING]) if index - onset < TIME_RING else math.nan
         alarm = {"alarm_id": len(self.alarms) + 1, "detection_time": float(t_s), "detection_index": int(index),
-                 "onset_index": int(self.cusum.last_zero[top]) + 1, "statistic": self.stat_names[top],
+                 "onset_index": onset, "onset_time": onset_t if math.isfinite(onset_t) else None,
+                 "statistic": self.stat_names[top],
                  "statistic_value": float(ratio[top] * self.h[top]), "threshold": float(self.h[top]),
                  "channels": list(cont), "contributions": cont, "cleared_time": None}
         self.alarms.append(alarm)
