@@ -44,7 +44,6 @@ KNOWN_UPWARD: frozenset[tuple[str, str]] = frozenset({
     ("wavelet_fdi.node", "phfdi.ros.node"),
     ("wavelet_fdi.paperset", "phfdi.loop"),
     ("wavelet_fdi.paperset", "phfdi.scenario"),
-    ("wavelet_fdi.reference", "phfdi.loop"),
     ("wavelet_fdi.replay", "phfdi.records"),
     ("wavelet_fdi.replay", "phfdi.run"),
     ("wavelet_fdi.replay", "phfdi.scenario"),

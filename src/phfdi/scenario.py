@@ -14,11 +14,8 @@ from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
-import yaml
-from pydantic import ValidationError
-
+from ph_plant_sim.build import PLANT_DIR, load_plant_model  # noqa: F401  (the plant presets, for the CLI)
 from phfdi_base.errors import UserError
 from phfdi_base.spec import (  # noqa: F401
     BlockSpec,
@@ -41,12 +38,15 @@ from phfdi_base.spec import (  # noqa: F401
     TankSpec,
     ValveSpec,
     ValvesSpec,
+    apply_override,
     deep_merge,
     format_validation,
     load_plugins,
+    parse_override,
+    resolve_scenario,
     validate_scenario,
 )
-from phfdi_base.yamlfile import read_mapping
+from phfdi_base.yamlfile import list_presets, read_mapping, resolve_preset  # noqa: F401  (list_presets: CLI)
 
 
 def _package_dir(package: str, sub: str = "") -> Path:
@@ -54,34 +54,11 @@ def _package_dir(package: str, sub: str = "") -> Path:
 
 
 SCENARIO_DIR = _package_dir("phfdi", "scenarios")
-PLANT_DIR = _package_dir("ph_plant_sim", "presets")
-
-
-def list_presets(directory: Path) -> dict[str, str]:
-    """name -> description of the YAML presets in a directory."""
-    out = {}
-    for p in sorted(directory.glob("*.yaml")):
-        if p.stem == "faults":
-            continue
-        out[p.stem] = str(read_mapping(p).get("description", "")).strip().splitlines()[0:1]
-        out[p.stem] = out[p.stem][0] if out[p.stem] else ""
-    return out
 
 
 def fault_library() -> dict[str, dict]:
     """Named fault presets (the paper's severities), from faults.yaml."""
     return read_mapping(SCENARIO_DIR / "faults.yaml")["faults"]
-
-
-def _resolve(name_or_path: str, directory: Path, kind: str) -> Path:
-    p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml"):
-        return p
-    candidate = directory / f"{name_or_path}.yaml"
-    if not candidate.exists():
-        known = ", ".join(list_presets(directory))
-        raise UserError(f"unknown {kind} {name_or_path!r}; presets: {known} (or give a .yaml path)")
-    return candidate
 
 
 def _absolutise(data: dict, base: Path) -> None:
@@ -101,7 +78,7 @@ def _absolutise(data: dict, base: Path) -> None:
 
 def raw_scenario(name_or_path: str, _seen: tuple = ()) -> dict:
     """Scenario mapping with ``extends`` resolved (not yet validated)."""
-    path = _resolve(name_or_path, SCENARIO_DIR, "scenario")
+    path = resolve_preset(name_or_path, SCENARIO_DIR, "scenario")
     data = read_mapping(path)
     _absolutise(data, path.parent)
     parent = data.pop("extends", None)
@@ -113,41 +90,6 @@ def raw_scenario(name_or_path: str, _seen: tuple = ()) -> dict:
     return data
 
 
-def load_plant_model(plant: str | PlantModelSpec) -> PlantModelSpec:
-    if isinstance(plant, PlantModelSpec):
-        return plant
-    path = _resolve(plant, PLANT_DIR, "plant model")
-    try:
-        return PlantModelSpec.model_validate(read_mapping(path))
-    except ValidationError as exc:
-        raise UserError(format_validation(exc, str(path))) from None
-
-
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """'a.b.c=value' -> (['a','b','c'], yaml-parsed value)."""
-    if "=" not in text:
-        raise UserError(f"--set expects key=value, got {text!r}")
-    key, value = text.split("=", 1)
-    try:
-        parsed = yaml.safe_load(value)
-    except yaml.YAMLError:
-        parsed = value
-    return key.strip().split("."), parsed
-
-
-def apply_override(data: dict, keys: list[str], value: Any) -> None:
-    node = data
-    for k in keys[:-1]:
-        if isinstance(node, list):
-            node = node[int(k)]
-        else:
-            node = node.setdefault(k, {})
-    if isinstance(node, list):
-        node[int(keys[-1])] = value
-    else:
-        node[keys[-1]] = value
-
-
 def load_scenario(name_or_path: str = "paper", fault: str | None = None,
                   overrides: list[str] = (), onset_s: float | None = None) -> ScenarioSpec:
     """Load, apply a named fault and ``key=value`` overrides, validate.
@@ -155,23 +97,6 @@ def load_scenario(name_or_path: str = "paper", fault: str | None = None,
     ``fault`` replaces the scenario's faults with the library fault of that
     name ("none" or "healthy" removes them).
     """
-    data = raw_scenario(name_or_path)
-    if fault is not None:
-        if fault in ("none", "healthy"):
-            data["faults"] = []
-        else:
-            lib = fault_library()
-            if fault not in lib:
-                raise UserError(f"unknown fault {fault!r}; known: healthy, {', '.join(lib)}")
-            entry = dict(lib[fault])
-            entry.pop("description", None)
-            data["faults"] = [entry]
-    if onset_s is not None:
-        for f in data.get("faults", []):
-            f["onset_s"] = onset_s
-    for text in overrides:
-        keys, value = parse_override(text)
-        apply_override(data, keys, value)
-    if fault is not None and fault not in ("none", "healthy"):
-        data["name"] = f"{data.get('name', 'scenario')}-{fault}"
-    return validate_scenario(data, source=f"scenario {name_or_path}")
+    library = fault_library() if fault not in (None, "none", "healthy") else {}
+    return resolve_scenario(raw_scenario(name_or_path), fault, library, overrides, onset_s,
+                            source=f"scenario {name_or_path}")

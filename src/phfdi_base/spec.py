@@ -18,17 +18,21 @@ import importlib
 import importlib.util
 import sys
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Collection, Literal, Sequence
 
+import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from .blocks import Block, Injected, make_block
 from .errors import UserError
+from .profiles import Change, Profile
 
 __all__ = [
     "BlockSpec", "ChangeSpec", "ChemistrySpec", "ComponentSpec", "ControllersSpec", "FaultSite", "FaultSpec",
     "FeedSpec", "MixingSpec", "OutletSpec", "PISpec", "PlantModelSpec", "ProfileSpec", "ScenarioSpec", "SensorSpec",
     "SensorsSpec", "SetpointsSpec", "TankSpec", "ValveSpec", "ValvesSpec", "deep_merge", "format_validation",
-    "load_plugins", "validate_scenario",
+    "apply_override", "checked_block", "injected_faults", "load_plugins", "parse_override", "profile",
+    "resolve_scenario", "validate_scenario",
 ]
 
 
@@ -271,3 +275,99 @@ def validate_scenario(data: dict, source: str = "scenario") -> ScenarioSpec:
         return ScenarioSpec.model_validate(data)
     except ValidationError as exc:
         raise UserError(format_validation(exc, source)) from None
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """'a.b.c=value' -> (['a','b','c'], yaml-parsed value)."""
+    if "=" not in text:
+        raise UserError(f"--set expects key=value, got {text!r}")
+    key, value = text.split("=", 1)
+    try:
+        parsed = yaml.safe_load(value)
+    except yaml.YAMLError:
+        parsed = value
+    return key.strip().split("."), parsed
+
+
+def apply_override(data: dict, keys: list[str], value: Any) -> None:
+    """Set ``data[k0][k1]...`` (list items by index) to ``value`` in place."""
+    node = data
+    for k in keys[:-1]:
+        if isinstance(node, list):
+            node = node[int(k)]
+        else:
+            node = node.setdefault(k, {})
+    if isinstance(node, list):
+        node[int(keys[-1])] = value
+    else:
+        node[keys[-1]] = value
+
+
+def resolve_scenario(raw: dict, fault: str | None, library: dict[str, dict], overrides: Sequence[str] = (),
+                     onset_s: float | None = None, source: str = "scenario") -> ScenarioSpec:
+    """A scenario mapping (``extends`` already resolved) made into a validated scenario.
+
+    ``fault`` replaces the scenario's faults with the entry of that name in
+    ``library`` ("none" or "healthy" removes them; None keeps them); ``onset_s``
+    moves every fault's onset; then the ``key=value`` overrides apply. The
+    application calls this with the files it found; a node re-resolves with
+    the same inputs when its fault changes at runtime.
+
+    Examples
+    --------
+    >>> raw = {"name": "demo", "plant": "paper", "duration_s": 100, "setpoints": {"ph": {"initial": 7}},
+    ...        "controllers": {"ph": {"kp": 1, "ti_s": 10}},
+    ...        "valves": {"ph": {"feed": "base", "max_flow_ml_s": 2}}}
+    >>> spec = resolve_scenario(raw, "stuck", {"stuck": {"type": "stiction", "params": {"s_pct": 2}}},
+    ...                         onset_s=50)
+    >>> spec.name, spec.faults[0].type, spec.faults[0].onset_s
+    ('demo-stuck', 'stiction', 50.0)
+    """
+    data = copy.deepcopy(raw)
+    if fault is not None:
+        if fault in ("none", "healthy"):
+            data["faults"] = []
+        else:
+            if fault not in library:
+                raise UserError(f"unknown fault {fault!r}; known: healthy, {', '.join(library)}")
+            entry = dict(library[fault])
+            entry.pop("description", None)
+            data["faults"] = [entry]
+    if onset_s is not None:
+        for f in data.get("faults", []):
+            f["onset_s"] = onset_s
+    for text in overrides:
+        keys, value = parse_override(text)
+        apply_override(data, keys, value)
+    if fault is not None and fault not in ("none", "healthy"):
+        data["name"] = f"{data.get('name', 'scenario')}-{fault}"
+    return validate_scenario(data, source=source)
+
+
+def profile(spec: ProfileSpec) -> Profile:
+    """The piecewise signal a profile spec describes."""
+    return Profile(spec.initial, [Change(c.at_s, c.value, c.ramp_s) for c in spec.changes])
+
+
+def checked_block(kind: str, params: dict, where: str, dt_s: float, max_flow_ml_s: float | None = None) -> Block:
+    """A registered block made from a spec; a :class:`UserError` naming ``where`` if it refuses its parameters."""
+    try:
+        return make_block(kind, params, dt_s=dt_s, max_flow_ml_s=max_flow_ml_s or 1.0)
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"{where}: {kind}: {exc}") from None
+
+
+def injected_faults(spec: ScenarioSpec, site: str, max_flow_ml_s: float | None = None,
+                    flow_blocks: Collection[str] = ()) -> list[Injected]:
+    """The scenario's faults acting at ``site``, each switched on at its onset.
+
+    A fault of a type in ``flow_blocks`` given at ``valve`` acts on the valve's
+    flow (``valve_flow``): the valve core names those types.
+    """
+    out = []
+    for i, f in enumerate(spec.faults):
+        f_site = "valve_flow" if f.type in flow_blocks and f.where == "valve" else f.where
+        if f_site == site:
+            block = checked_block(f.type, f.params, f"faults.{i}", spec.sample_time_s, max_flow_ml_s)
+            out.append(Injected(block, f.onset_s, f.ramp_s))
+    return out

@@ -52,6 +52,8 @@ PLANT_STATE = Topic("/plant/state", "phfdi_interfaces/msg/PlantState", PLANT, Tr
 DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", VALVE, False,
                     "valve health: commands held (not finite / out of range), active faults; the detector's "
                     "input counters, state and processing lag")
+MEASURED_SAMPLE = Topic("/measured/sample", "phfdi_interfaces/msg/MeasuredSample", "player", True,
+                        "one row of a measured record (phfdi bag from-csv): channel names and values")
 FAULT_ALARM = Topic("/fault_alarm", "phfdi_interfaces/msg/FaultAlarm", DETECTOR, False,
                     "the fault detector's state: on every change and as a heartbeat")
 

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ph_plant_sim.build import build_plant, load_plant_model
 from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, nominal_raw
-from phfdi.loop import build_plant, simulate, simulate_open_loop
+from phfdi.loop import simulate, simulate_open_loop
 from phfdi.run import Run
 from phfdi_base.spec import validate_scenario
-from phfdi.scenario import load_plant_model
 
 FEEDS = ["acid", "base"]
 CONC = np.array([[2e-3, 0.0], [0.0, 20e-3]])  # components: acid equivalents, base (mol/L)
@@ -73,6 +73,7 @@ def test_a_zoned_vessel_runs_in_the_loop_and_the_diagnosis_simulates_it_identica
 
 def test_mixing_zone_names_an_unknown_feed():
     import pytest
+
     from phfdi_base.errors import UserError
 
     raw = nominal_raw("paper", SHORT)
@@ -80,6 +81,7 @@ def test_mixing_zone_names_an_unknown_feed():
     with pytest.raises(UserError):
         validate_scenario(raw)
     from pydantic import ValidationError
+
     from phfdi_base.spec import PlantModelSpec
     with pytest.raises(ValidationError, match="mixing.feeds: no feed 'lye'"):
         PlantModelSpec.model_validate(raw["plant"])

@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ph_plant_sim.build import load_plant_model
 from phfdi.loop import simulate, simulate_open_loop
 from phfdi.run import Run
-from phfdi.scenario import load_plant_model, raw_scenario
+from phfdi.scenario import raw_scenario
 from phfdi_base.blocks import register_block
 from phfdi_base.spec import validate_scenario
 

@@ -9,9 +9,18 @@ from .common import EPILOG_FORMAT, print_notes
 
 EXAMPLES = """examples:
   phfdi loop-diagnose ../shared/data/plant_loops/stiction/stic_2111FIC46005_0614_0003.txt
+  phfdi loop-diagnose ../shared/data/plant_loops --out plant/ --figures plant/figs
+  phfdi loop-diagnose historian_export.csv --out plant/           # a wide export: one job per loop tag
+  phfdi loop-diagnose /data/unit2 --scheduler tcp://10.0.0.5:8786 --out unit2/
   phfdi loop-diagnose ../shared/data/plant_loops/*/*.txt --json > loops.json
   phfdi loop-diagnose export.csv --columns op=FIC101.OP,pv=FIC101.PV,sp=FIC101.SP,time=Timestamp
   phfdi loop-diagnose export.csv --columns mapping.yaml --process integrating --figure figs/
+
+inputs: files and folders (every .txt, .csv, .parquet below them). A CSV whose header holds several
+loops' tags (<tag>.OP or .MV, .PV, .SP or .SV) is a wide historian export: each loop tag is one job.
+Many jobs run on Dask: a local cluster of --workers processes (default 2) or, with --scheduler, a
+running one. --out DIR writes loops.parquet and loops.csv (one row per loop: the stiction verdict
+and probability with its strongest evidence, Kano S and J, oscillation, notes) and worst_loops.txt.
 
 file formats: the tab-separated historian export of ../shared/data/plant_loops (detected by its
 'PROCESSDATA' title line) and CSV with a header line. CSV columns are guessed from names (time_s,
@@ -40,7 +49,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "dead-zone, saturation, quantisation) jointly with the linear part, rank them "
                                    "on held-out data and name the cause.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
-    p.add_argument("files", nargs="+", metavar="FILE", help="loop records (plant_loops export or CSV)")
+    p.add_argument("files", nargs="+", metavar="PATH",
+                   help="loop records (plant_loops export or CSV), folders of them, or wide historian exports")
     p.add_argument("--columns", default=None, metavar="MAP",
                    help="CSV column mapping: op=NAME,pv=NAME[,sp=NAME][,time=NAME][,mode=NAME] or a .yaml file")
     p.add_argument("--segments", choices=("longest", "each"), default="longest",
@@ -53,15 +63,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="actuator causes to fit, comma separated (default: all of "
                         "backlash,deadzone,saturation,quantization,stiction)")
     p.add_argument("--no-baselines", action="store_true", help="skip the Horch and He et al. stiction tests")
-    p.add_argument("--workers", type=int, default=None, help="processes for a batch (default: 2)")
-    p.add_argument("--figure", default=None, metavar="DIR", help="write one PNG per loop into DIR")
+    p.add_argument("--workers", type=int, default=None, help="Dask worker processes of the local cluster (default: 2)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="write the plant-wide table (loops.parquet, loops.csv) and worst_loops.txt into DIR")
+    p.add_argument("--top", type=int, default=10, metavar="N", help="loops in the ranked summary (default 10)")
+    p.add_argument("--figure", "--figures", dest="figure", default=None, metavar="DIR",
+                   help="write one PNG per loop into DIR (trends, PV-OP and OP-dPV with the fitted models)")
     p.add_argument("--json", action="store_true", help="print the reports as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.loopdiag.batch import diagnose_files, stderr_progress
     from phfdi.loopdiag.diagnose import Settings
+    from phfdi.loopdiag.plantwide import diagnose_jobs, expand, format_worst, write_table
     from phfdi.loopdiag.hammerstein import ACTUATOR_CAUSES
     from phfdi.loopdiag.readers import ColumnMap
     from phfdi.loopdiag.report import format_report, format_summary, to_json
@@ -83,15 +99,26 @@ def run(args: argparse.Namespace) -> int:
         settings.causes = causes
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
-    reports = diagnose_files(args.files, columns, settings, args.workers, stderr_progress(),
-                             figure_dir=args.figure, each_segment=args.segments == "each")
+    if args.top < 1:
+        raise UserError(f"--top must be at least 1, got {args.top}")
+    jobs = expand(args.files, columns)
+    reports = diagnose_jobs(jobs, settings, args.figure, args.scheduler, args.workers, _progress(len(jobs)),
+                            each_segment=args.segments == "each")
     for r in reports:
         if "error" in r:
             print(f"phfdi loop-diagnose: {r['error']}", file=sys.stderr)
         else:
             print_notes("loop-diagnose", [f"{r['file']}: {n}" for n in r.get("reading_notes", [])])
+    ok = any("error" not in r for r in reports)
+    if args.out:
+        pq_path, csv_path = write_table(reports, args.out)
+        worst = format_worst(reports, args.top) if ok else "no loop could be diagnosed"
+        (pq_path.parent / "worst_loops.txt").write_text(worst + "\n", encoding="utf-8")
+        print(f"phfdi loop-diagnose: {len(reports)} loop records -> {pq_path}, {csv_path}", file=sys.stderr)
     if args.json:
         print(to_json(reports))
+    elif args.out and len(reports) > 1:
+        print(worst)
     else:
         good = [r for r in reports if "error" not in r]
         for r in good:
@@ -99,4 +126,19 @@ def run(args: argparse.Namespace) -> int:
             print()
         if len(reports) > 1:
             print(format_summary(reports))
-    return 0 if any("error" not in r for r in reports) else 2
+            print()
+            print(format_worst(reports, args.top))
+    return 0 if ok else 2
+
+
+def _progress(total: int):
+    """``loop-diagnose: k/n loops`` on stderr for batches (every 5 % and at the end)."""
+    if total < 2:
+        return None
+    step = max(1, total // 20)
+
+    def show(done: int, n: int) -> None:
+        if done == n or done % step == 0:
+            print(f"loop-diagnose: {done}/{n} loops", file=sys.stderr, flush=True)
+
+    return show

@@ -16,6 +16,13 @@ EXAMPLES = """examples:
   phfdi replay bags/run.mcap --calibration my.yaml      # a bag recorded by phfdi launch, own calibration
   phfdi replay --live bags/run.mcap                     # through a detector NODE, over ROS topics
   phfdi replay plant.csv --column time_s=t --column ph_measured=pH --column valve_command_pct=OP
+  phfdi replay rig.csv --reference ref.json              # a learned reference (phfdi calibrate --learn)
+  phfdi replay rig.csv --reference ref.json --refit-rows 400 --json
+
+With --reference the record's channels go through the learned reference and the
+multichannel wavelet detector instead (any number of channels, no plant model):
+each alarm names the channels and bands that carry it; --refit-rows N re-fits
+the reference on the record's own first N rows with the file's settings.
 
 The detector sees only what a plant would measure: time_s, ph_measured,
 valve_command_pct (or ph_controller_output_pct), level_measured_cm,
@@ -52,6 +59,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_detector_args(p)
     p.add_argument("--no-isolation", action="store_true", help="detect only (no fault class)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
+    p.add_argument("--reference", default=None, metavar="REF.json",
+                   help="a learned reference (phfdi calibrate --learn): watch the record's channels with it")
+    p.add_argument("--refit-rows", type=int, default=None, metavar="N",
+                   help="with --reference: re-fit it on the record's first N rows (its settings kept)")
     add_record_args(p)
     live = p.add_argument_group("live replay (ROS 2)")
     live.add_argument("--live", action="store_true",
@@ -71,6 +82,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
+    if args.refit_rows is not None and not args.reference:
+        raise UserError("--refit-rows goes with --reference")
+    if args.reference and not args.live:
+        return run_learned(args)
+    if args.reference:
+        if args.map or args.column or args.encoding or args.refit_rows is not None:
+            raise UserError("--map, --column, --encoding and --refit-rows apply to an offline replay, not to --live")
+        return run_live_learned(args)
     if args.live:
         if args.map or args.column or args.encoding:
             raise UserError("--map, --column and --encoding apply to an offline replay, not to --live")
@@ -92,6 +111,93 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(format_alarms(result.alarms, result.diagnostics))
     return 0
+
+
+def run_learned(args: argparse.Namespace) -> int:
+    """The record through the learned reference and the multichannel detector."""
+    from phfdi.learned import alarm_summaries, event_dict, format_alarms as format_learned, read_measured, \
+        replay_measured
+    from wavelet_fdi.learned_detector import LearnedModel
+
+    model = LearnedModel.load(args.reference)
+    rec = read_measured(args.file, column_map_from_args(args), channels=model.channels, encoding=args.encoding)
+    print_notes("replay", rec.notes)
+    t0 = time.perf_counter()
+    events, states, model = replay_measured(rec, model, args.refit_rows)
+    elapsed = time.perf_counter() - t0
+    print(f"replayed {len(rec.x)} rows x {len(model.channels)} channels in {elapsed:.2f} s", file=sys.stderr)
+    alarms = alarm_summaries(events, rec)
+    inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
+    if args.json:
+        print(json.dumps({"file": args.file, "reference": args.reference, "samples": len(rec.x),
+                          "channels": list(model.channels), "notes": rec.notes, "input_problems": inputs,
+                          "alarm_rows": int(states.sum()), "alarms": alarms}, indent=2))
+        return 0
+    print(format_learned(alarms))
+    for e in inputs:
+        print(f"input: {e['message']} ({rec.where} {e['line']})")
+    return 0
+
+
+def run_live_learned(args: argparse.Namespace) -> int:
+    """A bag of a measured record (phfdi bag from-csv) through the learned detector NODE over ROS."""
+    import math
+    import tempfile
+    from pathlib import Path
+
+    from phfdi import bagio
+    from phfdi.learned import format_alarms as format_learned
+    from phfdi.ros.launcher import OBSERVER, Launcher, NodeSpec
+    from phfdi.ros.player import PLAYER
+    from phfdi_base.errors import UserError
+    from phfdi_base.topics import DETECTOR, MEASURED_SAMPLE
+    from wavelet_fdi.learned_detector import LearnedModel
+
+    from .common import Progress
+    from .launch import alarm_event_line
+
+    if not args.file.endswith(".mcap"):
+        raise UserError(f"--live plays a bag: give an .mcap file, not {args.file}")
+    if not (math.isfinite(args.pace) and 0.0 <= args.pace <= 1e6):
+        raise UserError(f"--pace {args.pace}: use 0 (as fast as possible) or a factor up to 1e6")
+    model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
+    info = bagio.bag_info(args.file)
+    if not info["finished"]:
+        raise UserError(f"{args.file}: the bag is not finished; run phfdi bag recover {args.file} FIXED.mcap")
+    if not any(t["topic"] == MEASURED_SAMPLE.name for t in info["topics"]):
+        raise UserError(f"{args.file}: no {MEASURED_SAMPLE.name} topic: write the record with phfdi bag from-csv")
+    say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
+
+    def on_event(node: str, event: dict) -> None:
+        if event.get("event") == "fault_alarm":
+            say(f"/fault_alarm {event['state']} at {event['time_s']:g} s: {event['message']}")
+
+    with tempfile.TemporaryDirectory(prefix="phfdi-replay-") as tmp:
+        common = {"scenario": _scenario_file(args.file, args.scenario, tmp), "fault": "",
+                  "graph_nodes": [PLAYER, DETECTOR]}
+        nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
+                                                        "pace": float(args.pace)}),
+                 NodeSpec(DETECTOR, "phfdi.ros.learned_node",
+                          {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
+        t0 = time.perf_counter()
+        result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
+                          progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
+        elapsed = time.perf_counter() - t0
+    done = [e for e in result.node_events.get(DETECTOR, []) if e["event"] == "detector_done"]
+    if result.failure or not done:
+        say(f"error: {result.failure or 'the detector node did not report'}"
+            + (f"; node logs: {result.log_dir}" if result.log_dir else ""))
+        return result.status or 1
+    report = done[-1]
+    say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
+        f"(ROS domain {result.domain_id})")
+    alarms = report["alarms"]
+    if args.json:
+        print(json.dumps({"file": args.file, "reference": args.reference, "samples": report["samples"],
+                          "channels": list(model.channels), "alarms": alarms}, indent=2))
+    else:
+        print(format_learned(alarms))
+    return result.status
 
 
 def replay_json(file: str, samples: int, notes: list[str], diagnostics: dict, alarms: list[dict]) -> dict:

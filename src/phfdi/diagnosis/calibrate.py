@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from phfdi.scenario import apply_override
+from phfdi_base.spec import apply_override
 from phfdi_base.errors import UserError
 
 from .catalogue import Candidate, Param
