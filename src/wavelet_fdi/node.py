@@ -415,6 +415,10 @@ class DetectorNode(GraphNode):
         if self.core_errors and grew:
             level = DiagnosticStatus.ERROR
         text = ", ".join(f"{k} {v}" for k, v in counted.items()) if counted else "no input problem so far"
+        held = int(problems.get("nonfinite_ph", 0)) + int(problems.get("out_of_range_ph", 0))
+        d["ph_samples_held"] = held
+        if held:
+            text = f"{held} pH samples missing or out of range: held (no residual; statistics not fed); " + text
         if stale:
             text = "valve command missing: detection held; " + text
         inputs = DiagnosticStatus(level=level, name=f"{self.get_name()}: {self._loop} loop inputs",

@@ -237,6 +237,7 @@ CLI_CASES = {
                                                              if f.endswith(".csv") else "op=X.MV,pv=X.PV"]),
     "bag": (["run.mcap"], lambda f, o: ["bag", "to-run", f, o / "r.csv"]),
     "bag-info": (["run.mcap"], lambda f, o: ["bag", "info", f]),
+    "bag-from-csv": (["skab.csv", "run.csv", "run.parquet"], lambda f, o: ["bag", "from-csv", f, o / "b.mcap"]),
     "bag-recover": (["run.mcap"], lambda f, o: ["bag", "recover", f, o / "r.mcap"]),
     "simulate-inputs": (["run.csv"], lambda f, o: ["simulate", "--inputs", f, "--out", o / "o.csv"]),
     "scenario": (["scenario.yaml"], lambda f, o: ["simulate", "--scenario", f, *SET]),
