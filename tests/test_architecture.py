@@ -45,8 +45,6 @@ KNOWN_UPWARD: frozenset[tuple[str, str]] = frozenset({
 KNOWN_CYCLES: tuple[tuple[str, ...], ...] = (
     ("phfdi.bagio", "phfdi.records", "phfdi.records.reader", "phfdi.records.record", "phfdi.records.sources",
      "phfdi.run"),
-    # batch.diagnose_files runs on Dask through plantwide, whose jobs call back into batch
-    ("phfdi.loopdiag.batch", "phfdi.loopdiag.plantwide"),
 )
 
 
