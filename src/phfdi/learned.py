@@ -92,7 +92,6 @@ def alarm_summaries(events: list[LearnedEvent], rec: MeasuredRecord) -> list[dic
             continue
         a = dict(e.alarm)
         a["detection_line"] = int(rec.lines[a["detection_index"]])
-        a["onset_time"] = float(rec.time_s[min(a["onset_index"], len(rec.time_s) - 1)])
         if a.get("cleared_index") is not None:
             a["cleared_line"] = int(rec.lines[min(a["cleared_index"], len(rec.lines) - 1)])
         alarms[a["alarm_id"]] = a
@@ -121,8 +120,10 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
     for a in alarms:
         top = ", ".join(f"{c} {v['share']:.0%} ({max(v['bands'], key=v['bands'].get)})"
                         for c, v in list(a["contributions"].items())[:4])
+        where = f"line {a['detection_line']}" if "detection_line" in a else f"row {a['detection_index']}"
+        onset = "" if a.get("onset_time") is None else f", onset about {a['onset_time']:g} {unit_of_time}"
         lines.append(f"alarm {a['alarm_id']}: detected {a['detection_time']:g} {unit_of_time} "
-                     f"(line {a['detection_line']}), onset about {a['onset_time']:g} {unit_of_time}, by "
+                     f"({where}){onset}, by "
                      f"{a['statistic']} ({a['statistic_value']:.1f} > {a['threshold']:.1f})")
         lines.append(f"  channels: {top}")
         if a.get("cleared_time") is not None:

@@ -20,6 +20,9 @@ def read_mapping(path: str | Path, what: str = "file", expected: str = "a mappin
             data = yaml.safe_load(fh)
     except (FileNotFoundError, IsADirectoryError):
         raise UserError(f"no such {what}: {path}") from None
+    except UnicodeDecodeError as exc:
+        line = exc.object.count(b"\n", 0, exc.start) + 1
+        raise UserError(f"{path}: line {line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x})") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

@@ -43,7 +43,7 @@ def test_damaged_files_are_one_line(short_run, tmp_path, run_cli):
     assert "not a readable Parquet file" in one_error_line(*diagnose(run_cli, pq, tmp_path)[::2])
     bag = tmp_path / "m.mcap"
     bag.write_bytes(b"\x89MCAP0\r\n")
-    assert "not a readable MCAP bag" in one_error_line(*diagnose(run_cli, bag, tmp_path)[::2])
+    assert "cannot read the bag" in one_error_line(*diagnose(run_cli, bag, tmp_path)[::2])
     csv = tmp_path / "b.csv"
     csv.write_bytes(b"time_s,ph_measured,valve_command_pct\n0,7,\x81\x9d\n")
     line = one_error_line(*diagnose(run_cli, csv, tmp_path)[::2])

@@ -110,7 +110,7 @@ def test_corrupt_parquet_and_magic_only_mcap(short_run, tmp_path, run_cli):
     assert "not a readable Parquet file" in one_error_line(*run_cli("replay", pq)[::2])
     bag = tmp_path / "m.mcap"
     bag.write_bytes(b"\x89MCAP0\r\n")
-    assert "m.mcap: not a readable MCAP bag" in one_error_line(*run_cli("replay", bag)[::2])
+    assert "m.mcap: cannot read the bag" in one_error_line(*run_cli("replay", bag)[::2])
 
 
 def test_column_map_options(short_run, tmp_path, run_cli):
@@ -137,4 +137,4 @@ def test_bag_to_run_names_its_repairs(short_run, tmp_path, run_cli):
     assert Run.load(tmp_path / "out.csv")["ph_measured"][10] != Run.load(tmp_path / "out.csv")["ph_measured"][10]
     bad = tmp_path / "m.mcap"
     bad.write_bytes(b"\x89MCAP0\r\n")
-    assert "not a readable MCAP bag" in one_error_line(*run_cli("bag", "to-run", bad, tmp_path / "o.csv")[::2])
+    assert "cannot read the bag" in one_error_line(*run_cli("bag", "to-run", bad, tmp_path / "o.csv")[::2])

@@ -30,6 +30,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def read_inputs(path: str):
+    """Recorded open-loop inputs (phfdi.records, run policy): the commands and flows the plant is driven with
+    must have every sample; the reader's notes go to stderr."""
+    from phfdi.records import read_record
+
+    from .common import print_notes
+
+    rec = read_record(path, policy="run")
+    print_notes("simulate", rec.note_lines())
+    for name in rec.names:
+        if name in ("valve_command_pct", "level_controller_output_pct") or \
+                (name.endswith("_flow_ml_s") and name != "outlet_flow_ml_s"):
+            rec.refuse_missing(name, "open-loop inputs need every sample of the commands and feed flows")
+    return rec.to_run()
+
+
 def run(args: argparse.Namespace) -> int:
     from phfdi.loop import simulate, simulate_open_loop
     from phfdi.run import Run
@@ -37,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
 
     spec = scenario_from_args(args)
     if args.inputs:
-        result = simulate_open_loop(spec, Run.load(args.inputs))
+        result = simulate_open_loop(spec, read_inputs(args.inputs))
     else:
         result = simulate(spec, progress=Progress(f"simulate {spec.name}"))
     summary = summarize(result)

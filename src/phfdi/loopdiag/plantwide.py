@@ -99,7 +99,7 @@ def diagnose_job(job: Job, settings: Settings | None = None, figure_dir: str | N
                  each_segment: bool = False) -> list[dict]:
     """Reports of one job: its longest usable stretch, or with ``each_segment`` every stretch
     (``error`` set when it cannot be read or diagnosed); runs on a worker."""
-    from .batch import diagnose_file_segments, diagnose_run
+    from .single import diagnose_file_segments, diagnose_run
 
     if each_segment:
         reps = diagnose_file_segments(job.path, job.columns, settings, figure_dir)

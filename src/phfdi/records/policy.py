@@ -229,8 +229,8 @@ def note_holds_and_steps(rows: Rows, units: dict[str, str], columns: dict[str, s
         step = _quantum(x)
         if step is not None:
             unit = units.get(name, "")
-            rows.note(f"column {columns[name]!r}: quantised in steps of {step:.6g} {'' if unit == '1' else unit}".rstrip()
-                      + f" ({len(np.unique(x))} levels)")
+            unit = "" if unit == "1" else f" {unit}"
+            rows.note(f"column {columns[name]!r}: quantised in steps of {step:.6g}{unit} ({len(np.unique(x))} levels)")
 
 
 def _longest(mask: np.ndarray) -> int:

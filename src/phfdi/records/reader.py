@@ -28,9 +28,11 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
                 encoding: str | None = None, min_samples: int = 2, required: tuple[str, ...] = ()) -> Record:
     """Read a record (CSV, Parquet or an MCAP bag), repair what the policy repairs, refuse the rest.
 
-    ``column_map``: a :class:`ColumnMap`, its dict form, a YAML file, or a function (header, file metadata) ->
-    ColumnMap; None reads every column under its own name (time from ``time_s``, ``timestamp`` or ``time``). ``channels``: only these signals (each
-    must exist); ``required``: signals that must exist and hold values even when ``channels`` is None. ``policy``: "run" (a clock reset is refused) or "historian" (it starts a new segment).
+    ``column_map``: a :class:`ColumnMap`, its dict form, a YAML file, or a function (header, file metadata)
+    -> ColumnMap; None reads every column under its own name (time from ``time_s``, ``timestamp`` or ``time``).
+    ``channels``: only these signals (each must exist); ``required``: signals that must exist and hold values
+    even when ``channels`` is None. ``policy``: "run" (a clock reset is refused) or "historian" (it starts a
+    new segment). ``min_samples``: fewer usable samples are refused.
     Raises :class:`ReadError` (one line naming file, line and column) for what cannot be used.
     """
     if policy not in P.POLICIES:
@@ -123,13 +125,13 @@ def _unit(name: str, spec: ColumnSpec, table: Table) -> str:
 # ---- cells -> rows -------------------------------------------------------------------------
 def _rows(table: Table, cmap: ColumnMap) -> P.Rows:
     time_s, stamps = _time(table, cmap)
-    values = {}
+    values, numbers = {}, {}
     for name, spec in cmap.signals.items():
         if name == "time_s":
             continue
-        nums = to_numbers(table.columns[spec.column])
-        _note_missing_cells(table, spec.column, nums)
+        numbers[spec.column] = nums = to_numbers(table.columns[spec.column])
         values[name] = nums.values * spec.factor
+    _note_missing_cells(table, numbers)
     rows = P.Rows(table.path, table.where, time_s, values, table.lines.copy(), stamps)
     _apply_quality(rows, table, cmap)
     _apply_mode(rows, table, cmap)
@@ -165,19 +167,28 @@ def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None]:
     return t, [str(c).strip() for c in cells]
 
 
-def _note_missing_cells(table: Table, column: str, nums) -> None:
-    kinds = {"empty": nums.empty, "NaN": nums.nan, "inf": nums.inf, "text": nums.text}
-    total = int(nums.missing.sum())
-    if total == 0:
-        return
-    first = int(np.argmax(nums.missing))
-    counts = counted({k: int(v.sum()) for k, v in kinds.items()})
-    example = ""
-    if nums.text.any():
-        example = f" (e.g. {str(table.columns[column][int(np.argmax(nums.text))])[:20]!r})"
-    amount = f"all {total}" if total == len(nums.values) > 1 else f"{total}"
-    table.notes.append(f"{table.path}: column {column!r}: {amount} {'cell' if total == 1 else 'cells'} not a number "
-                       f"({counts}){example}, first at {table.where} {table.lines[first]}: marked missing")
+def _note_missing_cells(table: Table, numbers: dict) -> None:
+    """One note per set of columns missing in the same rows for the same reasons (a row cut short: one note)."""
+    groups: dict[tuple, list[str]] = {}
+    for column, nums in numbers.items():
+        if nums.missing.any():
+            key = (nums.missing.tobytes(), nums.empty.tobytes(), nums.nan.tobytes(), nums.inf.tobytes())
+            groups.setdefault(key, []).append(column)
+    for columns in groups.values():
+        nums = numbers[columns[0]]
+        total = int(nums.missing.sum())
+        first = int(np.argmax(nums.missing))
+        kinds = {"empty": nums.empty, "NaN": nums.nan, "inf": nums.inf, "text": nums.text}
+        counts = counted({k: int(v.sum()) for k, v in kinds.items()})
+        example = ""
+        if nums.text.any():
+            example = f" (e.g. {str(table.columns[columns[0]][int(np.argmax(nums.text))])[:20]!r})"
+        amount = f"all {total}" if total == len(nums.values) > 1 else f"{total}"
+        names = (f"column {columns[0]!r}" if len(columns) == 1 else
+                 f"columns {', '.join(repr(c) for c in columns)}")
+        each = " each" if len(columns) > 1 else ""
+        table.notes.append(f"{table.path}: {names}: {amount} {'cell' if total == 1 else 'cells'}{each} not a "
+                           f"number ({counts}){example}, first at {table.where} {table.lines[first]}: marked missing")
 
 
 def _apply_quality(rows: P.Rows, table: Table, cmap: ColumnMap) -> None:

@@ -97,8 +97,8 @@ class Record:
                 if e - s >= min_samples:
                     seg = self._subset(slice(a + s, a + e), boundaries=[])
                     if e - s < len(self):
-                        seg.notes.append(f"{self.path}: segment {self.where}s {self.lines[a + s]}-{self.lines[a + e - 1]} "
-                                         f"({e - s} samples)")
+                        first, last = self.lines[a + s], self.lines[a + e - 1]
+                        seg.notes.append(f"{self.path}: segment {self.where}s {first}-{last} ({e - s} samples)")
                     out.append(seg)
         return out
 
