@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from phfdi_base.stamps import ns_to_seconds
+
 STATE_NAMES = {0: "OK", 1: "WARN", 2: "ALARM"}
 
 
@@ -32,7 +34,7 @@ def from_summaries(alarms: list[dict]) -> list[dict]:
 
 
 def _seconds(t) -> float:
-    return t.sec + t.nanosec * 1e-9
+    return ns_to_seconds(t.sec, t.nanosec)
 
 
 def to_dict(msg) -> dict:
