@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.scenario import load_scenario
     from phfdi_base.errors import UserError
     from wavelet_fdi.config import Calibration
-    from wavelet_fdi.replay import load_any, replay_run, scenario_of
+    from phfdi.replay import load_any, replay_run, scenario_of
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
