@@ -3,6 +3,11 @@
     .venv/bin/python benchmarks/plant_loops_eval.py                       # full run, both cores
     .venv/bin/python benchmarks/plant_loops_eval.py --records out.json    # also keep the per-file records
     .venv/bin/python benchmarks/plant_loops_eval.py --from-records benchmarks/results/plant_loops_records.json
+    .venv/bin/python benchmarks/plant_loops_eval.py --classifier    # the stiction classifier vs Horch, He, previous
+
+``--classifier``: the combined stiction classifier under nested leave-one-loop-out against Horch,
+He et al. and this diagnosis at 10 % (from benchmarks/results/stiction_dataset.json, written by
+benchmarks/stiction_dataset.py; the same as ``benchmarks/train_stiction_classifier.py --no-write``).
 
 Prints the table of docs/loop_diagnosis.md (accuracy, precision and recall for "stiction" of
 the Hammerstein diagnosis and of the Horch and He et al. baselines), the wall time, and the
@@ -39,7 +44,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--records", type=Path, default=None, help="write the per-file records (JSON) here")
     p.add_argument("--from-records", type=Path, default=None, help="evaluate saved records instead of diagnosing")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("--classifier", action="store_true",
+                   help="evaluate the stiction classifier (nested leave-one-loop-out) against the baselines")
     args = p.parse_args(argv)
+    if args.classifier:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from train_stiction_classifier import main as classifier_main
+
+        return classifier_main(["--no-write"])
     t0 = time.perf_counter()
     if args.from_records:
         records = json.loads(args.from_records.read_text())

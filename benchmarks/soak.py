@@ -48,6 +48,8 @@ import threading
 import time
 from pathlib import Path
 
+from phfdi.bagio import bag_parts
+
 #: /proc/<pid>/status fields sampled (kB)
 MEMORY_FIELDS = ("VmRSS", "RssAnon", "RssFile", "RssShmem", "VmHWM")
 GROWTH_LIMIT = 0.10  # issue 15: under 10 % from middle to end
@@ -97,7 +99,7 @@ class Sampler(threading.Thread):
         now = time.monotonic() - self.t0
         load1 = os.getloadavg()[0]
         try:
-            bag_bytes = self.bag.stat().st_size if self.bag is not None else 0
+            bag_bytes = sum(p.stat().st_size for p in bag_parts(self.bag)) if self.bag is not None else 0
         except OSError:
             bag_bytes = 0
         self.system.append({"wall_s": now, "load1": load1, "bag_bytes": bag_bytes})
@@ -155,15 +157,16 @@ def _slope_per_hour(rows: list[dict]) -> float:
     return float(np.polyfit(t, y, 1)[0] * 3600.0)
 
 
-def stamp_check(bag: Path, topics: list[str], n_samples: int, dt_ns: int) -> dict[str, dict]:
-    """For topics with one message per sample: stamps in the bag against the grid 0..n_samples-1."""
+def stamp_check(bags: list[Path], topics: list[str], n_samples: int, dt_ns: int) -> dict[str, dict]:
+    """For topics with one message per sample: stamps in the bag (all its files) against the grid 0..n_samples-1."""
     import numpy as np
     from mcap.reader import make_reader
 
     stamps: dict[str, list[int]] = {t: [] for t in topics}
-    with open(bag, "rb") as f:
-        for _schema, channel, message in make_reader(f).iter_messages(topics=topics, log_time_order=False):
-            stamps[channel.topic].append(message.log_time)
+    for bag in bags:
+        with open(bag, "rb") as f:
+            for _schema, channel, message in make_reader(f).iter_messages(topics=topics, log_time_order=False):
+                stamps[channel.topic].append(message.log_time)
     out = {}
     for topic, s in stamps.items():
         a = np.asarray(s, dtype=np.int64)
@@ -179,7 +182,7 @@ def stamp_check(bag: Path, topics: list[str], n_samples: int, dt_ns: int) -> dic
 
 def message_summary(result, n_samples: int, dt_ns: int) -> dict:
     """Messages lost: published vs recorded per topic, stamps of per-sample topics, the detector's inputs."""
-    from phfdi.ros.topics import BY_NAME, CONTROLLER, MEASUREMENT
+    from phfdi_base.topics import BY_NAME, CONTROLLER, MEASUREMENT
 
     recorded = {t["topic"]: t["count"] for t in (result.bag or {}).get("topics", [])}
     topics = {}
@@ -190,7 +193,8 @@ def message_summary(result, n_samples: int, dt_ns: int) -> dict:
         rec = recorded.get(topic, 0) if topic in BY_NAME else None
         topics[topic] = {"published": pub, "recorded": rec, "lost": None if rec is None else pub - rec}
     per_sample = [t for t in recorded if t in BY_NAME and BY_NAME[t].per_sample]
-    stamps = stamp_check(Path(result.bag["path"]), per_sample, n_samples, dt_ns) if result.bag else {}
+    files = [Path(p) for p in result.bag.get("parts", [result.bag["path"]])] if result.bag else []
+    stamps = stamp_check(files, per_sample, n_samples, dt_ns) if files else {}
     for topic, s in stamps.items():
         topics[topic].update(s)
     done = [e for e in result.node_events.get("detector", []) if e.get("event") == "detector_done"]
@@ -245,16 +249,16 @@ def stop_load(procs: list[subprocess.Popen]) -> None:
 # ---- report ------------------------------------------------------------------------------------------
 def print_table(summary: dict) -> None:
     mem = summary["memory"]
-    print(f"\n{'node':12s} {'RSS start':>10s} {'middle':>10s} {'end':>10s} {'max':>10s} {'mid->end':>9s} "
+    print(f"\nVmRSS in MiB\n{'node':12s} {'start':>10s} {'middle':>10s} {'end':>10s} {'max':>10s} {'mid->end':>9s} "
           f"{'anon mid->end':>14s} {'slope 2nd half':>15s}")
     for name, m in mem.items():
         if not m.get("samples"):
             print(f"{name:12s} (no sample during the run)")
             continue
         r = m["VmRSS"]
-        print(f"{name:12s} {r['start_kb'] / 1024:8.1f}MB {r['middle_kb'] / 1024:8.1f}MB {r['end_kb'] / 1024:8.1f}MB "
-              f"{r['max_kb'] / 1024:8.1f}MB {100 * m['growth_middle_to_end']:+8.2f}% "
-              f"{100 * m['anon_growth_middle_to_end']:+13.2f}% {m['rss_slope_kb_per_h'] / 1024:+10.2f} MB/h")
+        print(f"{name:12s} {r['start_kb'] / 1024:10.1f} {r['middle_kb'] / 1024:10.1f} {r['end_kb'] / 1024:10.1f} "
+              f"{r['max_kb'] / 1024:10.1f} {100 * m['growth_middle_to_end']:+8.2f}% "
+              f"{100 * m['anon_growth_middle_to_end']:+13.2f}% {m['rss_slope_kb_per_h'] / 1024:+9.2f} MiB/h")
     msgs = summary["messages"]
     print(f"\n{'topic':22s} {'published':>10s} {'recorded':>10s} {'lost':>6s} {'missing stamps':>15s} "
           f"{'duplicates':>10s}")
@@ -272,7 +276,8 @@ def print_table(summary: dict) -> None:
     ld = summary["load"]
     print(f"ring: {msgs['samples_done']} of {msgs['samples']} samples; messages lost in all: {msgs['lost_total']}")
     print(f"wall: start-up {w['connect_s']:.1f} s, run {w['run_s']:.1f} s ({summary['sim_s'] / w['run_s']:.0f} x "
-          f"real time), total {w['total_s']:.1f} s; bag {summary['bag_bytes'] / 1e6:.2f} MB; load average "
+          f"real time), total {w['total_s']:.1f} s; bag {summary['bag_bytes'] / 1e6:.2f} MB "
+          f"({summary['bag_messages']} messages, {summary.get('bag_files', 1)} files); load average "
           f"min {ld['load1_min']:.1f} median {ld['load1_median']:.1f} max {ld['load1_max']:.1f} on "
           f"{os.cpu_count()} cores (+{ld['busy_processes']} busy processes of ours)")
     v = summary["acceptance"]
@@ -297,7 +302,12 @@ def plot(summary: dict, rows: list[dict], system: list[dict], path: Path) -> Non
         x = (summary["wall"][key] - t0) / scale
         ax.axvline(x, color="0.5", ls="--", lw=0.8)
         ax.annotate(label, (x, 1.0), xycoords=("data", "axes fraction"), ha="right", va="top", fontsize=8)
-    ax.set_ylabel("resident memory VmRSS (MB)")
+    for a in summary.get("alarms_wall", []):
+        x = (a["wall_s"] - t0) / scale
+        ax.axvline(x, color="tab:red", ls=":", lw=0.8)
+        ax.annotate(f"detector {a['kind']}", (x, 0.02), xycoords=("data", "axes fraction"), rotation=90,
+                    ha="right", va="bottom", fontsize=7, color="tab:red")
+    ax.set_ylabel("resident memory VmRSS (MiB)")
     ax.set_title(summary["title"], fontsize=10)
     ax.legend(fontsize=8, ncol=3)
     ax.grid(alpha=0.3)
@@ -328,6 +338,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--out", default="benchmarks/results/soak", help="folder for the JSON, CSV, figure and bag")
     ap.add_argument("--name", default=None, help="file name stem (default soak_<lockstep|paceF>_<sim>s)")
     ap.add_argument("--keep-bag", action="store_true", help="keep the bag (default: deleted after measuring)")
+    ap.add_argument("--split-s", type=float, default=0.0,
+                    help="recorder: a new bag file every this many s of simulated time (0: one file)")
+    ap.add_argument("--replot", metavar="RUN.json", default=None,
+                    help="only redraw the figure and reprint the table of a finished run")
     args = ap.parse_args(argv)
     if args.wall_s is not None:
         if args.pace <= 0:
@@ -347,18 +361,35 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def replot(json_path: Path) -> None:
+    """Redraw the figure and reprint the table of a finished run from its JSON and CSV."""
+    summary = json.loads(json_path.read_text())
+    stem = json_path.with_suffix("")
+    with open(f"{stem}_rss.csv", newline="") as f:
+        rows = [{k: (v if k == "node" else float(v)) for k, v in r.items()} for r in csv.DictReader(f)]
+    system = list({r["wall_s"]: {"wall_s": r["wall_s"], "load1": r["load1"]} for r in rows}.values())
+    print_table(summary)
+    plot(summary, rows, system, Path(f"{stem}_rss.png"))
+    print(f"wrote {stem}_rss.png")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    from phfdi.errors import UserError
+    if args.replot is not None:
+        replot(Path(args.replot))
+        return 0
     from phfdi.ros.launcher import Launcher, loop_graph
-    from phfdi.ros.topics import sample_period_ns
     from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
+    from phfdi_base.topics import sample_period_ns
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     bag = (out / f"{args.name}.mcap").resolve()
-    if bag.exists():
-        bag.unlink()
+    if bag_parts(bag):
+        print(f"soak: error: {bag} exists: remove it (and its parts {bag.stem}.N.mcap) or give another --name",
+              file=sys.stderr)
+        return 2
     fault = None if args.fault == "healthy" else args.fault
     overrides = [f"duration_s={args.sim_s}"]
     if args.scenario == "paper" and args.sim_s <= 5000:  # its setpoint step (5000 s) inside a short run
@@ -377,7 +408,8 @@ def main(argv: list[str] | None = None) -> int:
           f"fault {args.fault} at {onset if onset is not None else '-'} s; load average now "
           f"{os.getloadavg()[0]:.1f}; {args.load} busy processes (nice {args.load_nice}) added", flush=True)
 
-    nodes = loop_graph(args.scenario, args.fault, onset, overrides, bag, args.pace, detector={})
+    nodes = loop_graph(args.scenario, args.fault, onset, overrides, bag, args.pace, detector={},
+                       split_after_s=args.split_s)
     load = start_load(args.load, args.load_nice)
     load_nice = sorted({os.getpriority(os.PRIO_PROCESS, p.pid) for p in load})
     t_start = time.monotonic()
@@ -396,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
         elapsed = now - marks.get("connected", t_start)
         eta = elapsed * (1 - fraction) / fraction if fraction > 0 else math.nan
         print(f"[{100 * fraction:5.1f} %] {fraction * args.sim_s:9.0f} s simulated, {elapsed:7.0f} s wall, "
-              f"ETA {eta:6.0f} s; load {os.getloadavg()[0]:.1f}; RSS MB "
+              f"ETA {eta:6.0f} s; load {os.getloadavg()[0]:.1f}; RSS MiB "
               + " ".join(f"{k} {v / 1024:.0f}" for k, v in mem.items()), flush=True)
 
     def status(text: str) -> None:
@@ -404,8 +436,15 @@ def main(argv: list[str] | None = None) -> int:
             marks["connected"] = time.monotonic()
         print(f"soak: {text}", flush=True)
 
+    alarms_at: list[dict] = []  # wall time of the detector's alarms and diagnoses (the isolation runs before)
+
+    def on_event(node: str, event: dict) -> None:
+        if event.get("event") == "fault_alarm" and event.get("kind") in ("alarm", "diagnosis"):
+            alarms_at.append({"wall_s": time.monotonic() - t_start, "kind": event["kind"],
+                              "time_s": event.get("time_s")})
+
     launcher = Launcher(nodes, domain_id=args.domain_id, log_dir=out / f"{args.name}_logs", progress=progress,
-                        status=status)
+                        status=status, on_event=on_event)
     sampler = Sampler(launcher, args.sample_s, bag, out / f"{args.name}_rss.csv")
     sampler.t0 = t_start
     sampler_box.append(sampler)
@@ -427,7 +466,8 @@ def main(argv: list[str] | None = None) -> int:
     summary = {
         "title": (f"soak: {args.sim_s:g} s simulated, "
                   + (f"pace {args.pace:g}" if args.pace > 0 else "lock-step")
-                  + f", {spec.name}, +{args.load} busy processes"),
+                  + f", {spec.name}, +{args.load} busy processes"
+                  + (f", a bag file every {args.split_s:g} s" if args.split_s > 0 else "")),
         "command": " ".join([Path(sys.argv[0]).as_posix(), *(argv if argv is not None else sys.argv[1:])]),
         "scenario": spec.name, "fault": args.fault, "onset_s": onset, "sim_s": args.sim_s, "pace": args.pace,
         "samples": n, "domain_id": result.domain_id, "status": result.status, "failure": result.failure,
@@ -437,9 +477,9 @@ def main(argv: list[str] | None = None) -> int:
                  "t_connected": t_connected, "t_mid": 0.5 * (t_connected + t_done), "t_done": t_done},
         "load": {"busy_processes": args.load, "busy_nice": load_nice, "busy_pids": [p.pid for p in load], "load1_min": loads[0],
                  "load1_median": loads[len(loads) // 2], "load1_max": loads[-1]},
-        "bag_bytes": bag.stat().st_size if bag.exists() else 0,
+        "bag_bytes": sum(p.stat().st_size for p in bag_parts(bag)), "bag_files": len(bag_parts(bag)),
         "bag_messages": (result.bag or {}).get("messages"),
-        "memory": memory, "messages": messages,
+        "memory": memory, "messages": messages, "alarms_wall": alarms_at,
     }
     summary["acceptance"] = {
         "memory": bool(memory) and all(m.get("samples") and m["growth_middle_to_end"] < GROWTH_LIMIT
@@ -451,8 +491,9 @@ def main(argv: list[str] | None = None) -> int:
     if sampler.rows:
         plot(summary, sampler.rows, sampler.system, out / f"{args.name}_rss.png")
     print(f"wrote {out / (args.name + '.json')}, {args.name}_rss.csv, {args.name}_rss.png")
-    if not args.keep_bag and bag.exists():
-        bag.unlink()
+    if not args.keep_bag:
+        for part in bag_parts(bag):
+            part.unlink()
     return 0 if result.status == 0 else 1
 
 

@@ -8,14 +8,14 @@ Plugged into a scenario with::
       ph:
         extra: [{type: probe_aging, params: {slope_loss_per_hour: 0.01}}]
 
-The block protocol (phfdi.blocks): ``reset(x0)``, ``step(x, t_s) -> y``, an
+The block protocol (phfdi_base.blocks): ``reset(x0)``, ``step(x, t_s) -> y``, an
 optional ``severity`` in [0, 1], and ``register_block(name)`` so scenario
 files can name it.
 """
 
 from dataclasses import dataclass
 
-from phfdi.blocks import register_block
+from phfdi_base.blocks import register_block
 
 
 @register_block("probe_aging")

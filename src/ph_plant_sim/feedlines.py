@@ -3,7 +3,7 @@
 A feed's ``line`` in the plant model (``feeds.<name>.line``) is a chain of
 these blocks, stepped once per sample on the flow the pump or valve is asked
 to deliver (mL/s); its output is the flow that enters the vessel. They follow
-the block protocol of :mod:`phfdi.blocks` (``reset``, ``step``), so a line
+the block protocol of :mod:`phfdi_base.blocks` (``reset``, ``step``), so a line
 can also hold any user block.
 
 * ``line_delay``: transport dead time of the tubing between pump and vessel;
@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from phfdi.blocks import register_block
+from phfdi_base.blocks import register_block
 
 from .sensors import TransportDelay, _check
 

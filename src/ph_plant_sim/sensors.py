@@ -1,6 +1,6 @@
-"""Sensor effects as blocks (see :mod:`phfdi.blocks`), stepped once per sample.
+"""Sensor effects as blocks (see :mod:`phfdi_base.blocks`), stepped once per sample.
 
-A sensor is a :class:`~phfdi.blocks.Chain` of these, applied to the true
+A sensor is a :class:`~phfdi_base.blocks.Chain` of these, applied to the true
 value: for example transport delay, then first-order probe lag, then noise.
 """
 
@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from phfdi.blocks import register_block
+from phfdi_base.blocks import register_block
 
 
 def _check(name: str, value: float, positive: bool = False) -> None:

@@ -1,6 +1,6 @@
 """Bags (MCAP files, ros2 profile) and runs: write, read, inspect, recover.
 
-A bag of the graph holds one channel per topic of :mod:`phfdi.ros.topics`
+A bag of the graph holds one channel per topic of :mod:`phfdi_base.topics`
 (cdr messages, ``ros2msg`` schemas, the offered QoS in the channel metadata
 as rosbag2 writes it), every message logged at its simulated time stamp, and
 the run's metadata (scenario, seed, faults) in an MCAP metadata record named
@@ -30,10 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
+from phfdi.run import Run
+from phfdi_base import topics as T
+from phfdi_base.errors import UserError
+from phfdi_base.signals import SIGNALS
+from phfdi_base.stamps import join_ns, seconds_to_ns, split_ns
+from wavelet_fdi.alarm_messages import to_dict as alarm_message_dict
+
 from . import __version__
-from .errors import UserError
-from .ros import topics as T
-from .run import SIGNALS, Run
 
 RUN_METADATA = "phfdi_run"
 INTERFACES_PACKAGE = "phfdi_interfaces"
@@ -194,7 +198,7 @@ def stamp_of_cdr(cdr: bytes) -> int:
     little = cdr[1] == 1
     sec = int.from_bytes(cdr[4:8], "little" if little else "big", signed=True)
     nsec = int.from_bytes(cdr[8:12], "little" if little else "big", signed=False)
-    return sec * 1_000_000_000 + nsec
+    return join_ns(sec, nsec)
 
 
 # ---- run <-> bag --------------------------------------------------------------------
@@ -262,7 +266,7 @@ def load_run(path: str | Path) -> Run:
         raise UserError(f"no such file: {path}")
     if path.suffix.lower() != ".mcap" and not (path / "metadata.yaml").exists():
         raise UserError(f"cannot read a run from {path}: expected .mcap, .csv or .parquet")
-    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.highlevel import AnyReader
 
     rows: dict[int, dict] = defaultdict(dict)
     measured: set[int] = set()
@@ -274,23 +278,23 @@ def load_run(path: str | Path) -> Run:
                 raise UserError(f"{path}: no {T.MEASUREMENT.name} topic: not a bag of the phfdi graph")
             for conn, _t, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
-                ns = msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec
+                ns = join_ns(msg.stamp.sec, msg.stamp.nanosec)
                 _extract(conn.topic, msg, rows[ns])
                 if conn.topic == T.MEASUREMENT.name:
                     measured.add(ns)
                 elif feeds is None and conn.topic == T.PLANT_STATE.name:
                     feeds = list(msg.feed_names)  # the plant's feed order
-    except AnyReaderError as exc:
-        raise UserError(f"{path}: cannot read the bag ({exc}); if its recorder was killed, "
-                        f"run: phfdi bag recover {path} FIXED.mcap") from None
-    meta = read_metadata(path)
-    metadata = json.loads(meta.get(RUN_METADATA, {}).get("json", "{}"))
-    metadata.update({"source": str(path), "mode": "graph"})
+    except UserError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - rosbags, mcap and zstd raise many types (even MemoryError) on damage
+        raise UserError(f"{path}: cannot read the bag ({type(exc).__name__}: {_one_line(exc)}); if its recorder "
+                        f"was killed, run: phfdi bag recover {path} FIXED.mcap") from None
+    metadata = _run_metadata(path)
     stamps = sorted(measured)
     dt = metadata.get("sample_time_s")
     try:
-        dt_ns = T.sample_period_ns(dt) if dt else None
-    except ValueError:
+        dt_ns = T.sample_period_ns(float(dt)) if dt else None
+    except (TypeError, ValueError, OverflowError):
         dt_ns = None
     if dt_ns and all(ns % dt_ns == 0 for ns in stamps):
         time_s = [(ns // dt_ns) * dt for ns in stamps]  # k * dt exactly as the simulation
@@ -309,9 +313,27 @@ def load_run(path: str | Path) -> Run:
     return Run(signals, metadata)
 
 
+def _one_line(exc: BaseException, limit: int = 160) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _run_metadata(path: Path) -> dict:
+    """The run's metadata record (scenario, seed, sample time); a damaged one is a UserError, not a guess."""
+    text = read_metadata(path).get(RUN_METADATA, {}).get("json", "{}")
+    try:
+        metadata = json.loads(text)
+    except ValueError as exc:
+        raise UserError(f"{path}: the bag's run metadata ({RUN_METADATA}) is damaged ({exc})") from None
+    if not isinstance(metadata, dict):
+        raise UserError(f"{path}: the bag's run metadata ({RUN_METADATA}) is not a mapping")
+    metadata.update({"source": str(path), "mode": "graph"})
+    return metadata
+
+
 def read_messages(path: str | Path, topic: str) -> list:
     """Every message of one topic, decoded (rosbags objects with the message's field names), in log-time order."""
-    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.highlevel import AnyReader
 
     path = Path(path)
     if not path.exists():
@@ -320,13 +342,14 @@ def read_messages(path: str | Path, topic: str) -> list:
         with AnyReader([path]) as reader:
             conns = [c for c in reader.connections if c.topic == topic]
             return [reader.deserialize(raw, conn.msgtype) for conn, _t, raw in reader.messages(connections=conns)]
-    except AnyReaderError as exc:
-        raise UserError(f"{path}: cannot read the bag ({exc}); if its recorder was killed, "
-                        f"run: phfdi bag recover {path} FIXED.mcap") from None
+    except Exception as exc:  # noqa: BLE001 - rosbags, mcap and zstd raise many types on damaged bags
+        raise UserError(f"{path}: cannot read the bag ({type(exc).__name__}: {_one_line(exc)}); if its recorder "
+                        f"was killed, run: phfdi bag recover {path} FIXED.mcap") from None
 
 
 def _time(store, ns: int):
-    return store.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = split_ns(ns)
+    return store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
@@ -355,7 +378,7 @@ def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES)
         meta.setdefault("sample_time_s", run.dt_s)
         bag.add_metadata(RUN_METADATA, {"json": json.dumps(meta, default=str)})
         for i in range(len(t)):
-            ns = int(round((t[i] - t0) * 1e9))
+            ns = seconds_to_ns(t[i] - t0)
             stamp = _time(store, ns)
             msgs = (
                 (T.MEASUREMENT, ty["phfdi_interfaces/msg/Measurement"](
@@ -380,6 +403,34 @@ def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES)
     finally:
         bag.close()
     return path
+
+
+def write_measured(time_s: np.ndarray, x: np.ndarray, channels: list[str], path: str | Path, source: str = "",
+                   metadata: dict | None = None, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
+    """A measured record as a bag: one phfdi_interfaces/MeasuredSample per row on /measured/sample,
+    stamped with the row's time (s from the first row), schemas embedded (ros2 profile)."""
+    store = typestore()
+    msg_type = store.types[T.MEASURED_SAMPLE.type]
+    t = np.asarray(time_s, dtype=float)
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim != 2 or x.shape != (len(t), len(channels)):
+        raise UserError(f"measured record: {x.shape} values for {len(t)} times and {len(channels)} channels")
+    stamps = np.round((t - t[0]) * 1e9).astype(np.int64) if len(t) else np.zeros(0, dtype=np.int64)
+    if len(t) > 1 and np.any(np.diff(stamps) <= 0):
+        raise UserError("measured record: time stamps must increase")
+    names = [str(c) for c in channels]
+    bag = BagWriter(Path(path), chunk_size=chunk_size)
+    try:
+        cid = bag.add_topic(T.MEASURED_SAMPLE.name, T.MEASURED_SAMPLE.type)
+        bag.add_metadata(RUN_METADATA, {"json": json.dumps({"kind": "measured", "source": source,
+                                                            "channels": names, **(metadata or {})}, default=str)})
+        for i in range(len(t)):
+            ns = int(stamps[i])
+            msg = msg_type(stamp=_time(store, ns), source=source, names=names, values=x[i].copy())
+            bag.write(cid, ns, bytes(store.serialize_cdr(msg, T.MEASURED_SAMPLE.type)))
+    finally:
+        bag.close()
+    return Path(path)
 
 
 # ---- inspecting and recovering ---------------------------------------------------------------
@@ -512,3 +563,24 @@ def recover(src: str | Path, dst: str | Path) -> dict:
         w.finish()
     return {"path": str(dst), "messages": n, "last_s": None if last_ns is None else last_ns * 1e-9,
             "complete_input": error is None, "stopped_at": error}
+
+
+# ---- split bags (the recorder's split_after_s) ------------------------------------------
+
+def part_path(path: str | Path, index: int) -> Path:
+    """File ``index`` of a split bag: the path itself for 0, then ``<stem>.<index>.mcap``."""
+    path = Path(path)
+    return path if index == 0 else path.with_name(f"{path.stem}.{index}{path.suffix}")
+
+
+def bag_parts(path: str | Path) -> list[Path]:
+    """The files of a (possibly split) bag, in order: the path, then ``<stem>.1.mcap``, ... while they exist."""
+    parts = []
+    while part_path(path, len(parts)).exists():
+        parts.append(part_path(path, len(parts)))
+    return parts
+
+
+def fault_alarms(path: str | Path) -> list[dict]:
+    """Every /fault_alarm message a bag holds, in order (:func:`wavelet_fdi.alarm_messages.to_dict` of each)."""
+    return [alarm_message_dict(m) for m in read_messages(path, T.FAULT_ALARM.name)]

@@ -2,7 +2,7 @@
 
 Each module in :mod:`phfdi.commands` defines ``register(subparsers)`` that
 adds its parser and sets ``func`` (called with the parsed arguments, returns
-an exit status). A :class:`~phfdi.errors.UserError` anywhere becomes one line
+an exit status). A :class:`~phfdi_base.errors.UserError` anywhere becomes one line
 on stderr and exit status 2, never a traceback.
 """
 
@@ -13,8 +13,9 @@ import importlib
 import os
 import sys
 
+from phfdi_base.errors import UserError
+
 from . import __version__
-from .errors import UserError
 
 #: subcommand modules, in the order ``phfdi --help`` lists them
 COMMANDS = [

@@ -18,98 +18,25 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-import ph_plant_sim.feedlines  # noqa: F401  (registers feed-line blocks)
-import ph_plant_sim.sensors  # noqa: F401  (registers sensor blocks)
-import valve_actuator.blocks as vblocks
-from ph_plant_sim.chemistry import Chemistry, Component
-from ph_plant_sim.mixing import MixingZone, ZonedPlant
-from ph_plant_sim.plant import CstrPlant, Feed, GravityOutlet, Tank
-from ph_plant_sim.process import PlantProcess
+from ph_plant_sim.build import build_plant, build_process, load_plant_model, plant_start
+from ph_plant_sim.plant import CstrPlant
+from ph_plant_sim.process import (
+    PlantProcess,
+    advance_plant,  # noqa: F401  (part of the loop's API)
+)
+from phfdi_base.errors import UserError
+from phfdi_base.signals import SIGNALS
+from phfdi_base.spec import ScenarioSpec, load_plugins
+from pi_controllers.build import build_controllers
 from pi_controllers.loops import ControllerBank
-from pi_controllers.pi import PIController
-from valve_actuator.valve import Valve, ValveOutput, inherent_characteristic
+from valve_actuator.build import ValveStep, build_valves, check_reachable, start_commands, step_valves  # noqa: F401  (part of the loop's API)
+from valve_actuator.valve import Valve
 
 from . import __version__
-from .blocks import Chain, Injected, make_block
-from .errors import UserError
-from .profiles import Change, Profile
 from .run import Run, RunRecorder
-from .scenario import (PlantModelSpec, ProfileSpec, ScenarioSpec, SensorSpec, ValveSpec, load_plant_model,
-                       load_plugins)
 
 
 # ---- construction -----------------------------------------------------------------
-def build_plant(model: PlantModelSpec) -> CstrPlant:
-    chem_spec = model.chemistry
-    try:
-        chemistry = Chemistry.for_streams(
-            [f.recipe for f in model.feeds.values()],
-            extra_components=[Component(c.name, c.charge, tuple(c.pka)) for c in chem_spec.components],
-            extra_compounds=chem_spec.compounds,
-            pkw=chem_spec.pkw,
-        )
-    except ValueError as exc:
-        raise UserError(f"plant model {model.name!r}: {exc}") from None
-    feeds = [Feed(name, dict(f.recipe), f.flow_ml_s) for name, f in model.feeds.items()]
-    t = model.tank
-    outlet = GravityOutlet(t.outlet.cv, t.outlet.z_cm, t.outlet.n) if t.outlet else None
-    plant = CstrPlant(chemistry, feeds, Tank(t.area_cm2, outlet, t.overflow, t.volume_ml))
-    if model.mixing is not None:  # the probe reads a zone exchanging with the bulk
-        m = model.mixing
-        return ZonedPlant(plant, MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds)))
-    return plant
-
-
-def feed_lines(model: PlantModelSpec, dt_s: float) -> dict[str, Chain]:
-    """Each feed's line blocks (``feeds.<name>.line``) as a chain; feeds without a line are left out."""
-    out = {}
-    for name, f in model.feeds.items():
-        if f.line:
-            out[name] = Chain([_line_block(b.type, b.params, f"plant.feeds.{name}.line.{i}", dt_s)
-                               for i, b in enumerate(f.line)])
-    return out
-
-
-def _line_block(kind: str, params: dict, where: str, dt_s: float):
-    try:
-        return make_block(kind, params, dt_s=dt_s)
-    except (ValueError, TypeError) as exc:
-        raise UserError(f"{where}: {exc}") from None
-
-
-def profile(spec: ProfileSpec) -> Profile:
-    return Profile(spec.initial, [Change(c.at_s, c.value, c.ramp_s) for c in spec.changes])
-
-
-def position_for_opening(opening: float, valve: ValveSpec) -> float:
-    """Inverse inherent characteristic: stem position (%) giving a flow fraction."""
-    if valve.characteristic == "linear":
-        return 100.0 * opening
-    return 100.0 * (1.0 + math.log(opening) / math.log(valve.rangeability))
-
-
-def _block(kind: str, params: dict, where: str, dt_s: float, max_flow: float | None):
-    try:
-        return make_block(kind, params, dt_s=dt_s, max_flow_ml_s=max_flow or 1.0)
-    except (TypeError, ValueError) as exc:
-        raise UserError(f"{where}: {kind}: {exc}") from None
-
-
-def sensor_chain(spec: SensorSpec, dt_s: float, seed: int, where: str, faults: list) -> Chain:
-    """delay -> lag -> extra effects -> injected faults -> noise."""
-    blocks: list = []
-    if spec.delay_s > 0:
-        blocks.append(_block("sensor_delay", {"delay_s": spec.delay_s}, f"sensors.{where}", dt_s, None))
-    if spec.lag_s > 0:
-        blocks.append(_block("sensor_lag", {"tau_s": spec.lag_s}, f"sensors.{where}", dt_s, None))
-    for i, b in enumerate(spec.extra):
-        blocks.append(_block(b.type, b.params, f"sensors.{where}.extra.{i}", dt_s, None))
-    blocks.extend(faults)
-    if spec.noise_std > 0:
-        blocks.append(_block("sensor_noise", {"std": spec.noise_std, "seed": seed}, f"sensors.{where}", dt_s, None))
-    return Chain(blocks)
-
-
 @dataclass
 class OperatingPoint:
     """Steady state the loop starts from (at the t=0 setpoints)."""
@@ -122,40 +49,10 @@ class OperatingPoint:
 
 def operating_point(spec: ScenarioSpec, plant: CstrPlant, ph_target: float | None = None) -> OperatingPoint:
     """Valve positions that hold the plant at the pH (default: initial setpoint) and level setpoint."""
-    vspec = spec.valves.ph
-    names = [f.name for f in plant.feeds]
-    if vspec.feed not in names:
-        raise UserError(f"valves.ph.feed: plant has no feed {vspec.feed!r} (feeds: {', '.join(names)})")
-    k = names.index(vspec.feed)
-    flows = [profile(spec.feeds[n]).value(0.0) if n in spec.feeds else f.flow_ml_s
-             for n, f in zip(names, plant.feeds)]
-    target = spec.setpoints.ph.initial if ph_target is None else ph_target
-    try:
-        q = plant.flow_for_ph(target, k, flows, vspec.max_flow_ml_s)
-    except ValueError as exc:
-        raise UserError(f"setpoints.ph: {exc}") from None
-    flows[k] = q
-    cmd = position_for_opening(q / vspec.max_flow_ml_s, vspec)
-    opening, outlet_cmd = 1.0, 100.0
-    if spec.setpoints.level_cm is not None and not plant.tank.overflow:
-        outlet = plant.tank.outlet
-        level = spec.setpoints.level_cm.initial
-        opening = sum(flows) / outlet.flow(level, 1.0)
-        if not 0.0 < opening <= 1.0:
-            raise UserError(f"setpoints.level_cm: level {level} cm needs an outlet opening of "
-                            f"{100 * opening:.0f} % of full flow, outside 0..100 %")
-        outlet_cmd = position_for_opening(opening, spec.valves.outlet)
-    return OperatingPoint(cmd, outlet_cmd, opening, flows)
-
-
-def check_reachable(spec: ScenarioSpec, plant: CstrPlant) -> None:
-    """Every pH setpoint must be reachable by the healthy valve within the stated margin."""
-    margin = spec.min_actuator_margin_pct
-    for value in profile(spec.setpoints.ph).values():
-        op = operating_point(spec, plant, value)
-        if not margin <= op.valve_command_pct <= 100.0 - margin:
-            raise UserError(f"setpoints.ph: pH {value} needs the valve at {op.valve_command_pct:.1f} %, "
-                            f"outside the reachable range {margin:.0f}..{100 - margin:.0f} %")
+    rest = plant_start(spec, plant, ph_target)
+    level_controlled = spec.setpoints.level_cm is not None and not plant.tank.overflow
+    cmd, outlet_cmd = start_commands(spec, rest, level_controlled)
+    return OperatingPoint(cmd, outlet_cmd, rest.outlet_opening, rest.flows_ml_s)
 
 
 @dataclass
@@ -176,109 +73,25 @@ class LoopParts:
         return int(math.floor(self.spec.duration_s / self.spec.sample_time_s + 1e-9)) + 1
 
 
-def _faults(spec: ScenarioSpec, site: str, max_flow: float | None) -> list:
-    out = []
-    for i, f in enumerate(spec.faults):
-        f_site = f.where
-        if f.type in vblocks.FLOW_BLOCKS and f_site == "valve":
-            f_site = "valve_flow"
-        if f_site == site:
-            block = _block(f.type, f.params, f"faults.{i}", spec.sample_time_s, max_flow)
-            out.append(Injected(block, f.onset_s, f.ramp_s))
-    return out
-
-
-def _valve(vspec: ValveSpec, spec: ScenarioSpec, site: str) -> Valve:
-    max_flow = vspec.max_flow_ml_s or 1.0
-    return Valve(max_flow, vspec.characteristic, vspec.rangeability,
-                 Chain(_faults(spec, site, max_flow)), Chain(_faults(spec, site + "_flow", max_flow)))
-
-
 def build_parts(spec: ScenarioSpec) -> LoopParts:
-    """Plant, valves and controllers for a scenario, at its initial steady state."""
+    """Plant, valves and controllers for a scenario, at its initial steady state (each core builds its part)."""
     load_plugins(spec.plugins)
     model = load_plant_model(spec.plant)
     plant = build_plant(model)
-    check_reachable(spec, plant)
+    check_reachable(spec, lambda ph: plant_start(spec, plant, ph))
     start = operating_point(spec, plant)
-    plant.set_steady_state(start.flows_ml_s, start.outlet_opening)
-    dt = spec.sample_time_s
-    # independent noise streams per sensor, derived from the scenario seed
-    process = PlantProcess(
-        plant,
-        sensor_chain(spec.sensors.ph, dt, spec.seed * 2 + 0, "ph", _faults(spec, "ph_sensor", None)),
-        sensor_chain(spec.sensors.level, dt, spec.seed * 2 + 1, "level", _faults(spec, "level_sensor", None)),
-        {name: profile(p) for name, p in spec.feeds.items()},
-        dt,
-        feed_lines(model, dt),
-    )
-    if process.feed_lines:  # at rest the vessel receives what the lines deliver
-        plant.set_steady_state(process.steady_delivery(start.flows_ml_s), start.outlet_opening)
-    process.reset_sensors()
-    process.reset_lines(start.flows_ml_s)
-    valve = _valve(spec.valves.ph, spec, "valve")
-    valve.reset(start.valve_command_pct)
-    outlet_valve = None
-    if spec.valves.outlet is not None:
-        outlet_valve = _valve(spec.valves.outlet, spec, "outlet_valve")
-        outlet_valve.reset(start.outlet_command_pct)
-
-    def pi(p) -> PIController:
-        return PIController(p.kp, p.ti_s, dt, p.u_min, p.u_max, p.action, p.antiwindup, p.tt_s, p.setpoint_weight)
-
-    c = spec.controllers
-    bank = ControllerBank(pi(c.ph), profile(spec.setpoints.ph),
-                          pi(c.level) if c.level else None,
-                          profile(spec.setpoints.level_cm) if spec.setpoints.level_cm else None,
-                          fixed_level_output_pct=start.outlet_command_pct)
-    bank.reset(start.valve_command_pct, plant.ph, start.outlet_command_pct, plant.level_cm)
+    process = build_process(spec, plant, model, start.flows_ml_s, start.outlet_opening)
+    valve, outlet_valve = build_valves(spec, start.valve_command_pct, start.outlet_command_pct)
+    bank = build_controllers(spec, start.valve_command_pct, start.outlet_command_pct, plant.ph, plant.level_cm)
     return LoopParts(spec, process, valve, outlet_valve, bank, start)
 
 
 # ---- running ----------------------------------------------------------------------
 def signal_names(parts: LoopParts) -> list[str]:
-    from .run import SIGNALS
-
     names = [s.name for s in SIGNALS]
     i = names.index("outlet_valve_position_pct")
     feeds = [f"{f.name}_flow_ml_s" for f in parts.process.plant.feeds]
     return names[:i] + feeds + names[i:]
-
-
-@dataclass(slots=True)
-class ValveStep:
-    """The valves' answer to one sample's controller outputs."""
-
-    valve: ValveOutput  # the pH loop's valve
-    outlet_position_pct: float  # outlet stem position (the level output itself when there is no outlet valve)
-    outlet_opening: float  # fraction of full outlet flow
-    outlet: ValveOutput | None  # the outlet valve's full output, if there is one
-
-
-def step_valves(valve: Valve, outlet_valve: Valve | None, fixed_outlet_opening: float, t_s: float,
-                ph_command_pct: float, level_command_pct: float) -> ValveStep:
-    """Valve side of a tick: both valves move for the commands of t_s (the valve node calls this too)."""
-    v = valve.step(ph_command_pct, t_s)
-    if outlet_valve is None:
-        return ValveStep(v, level_command_pct, fixed_outlet_opening, None)
-    o = outlet_valve.step(level_command_pct, t_s)
-    return ValveStep(v, o.position_pct, o.opening, o)
-
-
-def advance_plant(process: PlantProcess, valve_feed: str, t_s: float, valve_flow_ml_s: float,
-                  outlet_opening: float) -> tuple[list[float], float]:
-    """Plant side of a tick: feed flows and outlet flow of t_s, then integrate to t_s + dt.
-
-    Returns (commanded feed flows in plant feed order, outlet flow), both mL/s,
-    as they were during the sample: the feeds' line blocks (dead time, pump
-    curve) lie between the commanded flow and the vessel, and a run records
-    the commanded flow, as a pump's historian does. The plant node calls this too.
-    """
-    flows = process.feed_flows(t_s, {valve_feed: valve_flow_ml_s})
-    delivered = process.deliver(flows, t_s)
-    outlet_flow = process.plant.outlet_flow(delivered, outlet_opening)
-    process.plant.step(delivered, outlet_opening, process.dt_s)
-    return flows, outlet_flow
 
 
 def tick(parts: LoopParts, k: int) -> dict[str, float]:

@@ -13,65 +13,15 @@ from __future__ import annotations
 
 import json
 import math
-from operator import itemgetter
 from dataclasses import dataclass, field
+from operator import itemgetter
 from pathlib import Path
 from typing import Iterable, Mapping
 
 import numpy as np
 
-from .errors import UserError
-
-
-@dataclass(frozen=True)
-class Signal:
-    name: str
-    unit: str
-    description: str
-
-
-#: Signals of a closed-loop run, in file column order. Feed flows are added
-#: per feed of the plant model as ``<feed>_flow_ml_s``.
-SIGNALS: tuple[Signal, ...] = (
-    Signal("time_s", "s", "simulated time of the sample"),
-    Signal("ph_setpoint", "pH", "pH setpoint"),
-    Signal("level_setpoint_cm", "cm", "level setpoint"),
-    Signal("ph_controller_output_pct", "%", "pH controller output (the valve command)"),
-    Signal("level_controller_output_pct", "%", "level controller output (outlet valve command)"),
-    Signal("valve_command_pct", "%", "command received by the pH loop's valve"),
-    Signal("valve_position_pct", "%", "stem position of the pH loop's valve"),
-    Signal("outlet_valve_position_pct", "%", "stem position of the outlet valve"),
-    Signal("outlet_flow_ml_s", "mL/s", "outlet flow"),
-    Signal("ph_true", "pH", "true pH in the tank"),
-    Signal("ph_measured", "pH", "pH probe reading"),
-    Signal("level_true_cm", "cm", "true liquid level"),
-    Signal("level_measured_cm", "cm", "level sensor reading"),
-    Signal("fault_severity", "1", "injected fault's severity, 0 = healthy, 1 = full"),
-)
-
-_CATALOGUE = {s.name: s for s in SIGNALS}
-
-
-def unit_of(name: str) -> str:
-    """Unit of a signal from the catalogue, else from its name's suffix."""
-    if name in _CATALOGUE:
-        return _CATALOGUE[name].unit
-    for suffix, unit in (("_ml_s", "mL/s"), ("_pct", "%"), ("_cm", "cm"), ("_s", "s"), ("_ml", "mL")):
-        if name.endswith(suffix):
-            return unit
-    if name.startswith("ph"):
-        return "pH"
-    return "1"
-
-
-def label(name: str) -> str:
-    """Axis label with unit, e.g. 'valve position (%)'."""
-    base = name
-    for suffix in ("_ml_s", "_pct", "_cm", "_s"):
-        if base.endswith(suffix):
-            base = base[: -len(suffix)]
-            break
-    return f"{base.replace('_', ' ')} ({unit_of(name)})"
+from phfdi_base.errors import UserError
+from phfdi_base.signals import SIGNALS, Signal, label, unit_of  # noqa: F401  (re-exported: a run's signals)
 
 
 @dataclass
@@ -159,37 +109,18 @@ class Run:
 
     @classmethod
     def load(cls, path: str | Path) -> "Run":
+        """A run file (.csv or .parquet) read by :func:`phfdi.records.read_record` under the run policy.
+
+        Repairs (duplicate rows, repeated stamps, cells that are not numbers: NaN) are listed in
+        ``metadata["notes"]``; what cannot be repaired is a one-line :class:`UserError`.
+        """
         path = Path(path)
-        if not path.exists():
-            raise UserError(f"no such file: {path}")
-        suffix = path.suffix.lower()
-        if suffix in (".parquet", ".pq"):
-            return cls.from_parquet(path)
-        if suffix == ".csv":
-            return cls.from_csv(path)
-        raise UserError(f"cannot read a run from {path}: expected .csv or .parquet")
+        if path.suffix.lower() not in (".csv", ".parquet", ".pq"):
+            raise UserError(f"cannot read a run from {path}: expected .csv or .parquet")
+        from .records import read_record
 
-    @classmethod
-    def from_parquet(cls, path: str | Path) -> "Run":
-        import pyarrow.parquet as pq
+        return read_record(path, policy="run").to_run()
 
-        table = pq.read_table(path)
-        meta = table.schema.metadata or {}
-        metadata = json.loads(meta.get(b"phfdi_run", b"{}"))
-        return cls({n: table.column(n).to_numpy().astype(float) for n in table.column_names}, metadata)
-
-    @classmethod
-    def from_csv(cls, path: str | Path) -> "Run":
-        path = Path(path)
-        with open(path, encoding="utf-8") as fh:
-            header = fh.readline().strip().split(",")
-        try:
-            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-        except ValueError as exc:
-            raise UserError(f"{path}: not a numeric run CSV ({exc})") from None
-        if data.shape[1] != len(header):
-            raise UserError(f"{path}: header has {len(header)} columns, rows have {data.shape[1]}")
-        return cls({n: data[:, i].copy() for i, n in enumerate(header)}, {"source": str(path)})
 
 
 class RunRecorder:

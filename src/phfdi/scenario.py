@@ -1,263 +1,64 @@
-"""Scenario and plant-model files: YAML validated against a strict schema.
+"""Scenario and plant-model files: finding, merging and validating them.
 
 A *plant model* (``ph_plant_sim/presets/<name>.yaml``) is the vessel, its
 feeds and their chemistry. A *scenario* (``phfdi/scenarios/<name>.yaml``) is
-a whole experiment on the loop: which plant, valves, sensors, controller
-tuning, setpoint profile, faults, duration, noise and seed. A scenario may
-``extends:`` another and override any key. Faults can also come from the
-fault library (``phfdi/scenarios/faults.yaml``) by name.
+a whole experiment on the loop. A scenario may ``extends:`` another and
+override any key. Faults can also come from the fault library
+(``phfdi/scenarios/faults.yaml``) by name. The schema itself is
+:mod:`phfdi_base.spec` (re-exported here for the application's convenience).
 
-Every error names the key and the problem (:class:`phfdi.errors.UserError`).
+Every error names the key and the problem (:class:`phfdi_base.errors.UserError`).
 """
 
 from __future__ import annotations
 
-import copy
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
 
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
-
-from .errors import UserError
-from .yamlfile import read_mapping
-
-NonNeg = Field(ge=0.0, allow_inf_nan=False)
-
-
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-# ---- plant model ----------------------------------------------------------------
-class ComponentSpec(Strict):
-    name: str
-    charge: int
-    pka: list[float] = []
-
-
-class ChemistrySpec(Strict):
-    pkw: float = Field(14.0, gt=10.0, lt=18.0)
-    components: list[ComponentSpec] = []
-    compounds: dict[str, dict[str, float]] = {}
-
-
-class BlockSpec(Strict):
-    type: str
-    params: dict[str, Any] = {}
-
-
-class FeedSpec(Strict):
-    recipe: dict[str, float] = Field(description="compound -> concentration (mol/L)")
-    flow_ml_s: float = Field(0.0, ge=0.0, description="nominal flow when no valve drives the feed (mL/s)")
-    line: list[BlockSpec] = Field([], description=(
-        "blocks between the commanded flow and the vessel (ph_plant_sim.feedlines: line_delay, pump_curve, "
-        "pump_lag), stepped per sample on the flow in mL/s"))
-
-    @field_validator("recipe")
-    @classmethod
-    def _nonnegative(cls, v: dict[str, float]) -> dict[str, float]:
-        for k, c in v.items():
-            if not c >= 0.0:
-                raise ValueError(f"concentration of {k} must be non-negative, got {c}")
-        return v
+from ph_plant_sim.build import PLANT_DIR, load_plant_model  # noqa: F401  (the plant presets, for the CLI)
+from phfdi_base.errors import UserError
+from phfdi_base.spec import (  # noqa: F401
+    BlockSpec,
+    ChangeSpec,
+    ChemistrySpec,
+    ComponentSpec,
+    ControllersSpec,
+    FaultSite,
+    FaultSpec,
+    FeedSpec,
+    MixingSpec,
+    OutletSpec,
+    PISpec,
+    PlantModelSpec,
+    ProfileSpec,
+    ScenarioSpec,
+    SensorSpec,
+    SensorsSpec,
+    SetpointsSpec,
+    TankSpec,
+    ValveSpec,
+    ValvesSpec,
+    apply_override,
+    deep_merge,
+    format_validation,
+    load_plugins,
+    parse_override,
+    resolve_scenario,
+    validate_scenario,
+)
+from phfdi_base.yamlfile import list_presets, read_mapping, resolve_preset  # noqa: F401  (list_presets: CLI)
 
 
-class OutletSpec(Strict):
-    cv: float = Field(gt=0.0, description="drain coefficient, mL/s per cm^n")
-    z_cm: float = Field(0.0, description="outlet head offset (cm)")
-    n: float = Field(0.5, gt=0.0, le=1.0)
-
-
-class TankSpec(Strict):
-    area_cm2: float = Field(gt=0.0)
-    outlet: OutletSpec | None = None
-    overflow: bool = False
-    volume_ml: float | None = Field(None, gt=0.0)
-
-    @model_validator(mode="after")
-    def _consistent(self) -> "TankSpec":
-        if self.overflow and self.volume_ml is None:
-            raise ValueError("an overflow vessel needs volume_ml")
-        if not self.overflow and self.outlet is None:
-            raise ValueError("a vessel without overflow needs an outlet")
-        return self
-
-
-class MixingSpec(Strict):
-    """A zone around the inlets and the probe exchanging with the bulk (ph_plant_sim.mixing)."""
-
-    zone_volume_ml: float = Field(gt=0.0)
-    exchange_ml_s: float = Field(ge=0.0, allow_inf_nan=False)
-    feeds: list[str] = Field(description="feeds dosed into the zone; the others enter the bulk")
-
-
-class PlantModelSpec(Strict):
-    name: str
-    description: str = ""
-    chemistry: ChemistrySpec = ChemistrySpec()
-    feeds: dict[str, FeedSpec]
-    tank: TankSpec
-    mixing: MixingSpec | None = None
-
-    @model_validator(mode="after")
-    def _zone_feeds(self) -> "PlantModelSpec":
-        for f in (self.mixing.feeds if self.mixing else []):
-            if f not in self.feeds:
-                raise ValueError(f"mixing.feeds: no feed {f!r} (feeds: {', '.join(self.feeds)})")
-        return self
-
-
-# ---- loop ------------------------------------------------------------------------
-class ChangeSpec(Strict):
-    at_s: float = Field(ge=0.0)
-    value: float
-    ramp_s: float = Field(0.0, ge=0.0)
-
-
-class ProfileSpec(Strict):
-    initial: float
-    changes: list[ChangeSpec] = []
-
-
-class PISpec(Strict):
-    kp: float = Field(gt=0.0, description="% per PV unit")
-    ti_s: float = Field(gt=0.0)
-    action: Literal["direct", "reverse"] = "reverse"
-    antiwindup: Literal["back_calculation", "conditional", "none"] = "back_calculation"
-    tt_s: float | None = Field(None, gt=0.0)
-    u_min: float = 0.0
-    u_max: float = 100.0
-    setpoint_weight: float = Field(1.0, ge=0.0, le=1.0)
-
-
-class ValveSpec(Strict):
-    feed: str | None = Field(None, description="feed the valve manipulates; none for the outlet valve")
-    max_flow_ml_s: float | None = Field(None, gt=0.0)
-    characteristic: Literal["linear", "equal_percentage"] = "linear"
-    rangeability: float = Field(50.0, gt=1.0)
-
-
-class SensorSpec(Strict):
-    delay_s: float = Field(0.0, ge=0.0)
-    lag_s: float = Field(0.0, ge=0.0)
-    noise_std: float = Field(0.0, ge=0.0)
-    extra: list[BlockSpec] = Field([], description="further sensor effects (blocks), after delay and lag")
-
-
-FaultSite = Literal["valve", "valve_flow", "outlet_valve", "ph_sensor", "level_sensor"]
-
-
-class FaultSpec(Strict):
-    type: str
-    where: FaultSite = "valve"
-    params: dict[str, Any] = {}
-    onset_s: float = Field(0.0, ge=0.0)
-    ramp_s: float = Field(0.0, ge=0.0)
-
-
-class SetpointsSpec(Strict):
-    ph: ProfileSpec
-    level_cm: ProfileSpec | None = None
-
-
-class ControllersSpec(Strict):
-    ph: PISpec
-    level: PISpec | None = None
-
-
-class ValvesSpec(Strict):
-    ph: ValveSpec = Field(description="the valve the pH controller drives (the actuator under study)")
-    outlet: ValveSpec | None = Field(None, description="outlet valve the level controller drives")
-
-
-class SensorsSpec(Strict):
-    ph: SensorSpec = SensorSpec()
-    level: SensorSpec = SensorSpec()
-
-
-class ScenarioSpec(Strict):
-    name: str
-    description: str = ""
-    plant: str | PlantModelSpec
-    sample_time_s: float = Field(1.0, gt=0.0)
-    duration_s: float = Field(gt=0.0)
-    seed: int = Field(0, ge=0)
-    setpoints: SetpointsSpec
-    controllers: ControllersSpec
-    valves: ValvesSpec
-    sensors: SensorsSpec = SensorsSpec()
-    feeds: dict[str, ProfileSpec] = Field({}, description="flow schedules (mL/s) of feeds no valve drives")
-    faults: list[FaultSpec] = []
-    plugins: list[str] = Field([], description=(
-        "modules or .py files (relative to the scenario file) that register user blocks before the loop is built"))
-    min_actuator_margin_pct: float = Field(0.0, ge=0.0, lt=50.0, description=(
-        "each pH setpoint must be reachable with the valve between margin and 100 - margin %"))
-
-    @model_validator(mode="after")
-    def _consistent(self) -> "ScenarioSpec":
-        if (self.controllers.level is None) != (self.setpoints.level_cm is None):
-            raise ValueError("setpoints.level_cm and controllers.level go together")
-        if self.controllers.level is not None and self.valves.outlet is None:
-            raise ValueError("controllers.level needs valves.outlet")
-        if self.valves.ph.feed is None or self.valves.ph.max_flow_ml_s is None:
-            raise ValueError("valves.ph needs feed and max_flow_ml_s")
-        for i, f in enumerate(self.faults):
-            if f.onset_s >= self.duration_s:
-                raise ValueError(f"faults.{i}.onset_s = {f.onset_s} s is not before the end of the run "
-                                 f"(duration_s = {self.duration_s} s)")
-        for key, prof in (("setpoints.ph", self.setpoints.ph), ("setpoints.level_cm", self.setpoints.level_cm)):
-            for j, c in enumerate(prof.changes if prof else []):
-                if c.at_s >= self.duration_s:
-                    raise ValueError(f"{key}.changes.{j}.at_s = {c.at_s} s is not before the end of the run")
-        return self
-
-
-# ---- loading ---------------------------------------------------------------------
 def _package_dir(package: str, sub: str = "") -> Path:
     return Path(str(resources.files(package))) / sub
 
 
 SCENARIO_DIR = _package_dir("phfdi", "scenarios")
-PLANT_DIR = _package_dir("ph_plant_sim", "presets")
-
-
-def list_presets(directory: Path) -> dict[str, str]:
-    """name -> description of the YAML presets in a directory."""
-    out = {}
-    for p in sorted(directory.glob("*.yaml")):
-        if p.stem == "faults":
-            continue
-        out[p.stem] = str(read_mapping(p).get("description", "")).strip().splitlines()[0:1]
-        out[p.stem] = out[p.stem][0] if out[p.stem] else ""
-    return out
 
 
 def fault_library() -> dict[str, dict]:
     """Named fault presets (the paper's severities), from faults.yaml."""
     return read_mapping(SCENARIO_DIR / "faults.yaml")["faults"]
-
-
-def deep_merge(base: dict, over: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = deep_merge(out[k], v)
-        else:
-            out[k] = copy.deepcopy(v)
-    return out
-
-
-def _resolve(name_or_path: str, directory: Path, kind: str) -> Path:
-    p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml"):
-        return p
-    candidate = directory / f"{name_or_path}.yaml"
-    if not candidate.exists():
-        known = ", ".join(list_presets(directory))
-        raise UserError(f"unknown {kind} {name_or_path!r}; presets: {known} (or give a .yaml path)")
-    return candidate
 
 
 def _absolutise(data: dict, base: Path) -> None:
@@ -275,33 +76,9 @@ def _absolutise(data: dict, base: Path) -> None:
         data["plugins"] = [fix(p) for p in data["plugins"]]
 
 
-def load_plugins(plugins: list[str]) -> None:
-    """Import user modules (dotted names or .py files) so their blocks register."""
-    import importlib
-    import importlib.util
-    import sys
-
-    for ref in plugins:
-        try:
-            if ref.endswith(".py"):
-                name = f"phfdi_plugin_{Path(ref).stem}"
-                if name in sys.modules:
-                    continue
-                spec = importlib.util.spec_from_file_location(name, ref)
-                if spec is None or not Path(ref).exists():
-                    raise FileNotFoundError(ref)
-                module = importlib.util.module_from_spec(spec)
-                sys.modules[name] = module
-                spec.loader.exec_module(module)
-            else:
-                importlib.import_module(ref)
-        except Exception as exc:  # a user's plugin: report it as bad input, whatever it raised
-            raise UserError(f"plugins: cannot load {ref!r}: {type(exc).__name__}: {exc}") from None
-
-
 def raw_scenario(name_or_path: str, _seen: tuple = ()) -> dict:
     """Scenario mapping with ``extends`` resolved (not yet validated)."""
-    path = _resolve(name_or_path, SCENARIO_DIR, "scenario")
+    path = resolve_preset(name_or_path, SCENARIO_DIR, "scenario")
     data = read_mapping(path)
     _absolutise(data, path.parent)
     parent = data.pop("extends", None)
@@ -313,60 +90,6 @@ def raw_scenario(name_or_path: str, _seen: tuple = ()) -> dict:
     return data
 
 
-def _format_validation(exc: ValidationError, source: str) -> str:
-    err = exc.errors()[0]
-    loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
-    msg = err["msg"]
-    if err["type"] == "extra_forbidden":
-        msg = "unknown key"
-    elif msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
-    more = f" (and {len(exc.errors()) - 1} more problem(s))" if len(exc.errors()) > 1 else ""
-    return f"{source}: {loc}: {msg}{more}"
-
-
-def validate_scenario(data: dict, source: str = "scenario") -> ScenarioSpec:
-    try:
-        return ScenarioSpec.model_validate(data)
-    except ValidationError as exc:
-        raise UserError(_format_validation(exc, source)) from None
-
-
-def load_plant_model(plant: str | PlantModelSpec) -> PlantModelSpec:
-    if isinstance(plant, PlantModelSpec):
-        return plant
-    path = _resolve(plant, PLANT_DIR, "plant model")
-    try:
-        return PlantModelSpec.model_validate(read_mapping(path))
-    except ValidationError as exc:
-        raise UserError(_format_validation(exc, str(path))) from None
-
-
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """'a.b.c=value' -> (['a','b','c'], yaml-parsed value)."""
-    if "=" not in text:
-        raise UserError(f"--set expects key=value, got {text!r}")
-    key, value = text.split("=", 1)
-    try:
-        parsed = yaml.safe_load(value)
-    except yaml.YAMLError:
-        parsed = value
-    return key.strip().split("."), parsed
-
-
-def apply_override(data: dict, keys: list[str], value: Any) -> None:
-    node = data
-    for k in keys[:-1]:
-        if isinstance(node, list):
-            node = node[int(k)]
-        else:
-            node = node.setdefault(k, {})
-    if isinstance(node, list):
-        node[int(keys[-1])] = value
-    else:
-        node[keys[-1]] = value
-
-
 def load_scenario(name_or_path: str = "paper", fault: str | None = None,
                   overrides: list[str] = (), onset_s: float | None = None) -> ScenarioSpec:
     """Load, apply a named fault and ``key=value`` overrides, validate.
@@ -374,23 +97,6 @@ def load_scenario(name_or_path: str = "paper", fault: str | None = None,
     ``fault`` replaces the scenario's faults with the library fault of that
     name ("none" or "healthy" removes them).
     """
-    data = raw_scenario(name_or_path)
-    if fault is not None:
-        if fault in ("none", "healthy"):
-            data["faults"] = []
-        else:
-            lib = fault_library()
-            if fault not in lib:
-                raise UserError(f"unknown fault {fault!r}; known: healthy, {', '.join(lib)}")
-            entry = dict(lib[fault])
-            entry.pop("description", None)
-            data["faults"] = [entry]
-    if onset_s is not None:
-        for f in data.get("faults", []):
-            f["onset_s"] = onset_s
-    for text in overrides:
-        keys, value = parse_override(text)
-        apply_override(data, keys, value)
-    if fault is not None and fault not in ("none", "healthy"):
-        data["name"] = f"{data.get('name', 'scenario')}-{fault}"
-    return validate_scenario(data, source=f"scenario {name_or_path}")
+    library = fault_library() if fault not in (None, "none", "healthy") else {}
+    return resolve_scenario(raw_scenario(name_or_path), fault, library, overrides, onset_s,
+                            source=f"scenario {name_or_path}")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from phfdi.profiles import Profile
+from phfdi_base.profiles import Profile
 
 from .pi import PIController
 

@@ -1,6 +1,6 @@
-"""Setpoint profiles (steps and ramps): the shared piecewise signal of :mod:`phfdi.profiles`."""
+"""Setpoint profiles (steps and ramps): the shared piecewise signal of :mod:`phfdi_base.profiles`."""
 
-from phfdi.profiles import Change as SetpointChange
-from phfdi.profiles import Profile as SetpointProfile
+from phfdi_base.profiles import Change as SetpointChange
+from phfdi_base.profiles import Profile as SetpointProfile
 
 __all__ = ["SetpointChange", "SetpointProfile"]

@@ -1,4 +1,4 @@
-"""Control valve nonlinearities as blocks (see :mod:`phfdi.blocks`).
+"""Control valve nonlinearities as blocks (see :mod:`phfdi_base.blocks`).
 
 Position blocks take the valve command and return the stem position, both in
 % of span; they are stepped once per sample. Terms follow ANSI/ISA-S51.1 as
@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from phfdi.blocks import register_block
+from phfdi_base.blocks import register_block
 
 
 def _positive(name: str, value: float, allow_zero: bool = True) -> None:
@@ -238,6 +238,48 @@ class Stiction:
                 self._stuck = False
                 self._y = x - direction * 0.5 * (big_s - big_j)
         self._u_prev = x
+        return self._y
+
+
+@register_block("stiction_he")
+@dataclass
+class HeStiction:
+    """Valve stiction, the two-parameter model of He, Wang, Pottmann & Qin (2007), Ind. Eng. Chem.
+    Res. 46, 4549-4560 (Section 2).
+
+    The command's moves accumulate a residual force u_r; while |u_r| <= fs (static friction band,
+    % of span) the stem stays. When it exceeds fs the stem slips by u_r - sign(u_r) fd and u_r
+    is left at sign(u_r) fd (kinetic friction band fd <= fs). Unlike Kano's model the stem sticks
+    again after every slip: on a slow ramp it moves in jumps of about fs - fd, lagging the command
+    by fd to fs, and a reversal must first work through fs + fd. fd = 0: each slip catches up fully.
+    """
+
+    fs_pct: float
+    fd_pct: float
+    severity: float = 1.0
+    _y: float = field(default=0.0, repr=False)
+    _u_prev: float = field(default=0.0, repr=False)
+    _ur: float = field(default=0.0, repr=False)
+
+    def __post_init__(self) -> None:
+        _positive("fs_pct", self.fs_pct)
+        _positive("fd_pct", self.fd_pct)
+        if self.fd_pct > self.fs_pct:
+            raise ValueError(f"fd_pct ({self.fd_pct}) must not exceed fs_pct ({self.fs_pct})")
+
+    def reset(self, x0: float) -> None:
+        self._y = self._u_prev = x0
+        self._ur = 0.0
+
+    def step(self, x: float, t_s: float) -> float:
+        fs = self.fs_pct * self.severity
+        fd = self.fd_pct * self.severity
+        self._ur += x - self._u_prev
+        self._u_prev = x
+        if abs(self._ur) > fs:
+            sign = 1.0 if self._ur > 0 else -1.0
+            self._y += self._ur - sign * fd
+            self._ur = sign * fd
         return self._y
 
 

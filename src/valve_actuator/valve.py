@@ -16,7 +16,7 @@ from typing import Literal
 
 import numpy as np
 
-from phfdi.blocks import Chain, Injected
+from phfdi_base.blocks import Chain, Injected
 
 Characteristic = Literal["linear", "equal_percentage"]
 

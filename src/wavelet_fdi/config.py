@@ -11,11 +11,12 @@ the package.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .filterbank import wavelet_filters
 from .statistics import energy_reference
@@ -123,6 +124,11 @@ class DetectorSettings:
         return 0.5 * self.mean_shift_sigma * gain
 
 
+def _positive(x: object) -> bool:
+    """A finite number above 0 (not a bool)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x > 0
+
+
 @dataclass
 class Calibration:
     """Measured on healthy runs: noise levels and thresholds for a false-alarm target."""
@@ -167,6 +173,11 @@ class Calibration:
         if "raw_band" in self.design and bool(self.design["raw_band"]) != settings.raw_band:
             raise UserError(f"calibration was made with raw_band = {bool(self.design['raw_band'])}, detector "
                             f"uses {settings.raw_band}: run phfdi calibrate with the same settings")
+        for ch in settings.channels:
+            absent = [b for b in ("raw", *settings.bands()) if b not in self.sigma.get(ch, {})]
+            if absent:
+                raise UserError(f"calibration has no noise level for the {ch} channel's {absent[0]} band: run "
+                                f"phfdi calibrate with the same settings")
         for key in ("mean_shift_sigma", "variance_ratio", "arl0_samples"):
             if key in self.design and abs(self.design[key] - getattr(settings, key)) > 1e-12 * abs(self.design[key]):
                 raise UserError(f"calibration was made for {key} = {self.design[key]:g}, detector uses "
@@ -189,23 +200,54 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":
-        import yaml
+        from phfdi_base.yamlfile import read_mapping
 
         path = Path(path)
-        try:
-            text = path.read_text()
-        except FileNotFoundError:
-            raise UserError(f"no such calibration file: {path}") from None
-        try:
-            data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
-        except (json.JSONDecodeError, yaml.YAMLError) as exc:
-            raise UserError(f"{path}: not a calibration file ({exc})") from None
+        if path.suffix.lower() == ".json":
+            try:
+                data = json.loads(path.read_text(encoding="utf-8"))
+            except (FileNotFoundError, IsADirectoryError):
+                raise UserError(f"no such calibration file: {path}") from None
+            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+                raise UserError(f"{path}: not a calibration file ({type(exc).__name__})") from None
+        else:
+            data = read_mapping(path, "calibration file",
+                                "a mapping: not a calibration file written by phfdi calibrate")
         if not isinstance(data, dict):
             raise UserError(f"{path}: not a calibration file (expected a mapping)")
         try:
-            return cls(**data)
+            cal = cls(**data)
         except TypeError as exc:
             raise UserError(f"{path}: not a calibration file ({exc})") from None
+        cal._validate(path)
+        return cal
+
+    def _validate(self, path: Path) -> None:
+        """Types and ranges of what the detector reads: one line naming the first bad key."""
+        def bad(key: str, what: str) -> UserError:
+            return UserError(f"{path}: not a calibration file ({key}: expected {what})")
+
+        for key in ("scenario", "wavelet"):
+            if not isinstance(getattr(self, key), str):
+                raise bad(key, "a name")
+        if not isinstance(self.level, int) or isinstance(self.level, bool) or not 1 <= self.level <= 12:
+            raise bad("level", "an integer 1..12")
+        for key in ("sample_time_s", "arl0_samples"):
+            if not _positive(getattr(self, key)):
+                raise bad(key, "a positive number")
+        for key, table in (("sigma", self.sigma), ("thresholds", self.thresholds), ("design", self.design),
+                           ("tail_fits", self.tail_fits), ("peers", self.peers)):
+            if not isinstance(table, dict):
+                raise bad(key, "a mapping")
+        for ch, bands in self.sigma.items():
+            if not isinstance(bands, dict) or not all(_positive(v) for v in bands.values()):
+                raise bad(f"sigma.{ch}", "a mapping band: positive number")
+        for name, h in self.thresholds.items():
+            if not _positive(h):
+                raise bad(f"thresholds.{name}", "a positive number")
+        for key in ("mean_shift_sigma", "variance_ratio", "arl0_samples"):
+            if key in self.design and not _positive(self.design[key]):
+                raise bad(f"design.{key}", "a positive number")
 
 
 def default_calibration_path(scenario: str, wavelet: str, level: int) -> Path:

@@ -33,7 +33,7 @@ from typing import Mapping
 
 import numpy as np
 
-from phfdi.scenario import ScenarioSpec
+from phfdi_base.spec import ScenarioSpec
 
 from .config import Calibration, DetectorSettings
 from .filterbank import CausalSwt

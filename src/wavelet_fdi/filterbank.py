@@ -55,7 +55,7 @@ def _fir(history: np.ndarray, x: np.ndarray, taps: np.ndarray, stride: int) -> n
 
 @dataclass
 class LevelOutputs:
-    """Coefficients of a chunk: details[j-1] is D_j (shape (J, N)), approx is A_J (N,)."""
+    """Coefficients of a chunk: details[j-1] is D_j (shape (J, N) or (J, N, m)), approx is A_J ((N,) or (N, m))."""
 
     details: np.ndarray
     approx: np.ndarray
@@ -64,14 +64,16 @@ class LevelOutputs:
 class CausalSwt:
     """Streaming level-J stationary wavelet transform of one signal."""
 
-    def __init__(self, wavelet: str = "sym4", level: int = 3) -> None:
+    def __init__(self, wavelet: str = "sym4", level: int = 3, channels: int | None = None) -> None:
+        """``channels``: None for one signal (inputs of shape (N,)), or m for m signals at once ((N, m))."""
         if not 1 <= int(level) <= 10:
             raise ValueError(f"wavelet level must be between 1 and 10, got {level}")
         self.wavelet = wavelet
         self.level = int(level)
         self.lo, self.hi = wavelet_filters(wavelet)
         self.taps = len(self.lo)
-        self._hist = [np.zeros((self.taps - 1) * 2 ** j) for j in range(self.level)]
+        tail = () if channels is None else (int(channels),)
+        self._hist = [np.zeros(((self.taps - 1) * 2 ** j,) + tail) for j in range(self.level)]
         self.samples_seen = 0
 
     @property
@@ -87,7 +89,7 @@ class CausalSwt:
     def process(self, x: np.ndarray) -> LevelOutputs:
         """Coefficients for the next samples ``x`` (any length, including 1)."""
         a = np.asarray(x, dtype=float)
-        details = np.empty((self.level, len(a)))
+        details = np.empty((self.level,) + a.shape)
         for j in range(self.level):
             stride = 2 ** j
             hist = self._hist[j]

@@ -1,7 +1,7 @@
 """Fault isolation: which fault explains the residual, and how big it is.
 
 A bank of hypotheses, each the healthy reference with one fault from the
-cores injected at the estimated onset (:class:`phfdi.blocks.Injected`):
+cores injected at the estimated onset (:class:`phfdi_base.blocks.Injected`):
 
 =============  ==================================================  =====================
 class          model (core block)                                  main parameter
@@ -42,8 +42,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from phfdi.blocks import Chain, Injected, make_block
-from phfdi.scenario import ScenarioSpec
+from phfdi_base.blocks import Chain, Injected, make_block
+from phfdi_base.spec import ScenarioSpec
 
 from .config import Calibration, DetectorSettings
 from .history import History
@@ -335,7 +335,7 @@ class FaultIsolator:
             ref = self.reference
             for i, c in enumerate(valve):
                 # before its onset a hypothesis is the healthy valve; from it, the block starts at rest
-                # on the last finite command (what phfdi.blocks.Injected does)
+                # on the last finite command (what phfdi_base.blocks.Injected does)
                 v = ref.new_valve(Chain([make_block(c.hyp.block, c.params(), dt_s=self.dt_s)]))
                 v.reset(_last_finite(w.command[:c.onset], bank.q0_command))
                 q[i, c.onset:] = ref.valve_flows(v, w.command[c.onset:], w.t[c.onset:])

@@ -33,6 +33,9 @@ from .statistics import CusumBank
 
 PEERS = ("cusum", "focus", "page_hinkley", "adwin")
 PEER_LABELS = {"cusum": "CUSUM", "focus": "FOCuS", "page_hinkley": "Page-Hinkley", "adwin": "ADWIN"}
+#: every detector the evaluation compares (ours first) and its label in tables and figures
+DETECTORS = ("wavelet", "wavelet_bands") + PEERS
+LABELS = {"wavelet": "wavelet (ours)", "wavelet_bands": "bands only", **PEER_LABELS}
 PH_ALPHA = 1.0
 ADWIN_DELTAS = tuple(float(d) for d in np.logspace(-6, math.log10(0.9), 12))
 

@@ -1,7 +1,7 @@
 """Healthy reference model: the core plant and a healthy valve driven by measured inputs.
 
 Analytical redundancy: the plant of the scenario (:class:`ph_plant_sim.plant.CstrPlant`,
-built by :func:`phfdi.loop.build_parts` with the faults removed) is driven by
+built by the plant and valve cores' factories with the faults removed) is driven by
 
 * the measured pH controller output through a *healthy* copy of the
   scenario's valve (:class:`valve_actuator.valve.Valve`, no fault blocks;
@@ -32,11 +32,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from phfdi.loop import build_parts
-from phfdi.scenario import ScenarioSpec
+from ph_plant_sim.build import build_plant, build_process, load_plant_model, plant_start
 from ph_plant_sim.plant import CstrPlant
+from ph_plant_sim.process import PlantProcess
+from phfdi_base.blocks import Chain
+from phfdi_base.spec import ScenarioSpec, load_plugins
+from valve_actuator.build import build_valves, check_reachable, start_commands
 from valve_actuator.valve import Valve
-
 
 RESTART_LEVEL_CM = 1.0
 
@@ -66,15 +68,38 @@ def healthy_spec(spec: ScenarioSpec) -> ScenarioSpec:
     return spec.model_copy(update={"faults": []})
 
 
+@dataclass
+class StartPoint:
+    """The loop's starting steady state (at the t=0 setpoints), as the in-process loop starts."""
+
+    valve_command_pct: float
+    outlet_command_pct: float
+    outlet_opening: float
+    flows_ml_s: list[float]
+
+
+def _healthy_parts(spec: ScenarioSpec) -> tuple[PlantProcess, Valve | None, StartPoint]:
+    """The plant (with its schedules) and the outlet valve of a scenario at its starting steady state, built by
+    the plant and valve cores as the in-process loop builds them (same checks, same start)."""
+    load_plugins(spec.plugins)
+    model = load_plant_model(spec.plant)
+    plant = build_plant(model)
+    check_reachable(spec, lambda ph: plant_start(spec, plant, ph))
+    rest = plant_start(spec, plant)
+    level_controlled = spec.setpoints.level_cm is not None and not plant.tank.overflow
+    cmd, outlet_cmd = start_commands(spec, rest, level_controlled)
+    process = build_process(spec, plant, model, rest.flows_ml_s, rest.outlet_opening)
+    _, outlet_valve = build_valves(spec, cmd, outlet_cmd)
+    return process, outlet_valve, StartPoint(cmd, outlet_cmd, rest.outlet_opening, rest.flows_ml_s)
+
+
 class HealthyReference:
     """The healthy loop's plant and valves, stepped on measured inputs."""
 
     def __init__(self, spec: ScenarioSpec) -> None:
         self.spec = healthy_spec(spec)
-        parts = build_parts(self.spec)
-        self.plant: CstrPlant = parts.process.plant
-        self.process = parts.process
-        self.start = parts.start
+        self.process, self.outlet_valve, self.start = _healthy_parts(self.spec)
+        self.plant: CstrPlant = self.process.plant
         self.dt_s = self.spec.sample_time_s
         vspec = self.spec.valves.ph
         self.valve_feed = vspec.feed
@@ -82,10 +107,9 @@ class HealthyReference:
         self.valve_index = self.feed_names.index(vspec.feed)
         self.valve = Valve(vspec.max_flow_ml_s, vspec.characteristic, vspec.rangeability)
         self.valve_spec = vspec
-        self.outlet_valve = parts.outlet_valve
         self.has_level = not self.plant.tank.overflow
-        self._last_cmd = parts.start.valve_command_pct
-        self._last_outlet_cmd = parts.start.outlet_command_pct
+        self._last_cmd = self.start.valve_command_pct
+        self._last_outlet_cmd = self.start.outlet_command_pct
         self._correction_index = self._strong_component()
         self.resets = 0
 
@@ -106,8 +130,6 @@ class HealthyReference:
 
     def new_valve(self, position_blocks=None) -> Valve:
         """A valve like the reference's, optionally with position blocks (isolation hypotheses)."""
-        from phfdi.blocks import Chain
-
         v = self.valve_spec
         return Valve(v.max_flow_ml_s, v.characteristic, v.rangeability, position_blocks or Chain())
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from phfdi.benchmarks import skab
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 HEADER = "datetime;" + ";".join(skab.SENSOR_COLUMNS) + ";anomaly;changepoint"
 

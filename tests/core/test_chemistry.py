@@ -10,9 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import brentq
 
-from ph_plant_sim.chemistry import COMPONENTS, Chemistry, ChargeBalance
-from phfdi.loop import build_plant
-from phfdi.scenario import load_plant_model
+from ph_plant_sim.build import build_plant, load_plant_model
+from ph_plant_sim.chemistry import COMPONENTS, ChargeBalance, Chemistry
 
 HS_FLOWS = [16.6, 0.55, 15.6]  # acid, buffer, base (mL/s)
 

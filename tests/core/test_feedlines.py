@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from phfdi.blocks import make_block
+from phfdi_base.blocks import make_block
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, nominal_raw
 from phfdi.loop import simulate, simulate_open_loop
 from phfdi.run import Run
-from phfdi.scenario import validate_scenario
+from phfdi_base.spec import validate_scenario
 import ph_plant_sim.feedlines  # noqa: F401
 
 
@@ -85,7 +85,7 @@ def test_a_feed_line_is_a_scenario_edit_the_loop_runs_and_the_diagnosis_simulate
 
 
 def test_a_bad_line_block_names_its_key():
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     raw = nominal_raw("paper", SHORT)
     raw["plant"]["feeds"]["acid"]["line"] = [{"type": "pump_curve", "params": {"gain": -2.0}}]

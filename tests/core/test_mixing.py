@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ph_plant_sim.build import build_plant, load_plant_model
 from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, nominal_raw
-from phfdi.loop import build_plant, simulate, simulate_open_loop
+from phfdi.loop import simulate, simulate_open_loop
 from phfdi.run import Run
-from phfdi.scenario import load_plant_model, validate_scenario
+from phfdi_base.spec import validate_scenario
 
 FEEDS = ["acid", "base"]
 CONC = np.array([[2e-3, 0.0], [0.0, 20e-3]])  # components: acid equivalents, base (mol/L)
@@ -72,13 +73,15 @@ def test_a_zoned_vessel_runs_in_the_loop_and_the_diagnosis_simulates_it_identica
 
 def test_mixing_zone_names_an_unknown_feed():
     import pytest
-    from phfdi.errors import UserError
+
+    from phfdi_base.errors import UserError
 
     raw = nominal_raw("paper", SHORT)
     raw["plant"]["mixing"] = {"zone_volume_ml": 150.0, "exchange_ml_s": 30.0, "feeds": ["lye"]}
     with pytest.raises(UserError):
         validate_scenario(raw)
     from pydantic import ValidationError
-    from phfdi.scenario import PlantModelSpec
+
+    from phfdi_base.spec import PlantModelSpec
     with pytest.raises(ValidationError, match="mixing.feeds: no feed 'lye'"):
         PlantModelSpec.model_validate(raw["plant"])

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from phfdi.loop import build_plant
-from phfdi.scenario import load_plant_model
+from ph_plant_sim.build import build_plant, load_plant_model
 
 
 def _flows_profile(n, seed=0):

@@ -9,9 +9,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from phfdi.blocks import Chain, Injected, make_block
-from valve_actuator.blocks import (Backlash, Blocking, CoulombViscousFriction, DeadZone, Leakage, Quantization,
-                                   Saturation, Stiction)
+from phfdi_base.blocks import Chain, Injected, make_block
+from valve_actuator.blocks import (
+    Backlash,
+    Blocking,
+    CoulombViscousFriction,
+    DeadZone,
+    Leakage,
+    Quantization,
+    Saturation,
+    Stiction,
+)
 from valve_actuator.valve import Valve, inherent_characteristic
 
 
@@ -210,3 +218,31 @@ def test_valve_holds_position_on_non_finite_command():
         assert held.position_pct == out.position_pct
     assert v.rejected_commands == 3
     assert v.step(36.0, 2.0).flow_ml_s == pytest.approx(14.4)
+
+
+def test_he_stiction_sticks_within_fs_slips_and_lags_by_fd():
+    from valve_actuator.blocks import HeStiction
+
+    b = make_block("stiction_he", {"fs_pct": 2.0, "fd_pct": 0.5})
+    assert isinstance(b, HeStiction)
+    b.reset(50.0)
+    ramp = 50.0 + 0.1 * np.arange(1, 60)
+    y = np.array([b.step(float(u), 0.0) for u in ramp])
+    # stuck until the command has moved by more than fs, then slips to u - fd
+    first = int(np.argmax(y > 50.0))
+    assert ramp[first] - 50.0 == pytest.approx(2.1, abs=1e-9)
+    assert y[first] == pytest.approx(ramp[first] - 0.5)
+    # on a ramp it sticks again after each slip: jumps of fs - fd, lagging by fd to fs
+    jumps = np.diff(y)[np.diff(y) > 0]
+    assert len(jumps) >= 3 and np.allclose(jumps, 1.6)
+    lag = ramp - y
+    assert np.all(lag[first:] >= 0.5 - 1e-9) and np.all(lag[first:] <= 2.0 + 1e-9)
+    # a reversal must work through fs + fd before the stem moves back
+    b.reset(50.0)
+    for u in (51.0, 52.1):
+        b.step(u, 0.0)  # slips at 52.1 to 51.6, residual +fd
+    held = [b.step(52.1 - d, 0.0) for d in (0.5, 1.0, 2.0, 2.5)]
+    assert all(v == pytest.approx(51.6) for v in held)
+    assert b.step(52.1 - 2.6, 0.0) == pytest.approx(51.6 - (2.6 - 0.5) + 0.5)
+    with pytest.raises(ValueError, match="fd_pct"):
+        HeStiction(fs_pct=1.0, fd_pct=2.0)

@@ -23,7 +23,9 @@ def backlash_file(tmp_path_factory):
 def test_replay_json_lists_the_alarm_with_its_diagnosis(backlash_file, capsys):
     # the run carries its scenario (shortened paper loop); warm-up and isolation delay shortened
     assert main(["replay", str(backlash_file), "--json"]) == 0
-    alarms = json.loads(capsys.readouterr().out)
+    report = json.loads(capsys.readouterr().out)
+    assert report["notes"] == [] and report["file"] == str(backlash_file)
+    alarms = report["alarms"]
     assert len(alarms) == 1
     a = alarms[0]
     for key in ("onset_time", "detection_time", "fault_class", "severity", "confidence", "parameter"):
@@ -43,7 +45,8 @@ def test_replay_of_a_bag_gives_the_alarms_of_the_run_it_holds(backlash_file, tmp
     from_file = json.loads(capsys.readouterr().out)
     assert main(["replay", str(bag), "--json"]) == 0
     from_bag = json.loads(capsys.readouterr().out)
-    assert from_bag == from_file and from_bag[0]["fault_class"] == "backlash"
+    assert from_bag["alarms"] == from_file["alarms"] and from_bag["alarms"][0]["fault_class"] == "backlash"
+    assert from_bag["notes"] == from_file["notes"] == []
 
 
 def test_replay_of_a_csv_without_metadata_uses_the_scenario_option(backlash_file, tmp_path, capsys):
@@ -84,7 +87,7 @@ def test_calibrate_with_the_level_channel_and_replay_with_it(tmp_path, backlash_
     capsys.readouterr()
     assert main(["replay", str(backlash_file), "--json", "--no-isolation", "--channels", "ph,level",
                  "--calibration", str(out)]) == 0
-    alarms = json.loads(capsys.readouterr().out)
+    alarms = json.loads(capsys.readouterr().out)["alarms"]
     assert alarms and alarms[0]["detection_time"] >= 1000.0
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import valve_actuator.blocks  # noqa: F401  (registers blocks)
-from phfdi.blocks import Chain, Injected, make_block
+from phfdi_base.blocks import Chain, Injected, make_block
 from valve_actuator.valve import Valve
 
 

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from phfdi.ros import topics as T
+from phfdi_base import topics as T
 
 from ..ros.conftest import close_context
 from .conftest import ROOT, node_cmd, stop
@@ -28,7 +28,7 @@ class _Feeder:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
-        from phfdi.ros.node import DATA_QOS
+        from phfdi_base.ros.graph_node import DATA_QOS
 
         self.detector = detector
         self.node = Node("garbage_feeder", context=context)
@@ -38,6 +38,7 @@ class _Feeder:
         self.pub_o = self.node.create_publisher(ControllerOutput, T.CONTROLLER.name, DATA_QOS)
         self.alarms: list = []
         self.inputs: list[dict] = []  # the detector's input status, key -> value, as published
+        self.messages: list[str] = []  # the same status's message
         self.levels: list[int] = []
         self.node.create_subscription(FaultAlarm, T.FAULT_ALARM.name, self.alarms.append, DATA_QOS)
         self.node.create_subscription(DiagnosticArray, T.DIAGNOSTICS.name, self._on_diagnostics, DATA_QOS)
@@ -47,6 +48,7 @@ class _Feeder:
         for s in msg.status:
             if s.name == "detector: ph loop inputs":
                 self.inputs.append({kv.key: kv.value for kv in s.values})
+                self.messages.append(s.message)
                 self.levels.append(int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else s.level)
 
     def spin_until(self, condition, timeout_s: float = 60.0) -> None:
@@ -133,6 +135,9 @@ def test_garbage_is_counted_reported_and_survived(detector, feeder):
     feeder.spin_until(lambda: feeder.counter("nonfinite_command") >= 25)
     counts = feeder.inputs[-1]
     assert int(counts["nonfinite_ph"]) == 2 and int(counts["out_of_range_ph"]) == 1
+    # missing pH is held, not fed as a number, and /diagnostics says so in words
+    assert int(counts["ph_samples_held"]) == 3
+    assert "3 pH samples missing or out of range: held (no residual; statistics not fed)" in feeder.messages[-1]
     assert int(counts["duplicate_stamps"]) == 1 and int(counts["out_of_order"]) == 1
     assert int(counts["extra_samples"]) == 1
     assert int(counts["nonfinite_command"]) == 25 and int(counts["nonfinite_outlet_command"]) == 1

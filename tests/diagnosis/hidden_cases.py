@@ -25,10 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.blocks import register_block
+from ph_plant_sim.build import load_plant_model
 from phfdi.loop import simulate, simulate_open_loop
 from phfdi.run import Run
-from phfdi.scenario import load_plant_model, raw_scenario, validate_scenario
+from phfdi.scenario import raw_scenario
+from phfdi_base.blocks import register_block
+from phfdi_base.spec import validate_scenario
 
 WARMUP_S = 600.0
 COLUMNS = ["time_s", "valve_command_pct", "level_controller_output_pct", "ph_measured", "level_measured_cm"]

@@ -11,7 +11,7 @@ from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, Start, nominal_raw
 from phfdi.loop import simulate, simulate_open_loop
 from phfdi.run import Run
-from phfdi.scenario import validate_scenario
+from phfdi_base.spec import validate_scenario
 
 NO_NOISE = ["sensors.ph.noise_std=0", "sensors.level.noise_std=0", "duration_s=1500",
             "setpoints.ph.changes.0.at_s=600"]

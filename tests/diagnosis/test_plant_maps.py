@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ph_plant_sim.build import build_plant, load_plant_model
 from ph_plant_sim.plant import _sequential_maps, affine_recurrence, record_sample_maps
-from phfdi.loop import build_plant
-from phfdi.scenario import load_plant_model
 
 
 def _inputs(rng, n, level=34.0):

@@ -39,14 +39,20 @@ def test_batch_with_bad_files_reports_each_once_and_goes_on(tmp_path, backlash_c
     out, err = capsys.readouterr()
     assert status == 0
     doc = json.loads(out)
-    assert [f["loop_tag"] for f in doc["files"]] == ["FIC7"]
+    assert [f["loop_tag"] for f in doc["files"]] == ["FIC7", "gap"]
     assert doc["files"][0]["cause"] == "backlash"
-    assert len(doc["failed"]) == 4
-    lines = [ln for ln in err.splitlines() if ln.startswith("phfdi loop-diagnose:")]
-    assert len(lines) == 4
+    # historian policy: the 30-sample PV gap ends a stretch; the longer one (170 samples) is diagnosed, said
+    assert doc["files"][1]["samples"] == 170
+    assert any("2 stretches" in n and "cut where OP or PV is missing for 30 samples in a row (from t = 100 s)" in n
+               for n in doc["files"][1]["reading_notes"])
+    assert len(doc["failed"]) == 3
+    lines = [ln for ln in err.splitlines() if ln.startswith("phfdi loop-diagnose:") and ": note: " not in ln]
+    assert len(lines) == 3
     for name, needle in (("constant", "PV is constant"), ("short", "too short"),
-                         ("columns", "cannot tell the OP and PV"), ("gap", "missing for 30 samples")):
+                         ("columns", "cannot tell the OP and PV")):
         assert sum(str(bad[name]) in ln and needle in ln for ln in lines) == 1, (name, lines)
+    assert f"phfdi loop-diagnose: note: {bad['gap']}: column 'pv': 30 cells not a number (NaN 30), first at line 102" \
+        in err
     assert "Traceback" not in err
 
 

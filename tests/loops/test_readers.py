@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from phfdi.loopdiag.readers import ColumnMap, LoopDataError, guess_columns, process_type_for, read_loop
+from phfdi.loopdiag.readers import (ColumnMap, LoopDataError, guess_columns, process_type_for, read_loop,
+                                   read_loop_segments)
 
 
 def simple_export(path, n=150, pv=None, dt=10):
@@ -26,7 +27,7 @@ def simple_export(path, n=150, pv=None, dt=10):
 
 def test_plant_export_becomes_a_run(tmp_path):
     run = read_loop(simple_export(tmp_path / "a.txt"))
-    assert run.names == ["time_s", "op_pct", "pv", "sp", "mode"]
+    assert run.names == ["time_s", "op_pct", "pv", "sp"]  # MODE keeps automatic stretches, it is no signal
     assert run.metadata["loop_tag"] == "X1LIC7"
     assert run.metadata["process_type"] == "integrating"  # a level loop
     assert run.dt_s == 10.0 and len(run) == 150
@@ -89,13 +90,15 @@ def test_wrong_columns_and_uneven_time(tmp_path):
     path.write_text("a,b,c\n" + "\n".join(f"{k},{k},{k}" for k in range(200)))
     with pytest.raises(LoopDataError, match="cannot tell the OP and PV"):
         read_loop(path)
-    with pytest.raises(LoopDataError, match="no column 'zz'"):
+    with pytest.raises(LoopDataError, match="column 'zz': no such column"):
         read_loop(path, ColumnMap.parse("op=zz,pv=b,time=a"))
     uneven = tmp_path / "u.csv"
     uneven.write_text("time_s,op_pct,pv\n" + "\n".join(f"{k + (5 if k > 100 else 0)},{k % 9},{k % 4}"
                                                        for k in range(200)))
-    with pytest.raises(LoopDataError, match="not evenly spaced"):
-        read_loop(uneven)
+    run = read_loop(uneven)  # a 5-sample gap ends a stretch: the longer one (101 samples) is diagnosed
+    assert len(run) == 101 and run.time_s[-1] == 100.0
+    assert any("gap in time" in n for n in run.metadata["notes"])
+    assert any("the longest, lines 2-102 (101 samples)" in n for n in run.metadata["notes"])
 
 
 def test_mapping_errors_name_the_key():
@@ -110,3 +113,42 @@ def test_process_type_from_tag():
     assert process_type_for("2#CDU.7040-312_LIC63001") == "integrating"
     assert process_type_for("2111FIC46005") == "self_regulating"
     assert process_type_for("2111PIC10201") == "self_regulating"
+
+
+def export_rows(path, stamps, pv, modes=None):
+    """A plant_loops export with the given stamps (seconds from midnight), PV and MODE per row."""
+    lines = ["PROCESSDATA\tX1FIC7 Data\tyyyy-MM-dd HH:mm:ss", f"8\t10\t2024-01-01 00:00:00\t{len(stamps)}",
+             "tagname\tX1FIC7.MV\tX1FIC7.PV\tX1FIC7.SV\tX1FIC7.MODE\tbOpOFL\tbPvOFL\tbSpOFL\tbAutOFL",
+             "desc\ta\tb\tc\tAut\tf1\tf2\tf3\tf4", "settings"]
+    for k, secs in enumerate(stamps):
+        mode = 1 if modes is None else modes[k]
+        lines.append(f"2024-01-01 {secs // 3600:02d}:{secs // 60 % 60:02d}:{secs % 60:02d}\t{40 + k % 7}\t"
+                     f"{float(pv[k])!r}\t100\t{mode}\t0\t0\t0\t0")
+    path.write_bytes(("\r\n".join(lines) + "\r\n").encode("utf-8"))
+    return path
+
+
+def test_historian_repeated_stamp_and_skip_is_respaced(tmp_path):
+    stamps = [10 * k for k in range(200)]
+    stamps[50] = stamps[49]  # 490, 490, 510: the export repeated a stamp and skipped the next one
+    pv = 100 + np.sin(np.arange(200) / 3)
+    run = read_loop(export_rows(tmp_path / "r.txt", stamps, pv))
+    assert len(run) == 200 and np.allclose(run["pv"], pv)
+    assert any("lines 55-56: repeated stamp 2024-01-01 00:08:10 next to a skipped one" in n
+               for n in run.metadata["notes"])
+
+
+def test_historian_manual_mode_and_clock_reset_make_stretches(tmp_path):
+    stamps = [10 * k for k in range(150)] + [10 * k for k in range(260)]  # the clock starts again at row 151
+    modes = [1] * 150 + [0] * 30 + [1] * 230  # manual for 30 rows after the reset
+    pv = 100 + np.sin(np.arange(410) / 3)
+    path = export_rows(tmp_path / "r.txt", stamps, pv, modes)
+    run = read_loop(path)
+    assert len(run) == 230 and np.allclose(run["pv"], pv[180:])
+    notes = "\n".join(run.metadata["notes"])
+    assert "line 156: time goes back" in notes and "30 samples not in automatic" in notes
+    runs = read_loop_segments(path)
+    assert [len(r) for r in runs] == [150, 230]
+    modes = [1] * 60 + [0] * 300 + [1] * 50
+    with pytest.raises(LoopDataError, match="no usable stretch of 100 samples"):
+        read_loop(export_rows(tmp_path / "m.txt", stamps, pv, modes))

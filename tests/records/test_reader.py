@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from phfdi.errors import UserError
 from phfdi.records import ColumnMap, ReadError, read_record
 from phfdi.run import Run
+from phfdi_base.errors import UserError
 
 
 def write(tmp_path, text: str, name: str = "r.csv", encoding: str = "utf-8") -> str:
@@ -105,10 +105,13 @@ def test_all_missing_channel_is_refused(tmp_path):
         read_record(write(tmp_path, text), channels=["ph_measured", "valve_command_pct"])
 
 
-def test_all_missing_column_nobody_asked_for_is_left_out_and_noted(tmp_path):
+def test_all_missing_column_nobody_asked_for_is_kept_and_noted(tmp_path):
     text = "time_s,ph_measured,spare\n" + "".join(f"{i},7,\n" for i in range(5))
     r = read_record(write(tmp_path, text))
-    assert r.names == ["ph_measured"] and any("'spare': no value at all" in n for n in r.notes)
+    assert r.names == ["ph_measured", "spare"] and np.isnan(r.signals["spare"]).all()
+    assert any("'spare': all 5 cells not a number (empty 5)" in n for n in r.notes)
+    with pytest.raises(ReadError, match="column 'spare': no usable value"):
+        read_record(write(tmp_path, text), required=("spare",))
 
 
 def test_short_gaps_filled_only_when_asked(tmp_path):
@@ -127,7 +130,8 @@ def test_time_going_back_is_refused_under_run_policy(tmp_path):
     text = "time_s,pv\n0,1\n1,2\n2,3\n0,4\n1,5\n"
     with pytest.raises(ReadError) as err:
         read_record(write(tmp_path, text))
-    assert str(err.value) == f"{tmp_path / 'r.csv'}: line 5: time goes back from 2 s to 0 s (clock reset); split the file"
+    path = tmp_path / "r.csv"
+    assert str(err.value) == f"{path}: line 5: time goes back from 2 s to 0 s (clock reset); split the file"
 
 
 def test_clock_reset_starts_a_segment_under_historian_policy(tmp_path):
@@ -223,7 +227,7 @@ def test_parquet_round_trip_and_damage(tmp_path):
 def test_magic_only_mcap(tmp_path):
     path = tmp_path / "m.mcap"
     path.write_bytes(b"\x89MCAP0\r\n")
-    with pytest.raises(ReadError, match=r"m.mcap: "):
+    with pytest.raises(ReadError, match=r"m.mcap: cannot read the bag"):
         read_record(path)
 
 

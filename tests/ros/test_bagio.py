@@ -11,10 +11,10 @@ from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from phfdi import bagio
-from phfdi.errors import UserError
 from phfdi.loop import simulate
-from phfdi.ros import topics as T
 from phfdi.scenario import load_scenario
+from phfdi_base import topics as T
+from phfdi_base.errors import UserError
 
 from .conftest import SHORT_OVERRIDES, phfdi_cmd
 

@@ -11,8 +11,8 @@ import pytest
 
 from phfdi import bagio
 from phfdi.loop import simulate
-from phfdi.ros import topics as T
 from phfdi.scenario import load_scenario
+from phfdi_base import topics as T
 
 from .conftest import SHORT_OVERRIDES, SHORT_RUN, phfdi_cmd, processes_with, stale_shm_files
 

@@ -14,7 +14,7 @@ import time
 import pytest
 
 from phfdi import bagio
-from phfdi.ros import topics as T
+from phfdi_base import topics as T
 
 from .conftest import (
     SHORT_RUN,

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from phfdi import bagio
-from phfdi.ros import topics as T
+from phfdi_base import topics as T
 
 from .conftest import processes_with
 
@@ -36,7 +36,7 @@ def test_stamp_check_counts_missing_duplicated_and_off_grid_stamps(soak, tmp_pat
         bag.write(cid, k * dt, b"\0\1\0\0")
     bag.write(cid, 8 * dt + 5, b"\0\1\0\0")  # off the grid
     bag.close()
-    got = soak.stamp_check(path, [T.MEASUREMENT.name], 10, dt)[T.MEASUREMENT.name]
+    got = soak.stamp_check([path], [T.MEASUREMENT.name], 10, dt)[T.MEASUREMENT.name]
     assert got == {"messages": 10, "off_grid": 1, "missing_stamps": 2, "duplicate_stamps": 1, "in_order": False}
 
 

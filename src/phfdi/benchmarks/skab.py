@@ -24,7 +24,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .scoring import BinaryScores, NabResult, binary_scores, match_changepoints, nab_scores, switches
 
@@ -249,5 +249,25 @@ def hotelling_t2(quantile: float = 0.99) -> Detector:
             return np.einsum("ij,jk,ik->i", d, inv, d)
 
         return (t2(test) > np.quantile(t2(train), quantile)).astype(np.int8)
+
+    return detect
+
+
+# ---- our detector ---------------------------------------------------------------------
+def learned_detector(settings=None) -> Detector:
+    """The learned reference + multichannel wavelet-CUSUM detector (wavelet_fdi.learned_detector):
+    fitted on the training rows, then run over the whole file in time order (training rows first,
+    so the filters and the observer are warm), one chunk per row block; the test rows' states are
+    the prediction."""
+    from wavelet_fdi.learned_detector import LearnedSettings, learn, run_record
+
+    s = settings or LearnedSettings()
+
+    def detect(train: np.ndarray, test: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        model = learn(train, SENSOR_COLUMNS, s)
+        x = np.vstack((train, test))
+        t = np.arange(len(x)) * s.sample_time_s
+        _, states, _ = run_record(model, t, x)
+        return states[len(train):]
 
     return detect

@@ -65,21 +65,15 @@ def _say(text: str) -> None:
 
 
 def load_runs(paths: list[str]) -> list:
-    """Run files (.csv, .parquet) directly; anything else through the bag reader, imported only when needed."""
-    from phfdi.errors import UserError
-    from phfdi.run import Run
+    """Runs (.csv, .parquet or .mcap bags) read by phfdi.records under the run policy; repairs noted on stderr."""
+    from phfdi.records import read_record
+
+    from .common import print_notes
 
     runs = []
     for path in paths:
-        if Path(path).suffix.lower() in (".csv", ".parquet", ".pq"):
-            runs.append(Run.load(path))
-            continue
-        try:
-            from phfdi.bagio import load_run
-        except ImportError:
-            raise UserError(f"{path}: reading bags needs phfdi.bagio, which this installation lacks; "
-                            "give .csv or .parquet run files") from None
-        runs.append(load_run(path))
+        runs.append(read_record(path, policy="run").to_run())
+        print_notes("analyze", runs[-1].metadata["notes"])
     return runs
 
 
@@ -127,11 +121,10 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     import pywt
 
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
     from wavelet_fdi.analysis import Options
     from wavelet_fdi.multisignal import from_runs
-    from wavelet_fdi.paperset import (PAPER_GROUPING, section6_variants, section7_variants,
-                                      simulate_variants)
+    from phfdi.study.paperset import PAPER_GROUPING, section6_variants, section7_variants, simulate_variants
     from wavelet_fdi.report import section6_claims, section7_claims, write_all
 
     out = Path(args.out)

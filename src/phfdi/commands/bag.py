@@ -12,6 +12,13 @@ EXAMPLES = """examples:
   phfdi bag info bags/run.mcap --json
   phfdi bag recover bags/killed.mcap bags/fixed.mcap   # everything up to the last complete chunk
   phfdi bag to-run bags/run.mcap runs/run.csv  # the run's signals (CSV or Parquet)
+  phfdi bag from-csv rig.csv bags/rig.mcap --exclude anomaly,changepoint   # a measured record as a bag
+  phfdi replay --live bags/rig.mcap --reference ref.json                   # ... played into the detector node
+
+from-csv reads the record like phfdi replay (--map/--column/--encoding, the
+reading policy of docs/records.md, a note per repair) and writes one
+phfdi_interfaces/MeasuredSample per row on /measured/sample (every column but
+time and --exclude), stamped with the row's time from the first row.
 """
 
 
@@ -36,6 +43,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     conv.add_argument("input", help="bag (.mcap)")
     conv.add_argument("output", help="run file to write (.csv or .parquet)")
     conv.set_defaults(func=run_to_run)
+    fc = bag_sub.add_parser("from-csv", help="write a measured record (CSV, Parquet) as a bag of "
+                                             "/measured/sample messages", epilog=EXAMPLES,
+                            formatter_class=EPILOG_FORMAT)
+    fc.add_argument("input", help="measured record (.csv or .parquet)")
+    fc.add_argument("output", help="bag to write (.mcap)")
+    fc.add_argument("--exclude", default="", metavar="COLS", help="columns that are not channels (e.g. labels)")
+    from .common import add_record_args
+
+    add_record_args(fc, units=True)
+    fc.set_defaults(func=run_from_csv)
 
 
 def run_info(args: argparse.Namespace) -> int:
@@ -57,9 +74,37 @@ def run_recover(args: argparse.Namespace) -> int:
 
 
 def run_to_run(args: argparse.Namespace) -> int:
-    from phfdi.bagio import load_run
+    from pathlib import Path
 
-    run = load_run(args.input)
+    from phfdi.records import read_record
+    from phfdi_base.errors import UserError
+
+    from .common import print_notes
+
+    if Path(args.output).suffix.lower() not in (".csv", ".parquet", ".pq"):
+        raise UserError(f"cannot write a run to {args.output}: use a .csv or .parquet file name")
+    if Path(args.input).suffix.lower() != ".mcap" and not (Path(args.input) / "metadata.yaml").exists():
+        raise UserError(f"{args.input}: to-run converts a bag: give an .mcap file")
+    run = read_record(args.input, policy="run").to_run()
+    print_notes("bag", run.metadata["notes"])
     path = run.save(args.output)
     print(f"wrote {len(run)} samples of {len(run.names)} signals to {path}")
+    return 0
+
+
+def run_from_csv(args: argparse.Namespace) -> int:
+    from phfdi.bagio import write_measured
+    from phfdi.learned import read_measured
+    from phfdi_base.errors import UserError
+
+    from .common import column_map_from_args, print_notes
+
+    if not args.output.endswith(".mcap"):
+        raise UserError(f"{args.output}: the bag must be an .mcap file")
+    rec = read_measured(args.input, column_map_from_args(args),
+                        exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
+    print_notes("bag from-csv", rec.notes)
+    path = write_measured(rec.time_s, rec.x, list(rec.channels), args.output, source=str(args.input))
+    print(f"wrote {len(rec.x)} rows x {len(rec.channels)} channels ({', '.join(rec.channels)}) to {path} "
+          f"on /measured/sample")
     return 0

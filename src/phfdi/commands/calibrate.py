@@ -4,24 +4,35 @@ from __future__ import annotations
 
 import argparse
 
-from .common import EPILOG_FORMAT, Progress
+from .common import EPILOG_FORMAT, Progress, add_record_args, column_map_from_args, print_notes
 
 EXAMPLES = """examples:
   phfdi calibrate --out my_calibration.yaml                 # paper scenario, sym4 level 3, ARL0 1e5 samples
   phfdi calibrate --wavelet db8 --level 3 --out db8.yaml
   phfdi calibrate --scenario my_loop.yaml --seeds 2001-2032 --arl0 1e6 --out my_loop.yaml
   phfdi calibrate --scenario my_loop.yaml --runs healthy1.parquet healthy2.parquet --out plant.yaml
+  phfdi calibrate --scenario my_loop.yaml --runs h1.csv h2.csv --map plant_columns.yaml --out plant.yaml
+  phfdi calibrate --learn healthy.csv --rows 400 --exclude anomaly,changepoint --out ref.json
+
+--learn fits a learned healthy reference (no plant model needed) on the first
+--rows rows of a measured record (all of them by default): every channel
+predicted from its own past and the other channels (ARX, ridge), the wavelet
+bands of the residuals and their healthy noise per band; phfdi replay FILE
+--reference ref.json then watches any record with those columns. Channels:
+every column but time and --exclude, or the ones a --map/--column names.
 
 The seeds default to 1001-1016, disjoint from the evaluation's (1-99). The file
 records the seeds, the noise level per band and each threshold; pass it to
 phfdi replay --calibration. The shipped default for the paper scenario is
 wavelet_fdi/calibrations/paper_sym4_L3.yaml (made with the defaults).
+Recorded runs are read under the reading policy of docs/records.md (--map,
+--column, --encoding as in phfdi replay); every repair is printed as a note.
 """
 
 
 def parse_seeds(text: str) -> list[int]:
     """'1001-1016' or '1,2,5' -> list of seeds."""
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     out: list[int] = []
     try:
@@ -68,18 +79,40 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="calibrate on these recorded healthy runs (.csv, .parquet, .mcap) instead of simulating; "
                         "--scenario is then the plant's model")
     add_detector_args(p)
-    p.add_argument("--out", required=True, help="calibration file to write (.yaml or .json)")
+    add_record_args(p)
+    g = p.add_argument_group("learned reference (measured records, no plant model)")
+    g.add_argument("--learn", default=None, metavar="RECORD",
+                   help="fit a learned healthy reference on this healthy record (.csv, .parquet, .mcap)")
+    g.add_argument("--rows", type=int, default=None, metavar="N", help="with --learn: the first N rows only")
+    g.add_argument("--exclude", default="", metavar="COLS", help="with --learn: columns that are not channels, "
+                   "comma-separated (e.g. labels)")
+    g.add_argument("--learned", action="append", default=[], metavar="KEY=VALUE",
+                   help="with --learn: a detector setting, e.g. --learned mean_h=8 (see docs/detector.md)")
+    p.add_argument("--out", required=True, help="file to write (.yaml or .json; --learn: .json)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.scenario import load_scenario
-    from wavelet_fdi.calibration import calibrate, calibrate_from_runs
+    from phfdi_base.errors import UserError
+    from phfdi.calibration import calibrate, calibrate_from_runs
+    from phfdi.replay import load_any
 
+    if args.learn:
+        return run_learn(args)
+    if args.rows is not None or args.exclude or args.learned:
+        raise UserError("--rows, --exclude and --learned go with --learn")
     settings = settings_from_args(args)
+    cmap = column_map_from_args(args)
+    if not args.runs and (cmap is not None or args.encoding):
+        raise UserError("--map, --column and --encoding read recorded runs: give them with --runs")
     if args.runs:
         spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
-        cal = calibrate_from_runs(args.runs, spec, settings,
+        runs = []
+        for path in args.runs:
+            runs.append(load_any(path, cmap, args.encoding))
+            print_notes("calibrate", runs[-1].metadata.get("notes", []))
+        cal = calibrate_from_runs(args.runs, spec, settings, runs=runs,
                                   progress=Progress(f"calibrate on {len(args.runs)} recorded runs", enabled=True))
         source = f"{len(args.runs)} recorded runs"
     else:
@@ -93,4 +126,50 @@ def run(args: argparse.Namespace) -> int:
     for name, h in cal.thresholds.items():
         print(f"  {name:22s} threshold {h:8.2f}")
     print(f"wrote {path}")
+    return 0
+
+
+def learned_settings(pairs: list[str], base=None):
+    """LearnedSettings from --learned KEY=VALUE pairs (numbers, or text for the wavelet)."""
+    from dataclasses import asdict
+
+    from phfdi_base.errors import UserError
+    from wavelet_fdi.learned_detector import LearnedSettings
+
+    d = asdict(base or LearnedSettings())
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or key not in d:
+            raise UserError(f"--learned {pair!r}: use KEY=VALUE with KEY one of {', '.join(d)}")
+        kind = type(d[key])
+        try:
+            d[key] = value if kind is str else kind(float(value)) if kind is int else float(value)
+        except ValueError:
+            raise UserError(f"--learned {pair!r}: {key} must be a number") from None
+    return LearnedSettings.from_dict(d)
+
+
+def run_learn(args: argparse.Namespace) -> int:
+    from phfdi.learned import learn_from, read_measured
+    from phfdi_base.errors import UserError
+
+    if args.runs:
+        raise UserError("--learn and --runs are two different calibrations: give one")
+    if not args.out.endswith(".json"):
+        raise UserError(f"--out {args.out}: a learned reference is written as .json")
+    settings = learned_settings(args.learned)
+    rec = read_measured(args.learn, column_map_from_args(args),
+                        exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
+    print_notes("calibrate", rec.notes)
+    model = learn_from(rec, args.rows, settings)
+    model.save(args.out)
+    s = model.settings
+    print(f"learned reference on {model.source['rows']} healthy rows of {args.learn}: {len(model.channels)} channels, "
+          f"{s.lags} own lags + the other channels (ridge), {s.wavelet} level {s.level}, "
+          f"sample time {s.sample_time_s:g} s")
+    print(f"  {'channel':28s} {'residual/std':>12s}  healthy RMS per band ({', '.join(s.bands())})")
+    for c, name in enumerate(model.channels):
+        print(f"  {name:28s} {model.reference.residual_sigma[c]:12.3f}  "
+              + " ".join(f"{v:6.2f}" for v in model.band_sigma[c]))
+    print(f"wrote {args.out}")
     return 0

@@ -38,3 +38,56 @@ class Progress:
             end = "\n" if fraction >= 1.0 else ""
             print(f"\r{self.label}: {100 * fraction:5.1f} %  ({time.perf_counter() - self.t0:5.1f} s)",
                   end=end, file=sys.stderr, flush=True)
+
+
+# ---- measured records (phfdi.records) -------------------------------------------------------
+def add_record_args(p: argparse.ArgumentParser, units: bool = True) -> None:
+    """--map, --column, --unit and --encoding: how to read a user's record (see docs/records.md)."""
+    g = p.add_argument_group("reading the file")
+    g.add_argument("--map", default=None, metavar="FILE",
+                   help="column map: a YAML file (signal: column, or signal: {column:, unit:}) or a shipped "
+                        "name (ph_rig)")
+    g.add_argument("--column", action="append", default=[], metavar="SIGNAL=COLUMN",
+                   help="map one column, e.g. --column ph_measured=pH (instead of --map)")
+    if units:
+        g.add_argument("--unit", action="append", default=[], metavar="SIGNAL=UNIT",
+                       help="unit of a --column, e.g. --unit time_s=min")
+    g.add_argument("--encoding", default=None,
+                   help="text encoding of a CSV when it cannot be detected (e.g. cp1250, shift_jis)")
+
+
+def shipped_map(name: str):
+    """The path of a column map shipped with phfdi (phfdi/diagnosis/maps/NAME.yaml), or None."""
+    from importlib import resources
+    from pathlib import Path
+
+    path = Path(str(resources.files("phfdi.diagnosis"))) / "maps" / f"{name}.yaml"
+    return path if path.exists() else None
+
+
+def column_map_from_args(args: argparse.Namespace):
+    """The :class:`phfdi.records.ColumnMap` of --map or --column/--unit; None when neither is given."""
+    from phfdi.records import ColumnMap
+    from phfdi_base.errors import UserError
+
+    units = getattr(args, "unit", [])
+    if args.map and args.column:
+        raise UserError("give either --map or --column, not both")
+    if args.map:
+        if not args.map.endswith((".yaml", ".yml")):
+            path = shipped_map(args.map)
+            if path is None:
+                raise UserError(f"--map {args.map!r}: not a .yaml file nor a shipped map (ph_rig)")
+            return ColumnMap.load(path)
+        return ColumnMap.load(args.map)
+    if args.column:
+        return ColumnMap.from_args(args.column, units)
+    if units:
+        raise UserError("--unit goes with --column")
+    return None
+
+
+def print_notes(command: str, notes: list[str]) -> None:
+    """Every repair the reader made, one line each on stderr."""
+    for note in notes:
+        print(f"phfdi {command}: note: {note}", file=sys.stderr)

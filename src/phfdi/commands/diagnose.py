@@ -6,12 +6,11 @@ import argparse
 import json
 import shlex
 import sys
-from importlib import resources
 from pathlib import Path
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
-from .common import EPILOG_FORMAT
+from .common import EPILOG_FORMAT, column_map_from_args, print_notes
 
 EXAMPLES = """examples:
   # a run of the project (CSV, Parquet or .mcap bag) against the paper model, segments held out
@@ -37,7 +36,10 @@ column map (YAML; signal: column, or signal: {column: NAME, unit: UNIT}):
   level_controller_output_pct: LIC_OP
   ph_measured: pH                                      # pH
   level_measured_cm: {column: level, unit: mm}         # cm, mm, m
-Named maps shipped with phfdi: ph_rig (../shared/data/ph_rig).
+Named maps shipped with phfdi: ph_rig (../shared/data/ph_rig). Files are read under the reading
+policy of docs/records.md (any delimiter, encoding detected or --encoding, repeated stamps repaired,
+NaN/inf/text cells missing; short gaps of up to 5 samples filled); every repair is printed as a note
+and listed in the report. A measured output with no value at all is an error.
 
 catalogue: stiction backlash deadzone saturation coulomb_viscous_friction leakage valve_gain (actuator),
   sensor_delay sensor_lag sensor_bias sensor_drift sensor_gain (sensor),
@@ -63,6 +65,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--column", action="append", default=[], metavar="SIGNAL=COLUMN",
                      help="map one column (instead of --map)")
     src.add_argument("--unit", action="append", default=[], metavar="SIGNAL=UNIT", help="unit of a --column")
+    src.add_argument("--encoding", default=None,
+                     help="text encoding of the CSV files when it cannot be detected (e.g. cp1250)")
     src.add_argument("--dt", type=float, default=None, metavar="S", help="resample onto this sample time (s)")
     mod = p.add_argument_group("model")
     mod.add_argument("--model", default="paper", help="nominal model: scenario preset or .yaml (default: paper)")
@@ -97,23 +101,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _map(args):
+    """The diagnosis column map of --map or --column (checked: time, an input, an output), or None."""
     from phfdi.diagnosis.data import ColumnMap
 
-    if args.map and args.column:
-        raise UserError("give either --map or --column, not both")
-    if args.map:
-        path = Path(args.map)
-        if path.suffix not in (".yaml", ".yml"):
-            shipped = Path(str(resources.files("phfdi.diagnosis"))) / "maps" / f"{args.map}.yaml"
-            if not shipped.exists():
-                raise UserError(f"--map {args.map!r}: not a .yaml file nor a shipped map (ph_rig)")
-            path = shipped
-        return ColumnMap.from_yaml(path)
-    if args.column:
-        return ColumnMap.from_args(args.column, args.unit)
-    if args.unit:
-        raise UserError("--unit goes with --column")
-    return None
+    cmap = column_map_from_args(args)
+    if cmap is None:
+        return None
+    return ColumnMap.of(cmap)
 
 
 def _groups(pattern: str, files: list[str]) -> list[str]:
@@ -133,10 +127,10 @@ def _groups(pattern: str, files: list[str]) -> list[str]:
     return out
 
 
-def _records(files, cmap, dt):
+def _records(files, cmap, dt, encoding=None):
     from phfdi.diagnosis.data import load_record
 
-    return [load_record(f, cmap, dt) for f in files]
+    return [load_record(f, cmap, dt, encoding) for f in files]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -150,8 +144,9 @@ def run(args: argparse.Namespace) -> int:
     if args.validate and not args.fit:
         raise UserError("--validate needs --fit")
     cmap = _map(args)
-    fit_records = _records(args.data or args.fit, cmap, args.dt)
-    val_records = _records(args.validate or [], cmap, args.dt)
+    fit_records = _records(args.data or args.fit, cmap, args.dt, args.encoding)
+    val_records = _records(args.validate or [], cmap, args.dt, args.encoding)
+    print_notes("diagnose", [f"{r.name}: {n}" for r in fit_records + val_records for n in r.notes])
     nominal = nominal_raw(args.model, args.overrides)
     progress = None if args.quiet else (lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True))
     if not 0.0 <= args.adapt < 1.0:

@@ -15,6 +15,7 @@ EXAMPLES = """examples:
   phfdi launch --fault backlash --detector --record bags/run.mcap   # + the fault detector (/fault_alarm)
   phfdi launch --fault stiction --set duration_s=2000 --onset 1000 --record bags/stiction.mcap
   phfdi launch --record bags/live.mcap --pace 20          # 20 x real time, for a live demo
+  phfdi launch --record bags/day.mcap --pace 1 --split-s 3600   # live, a new bag file every hour
   phfdi launch --domain-id 42 --pace 1                    # real time, join with your own nodes on domain 42
 
 Every node runs as its own process (python -m <package>.node) with
@@ -32,6 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_scenario_args(p)
     p.add_argument("--record", metavar="BAG.mcap", default=None, help="record every topic to this MCAP bag")
     p.add_argument("--overwrite", action="store_true", help="replace the --record file if it exists")
+    p.add_argument("--split-s", type=float, default=0.0, metavar="S",
+                   help="start a new bag file every S s of simulated time (run.mcap, run.1.mcap, ...): bounds the "
+                        "recorder's memory in runs of days; 0 (default): one file")
     p.add_argument("--detector", action="store_true",
                    help="add the fault detector node (wavelet_fdi.node): publishes /fault_alarm and /diagnostics")
     p.add_argument("--detector-param", dest="detector_params", action="append", default=[], metavar="NAME=VALUE",
@@ -51,23 +55,33 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     if not (math.isfinite(args.pace) and 0.0 <= args.pace <= 1e6):
         raise UserError(f"--pace {args.pace}: use 0 (lock-step, as fast as possible) or a factor up to 1e6")
     if not 0.1 <= args.connect_timeout <= 3600:
         raise UserError(f"--connect-timeout {args.connect_timeout}: use 0.1 .. 3600 s")
+    if not (math.isfinite(args.split_s) and 0.0 <= args.split_s <= 1e12):
+        raise UserError(f"--split-s {args.split_s}: use 0 (one file) or a positive number of seconds")
+    if args.split_s > 0 and args.record is None:
+        raise UserError("--split-s needs --record")
     if args.record is not None and not args.record.endswith(".mcap"):
         raise UserError(f"--record {args.record}: give a .mcap file name")
     if args.record is not None and Path(args.record).exists() and not args.overwrite:
         raise UserError(f"--record {args.record} exists: give another name, or --overwrite to replace it")
+    if args.split_s > 0:
+        from phfdi.bagio import part_path
+
+        if part_path(args.record, 1).exists():
+            raise UserError(f"--split-s: {part_path(args.record, 1)} exists (a part of an earlier split bag); "
+                            f"remove those parts or give another --record name")
 
 
 def detector_params(items: list[str]) -> dict:
     """--detector-param NAME=VALUE items as typed node parameters (VALUE read as YAML: 2.0, true, [ph, level])."""
     import yaml
 
-    from phfdi.errors import UserError
+    from phfdi_base.errors import UserError
 
     out = {}
     for item in items:
@@ -93,10 +107,12 @@ def alarm_event_line(event: dict) -> str | None:
 def received_alarms(result) -> tuple[list[dict], str]:
     """The alarms of the run: as the recorder received them on /fault_alarm (bag), else as the detector
     reported publishing them."""
+    from phfdi import bagio
     from wavelet_fdi import alarm_messages
 
     if result.bag is not None and any(t["topic"] == "/fault_alarm" for t in result.bag["topics"]):
-        return alarm_messages.per_alarm(alarm_messages.from_bag(result.bag["path"])), "received in the bag"
+        messages = [m for part in result.bag.get("parts", [result.bag["path"]]) for m in bagio.fault_alarms(part)]
+        return alarm_messages.per_alarm(messages), "received in the bag"
     done = [e for e in result.node_events.get("detector", []) if e["event"] == "detector_done"]
     return alarm_messages.from_summaries(done[-1]["alarms"] if done else []), "as the detector reported them"
 
@@ -110,6 +126,8 @@ def summary_dict(result, alarms: list[dict] | None = None) -> dict:
     if result.bag is not None:
         out["bag"] = {"path": result.bag["path"], "size_bytes": result.bag["size_bytes"],
                       "counts": {t["topic"]: t["count"] for t in result.bag["topics"]}}
+        if "parts" in result.bag:
+            out["bag"]["parts"] = result.bag["parts"]
     if alarms is not None:
         out["alarms"] = alarms
     return out
@@ -126,7 +144,9 @@ def format_summary(result) -> str:
     if result.bag is not None:
         b = result.bag
         lines.append(f"  bag {b['path']} ({b['size_bytes'] / 1e6:.2f} MB, {b['messages']} messages"
-                     f"{'' if b['finished'] else ', NOT FINISHED'})")
+                     f"{'' if b['finished'] else ', NOT FINISHED'}"
+                     + (f"; in {len(b['parts'])} files, {Path(b['parts'][-1]).name} the last" if "parts" in b else "")
+                     + ")")
         width = max(len(t["topic"]) for t in b["topics"]) if b["topics"] else 0
         for t in b["topics"]:
             lines.append(f"    {t['topic']:{width}s} {t['count']:8d}")
@@ -144,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
     spec = scenario_from_args(args)  # one clear line for a bad scenario before any process starts
     detector = detector_params(args.detector_params) if args.detector or args.detector_params else None
     nodes = loop_graph(args.scenario, args.fault, args.onset, args.overrides, args.record, args.pace,
-                       args.executor, args.connect_timeout, detector=detector)
+                       args.executor, args.connect_timeout, detector=detector, split_after_s=args.split_s)
     say = lambda text: print(f"phfdi launch: {text}", file=sys.stderr)  # noqa: E731
 
     def on_event(node: str, event: dict) -> None:

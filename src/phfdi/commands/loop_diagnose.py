@@ -5,21 +5,36 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import EPILOG_FORMAT
+from .common import EPILOG_FORMAT, print_notes
 
 EXAMPLES = """examples:
   phfdi loop-diagnose ../shared/data/plant_loops/stiction/stic_2111FIC46005_0614_0003.txt
+  phfdi loop-diagnose ../shared/data/plant_loops --out plant/ --figures plant/figs
+  phfdi loop-diagnose historian_export.csv --out plant/           # a wide export: one job per loop tag
+  phfdi loop-diagnose /data/unit2 --scheduler tcp://10.0.0.5:8786 --out unit2/
   phfdi loop-diagnose ../shared/data/plant_loops/*/*.txt --json > loops.json
   phfdi loop-diagnose export.csv --columns op=FIC101.OP,pv=FIC101.PV,sp=FIC101.SP,time=Timestamp
   phfdi loop-diagnose export.csv --columns mapping.yaml --process integrating --figure figs/
+
+inputs: files and folders (every .txt, .csv, .parquet below them). A CSV whose header holds several
+loops' tags (<tag>.OP or .MV, .PV, .SP or .SV) is a wide historian export: each loop tag is one job.
+Many jobs run on Dask: a local cluster of --workers processes (default 2) or, with --scheduler, a
+running one. --out DIR writes loops.parquet and loops.csv (one row per loop: the stiction verdict
+and probability with its strongest evidence, Kano S and J, oscillation, notes) and worst_loops.txt.
 
 file formats: the tab-separated historian export of ../shared/data/plant_loops (detected by its
 'PROCESSDATA' title line) and CSV with a header line. CSV columns are guessed from names (time_s,
 op_pct, pv, sp; or tags ending .OP/.MV, .PV, .SP/.SV) unless --columns maps them; a YAML mapping is
 
-  columns: {time: Timestamp, op: FIC101.OP, pv: FIC101.PV, sp: FIC101.SP}
+  columns: {time: Timestamp, op: FIC101.OP, pv: FIC101.PV, sp: FIC101.SP, mode: FIC101.MODE}
   loop_tag: FIC101          # optional
   sample_time_s: 10         # when there is no time column
+
+reading: the historian policy of docs/records.md. Repeated stamps are repaired, NaN/text cells are
+missing, gaps of up to 3 samples are filled; a MODE column (the export's .MODE tag, or mode= in
+--columns) keeps only automatic stretches, and a clock reset, a time jump or a longer gap ends a
+stretch. The longest usable stretch (at least 100 samples) is diagnosed, or each of them with
+--segments each. Every repair is a note on stderr, in the report and in --json.
 
 exit status: 0 when at least one file was diagnosed (a file that cannot be read gets one line on
 stderr and the batch goes on), 2 when every file failed or the arguments are wrong.
@@ -34,9 +49,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "dead-zone, saturation, quantisation) jointly with the linear part, rank them "
                                    "on held-out data and name the cause.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
-    p.add_argument("files", nargs="+", metavar="FILE", help="loop records (plant_loops export or CSV)")
+    p.add_argument("files", nargs="+", metavar="PATH",
+                   help="loop records (plant_loops export or CSV), folders of them, or wide historian exports")
     p.add_argument("--columns", default=None, metavar="MAP",
-                   help="CSV column mapping: op=NAME,pv=NAME[,sp=NAME][,time=NAME] or a .yaml file")
+                   help="CSV column mapping: op=NAME,pv=NAME[,sp=NAME][,time=NAME][,mode=NAME] or a .yaml file")
+    p.add_argument("--segments", choices=("longest", "each"), default="longest",
+                   help="diagnose the longest usable stretch of each file (default) or each stretch")
     p.add_argument("--process", choices=("auto", "self_regulating", "integrating"), default="auto",
                    help="process type (default auto: level loops, tags with LIC, integrate)")
     p.add_argument("--gain-threshold", type=float, default=None, metavar="PCT",
@@ -45,19 +63,25 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="actuator causes to fit, comma separated (default: all of "
                         "backlash,deadzone,saturation,quantization,stiction)")
     p.add_argument("--no-baselines", action="store_true", help="skip the Horch and He et al. stiction tests")
-    p.add_argument("--workers", type=int, default=None, help="processes for a batch (default: 2)")
-    p.add_argument("--figure", default=None, metavar="DIR", help="write one PNG per loop into DIR")
+    p.add_argument("--workers", type=int, default=None, help="Dask worker processes of the local cluster (default: 2)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="write the plant-wide table (loops.parquet, loops.csv) and worst_loops.txt into DIR")
+    p.add_argument("--top", type=int, default=10, metavar="N", help="loops in the ranked summary (default 10)")
+    p.add_argument("--figure", "--figures", dest="figure", default=None, metavar="DIR",
+                   help="write one PNG per loop into DIR (trends, PV-OP and OP-dPV with the fitted models)")
     p.add_argument("--json", action="store_true", help="print the reports as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.errors import UserError
-    from phfdi.loopdiag.batch import diagnose_files, stderr_progress
     from phfdi.loopdiag.diagnose import Settings
+    from phfdi.loopdiag.plantwide import diagnose_jobs, expand, format_worst, write_table
     from phfdi.loopdiag.hammerstein import ACTUATOR_CAUSES
     from phfdi.loopdiag.readers import ColumnMap
     from phfdi.loopdiag.report import format_report, format_summary, to_json
+    from phfdi_base.errors import UserError
 
     columns = ColumnMap.parse(args.columns) if args.columns else None
     settings = Settings(baselines=not args.no_baselines,
@@ -75,13 +99,26 @@ def run(args: argparse.Namespace) -> int:
         settings.causes = causes
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
-    reports = diagnose_files(args.files, columns, settings, args.workers, stderr_progress(),
-                             figure_dir=args.figure)
+    if args.top < 1:
+        raise UserError(f"--top must be at least 1, got {args.top}")
+    jobs = expand(args.files, columns)
+    reports = diagnose_jobs(jobs, settings, args.figure, args.scheduler, args.workers, _progress(len(jobs)),
+                            each_segment=args.segments == "each")
     for r in reports:
         if "error" in r:
             print(f"phfdi loop-diagnose: {r['error']}", file=sys.stderr)
+        else:
+            print_notes("loop-diagnose", [f"{r['file']}: {n}" for n in r.get("reading_notes", [])])
+    ok = any("error" not in r for r in reports)
+    if args.out:
+        pq_path, csv_path = write_table(reports, args.out)
+        worst = format_worst(reports, args.top) if ok else "no loop could be diagnosed"
+        (pq_path.parent / "worst_loops.txt").write_text(worst + "\n", encoding="utf-8")
+        print(f"phfdi loop-diagnose: {len(reports)} loop records -> {pq_path}, {csv_path}", file=sys.stderr)
     if args.json:
         print(to_json(reports))
+    elif args.out and len(reports) > 1:
+        print(worst)
     else:
         good = [r for r in reports if "error" not in r]
         for r in good:
@@ -89,4 +126,19 @@ def run(args: argparse.Namespace) -> int:
             print()
         if len(reports) > 1:
             print(format_summary(reports))
-    return 0 if any("error" not in r for r in reports) else 2
+            print()
+            print(format_worst(reports, args.top))
+    return 0 if ok else 2
+
+
+def _progress(total: int):
+    """``loop-diagnose: k/n loops`` on stderr for batches (every 5 % and at the end)."""
+    if total < 2:
+        return None
+    step = max(1, total // 20)
+
+    def show(done: int, n: int) -> None:
+        if done == n or done % step == 0:
+            print(f"loop-diagnose: {done}/{n} loops", file=sys.stderr, flush=True)
+
+    return show

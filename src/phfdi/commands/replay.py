@@ -8,19 +8,33 @@ import sys
 import time
 
 from .calibrate import add_detector_args, settings_from_args
-from .common import EPILOG_FORMAT
+from .common import EPILOG_FORMAT, add_record_args, column_map_from_args, print_notes
 
 EXAMPLES = """examples:
   phfdi simulate --fault backlash --out runs/backlash.parquet && phfdi replay runs/backlash.parquet
   phfdi replay runs/backlash.csv --json                 # machine-readable list of alarms
   phfdi replay bags/run.mcap --calibration my.yaml      # a bag recorded by phfdi launch, own calibration
   phfdi replay --live bags/run.mcap                     # through a detector NODE, over ROS topics
+  phfdi replay plant.csv --column time_s=t --column ph_measured=pH --column valve_command_pct=OP
+  phfdi replay rig.csv --reference ref.json              # a learned reference (phfdi calibrate --learn)
+  phfdi replay rig.csv --reference ref.json --refit-rows 400 --json
+
+With --reference the record's channels go through the learned reference and the
+multichannel wavelet detector instead (any number of channels, no plant model):
+each alarm names the channels and bands that carry it; --refit-rows N re-fits
+the reference on the record's own first N rows with the file's settings.
 
 The detector sees only what a plant would measure: time_s, ph_measured,
 valve_command_pct (or ph_controller_output_pct), level_measured_cm,
 level_controller_output_pct, ph_setpoint and the flows of feeds the valve does
 not drive. The plant model comes from the run's metadata (simulated runs),
 else from --scenario; the faults in it are ignored.
+
+The file is read under the reading policy of docs/records.md: exact duplicate
+rows dropped, a repeated stamp next to a skipped one re-spaced, other repeated
+stamps averaged, NaN/inf/text cells missing (the detector holds its statistics
+there); time going back is refused. Every repair is printed on stderr as a
+note and listed in --json ("notes").
 
 --live plays the bag's topics (raw CDR, each message at its simulated time
 stamp, and /clock) into a ROS graph of two processes started for the
@@ -45,6 +59,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_detector_args(p)
     p.add_argument("--no-isolation", action="store_true", help="detect only (no fault class)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
+    p.add_argument("--reference", default=None, metavar="REF.json",
+                   help="a learned reference (phfdi calibrate --learn): watch the record's channels with it")
+    p.add_argument("--refit-rows", type=int, default=None, metavar="N",
+                   help="with --reference: re-fit it on the record's first N rows (its settings kept)")
+    add_record_args(p)
     live = p.add_argument_group("live replay (ROS 2)")
     live.add_argument("--live", action="store_true",
                       help="play the bag over ROS topics into a detector node instead (.mcap only)")
@@ -56,16 +75,28 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.errors import UserError
     from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
     from wavelet_fdi.config import Calibration
-    from wavelet_fdi.replay import load_any, replay_run, scenario_of
+    from phfdi.replay import load_any, replay_run, scenario_of
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
+    if args.refit_rows is not None and not args.reference:
+        raise UserError("--refit-rows goes with --reference")
+    if args.reference and not args.live:
+        return run_learned(args)
+    if args.reference:
+        if args.map or args.column or args.encoding or args.refit_rows is not None:
+            raise UserError("--map, --column, --encoding and --refit-rows apply to an offline replay, not to --live")
+        return run_live_learned(args)
     if args.live:
+        if args.map or args.column or args.encoding:
+            raise UserError("--map, --column and --encoding apply to an offline replay, not to --live")
         return run_live(args)
-    run_ = load_any(args.file)
+    run_ = load_any(args.file, column_map_from_args(args), args.encoding)
+    notes = run_.metadata.get("notes", [])
+    print_notes("replay", notes)
     spec = load_scenario(args.scenario, fault="healthy") if args.scenario else scenario_of(run_)
     settings = settings_from_args(args)
     cal = Calibration.load(args.calibration) if args.calibration else None
@@ -75,42 +106,140 @@ def run(args: argparse.Namespace) -> int:
     print(f"replayed {result.samples} samples in {elapsed:.2f} s ({result.samples / max(elapsed, 1e-9):.0f} "
           f"samples/s, isolation included)", file=sys.stderr)
     if args.json:
-        print(json.dumps([a.summary() for a in result.alarms], indent=2))
+        print(json.dumps(replay_json(args.file, result.samples, notes, result.diagnostics,
+                                     [a.summary() for a in result.alarms]), indent=2))
         return 0
     print(format_alarms(result.alarms, result.diagnostics))
     return 0
 
 
-def _scenario_file(bag: str, fallback: str | None, folder: str) -> str:
-    """The bag's own scenario (its metadata) as a file the nodes load; else --scenario (default paper)."""
+def run_learned(args: argparse.Namespace) -> int:
+    """The record through the learned reference and the multichannel detector."""
+    from phfdi.learned import alarm_summaries, event_dict, format_alarms as format_learned, read_measured, \
+        replay_measured
+    from wavelet_fdi.learned_detector import LearnedModel
+
+    model = LearnedModel.load(args.reference)
+    rec = read_measured(args.file, column_map_from_args(args), channels=model.channels, encoding=args.encoding)
+    print_notes("replay", rec.notes)
+    t0 = time.perf_counter()
+    events, states, model = replay_measured(rec, model, args.refit_rows)
+    elapsed = time.perf_counter() - t0
+    print(f"replayed {len(rec.x)} rows x {len(model.channels)} channels in {elapsed:.2f} s", file=sys.stderr)
+    alarms = alarm_summaries(events, rec)
+    inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
+    if args.json:
+        print(json.dumps({"file": args.file, "reference": args.reference, "samples": len(rec.x),
+                          "channels": list(model.channels), "notes": rec.notes, "input_problems": inputs,
+                          "alarm_rows": int(states.sum()), "alarms": alarms}, indent=2))
+        return 0
+    print(format_learned(alarms))
+    for e in inputs:
+        print(f"input: {e['message']} ({rec.where} {e['line']})")
+    return 0
+
+
+def run_live_learned(args: argparse.Namespace) -> int:
+    """A bag of a measured record (phfdi bag from-csv) through the learned detector NODE over ROS."""
+    import math
     from pathlib import Path
 
-    import yaml
+    from phfdi import bagio
+    from phfdi.learned import format_alarms as format_learned
+    from phfdi.ros.launcher import OBSERVER, Launcher, NodeSpec
+    from phfdi.ros.parts import recorded_part
+    from phfdi.ros.player import PLAYER
+    from phfdi_base.errors import UserError
+    from phfdi_base.topics import DETECTOR, MEASURED_SAMPLE
+    from wavelet_fdi.learned_detector import LearnedModel
+
+    from .common import Progress
+
+    if not args.file.endswith(".mcap"):
+        raise UserError(f"--live plays a bag: give an .mcap file, not {args.file}")
+    if not (math.isfinite(args.pace) and 0.0 <= args.pace <= 1e6):
+        raise UserError(f"--pace {args.pace}: use 0 (as fast as possible) or a factor up to 1e6")
+    model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
+    info = bagio.bag_info(args.file)
+    if not info["finished"]:
+        raise UserError(f"{args.file}: the bag is not finished; run phfdi bag recover {args.file} FIXED.mcap")
+    if not any(t["topic"] == MEASURED_SAMPLE.name for t in info["topics"]):
+        raise UserError(f"{args.file}: no {MEASURED_SAMPLE.name} topic: write the record with phfdi bag from-csv")
+    say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
+
+    def on_event(node: str, event: dict) -> None:
+        if event.get("event") == "fault_alarm":
+            say(f"/fault_alarm {event['state']} at {event['time_s']:g} s: {event['message']}")
+
+    spec = _replay_scenario(args.file, args.scenario)
+    common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
+    nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
+                                                    "pace": float(args.pace)}),
+             NodeSpec(DETECTOR, "phfdi.ros.learned_node",
+                      {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
+    part = recorded_part(spec)  # resolved once; both nodes start from it
+    for node in nodes:
+        node.part = part
+    t0 = time.perf_counter()
+    result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
+                      progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
+    elapsed = time.perf_counter() - t0
+    done = [e for e in result.node_events.get(DETECTOR, []) if e["event"] == "detector_done"]
+    if result.failure or not done:
+        say(f"error: {result.failure or 'the detector node did not report'}"
+            + (f"; node logs: {result.log_dir}" if result.log_dir else ""))
+        return result.status or 1
+    report = done[-1]
+    say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
+        f"(ROS domain {result.domain_id})")
+    alarms = report["alarms"]
+    if args.json:
+        print(json.dumps({"file": args.file, "reference": args.reference, "samples": report["samples"],
+                          "channels": list(model.channels), "alarms": alarms}, indent=2))
+    else:
+        print(format_learned(alarms))
+    return result.status
+
+
+def replay_json(file: str, samples: int, notes: list[str], diagnostics: dict, alarms: list[dict]) -> dict:
+    """--json output: the file, what the reader repaired, what the detector counted as bad input, the alarms."""
+    return {"file": file, "samples": samples, "notes": notes, "input_problems": input_problems(diagnostics),
+            "alarms": alarms}
+
+
+def input_problems(diagnostics: dict) -> dict:
+    """The detector's bad-input counters that are not zero."""
+    return {k: v for k, v in diagnostics.items()
+            if k in ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
+                     "gap_resets", "time_resets", "nonfinite_ph", "out_of_range_ph", "nonfinite_command",
+                     "command_stale_episodes", "reference_resets") and v}
+
+
+def _replay_scenario(bag: str, fallback: str | None):
+    """The bag's own scenario (its metadata); else --scenario (default paper)."""
+    from pathlib import Path
 
     from phfdi import bagio
-    from phfdi.scenario import load_scenario, validate_scenario
+    from phfdi.scenario import load_scenario
+    from phfdi_base.spec import validate_scenario
 
     meta = json.loads(bagio.read_metadata(Path(bag)).get(bagio.RUN_METADATA, {}).get("json", "{}"))
     if fallback or not isinstance(meta.get("spec"), dict):
-        spec = load_scenario(fallback or "paper", fault="healthy")
-    else:
-        spec = validate_scenario(meta["spec"], source=f"{bag} metadata")
-    path = Path(folder) / "scenario.yaml"
-    path.write_text(yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
-    return str(path)
+        return load_scenario(fallback or "paper", fault="healthy")
+    return validate_scenario(meta["spec"], source=f"{bag} metadata")
 
 
 def run_live(args: argparse.Namespace) -> int:
     """The bag through a detector node over ROS: player + detector, started and stopped here."""
     import math
-    import tempfile
     from pathlib import Path
 
     from phfdi import bagio
-    from phfdi.errors import UserError
     from phfdi.ros.launcher import Launcher, NodeSpec, detector_spec
+    from phfdi.ros.parts import recorded_part
     from phfdi.ros.player import PLAYER
-    from phfdi.ros.topics import DETECTOR
+    from phfdi_base.errors import UserError
+    from phfdi_base.topics import DETECTOR
 
     from .common import Progress
     from .launch import alarm_event_line
@@ -132,21 +261,23 @@ def run_live(args: argparse.Namespace) -> int:
         if line:
             say(line)
 
-    with tempfile.TemporaryDirectory(prefix="phfdi-replay-") as tmp:
-        common = {"scenario": _scenario_file(args.file, args.scenario, tmp), "fault": "",
-                  "graph_nodes": [PLAYER, DETECTOR]}
-        detector = {**common, "wavelet": args.wavelet, "level": args.level, "arl0_samples": float(args.arl0),
-                    "channels": [c.strip() for c in args.channels.split(",") if c.strip()],
-                    "isolate": not args.no_isolation}
-        if args.calibration:
-            detector["calibration"] = str(Path(args.calibration).resolve())
-        nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
-                                                        "pace": float(args.pace)}),
-                 detector_spec(detector)]
-        t0 = time.perf_counter()
-        result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
-                          progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
-        elapsed = time.perf_counter() - t0
+    spec = _replay_scenario(args.file, args.scenario)
+    common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
+    detector = {**common, "wavelet": args.wavelet, "level": args.level, "arl0_samples": float(args.arl0),
+                "channels": [c.strip() for c in args.channels.split(",") if c.strip()],
+                "isolate": not args.no_isolation}
+    if args.calibration:
+        detector["calibration"] = str(Path(args.calibration).resolve())
+    nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
+                                                    "pace": float(args.pace)}),
+             detector_spec(detector)]
+    part = recorded_part(spec)  # resolved once; both nodes start from it
+    for node in nodes:
+        node.part = part
+    t0 = time.perf_counter()
+    result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
+                      progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
+    elapsed = time.perf_counter() - t0
     done = [e for e in result.node_events.get(DETECTOR, []) if e["event"] == "detector_done"]
     if result.failure or not done:
         say(f"error: {result.failure or 'the detector node did not report'}"
@@ -157,7 +288,8 @@ def run_live(args: argparse.Namespace) -> int:
         f"({result.run_wall_s:.1f} s after the graph connected; ROS domain {result.domain_id})")
     alarms = report["alarms"]
     if args.json:
-        print(json.dumps([{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms], indent=2))
+        print(json.dumps(replay_json(args.file, report["samples"], [], report["diagnostics"],
+                                     [{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms]), indent=2))
     else:
         print(format_alarms(alarms, report["diagnostics"]))
     return result.status
@@ -185,10 +317,11 @@ def format_alarms(alarms: list, diagnostics: dict) -> str:
                      f"{s['dominant_level']}, severity {s['severity']:.3g} pH RMS")
         if s["cleared_time"] is not None:
             lines.append(f"  cleared {s['cleared_time']:g} s")
-    problems = {k: v for k, v in diagnostics.items()
-                if k in ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
-                         "gap_resets", "time_resets", "nonfinite_ph", "out_of_range_ph", "nonfinite_command",
-                         "command_stale_episodes", "reference_resets") and v}
+    problems = input_problems(diagnostics)
     if problems:
         lines.append("input problems: " + ", ".join(f"{k} {v}" for k, v in problems.items()))
+    held = problems.get("nonfinite_ph", 0) + problems.get("out_of_range_ph", 0)
+    if held:
+        lines.append(f"  {held} pH samples missing or out of range: no residual there, the statistics held "
+                     f"(not fed as numbers)")
     return "\n".join(lines)

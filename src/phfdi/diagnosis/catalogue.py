@@ -383,7 +383,7 @@ def catalogue(ctx: Context, only: list[str] | None = None,
     if only:
         unknown = [c for c in only if c not in CAUSES or c == "none"]
         if unknown:
-            from phfdi.errors import UserError
+            from phfdi_base.errors import UserError
 
             raise UserError(f"unknown candidate {unknown[0]!r}; catalogue: "
                             f"{', '.join(c for c in CAUSES if c != 'none')}")

@@ -12,35 +12,30 @@ Nothing else is read from a project run (``ph_true``, valve position, fault
 severity and the run's metadata would tell the answer), so a diagnosis sees
 the same as it would on a plant historian.
 
-Sources: a run of the project (.csv, .parquet, or a .mcap bag through
-``phfdi.bagio.load_run``), or any CSV with a column mapping (a small YAML
-file or ``--column SIGNAL=COLUMN``; units converted to the project's).
+Sources: a run of the project (.csv, .parquet, or a .mcap bag), or any
+record with a column map (:class:`phfdi.records.ColumnMap`: a small YAML file
+or ``--column SIGNAL=COLUMN``; units converted to the project's). Files are
+read by :func:`phfdi.records.read_record` under the run policy: its repairs
+become the record's notes, and a measured output with no value at all is an
+error, never silently left out.
 """
 
 from __future__ import annotations
 
-import csv
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from phfdi.errors import UserError
-from phfdi.yamlfile import read_mapping
+from phfdi import records
+from phfdi_base.errors import UserError
 
 OUTPUTS = ("ph_measured", "level_measured_cm")
 COMMAND_INPUTS = ("valve_command_pct", "level_controller_output_pct")
 
-#: unit -> factor to the project's unit, per kind of signal
-UNITS: dict[str, dict[str, float]] = {
-    "time": {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0},
-    "pct": {"%": 1.0, "pct": 1.0, "fraction": 100.0},
-    "flow": {"mL/s": 1.0, "ml/s": 1.0, "mL/min": 1 / 60, "ml/min": 1 / 60, "L/min": 1000 / 60, "l/min": 1000 / 60,
-             "L/h": 1000 / 3600, "l/h": 1000 / 3600, "m3/h": 1e6 / 3600},
-    "ph": {"pH": 1.0, "ph": 1.0},
-    "level": {"cm": 1.0, "mm": 0.1, "m": 100.0},
-}
+UNITS = records.columns.UNITS
 
 #: longest stretch of missing samples filled by interpolation (samples)
 MAX_GAP_SAMPLES = 5
@@ -98,143 +93,71 @@ class Record:
         return True
 
 
-@dataclass
-class ColumnMap:
-    """Project signal -> (source column, unit of the source)."""
+class ColumnMap(records.ColumnMap):
+    """A :class:`phfdi.records.ColumnMap` checked for diagnosis: signals of known kinds, time, an input and an
+    output."""
 
-    columns: dict[str, tuple[str, str]]
+    @classmethod
+    def of(cls, cmap: records.ColumnMap) -> "ColumnMap":
+        """Any records column map, checked for diagnosis."""
+        return cls(**{f.name: getattr(cmap, f.name) for f in dataclasses.fields(cmap)}).checked()
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "ColumnMap":
-        data = read_mapping(path, "column map", "a mapping 'signal: column' or 'signal: {column:, unit:}'")
-        return cls.from_dict(data, str(path))
+        return cls.load(path).checked()
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "column map") -> "ColumnMap":
-        cols = {}
-        for signal, spec in data.items():
-            kind = kind_of(str(signal))
-            if isinstance(spec, str):
-                column, unit = spec, None
-            elif isinstance(spec, dict) and "column" in spec:
-                column, unit = str(spec["column"]), spec.get("unit")
-                unknown = set(spec) - {"column", "unit"}
-                if unknown:
-                    raise UserError(f"{source}: {signal}: unknown key {sorted(unknown)[0]!r} (use column, unit)")
-            else:
-                raise UserError(f"{source}: {signal}: expected a column name or {{column: NAME, unit: UNIT}}")
-            unit = unit or next(iter(UNITS[kind]))
-            if unit not in UNITS[kind]:
-                raise UserError(f"{source}: {signal}: unit {unit!r} not known for a {kind} signal; "
-                                f"use one of {', '.join(UNITS[kind])}")
-            cols[str(signal)] = (column, unit)
-        if "time_s" not in cols:
-            raise UserError(f"{source}: the map needs time_s (the column holding time)")
-        if not any(s in OUTPUTS for s in cols):
-            raise UserError(f"{source}: the map needs an output: ph_measured or level_measured_cm")
-        if not any(is_input(s) for s in cols):
-            raise UserError(f"{source}: the map needs an input: valve_command_pct, <feed>_flow_ml_s "
-                            f"or level_controller_output_pct")
-        return cls(cols)
+        return cls.from_mapping(data, source).checked()
 
     @classmethod
-    def from_args(cls, items: list[str], units: list[str]) -> "ColumnMap":
-        data: dict = {}
-        for item in items:
-            if "=" not in item:
-                raise UserError(f"--column expects SIGNAL=COLUMN, got {item!r}")
-            sig, col = item.split("=", 1)
-            data[sig.strip()] = {"column": col.strip()}
-        for item in units:
-            if "=" not in item:
-                raise UserError(f"--unit expects SIGNAL=UNIT, got {item!r}")
-            sig, unit = item.split("=", 1)
-            if sig.strip() not in data:
-                raise UserError(f"--unit {item!r}: no --column for {sig.strip()!r}")
-            data[sig.strip()]["unit"] = unit.strip()
-        return cls.from_dict(data, "--column")
+    def from_args(cls, items: list[str], units: list[str] = (), source: str = "--column") -> "ColumnMap":
+        return super().from_args(items, units, source).checked()
+
+    def checked(self) -> "ColumnMap":
+        for signal in self.signals:
+            kind_of(signal)
+        if "time_s" not in self.signals:
+            raise UserError(f"{self.source}: the map needs time_s (the column holding time)")
+        if not any(s in OUTPUTS for s in self.signals):
+            raise UserError(f"{self.source}: the map needs an output: ph_measured or level_measured_cm")
+        if not any(is_input(s) for s in self.signals):
+            raise UserError(f"{self.source}: the map needs an input: valve_command_pct, <feed>_flow_ml_s "
+                            f"or level_controller_output_pct")
+        return self
 
 
-def _read_table(path: Path) -> dict[str, list[str]]:
-    """All columns of a CSV as strings (header names stripped; empty trailing columns ignored)."""
-    with open(path, encoding="utf-8-sig", newline="") as fh:
-        rows = list(csv.reader(fh))
-    if not rows:
-        raise UserError(f"{path}: empty file")
-    header = [h.strip() for h in rows[0]]
-    cols: dict[str, list[str]] = {h: [] for h in header if h}
-    for row in rows[1:]:
-        if not any(c.strip() for c in row):
-            continue
-        for h, c in zip(header, row):
-            if h:
-                cols[h].append(c.strip())
-        for h in header[len(row):]:
-            if h:
-                cols[h].append("")
-    return cols
+def read_mapped(path: Path, cmap: records.ColumnMap, encoding: str | None = None) -> tuple[dict, list[str]]:
+    """The mapped signals of any record file (project names and units) and the reader's notes."""
+    rec = records.read_record(path, cmap, policy="run", channels=cmap.channels(), encoding=encoding)
+    return {"time_s": rec.time_s, **rec.signals}, rec.note_lines()
 
 
-def _numeric(path: Path, column: str, values: list[str]) -> np.ndarray:
-    out = np.empty(len(values))
-    for i, v in enumerate(values):
-        if v == "" or v.lower() in ("nan", "na", "null"):
-            out[i] = math.nan
-            continue
-        try:
-            out[i] = float(v)
-        except ValueError:
-            raise UserError(f"{path}: column {column!r} row {i + 2}: {v!r} is not a number") from None
-    return out
-
-
-def read_mapped_csv(path: Path, cmap: ColumnMap) -> dict[str, np.ndarray]:
-    table = _read_table(path)
-    out = {}
-    for signal, (column, unit) in cmap.columns.items():
-        if column not in table:
-            close = [h for h in table if h.lower().replace(" ", "") == column.lower().replace(" ", "")]
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise UserError(f"{path}: no column {column!r} for {signal}{hint}; columns: "
-                            f"{', '.join(repr(h) for h in table)}")
-        out[signal] = _numeric(path, column, table[column]) * UNITS[kind_of(signal)][unit]
-    return out
-
-
-def read_project_run(path: Path) -> dict[str, np.ndarray]:
-    """The signals of a project run (CSV, Parquet or bag) that a plant would have measured."""
-    if path.suffix.lower() == ".mcap" or path.is_dir():
-        try:
-            from phfdi.bagio import load_run
-        except ImportError:
-            raise UserError(f"{path}: reading bags needs phfdi.bagio, not in this installation") from None
-        run = load_run(path)
-    else:
-        from phfdi.run import Run
-
-        try:
-            run = Run.load(path)
-        except UserError as exc:
-            raise UserError(f"{exc} - for a CSV that is not a phfdi run, give a column map (--map or --column)") \
-                from None
-    sig = run.signals
-    out = {"time_s": np.asarray(sig["time_s"], dtype=float)}
+def read_project_run(path: Path, encoding: str | None = None) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The signals of a project run (CSV, Parquet or bag) that a plant would have measured, and the notes."""
+    rec = records.read_record(path, policy="run", encoding=encoding)
+    sig, notes = rec.signals, rec.note_lines()
+    out = {"time_s": rec.time_s}
     if "valve_command_pct" in sig:
         out["valve_command_pct"] = sig["valve_command_pct"]
     elif "ph_controller_output_pct" in sig:
         out["valve_command_pct"] = sig["ph_controller_output_pct"]
     for name, values in sig.items():
-        if name == "outlet_flow_ml_s" or not name.endswith("_flow_ml_s"):
-            continue
-        out[name] = values
-    if "level_controller_output_pct" in sig and np.isfinite(sig["level_controller_output_pct"]).any():
-        out["level_controller_output_pct"] = sig["level_controller_output_pct"]
+        if name.endswith("_flow_ml_s") and name != "outlet_flow_ml_s":
+            out[name] = values
+    if "level_controller_output_pct" in sig:
+        if np.isnan(sig["level_controller_output_pct"]).all():
+            notes.append(f"{path}: level_controller_output_pct has no value: not used as an input")
+        else:
+            out["level_controller_output_pct"] = sig["level_controller_output_pct"]
     for name in OUTPUTS:
-        if name in sig and np.isfinite(sig[name]).any():
+        if name in sig:
+            rec.refuse_empty(name)
             out[name] = sig[name]
     if not any(n in out for n in OUTPUTS):
-        raise UserError(f"{path}: no measured output (ph_measured or level_measured_cm)")
-    return {k: np.asarray(v, dtype=float) for k, v in out.items()}
+        raise UserError(f"{path}: no measured output (ph_measured or level_measured_cm) - for a file that is "
+                        f"not a phfdi run, give a column map (--map or --column)")
+    return {k: np.asarray(v, dtype=float) for k, v in out.items()}, notes
 
 
 def _fill_gaps(name: str, values: np.ndarray, time_s: np.ndarray, label: str, notes: list[str]) -> np.ndarray:
@@ -288,9 +211,10 @@ def _resample(time_s: np.ndarray, signals: dict[str, np.ndarray], dt_s: float) -
     return grid, out
 
 
-def make_record(signals: dict[str, np.ndarray], label: str, dt_s: float | None = None) -> Record:
+def make_record(signals: dict[str, np.ndarray], label: str, dt_s: float | None = None,
+                notes: list[str] | None = None) -> Record:
     """Check and resample raw signals (project names, project units) into a :class:`Record`."""
-    notes: list[str] = []
+    notes = list(notes or [])
     t = np.asarray(signals["time_s"], dtype=float)
     if len(t) < 20:
         raise UserError(f"{label}: only {len(t)} samples; a diagnosis needs at least 20")
@@ -327,15 +251,13 @@ def make_record(signals: dict[str, np.ndarray], label: str, dt_s: float | None =
     return Record(label, t, inputs, outputs, notes)
 
 
-def load_record(path: str | Path, cmap: ColumnMap | None = None, dt_s: float | None = None) -> Record:
+def load_record(path: str | Path, cmap: records.ColumnMap | None = None, dt_s: float | None = None,
+                encoding: str | None = None) -> Record:
     """Read one file into a :class:`Record` (see the module docstring for what is read)."""
     path = Path(path)
-    if not path.exists():
-        raise UserError(f"no such file: {path}")
     if cmap is not None:
-        if path.suffix.lower() != ".csv":
-            raise UserError(f"{path}: a column map applies to CSV files")
-        signals = read_mapped_csv(path, cmap)
+        signals, notes = read_mapped(path, cmap, encoding)
     else:
-        signals = read_project_run(path)
-    return make_record(signals, path.name, dt_s)
+        signals, notes = read_project_run(path, encoding)
+    prefix = f"{path}: "
+    return make_record(signals, path.name, dt_s, [n.removeprefix(prefix) for n in notes])

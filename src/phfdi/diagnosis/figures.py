@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pywt  # noqa: E402
 
-from phfdi.run import label  # noqa: E402
+from phfdi_base.signals import label  # noqa: E402
 
 from .data import Record  # noqa: E402
 from .model import Prediction  # noqa: E402

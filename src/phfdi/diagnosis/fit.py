@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .catalogue import Candidate, Context, catalogue
 from .data import Record

@@ -34,13 +34,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from ph_plant_sim.build import build_plant, feed_lines, load_plant_model, plant_start, sensor_chain
 from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from ph_plant_sim.plant import CstrPlant, affine_recurrence, record_sample_maps
-from phfdi.blocks import Chain, Injected
-from phfdi.errors import UserError
-from phfdi.loop import _valve, build_plant, feed_lines, profile, sensor_chain
-from phfdi.scenario import (ScenarioSpec, apply_override, load_plant_model, parse_override, raw_scenario,
-                            validate_scenario)
+from phfdi.scenario import raw_scenario
+from phfdi_base.blocks import Chain, Injected
+from phfdi_base.errors import UserError
+from phfdi_base.spec import ScenarioSpec, apply_override, injected_faults, parse_override, profile, validate_scenario
+from valve_actuator.build import build_valve
 
 from .data import Record
 
@@ -187,9 +188,7 @@ class Evaluator:
         plant = self.plant(spec)
         if plant.tank.overflow or "level_controller_output_pct" in self.record.inputs:
             return 1.0
-        from phfdi.loop import operating_point
-
-        return operating_point(spec, plant).outlet_opening
+        return plant_start(spec, plant).outlet_opening
 
     # ---- stages -----------------------------------------------------------------
     def flows(self, spec: ScenarioSpec, start: Start = Start()) -> tuple[np.ndarray, np.ndarray]:
@@ -232,7 +231,7 @@ class Evaluator:
                     {k: [b.model_dump() for b in v.line] for k, v in model.feeds.items()})
 
     def _valve_flows(self, spec: ScenarioSpec, command: np.ndarray, offset_pct: float = 0.0) -> np.ndarray:
-        valve = _valve(spec.valves.ph, spec, "valve")
+        valve = build_valve(spec.valves.ph, spec, "valve")
         # the faults of a diagnosis model act from the start: step the blocks themselves
         pos_blocks = [_bare(b) for b in valve.position_blocks.blocks]
         flow_blocks = [_bare(b) for b in valve.flow_blocks.blocks]
@@ -265,7 +264,7 @@ class Evaluator:
                                                      if f.where.startswith("outlet_valve")])
         if key == getattr(self, "_openings_key", None):
             return self._openings_cached
-        outlet = _valve(spec.valves.outlet, spec, "outlet_valve")
+        outlet = build_valve(spec.valves.outlet, spec, "outlet_valve")
         cmd = rec.inputs["level_controller_output_pct"].tolist()
         outlet.reset(cmd[0])
         t = self.t_rel.tolist()
@@ -355,7 +354,7 @@ class Evaluator:
 
 
 def _bare(block):
-    """The block inside an :class:`~phfdi.blocks.Injected` that is fully on from t = 0 (one call less per sample)."""
+    """The block inside an :class:`~phfdi_base.blocks.Injected` that is fully on from t = 0 (one call less per sample)."""
     if isinstance(block, Injected) and block.onset_s <= 0.0 and block.ramp_s <= 0.0:
         if hasattr(block.block, "severity"):
             block.block.severity = 1.0
@@ -364,9 +363,8 @@ def _bare(block):
 
 
 def _sensor_faults(spec: ScenarioSpec, site: str, dt_s: float) -> list:
-    from phfdi.loop import _faults
 
-    return [_bare(b) for b in _faults(spec, site, None)]
+    return [_bare(b) for b in injected_faults(spec, site)]
 
 
 def _run_chain(chain: Chain, x: np.ndarray, t: list[float]) -> np.ndarray:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .extend import load_model_file, write_model
 from .figures import plot_fit, plot_ranking, plot_scalogram

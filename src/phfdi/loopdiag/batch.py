@@ -1,68 +1,28 @@
-"""Many loop files at once, on all cores; a bad file is one message, never the end of the batch."""
+"""Many loop files at once (on Dask, :mod:`.plantwide`); a bad file is one message, never the end of the batch."""
 
 from __future__ import annotations
 
-import os
 import sys
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Callable, Iterable
 
-from phfdi.errors import UserError
-
-from .diagnose import Settings, gather_evidence, report
-from .readers import ColumnMap, read_loop
-
-
-def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Settings | None = None,
-                  figure_dir: str | None = None) -> dict:
-    """The report of one file, or ``{"file": ..., "error": message}`` for a file that cannot be diagnosed."""
-    try:
-        run = read_loop(path, columns)
-        settings = settings or Settings()
-        ev = gather_evidence(run, settings)
-        rep = report(run, ev, settings)
-    except UserError as exc:
-        return {"file": str(path), "error": str(exc)}
-    if figure_dir:
-        from .figures import plot_loop
-
-        rep["figure"] = str(plot_loop(run, ev, rep, figure_dir))
-    return rep
-
-
-def _worker(args: tuple) -> dict:
-    return diagnose_file(*args)
-
-
-def default_workers() -> int:
-    return max(1, min(2, os.cpu_count() or 1))
+from .diagnose import Settings
+from .readers import ColumnMap
+from .single import diagnose_file, diagnose_file_segments, diagnose_run  # noqa: F401 - the batch's public API
 
 
 def diagnose_files(paths: Iterable[str], columns: ColumnMap | None = None, settings: Settings | None = None,
                    workers: int | None = None, progress: Callable[[int, int, str], None] | None = None,
-                   figure_dir: str | None = None) -> list[dict]:
-    """Reports in the order of ``paths``; ``workers`` processes (default: both cores)."""
+                   figure_dir: str | None = None, each_segment: bool = False,
+                   scheduler: str | None = None) -> list[dict]:
+    """Reports in the order of ``paths`` (with ``each_segment``, one per usable stretch), on Dask
+    (:mod:`.plantwide`; a single file runs in this process)."""
+    from .plantwide import Job, diagnose_jobs
+
     paths = [str(p) for p in paths]
-    workers = default_workers() if workers is None else max(1, workers)
-    jobs = [(p, columns, settings, figure_dir) for p in paths]
-    results: list[dict | None] = [None] * len(paths)
-    if workers == 1 or len(paths) == 1:
-        for i, job in enumerate(jobs):
-            results[i] = _worker(job)
-            if progress:
-                progress(i + 1, len(paths), paths[i])
-        return results  # type: ignore[return-value]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(_worker, job): i for i, job in enumerate(jobs)}
-        done = 0
-        for fut in as_completed(futures):
-            i = futures[fut]
-            results[i] = fut.result()
-            done += 1
-            if progress:
-                progress(done, len(paths), paths[i])
-    return results  # type: ignore[return-value]
+    show = (lambda done, total: progress(done, total, "")) if progress else None
+    return diagnose_jobs([Job(p, columns) for p in paths], settings, figure_dir, scheduler, workers, show,
+                         each_segment=each_segment)
 
 
 def stderr_progress(enabled: bool | None = None) -> Callable[[int, int, str], None]:
@@ -75,4 +35,3 @@ def stderr_progress(enabled: bool | None = None) -> Callable[[int, int, str], No
                   file=sys.stderr, flush=True)
 
     return show
-

@@ -375,6 +375,7 @@ def report(run: Run, ev: Evidence, settings: Settings | None = None) -> dict:
                         "anchored on measured PV; validation = last third of the record")
     out["baselines"] = ev.baselines
     out["notes"] = list(run.metadata.get("notes") or []) + ev.notes
+    out["reading_notes"] = list(run.metadata.get("notes") or [])  # what the reader repaired (phfdi.records)
     return out
 
 

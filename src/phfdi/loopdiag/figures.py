@@ -1,4 +1,13 @@
-"""One figure per loop: PV against the linear and the extended model, OP against the stem position."""
+"""One figure per loop: time trends, the PV-OP and OP-dPV plots, and the fitted valve models over them.
+
+* top: PV and SP against time with the linear model and the best valve model; OP with the stem
+  position of the fitted Kano stiction model (and of the named valve model);
+* bottom left: PV against OP with Choudhury's fitted ellipse (band-passed signals, shifted to the
+  measured means) and the Kano model's PV against OP;
+* bottom middle: PV's change per sample against OP (the valve-position proxy of Kano's method for
+  a level loop's inflow, the jumps of a slipping valve), with the Kano model's;
+* bottom right: the Kano block's stem position against OP (its stick-slip characteristic, S and J).
+"""
 
 from __future__ import annotations
 
@@ -9,50 +18,115 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
 from phfdi.run import Run  # noqa: E402
 
+from .bicoherence import ellipse_points  # noqa: E402
 from .diagnose import Evidence  # noqa: E402
 from .identify import Split  # noqa: E402
 
 
+def _conic(rep: dict) -> np.ndarray | None:
+    d = ((rep.get("indicators") or {}).get("ellipse_apparent_stiction") or {}).get("detail") or {}
+    try:
+        return np.array([d[f"conic_{k}"] for k in "abcdef"], float)
+    except (KeyError, TypeError):
+        return None
+
+
 def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
-    """Write ``<out_dir>/<file stem>.png`` and return its path."""
+    """Write ``<out_dir>/<file stem>[_<loop tag>].png`` and return its path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     t_min = run.time_s / 60.0
+    op, pv = run["op_pct"], run["pv"]
+    unit = (run.metadata.get("units") or {}).get("pv", "") or "PV units"
+    op_unit = "% of span" if np.min(op) >= 0 and np.max(op) <= 100 else "OP units"
     split = Split.of(len(run))
-    fig, (ax_pv, ax_op) = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 2]})
-    unit = (run.metadata.get("units") or {}).get("pv", "")
-    ax_pv.plot(t_min, run["pv"], color="k", lw=0.7, label="PV measured")
+    fig = plt.figure(figsize=(13, 9))
+    gs = fig.add_gridspec(3, 3, height_ratios=[2.2, 1.4, 2.4])
+    ax_pv = fig.add_subplot(gs[0, :])
+    ax_op = fig.add_subplot(gs[1, :], sharex=ax_pv)
+    ax_xy = fig.add_subplot(gs[2, 0])
+    ax_dpv = fig.add_subplot(gs[2, 1])
+    ax_stem = fig.add_subplot(gs[2, 2])
+    ax_pv.plot(t_min, pv, color="k", lw=0.7, label="PV measured")
     if "sp" in run:
         ax_pv.plot(t_min, run["sp"], color="0.5", ls="--", lw=0.8, label="SP")
+    ax_op.plot(t_min, op, color="tab:green", lw=0.8, label="OP (controller output)")
+    kano = next((c for c in ev.causes if c.cause == "stiction"), None) if ev.identifiable else None
     if ev.identifiable:
         nom = ev.nominal
-        worse = ", worse than 'PV stays' (1.00)" if nom.nrmse_validation > 1.0 else ""
-        ax_pv.plot(t_min, nom.y_model, color="tab:blue", lw=0.9,
-                   label=f"linear {nom.structure} (held-out NRMSE {nom.nrmse_validation:.2f}{worse})")
+        ax_pv.plot(t_min, nom.y_model, color="tab:blue", lw=0.8,
+                   label=f"linear {nom.structure} (held-out NRMSE {nom.nrmse_validation:.2f})")
         chosen = ev.chosen()
-        if chosen is not None:
-            ax_pv.plot(t_min, chosen.model.y_model, color="tab:red", lw=0.9,
+        if chosen is not None and chosen is not kano:
+            ax_pv.plot(t_min, chosen.model.y_model, color="tab:purple", lw=0.8,
                        label=f"with {chosen.cause} (held-out NRMSE {chosen.model.nrmse_validation:.2f})")
-            ax_op.plot(t_min, chosen.position, color="tab:red", lw=0.9, label=f"stem position, {chosen.cause} model")
+            ax_op.plot(t_min, chosen.position, color="tab:purple", lw=0.8, label=f"stem, {chosen.cause} model")
+    if kano is not None:
+        s, j = kano.parameters["s_pct"], kano.parameters["j_pct"]
+        ax_pv.plot(t_min, kano.model.y_model, color="tab:red", lw=0.9,
+                   label=f"with Kano stiction S {s:.2g}, J {j:.2g} (held-out NRMSE {kano.model.nrmse_validation:.2f})")
+        ax_op.plot(t_min, kano.position, color="tab:red", lw=0.9, label="stem, Kano stiction model")
     for ax in (ax_pv, ax_op):
         ax.axvline(t_min[split.n_train], color="tab:green", ls=":", lw=1)
     ax_pv.text(t_min[split.n_train], ax_pv.get_ylim()[1], " held-out part", va="top", fontsize=8, color="tab:green")
-    ax_op.plot(t_min, run["op_pct"], color="tab:green", lw=0.8, label="OP (controller output)")
-    ax_pv.set_ylabel(f"PV ({unit})" if unit else "PV")
-    ax_op.set_ylabel("OP, stem (% of span)")
+    ax_pv.set_ylabel(f"PV ({unit})")
+    ax_op.set_ylabel(f"OP, stem ({op_unit})")
     ax_op.set_xlabel("time (min)")
-    ax_pv.legend(fontsize=8, loc="best")
-    ax_op.legend(fontsize=8, loc="best")
-    title = f"{rep['loop_tag']}: {rep['verdict']}"
-    if rep["cause"] != "none":
-        title += f", {rep['cause']}"
-    ax_pv.set_title(title)
+    ax_pv.legend(fontsize=7, loc="best")
+    ax_op.legend(fontsize=7, loc="best")
+
+    # PV-OP
+    ax_xy.plot(op, pv, color="0.35", lw=0.5, label="measured")
+    coef = _conic(rep)
+    if coef is not None:
+        ex, ey = ellipse_points(coef)
+        d = rep["indicators"]["ellipse_apparent_stiction"]["detail"]
+        ax_xy.plot(ex + d["op_mean"], ey + d["pv_mean"], color="tab:orange", lw=1.2,
+                   label=f"ellipse, apparent stiction {d['apparent_stiction_op']:.2g}")
+    if kano is not None:
+        ax_xy.plot(op, kano.model.y_model, color="tab:red", lw=0.8, alpha=0.8, label="Kano model")
+    ax_xy.set_xlabel(f"OP ({op_unit})")
+    ax_xy.set_ylabel(f"PV ({unit})")
+    ax_xy.set_title("PV against OP", fontsize=9)
+    ax_xy.legend(fontsize=7, loc="best")
+
+    # OP-dPV
+    dpv = np.diff(pv)
+    ax_dpv.plot(op[1:], dpv, ".", color="0.35", ms=2, label="measured")
+    if kano is not None:
+        ax_dpv.plot(op[1:], np.diff(kano.model.y_model), ".", color="tab:red", ms=2, label="Kano model")
+    ax_dpv.set_xlabel(f"OP ({op_unit})")
+    ax_dpv.set_ylabel(f"PV change per sample ({unit})")
+    ax_dpv.set_title("PV change against OP", fontsize=9)
+    ax_dpv.legend(fontsize=7, loc="best")
+
+    # OP -> stem
+    if kano is not None:
+        ax_stem.plot(op, kano.position, color="tab:red", lw=0.8)
+        ax_stem.set_title(f"Kano model: stem against OP (S {s:.2g}, J {j:.2g})", fontsize=9)
+    else:
+        ax_stem.text(0.5, 0.5, "no valve model (OP hardly moves)", ha="center", va="center",
+                     transform=ax_stem.transAxes, fontsize=9)
+        ax_stem.set_title("Kano model: stem against OP", fontsize=9)
+    ax_stem.set_xlabel(f"OP ({op_unit})")
+    ax_stem.set_ylabel(f"stem position ({op_unit})")
+
+    title = f"{rep.get('loop_tag')}: "
+    st = rep.get("stiction")
+    if st:
+        title += f"stiction classifier {st['verdict'].replace('_', ' ')} (p = {st['probability']:.2f}); "
+    title += f"Hammerstein: {rep['verdict']}" + (f", {rep['cause']}" if rep["cause"] != "none" else "")
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(str(rep.get("file") or "loop")).stem)
-    path = out_dir / f"{stem}.png"
-    fig.savefig(path, dpi=90)
+    stem_name = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(str(rep.get("file") or "loop")).stem)
+    tag = rep.get("loop_tag")
+    if tag and tag not in stem_name:
+        stem_name += "_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", str(tag))
+    path = out_dir / f"{stem_name}.png"
+    fig.savefig(path, dpi=80)
     plt.close(fig)
     return path

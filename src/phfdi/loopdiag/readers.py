@@ -1,4 +1,5 @@
-"""Historian exports of one control loop -> :class:`phfdi.run.Run`.
+"""Historian exports of one control loop -> :class:`phfdi.run.Run`, read by :func:`phfdi.records.read_record`
+under the historian policy (see docs/records.md).
 
 Two formats:
 
@@ -12,27 +13,30 @@ Two formats:
   guessed from names (``time_s``/``op_pct``/``pv``/``sp`` as phfdi writes
   them, or tags ending in ``.OP``/``.MV``, ``.PV``, ``.SP``/``.SV``).
 
-Every loop becomes a run with the signals ``time_s`` (from the first sample),
-``op_pct`` (controller output, % of span), ``pv`` and ``sp`` (in the units the
-historian gives, recorded in ``metadata["units"]``). :func:`check_loop_run`
-rejects what cannot be diagnosed with one message naming the problem.
+Every loop becomes a run with the signals ``time_s`` (on the median sample
+interval), ``op_pct`` (controller output, % of span), ``pv`` and ``sp`` (in the
+units the historian gives, recorded in ``metadata["units"]``). Historian
+records are taken as they come: repeated stamps are repaired, a MODE column
+(the export's ``.MODE`` tag, or ``mode`` in the mapping) keeps only automatic
+stretches, a clock reset or jump or a gap of more than ``MAX_FILLED_GAP``
+samples ends a stretch; the longest usable stretch is diagnosed
+(:func:`read_loop`) or each of them (:func:`read_loop_segments`). Every repair
+is a note in ``metadata["notes"]``. :func:`check_loop_run` rejects, with one
+message, what cannot be diagnosed.
 """
 
 from __future__ import annotations
 
-import csv
-import io
-import math
 import re
-from dataclasses import dataclass, field
-from datetime import datetime
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from phfdi.errors import UserError
+from phfdi import records
 from phfdi.run import Run
-from phfdi.yamlfile import read_mapping
+from phfdi_base.errors import UserError
+from phfdi_base.yamlfile import read_mapping
 
 #: fewer samples than this cannot hold a training and a validation part
 MIN_SAMPLES = 100
@@ -64,6 +68,7 @@ class ColumnMap:
     sample_time_s: float | None = None
     loop_tag: str | None = None
     time_format: str | None = None
+    mode: str | None = None
 
     @classmethod
     def parse(cls, text: str) -> "ColumnMap":
@@ -83,17 +88,17 @@ class ColumnMap:
         path = Path(path)
         data = read_mapping(path, "column mapping file", "a mapping with 'columns' (op, pv, sp, time)")
         items = dict(data.get("columns") or {})
-        for key in ("sample_time_s", "loop_tag", "time_format"):
+        for key in ("sample_time_s", "loop_tag", "time_format", "mode"):
             if key in data:
                 items[key] = data[key]
         return cls._from_items(items, str(path))
 
     @classmethod
     def _from_items(cls, items: dict, where: str) -> "ColumnMap":
-        allowed = {"op", "pv", "sp", "time", "sample_time_s", "loop_tag", "time_format"}
+        allowed = {"op", "pv", "sp", "time", "mode", "sample_time_s", "loop_tag", "time_format"}
         unknown = sorted(set(items) - allowed)
         if unknown:
-            raise UserError(f"{where}: unknown key {unknown[0]!r}; allowed: op, pv, sp, time, sample_time_s, "
+            raise UserError(f"{where}: unknown key {unknown[0]!r}; allowed: op, pv, sp, time, mode, sample_time_s, "
                             "loop_tag, time_format")
         missing = [k for k in ("op", "pv") if not items.get(k)]
         if missing:
@@ -101,113 +106,31 @@ class ColumnMap:
         st = items.get("sample_time_s")
         return cls(op=str(items["op"]), pv=str(items["pv"]), sp=_opt_str(items.get("sp")),
                    time=_opt_str(items.get("time")), sample_time_s=None if st is None else float(st),
-                   loop_tag=_opt_str(items.get("loop_tag")), time_format=_opt_str(items.get("time_format")))
+                   loop_tag=_opt_str(items.get("loop_tag")), time_format=_opt_str(items.get("time_format")),
+                   mode=_opt_str(items.get("mode")))
+
+    def to_records(self) -> records.ColumnMap:
+        """The same mapping as a :class:`phfdi.records.ColumnMap` (signals op_pct, pv, sp)."""
+        data: dict = {"op_pct": self.op, "pv": self.pv}
+        data.update({k: v for k, v in (("sp", self.sp), ("time_s", self.time)) if v})
+        data.update({k: v for k, v in (("sample_time_s", self.sample_time_s), ("loop_tag", self.loop_tag),
+                                       ("time_format", self.time_format), ("mode", self.mode)) if v})
+        return records.ColumnMap.from_mapping(data, "column mapping")
 
 
 def _opt_str(v) -> str | None:
     return None if v is None or v == "" else str(v)
 
 
-@dataclass
-class LoopRecord:
-    """What a reader found besides the samples (goes into ``Run.metadata``)."""
-
-    loop_tag: str
-    file: str
-    sample_time_s: float
-    start: str | None = None
-    units: dict = field(default_factory=dict)
-    descriptions: dict = field(default_factory=dict)
-    notes: list = field(default_factory=list)
-
-
-# ---- format detection ----------------------------------------------------------------
-def read_loop(path: str | Path, columns: ColumnMap | None = None) -> Run:
-    """Read one loop file (plant_loops TSV or CSV) and check it can be diagnosed."""
-    path = Path(path)
-    if not path.is_file():
-        raise LoopDataError(f"{path}: no such file")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise LoopDataError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    if text.startswith("PROCESSDATA"):
-        run = read_plant_export(path, text)
-    else:
-        run = read_csv(path, columns, text)
-    check_loop_run(run)
-    return run
-
-
-# ---- plant_loops tab-separated export -------------------------------------------------
-_TAG_ROLES = {"MV": "op_pct", "OP": "op_pct", "PV": "pv", "SV": "sp", "SP": "sp", "MODE": "mode"}
-
-
-def read_plant_export(path: Path, text: str | None = None) -> Run:
-    """The refinery historian export of ../shared/data/plant_loops (see module docstring)."""
-    text = path.read_text(encoding="utf-8-sig") if text is None else text
-    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-    if len(lines) < 6:
-        raise LoopDataError(f"{path}: export has {len(lines)} lines, expected 5 header lines and rows")
-    title = lines[0].split("\t")
-    loop_tag = title[1].strip() if len(title) > 1 else path.stem
-    loop_tag = re.sub(r"\s+Data$", "", loop_tag)
-    head = lines[1].split("\t")
-    try:
-        sample_time_s = float(head[1])
-        declared_rows = int(head[3])
-    except (IndexError, ValueError):
-        raise LoopDataError(f"{path}: line 2 should be '<n> <Ts> <start> <rows>', got {lines[1]!r}") from None
-    tags = lines[2].split("\t")
-    descs = lines[3].split("\t")
-    if not tags or tags[0] != "tagname":
-        raise LoopDataError(f"{path}: line 3 should list tag names after 'tagname', got {lines[2][:60]!r}")
-    roles: dict[str, int] = {}
-    descriptions: dict[str, str] = {}
-    for i, tag in enumerate(tags[1:], start=1):
-        suffix = tag.rsplit(".", 1)[-1].upper() if "." in tag else ""
-        role = _TAG_ROLES.get(suffix)
-        if role and role not in roles:
-            roles[role] = i
-            descriptions[role] = descs[i] if i < len(descs) else ""
-    missing = [name for name, role in (("MV (OP)", "op_pct"), ("PV", "pv")) if role not in roles]
-    if missing:
-        raise LoopDataError(f"{path}: no {' or '.join(missing)} column among the tags "
-                            f"{', '.join(tags[1:])}")
-    rows = [ln.split("\t") for ln in lines[5:] if ln.strip()]
-    if not rows:
-        raise LoopDataError(f"{path}: no data rows after the 5 header lines")
-    stamps = [r[0] for r in rows]
-    signals: dict[str, np.ndarray] = {}
-    for role, col in roles.items():
-        signals[role] = np.array([_number(r, col) for r in rows], dtype=float)
-    t = _times_from_stamps(stamps, "%Y-%m-%d %H:%M:%S", path)
-    notes = []
-    if len(rows) != declared_rows:
-        notes.append(f"header declares {declared_rows} rows, file has {len(rows)}")
-    if t is None:
-        t = np.arange(len(rows)) * sample_time_s
-    record = LoopRecord(loop_tag=loop_tag, file=str(path), sample_time_s=sample_time_s, start=stamps[0],
-                        units={"op_pct": "%", "pv": "as exported", "sp": "as exported"},
-                        descriptions=descriptions, notes=notes)
-    return _make_run(t, signals, record, path)
-
-
-def _number(row: list[str], col: int) -> float:
-    try:
-        return float(row[col])
-    except (IndexError, ValueError):
-        return math.nan
-
-
-# ---- CSV --------------------------------------------------------------------------------
 _GUESSES = {
     "time": ("time_s", "time", "timestamp", "t", "date", "datetime"),
+    "mode": ("mode",),
     "op": ("op_pct", "op", "mv", "co", "output", "controller_output_pct"),
     "pv": ("pv", "process_variable", "measurement"),
     "sp": ("sp", "sv", "setpoint"),
 }
-_SUFFIXES = {"op": (".op", ".mv", ".out", "_op", "_mv"), "pv": (".pv", "_pv"), "sp": (".sp", ".sv", "_sp", "_sv")}
+_SUFFIXES = {"op": (".op", ".mv", ".out", "_op", "_mv"), "pv": (".pv", "_pv"), "sp": (".sp", ".sv", "_sp", "_sv"),
+             "mode": (".mode", "_mode")}
 
 
 def guess_columns(header: list[str]) -> ColumnMap | None:
@@ -229,99 +152,98 @@ def guess_columns(header: list[str]) -> ColumnMap | None:
     tag = None
     if "." in found["pv"]:
         tag = found["pv"].rsplit(".", 1)[0]
-    return ColumnMap(op=found["op"], pv=found["pv"], sp=found.get("sp"), time=found.get("time"), loop_tag=tag)
+    return ColumnMap(op=found["op"], pv=found["pv"], sp=found.get("sp"), time=found.get("time"), loop_tag=tag,
+                     mode=found.get("mode"))
 
 
-def read_csv(path: Path, columns: ColumnMap | None = None, text: str | None = None) -> Run:
-    """A CSV export with a header line; columns from ``columns`` or guessed from names."""
-    text = path.read_text(encoding="utf-8-sig") if text is None else text
-    sample = text[:4096]
+# ---- reading -------------------------------------------------------------------------------
+def read_loop(path: str | Path, columns: ColumnMap | None = None) -> Run:
+    """The longest usable stretch of one loop file (plant_loops export or CSV), checked for diagnosis."""
+    runs, why, pieces, cuts = _stretches(Path(path), columns)
+    if not runs:
+        raise LoopDataError(why)
+    run = max(runs, key=len)
+    if pieces > 1:
+        a, b = run.metadata["lines"]
+        cut = f"; cut where {cuts[0]}" + (f" and {len(cuts) - 1} more" if len(cuts) > 1 else "") if cuts else ""
+        run.metadata["notes"].append(f"{pieces} stretches ({len(runs)} of at least {MIN_SAMPLES} samples){cut}; "
+                                     f"the longest, lines {a}-{b} ({len(run)} samples), is diagnosed")
+    check_loop_run(run)
+    return run
+
+
+def read_loop_segments(path: str | Path, columns: ColumnMap | None = None) -> list[Run]:
+    """Every usable stretch of one loop file (at least ``MIN_SAMPLES``), not yet checked."""
+    runs, why, _, _ = _stretches(Path(path), columns)
+    if not runs:
+        raise LoopDataError(why)
+    return runs
+
+
+def _stretches(path: Path, columns: ColumnMap | None) -> tuple[list[Run], str, int, list[str]]:
+    """Runs of the stretches with at least MIN_SAMPLES samples, why there is none when so, how many
+    stretches there are in all and the gaps that cut them."""
     try:
-        dialect = csv.Sniffer().sniff(sample, delimiters=",;\t")
-    except csv.Error:
-        dialect = csv.excel
-    reader = csv.reader(io.StringIO(text), dialect)
-    try:
-        header = [h.strip() for h in next(reader)]
-    except StopIteration:
-        raise LoopDataError(f"{path}: empty file") from None
-    rows = [r for r in reader if any(c.strip() for c in r)]
-    cmap = columns or guess_columns(header)
+        rec = records.read_record(path, lambda header, meta: _mapping(path, columns, header, meta),
+                                  policy="historian", min_samples=1)
+    except records.ReadError as exc:
+        raise LoopDataError(str(exc)) from None
+    pieces, cuts = [], []
+    for seg in rec.segments(automatic_only=True):
+        grid = seg.on_grid()
+        found, cut = _split_at_gaps(grid)
+        pieces += found
+        cuts += cut
+    runs = [_loop_run(p, rec) for p in pieces if len(p) >= MIN_SAMPLES]
+    longest = max((len(p) for p in pieces), default=0)
+    why = f"{path}: too short ({longest} samples, need at least {MIN_SAMPLES})"
+    if cuts or len(pieces) > 1 or rec.boundaries or rec.automatic is not None and not rec.automatic.all():
+        why = (f"{path}: no usable stretch of {MIN_SAMPLES} samples (longest {longest})"
+               + (f": {cuts[0]}" if cuts else "; the record breaks at manual mode or time jumps (see notes)"))
+    return runs, why, len(pieces), cuts
+
+
+def _mapping(path: Path, columns: ColumnMap | None, header: list[str], meta: dict) -> records.ColumnMap:
+    """The given mapping, else one guessed from the header (the export's tags, or conventional names)."""
+    cmap = columns or guess_columns([h for h in header if h != "timestamp"] if "declared_rows" in meta else header)
     if cmap is None:
         raise LoopDataError(f"{path}: cannot tell the OP and PV columns from the header "
                             f"({', '.join(header)}); give --columns op=NAME,pv=NAME[,sp=NAME,time=NAME]")
-    index = {h: i for i, h in enumerate(header)}
-    wanted = {"op_pct": cmap.op, "pv": cmap.pv}
-    if cmap.sp:
-        wanted["sp"] = cmap.sp
-    absent = [name for name in [*wanted.values(), *([cmap.time] if cmap.time else [])] if name not in index]
-    if absent:
-        raise LoopDataError(f"{path}: no column {absent[0]!r} in the header ({', '.join(header)})")
-    signals = {role: np.array([_number(r, index[name]) for r in rows], dtype=float)
-               for role, name in wanted.items()}
-    if not rows:
-        raise LoopDataError(f"{path}: no data rows after the header")
-    notes: list[str] = []
-    if cmap.time:
-        raw = [r[index[cmap.time]] if index[cmap.time] < len(r) else "" for r in rows]
-        t = _times_from_column(raw, cmap.time_format, path)
-        dt = float(np.median(np.diff(t))) if len(t) > 1 else float(cmap.sample_time_s or 1.0)
-    else:
-        if cmap.sample_time_s is None:
-            raise LoopDataError(f"{path}: no time column; give time=NAME in the mapping or sample_time_s")
-        dt = float(cmap.sample_time_s)
-        t = np.arange(len(rows)) * dt
-    tag = cmap.loop_tag or path.stem
-    record = LoopRecord(loop_tag=tag, file=str(path), sample_time_s=dt,
-                        units={"op_pct": "%", "pv": "as exported", "sp": "as exported"},
-                        descriptions={"op_pct": cmap.op, "pv": cmap.pv, "sp": cmap.sp or ""}, notes=notes)
-    return _make_run(t, signals, record, path)
+    if "declared_rows" in meta:  # the plant_loops export: stamps in the first column, the loop's tag in the title
+        cmap = ColumnMap(cmap.op, cmap.pv, cmap.sp, cmap.time or "timestamp", cmap.sample_time_s,
+                         columns.loop_tag if columns else None, cmap.time_format, cmap.mode)
+    if cmap.time is None and cmap.sample_time_s is None:
+        raise LoopDataError(f"{path}: no time column; give time=NAME in the mapping or sample_time_s")
+    return cmap.to_records()
 
 
-def _times_from_column(raw: list[str], fmt: str | None, path: Path) -> np.ndarray:
-    try:
-        return np.array([float(v) for v in raw]) - float(raw[0])
-    except ValueError:
-        pass
-    t = _times_from_stamps(raw, fmt, path)
-    if t is None:
-        raise LoopDataError(f"{path}: cannot read the time column (first value {raw[0]!r}); give time_format")
-    return t
+def _split_at_gaps(grid: records.Record) -> tuple[list[records.Record], list[str]]:
+    """Pieces without a gap of more than MAX_FILLED_GAP samples in OP or PV, and what cut them."""
+    bad = np.isnan(grid.signals["op_pct"]) | np.isnan(grid.signals["pv"])
+    d = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    long = (stops - starts) > MAX_FILLED_GAP
+    edges = [0, *[x for a, b in zip(starts[long], stops[long]) for x in (a, b)], len(grid)]
+    pieces = [grid.subset(slice(a, b)) for a, b in zip(edges[0::2], edges[1::2]) if b > a]
+    cuts = [f"OP or PV is missing for {b - a} samples in a row (from t = {grid.time_s[a]:g} s)"
+            for a, b in zip(starts[long], stops[long])]
+    return pieces, cuts
 
 
-def _times_from_stamps(stamps: list[str], fmt: str | None, path: Path) -> np.ndarray | None:
-    """Seconds since the first stamp, or None when the stamps do not parse."""
-    out = np.empty(len(stamps))
-    t0 = None
-    for i, s in enumerate(stamps):
-        s = s.strip()
-        try:
-            d = datetime.strptime(s, fmt) if fmt else datetime.fromisoformat(s)
-        except ValueError:
-            return None
-        t0 = d if t0 is None else t0
-        out[i] = (d - t0).total_seconds()
-    return out
-
-
-# ---- common ------------------------------------------------------------------------------
-def _make_run(t: np.ndarray, signals: dict[str, np.ndarray], record: LoopRecord, path: Path) -> Run:
-    if len(t) > 1:
-        dt = np.diff(t)
-        if np.any(dt <= 0):
-            k = int(np.argmax(dt <= 0))
-            raise LoopDataError(f"{path}: time does not increase at row {k + 2} of the data")
-        step = float(np.median(dt))
-        if np.any(np.abs(dt - step) > 0.01 * step):
-            k = int(np.argmax(np.abs(dt - step) > 0.01 * step))
-            raise LoopDataError(f"{path}: samples are not evenly spaced (step {dt[k]:g} s after row {k + 1}, "
-                                f"usual {step:g} s); resample the export to a fixed interval")
-        record.sample_time_s = step
-    signals = {"time_s": np.asarray(t, dtype=float), **signals}
-    meta = {"loop_tag": record.loop_tag, "file": record.file, "sample_time_s": record.sample_time_s,
-            "start": record.start, "units": record.units, "descriptions": record.descriptions,
-            "notes": record.notes, "process_type": process_type_for(record.loop_tag)}
-    return Run(signals, meta)
+def _loop_run(piece: records.Record, rec: records.Record) -> Run:
+    """A loop run of one stretch: time from the file's first sample, units and notes in the metadata."""
+    meta = rec.metadata
+    tag = meta.get("loop_tag") or Path(rec.path).stem
+    tag = re.sub(r"\s+Data$", "", tag)
+    descriptions = meta.get("descriptions") or {}
+    run = Run({"time_s": piece.time_s.copy(), **{k: v.copy() for k, v in piece.signals.items()}},
+              {"loop_tag": tag, "file": rec.path, "sample_time_s": piece.dt_s,
+               "units": {"op_pct": "%", "pv": "as exported", "sp": "as exported"},
+               "descriptions": {k: descriptions.get(c, c) for k, c in piece.columns.items()},
+               "notes": [n.removeprefix(f"{rec.path}: ") for n in piece.note_lines()],
+               "lines": [int(piece.lines[piece.lines > 0][0]), int(piece.lines.max())],
+               "process_type": process_type_for(tag)})
+    return run
 
 
 def process_type_for(loop_tag: str) -> str:
@@ -350,7 +272,8 @@ def check_loop_run(run: Run) -> None:
         if bad.any():
             good = np.flatnonzero(~bad)
             x[bad] = np.interp(np.flatnonzero(bad), good, x[good])
-            run.metadata.setdefault("notes", []).append(f"filled {int(bad.sum())} missing {name} samples")
+            run.metadata.setdefault("notes", []).append(f"filled {int(bad.sum())} missing {name} samples "
+                                                         f"(gaps of up to {MAX_FILLED_GAP}) by linear interpolation")
     pv = run.signals["pv"]
     if np.ptp(pv) <= CONSTANT_RTOL * max(1.0, float(np.max(np.abs(pv)))):
         raise LoopDataError(f"{where}: PV is constant ({pv[0]:g}); a frozen or disconnected transmitter "

@@ -74,6 +74,16 @@ def format_report(rep: dict) -> str:
         head += f", gain {rep['gain_percent']:.0f} %"
     lines.append(head)
     lines.append(f"    {rep['reason']}")
+    st = rep.get("stiction")
+    if st:
+        line = (f"  stiction classifier: {st['verdict'].replace('_', ' ')}, p = {st['probability']:.2f} "
+                f"(threshold {st['threshold']:.2f})")
+        if st.get("kano_s_pct") is not None:
+            line += f"; Kano fit S = {st['kano_s_pct']:.3g}, J = {st['kano_j_pct']:.3g} (OP units)"
+        lines.append(line)
+        top = [e for e in st["evidence"] if e["measured"]][:5]
+        lines.append("    evidence (value, contribution to the log-odds): "
+                     + "; ".join(f"{e['feature']} {_num(e['value'], '.3g')} ({e['contribution']:+.2f})" for e in top))
     base = rep.get("baselines") or {}
     if base:
         lines.append("  baselines: " + "; ".join(f"{k} {v['decision']}" + (f" ({v['index']:.2f})" if v.get("index")

@@ -10,6 +10,8 @@ simulated exactly for a piecewise-constant stem position (zero-order hold):
     PV(k) = pv0 + x(k) + disturbance(k) + noise(k)
 
 with d the dead time in samples and v0 the stem position at the start (the loop starts at rest).
+Loads enter at the process input (in % of stem travel): a random walk, a first-order filtered
+noise and steps; the recorded PV may be rounded to the historian's resolution.
 """
 
 from __future__ import annotations
@@ -19,11 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from phfdi.blocks import make_block
-from phfdi.run import Run
-from pi_controllers.pi import PIController
-
 import valve_actuator.blocks  # noqa: F401  (registers the valve blocks)
+from phfdi.run import Run
+from phfdi_base.blocks import make_block
+from pi_controllers.pi import PIController
 
 
 @dataclass
@@ -45,6 +46,10 @@ class SyntheticLoop:
     disturbance_amplitude: float = 0.0  # sinusoid added to PV
     disturbance_period_s: float = 300.0
     load_walk_std: float = 0.0  # random-walk load at the process input (% per sample)
+    load_ar_std: float = 0.0  # first-order filtered (AR(1)) load at the process input (% stationary std)
+    load_ar_pole: float = 0.95  # its pole (per sample)
+    load_steps: list[tuple[float, float]] = field(default_factory=list)  # (time s, load step %) at the input
+    pv_quantum: float = 0.0  # PV as the historian stores it: rounded to this step (0: not rounded)
     noise_std: float = 0.05
     seed: int = 1
     loop_tag: str = "SYN"
@@ -67,18 +72,28 @@ def simulate_loop(spec: SyntheticLoop) -> Run:
     v_hist = [spec.op0_pct] * (d + 1)
     x = 0.0
     load = 0.0
+    ar = 0.0
+    ar_gain = spec.load_ar_std * math.sqrt(max(1.0 - spec.load_ar_pole ** 2, 0.0))
+    load_steps = sorted(spec.load_steps)
+    step_load = 0.0
     out = {k: np.empty(n) for k in ("time_s", "op_pct", "pv", "sp", "stem_pct")}
     for k in range(n):
         t = k * spec.dt_s
         while steps and steps[0][0] <= t:
             sp_now = steps.pop(0)[1]
+        while load_steps and load_steps[0][0] <= t:
+            step_load += load_steps.pop(0)[1]
         dist = spec.disturbance_amplitude * math.sin(2 * math.pi * t / spec.disturbance_period_s)
         pv = spec.pv0 + x + dist + spec.noise_std * rng.standard_normal()
+        if spec.pv_quantum > 0:
+            pv = spec.pv_quantum * round(pv / spec.pv_quantum)
         op = pi.step(sp_now, pv)
         v = valve.step(op, t) if valve is not None else op
         v_hist.append(v)
-        v_in = v_hist[-1 - d] + load
+        v_in = v_hist[-1 - d] + load + ar + step_load
         load += spec.load_walk_std * rng.standard_normal()
+        if ar_gain > 0:
+            ar = spec.load_ar_pole * ar + ar_gain * rng.standard_normal()
         if spec.process == "integrating":
             x = x + spec.gain * spec.dt_s * (v_in - spec.op0_pct)
         else:

@@ -4,7 +4,7 @@
 anything else named in the error), Parquet and MCAP bags of the node graph into a :class:`Record`:
 samples in the project's names and units, NaN where missing, and a note for every repair (naming
 file, line and column). What cannot be repaired raises :class:`ReadError`, a
-:class:`~phfdi.errors.UserError` with one line ``FILE: line N, column 'X': problem``. The policy
+:class:`~phfdi_base.errors.UserError` with one line ``FILE: line N, column 'X': problem``. The policy
 table is in :mod:`phfdi.records.policy` and docs/records.md.
 """
 

@@ -38,6 +38,10 @@ def to_numbers(cells: list | np.ndarray) -> Numbers:
         x[inf] = math.nan
         zero = np.zeros(n, bool)
         return Numbers(x, zero, nan, inf, zero.copy())
+    try:  # every cell a number (the usual case): one C-level pass
+        return to_numbers(np.array(cells, dtype=float))
+    except (ValueError, TypeError):
+        pass
     x = np.empty(n)
     empty, nan, inf, text = (np.zeros(n, bool) for _ in range(4))
     for i, c in enumerate(cells):

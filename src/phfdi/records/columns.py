@@ -22,8 +22,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from phfdi.errors import UserError
-from phfdi.yamlfile import read_mapping
+from phfdi_base.errors import UserError
+from phfdi_base.yamlfile import read_mapping
 
 #: unit -> factor to the project's unit, per kind of signal
 UNITS: dict[str, dict[str, float]] = {

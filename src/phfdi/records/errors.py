@@ -1,8 +1,8 @@
-"""The one error a record reader raises: a :class:`~phfdi.errors.UserError` that names file, line and column."""
+"""The one error a record reader raises: a :class:`~phfdi_base.errors.UserError` that names file, line and column."""
 
 from __future__ import annotations
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 
 class ReadError(UserError):

@@ -170,8 +170,7 @@ def average_repeats(rows: Rows) -> None:
     ids = np.unique(group[rep])
     groups = [(int(rows.lines[np.argmax(group == g)]), int(rows.lines[len(group) - 1 - np.argmax(group[::-1] == g)]))
               for g in ids[:3]]
-    groups += [(0, 0)] * (len(ids) - len(groups))  # counted, not listed
-    rows.note(f"{places(rows.where, groups)}: {len(ids)} {'stamp' if len(ids) == 1 else 'stamps'} repeated in "
+    rows.note(f"{places(rows.where, groups, len(ids))}: {len(ids)} {'stamp' if len(ids) == 1 else 'stamps'} repeated in "
               f"{len(ids) + len(rep)} rows with different values (first {rows.stamp(int(rep[0]))}), averaged into "
               f"one sample each")
     mask = np.ones(len(rows), bool)
@@ -229,8 +228,8 @@ def note_holds_and_steps(rows: Rows, units: dict[str, str], columns: dict[str, s
         step = _quantum(x)
         if step is not None:
             unit = units.get(name, "")
-            rows.note(f"column {columns[name]!r}: quantised in steps of {step:.6g} {'' if unit == '1' else unit}".rstrip()
-                      + f" ({len(np.unique(x))} levels)")
+            unit = "" if unit == "1" else f" {unit}"
+            rows.note(f"column {columns[name]!r}: quantised in steps of {step:.6g}{unit} ({len(np.unique(x))} levels)")
 
 
 def _longest(mask: np.ndarray) -> int:

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import difflib
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
-from phfdi.run import unit_of
+from phfdi_base.signals import unit_of
 
 from . import policy as P
 from .cells import parse_stamps, to_numbers
@@ -22,28 +23,29 @@ TIME_NAMES = ("time_s", "timestamp", "time", "datetime", "date")
 DEFAULT_SOURCE = "the file's header"
 
 
-def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | None = None, *,
+def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Callable | None = None, *,
                 policy: str = "run", channels: list[str] | tuple[str, ...] | None = None,
-                encoding: str | None = None, min_samples: int = 2) -> Record:
+                encoding: str | None = None, min_samples: int = 2, required: tuple[str, ...] = ()) -> Record:
     """Read a record (CSV, Parquet or an MCAP bag), repair what the policy repairs, refuse the rest.
 
-    ``column_map``: a :class:`ColumnMap`, its dict form or a YAML file; None reads every column under its
-    own name (time from ``time_s``, ``timestamp`` or ``time``). ``channels``: only these signals (each
-    must exist). ``policy``: "run" (a clock reset is refused) or "historian" (it starts a new segment).
+    ``column_map``: a :class:`ColumnMap`, its dict form, a YAML file, or a function (header, file metadata)
+    -> ColumnMap; None reads every column under its own name (time from ``time_s``, ``timestamp`` or ``time``).
+    ``channels``: only these signals (each must exist); ``required``: signals that must exist and hold values
+    even when ``channels`` is None. ``policy``: "run" (a clock reset is refused) or "historian" (it starts a
+    new segment). ``min_samples``: fewer usable samples are refused.
     Raises :class:`ReadError` (one line naming file, line and column) for what cannot be used.
     """
     if policy not in P.POLICIES:
         raise ValueError(f"policy must be one of {P.POLICIES}, got {policy!r}")
     path = Path(path)
     table = read_table(path, encoding)
-    cmap = _resolve_map(column_map, table, channels)
+    cmap = _resolve_map(column_map, table, channels, required)
     rows = _rows(table, cmap)
     columns = {name: spec.column for name, spec in cmap.signals.items() if name != "time_s"}
     units = {name: _unit(name, spec, table) for name, spec in cmap.signals.items() if name != "time_s"}
     _apply_policy(rows, policy)
-    if cmap.source == DEFAULT_SOURCE and channels is None:
-        _drop_empty_channels(rows, columns, units)
-    _refuse_unusable(rows, columns, min_samples, table.where)
+    asked = set(required) | (set(columns) if channels is not None or cmap.source != DEFAULT_SOURCE else set())
+    _refuse_unusable(rows, columns, min_samples, table.where, asked)
     P.note_holds_and_steps(rows, units, columns)
     meta = dict(table.metadata)
     if cmap.loop_tag:
@@ -61,20 +63,24 @@ def _apply_policy(rows: P.Rows, policy: str) -> None:
 
 
 # ---- which columns -----------------------------------------------------------------------
-def _resolve_map(cmap: ColumnMap | dict | str | Path | None, table: Table, channels) -> ColumnMap:
+def _resolve_map(cmap: ColumnMap | dict | str | Path | None, table: Table, channels, required=()) -> ColumnMap:
+    if callable(cmap):  # a resolver that chooses the columns from the header and the file's metadata
+        cmap = cmap(list(table.columns), dict(table.metadata))
     if isinstance(cmap, (str, Path)):
         cmap = ColumnMap.load(cmap)
     elif isinstance(cmap, dict):
         cmap = ColumnMap.from_mapping(cmap)
     if cmap is None:
         cmap = _default_map(table)
-    if channels is not None:
-        absent = [c for c in channels if c not in cmap.signals]
+    wanted = [*(channels or ()), *(c for c in required if c not in (channels or ()))]
+    if wanted:
+        absent = [c for c in wanted if c not in cmap.signals]
         if absent:
             if cmap.source == DEFAULT_SOURCE:
                 _no_column(table, absent[0], absent[0])
             raise ReadError(cmap.source, f"no column mapped for {absent[0]!r}")
-        keep = {"time_s", *channels}
+    if channels is not None:
+        keep = {"time_s", *channels, *required}
         cmap = ColumnMap({k: v for k, v in cmap.signals.items() if k in keep}, cmap.sample_time_s,
                          cmap.time_format, cmap.loop_tag, cmap.mode, cmap.quality, cmap.source)
     for name, spec in cmap.signals.items():
@@ -119,13 +125,13 @@ def _unit(name: str, spec: ColumnSpec, table: Table) -> str:
 # ---- cells -> rows -------------------------------------------------------------------------
 def _rows(table: Table, cmap: ColumnMap) -> P.Rows:
     time_s, stamps = _time(table, cmap)
-    values = {}
+    values, numbers = {}, {}
     for name, spec in cmap.signals.items():
         if name == "time_s":
             continue
-        nums = to_numbers(table.columns[spec.column])
-        _note_missing_cells(table, spec.column, nums)
+        numbers[spec.column] = nums = to_numbers(table.columns[spec.column])
         values[name] = nums.values * spec.factor
+    _note_missing_cells(table, numbers)
     rows = P.Rows(table.path, table.where, time_s, values, table.lines.copy(), stamps)
     _apply_quality(rows, table, cmap)
     _apply_mode(rows, table, cmap)
@@ -161,18 +167,28 @@ def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None]:
     return t, [str(c).strip() for c in cells]
 
 
-def _note_missing_cells(table: Table, column: str, nums) -> None:
-    kinds = {"empty": nums.empty, "NaN": nums.nan, "inf": nums.inf, "text": nums.text}
-    total = int(nums.missing.sum())
-    if total == 0:
-        return
-    first = int(np.argmax(nums.missing))
-    counts = counted({k: int(v.sum()) for k, v in kinds.items()})
-    example = ""
-    if nums.text.any():
-        example = f" (e.g. {str(table.columns[column][int(np.argmax(nums.text))])[:20]!r})"
-    table.notes.append(f"{table.path}: column {column!r}: {total} {'cell' if total == 1 else 'cells'} not a number "
-                       f"({counts}){example}, first at {table.where} {table.lines[first]}: marked missing")
+def _note_missing_cells(table: Table, numbers: dict) -> None:
+    """One note per set of columns missing in the same rows for the same reasons (a row cut short: one note)."""
+    groups: dict[tuple, list[str]] = {}
+    for column, nums in numbers.items():
+        if nums.missing.any():
+            key = (nums.missing.tobytes(), nums.empty.tobytes(), nums.nan.tobytes(), nums.inf.tobytes())
+            groups.setdefault(key, []).append(column)
+    for columns in groups.values():
+        nums = numbers[columns[0]]
+        total = int(nums.missing.sum())
+        first = int(np.argmax(nums.missing))
+        kinds = {"empty": nums.empty, "NaN": nums.nan, "inf": nums.inf, "text": nums.text}
+        counts = counted({k: int(v.sum()) for k, v in kinds.items()})
+        example = ""
+        if nums.text.any():
+            example = f" (e.g. {str(table.columns[columns[0]][int(np.argmax(nums.text))])[:20]!r})"
+        amount = f"all {total}" if total == len(nums.values) > 1 else f"{total}"
+        names = (f"column {columns[0]!r}" if len(columns) == 1 else
+                 f"columns {', '.join(repr(c) for c in columns)}")
+        each = " each" if len(columns) > 1 else ""
+        table.notes.append(f"{table.path}: {names}: {amount} {'cell' if total == 1 else 'cells'}{each} not a "
+                           f"number ({counts}){example}, first at {table.where} {table.lines[first]}: marked missing")
 
 
 def _apply_quality(rows: P.Rows, table: Table, cmap: ColumnMap) -> None:
@@ -200,21 +216,12 @@ def _apply_mode(rows: P.Rows, table: Table, cmap: ColumnMap) -> None:
                   f"{' ...' if len(manual) > 1 else ''}): not judged where only automatic stretches are used")
 
 
-def _drop_empty_channels(rows: P.Rows, columns: dict[str, str], units: dict[str, str]) -> None:
-    """Columns nobody asked for that hold no value at all are dropped (noted), not refused."""
-    for name in [n for n, v in rows.values.items() if np.isnan(v).all()]:
-        if len(rows.values) == 1:
-            return  # the last one: refused below
-        del rows.values[name]
-        units.pop(name, None)
-        rows.note(f"column {columns.pop(name)!r}: no value at all, left out")
-
-
-def _refuse_unusable(rows: P.Rows, columns: dict[str, str], min_samples: int, where: str) -> None:
+def _refuse_unusable(rows: P.Rows, columns: dict[str, str], min_samples: int, where: str, asked: set[str]) -> None:
+    """Too few samples, or a channel the caller asked for without a single value: refused."""
     if len(rows) < min_samples:
         raise ReadError(rows.path, f"only {len(rows)} usable {'sample' if len(rows) == 1 else 'samples'} "
                                    f"after reading; at least {min_samples} are needed")
     for name, v in rows.values.items():
-        if np.isnan(v).all():
+        if name in asked and np.isnan(v).all():
             raise ReadError(rows.path, f"no usable value in any of the {len(v)} rows (all missing)",
                             line=int(rows.lines[0]), column=columns[name], where=where)

@@ -81,7 +81,8 @@ class Record:
         return replace(self, signals={c: self.signals[c] for c in channels},
                        units={c: self.units.get(c, "") for c in channels})
 
-    def _subset(self, index: np.ndarray | slice, **changes) -> "Record":
+    def subset(self, index: np.ndarray | slice, **changes) -> "Record":
+        """The samples at ``index`` (a slice or an index array) as a record of their own, notes kept."""
         auto = None if self.automatic is None else self.automatic[index]
         return replace(self, time_s=self.time_s[index], lines=self.lines[index], automatic=auto,
                        signals={k: v[index] for k, v in self.signals.items()}, notes=list(self.notes), **changes)
@@ -95,9 +96,10 @@ class Record:
             padded = np.diff(np.concatenate([[0], keep.astype(np.int8), [0]]))
             for s, e in zip(np.flatnonzero(padded == 1), np.flatnonzero(padded == -1)):
                 if e - s >= min_samples:
-                    seg = self._subset(slice(a + s, a + e), boundaries=[])
-                    seg.notes.append(f"{self.path}: segment {self.where}s {self.lines[a + s]}-{self.lines[a + e - 1]} "
-                                     f"({e - s} samples)")
+                    seg = self.subset(slice(a + s, a + e), boundaries=[])
+                    if e - s < len(self):
+                        first, last = self.lines[a + s], self.lines[a + e - 1]
+                        seg.notes.append(f"{self.path}: segment {self.where}s {first}-{last} ({e - s} samples)")
                     out.append(seg)
         return out
 
@@ -161,6 +163,14 @@ class Record:
             notes.append(f"{self.path}: {where}, column {self.columns.get(name, name)!r}: {len(fill)} missing samples "
                          f"in {int(short.sum())} gap(s) of up to {max_gap_s:g} s filled by linear interpolation")
         return replace(self, signals=signals, notes=notes)
+
+    def refuse_empty(self, channel: str) -> "Record":
+        """This record, or a :class:`ReadError` when ``channel`` has no value at all."""
+        if np.isnan(self.signals[channel]).all():
+            raise ReadError(self.path, f"no usable value in any of the {len(self)} rows (all missing)",
+                            line=int(self.lines[0]) if len(self) else None,
+                            column=self.columns.get(channel, channel), where=self.where)
+        return self
 
     def refuse_missing(self, channel: str, hint: str = "") -> "Record":
         """This record, or a :class:`ReadError` naming the first missing sample of ``channel``."""

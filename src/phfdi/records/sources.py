@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 from .errors import ReadError
 from .text import TextTable, decode, parse_csv

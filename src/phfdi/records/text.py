@@ -120,23 +120,36 @@ def parse_csv(data: bytes, path: object, encoding: str | None = None) -> TextTab
     reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
     header: list[str] | None = None
     rows, lines = [], []
+    end = 0  # the last line the reader has consumed
     try:
         for row in reader:
+            start, end = end + 1, reader.line_num
             if not any(c.strip() for c in row):
                 continue
             if header is None:
                 header = [c.strip() for c in row]
                 continue
             rows.append([c.strip() for c in row])
-            lines.append(reader.line_num)
+            lines.append(start)  # the line the row starts on (a quoted cell may run over several)
     except csv.Error as exc:
         raise ReadError(path, f"not a readable CSV ({exc})", line=reader.line_num) from None
     if header is None:
         raise ReadError(path, "empty file (no header line)", line=1)
+    _note_multiline(rows, lines, path, notes)
     if delimiter == ";" and _decimal_comma(rows):
         rows = [[c.replace(",", ".") if _DECIMAL_COMMA.match(c) else c for c in r] for r in rows]
         notes.append(f"{path}: decimal commas read as points (';'-separated file)")
     return TextTable(header, rows, lines, used, delimiter, notes)
+
+
+def _note_multiline(rows: list[list[str]], lines: list[int], path: object, notes: list[str]) -> None:
+    """A quoted cell that runs over line ends (an unclosed quote swallows the lines after it) is said."""
+    spread = [(k, sum(c.count("\n") for c in r)) for k, r in enumerate(rows) if any("\n" in c for c in r)]
+    if spread:
+        k, n = spread[0]
+        more = f" ({len(spread)} rows like it)" if len(spread) > 1 else ""
+        notes.append(f"{path}: line {lines[k]}: a quoted cell runs over {n + 1} lines (an unclosed quote?): "
+                     f"they are read as one row{more}")
 
 
 def _decimal_comma(rows: list[list[str]]) -> bool:

@@ -34,10 +34,12 @@ from typing import Callable
 
 import yaml
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
+from phfdi_base.parts import NodePart, write_part
+from phfdi_base.ros.env import graph_env, reserve_domain_id
+from phfdi_base.topics import CONTROLLERS, DETECTOR, PLANT, PLANT_STATE, RECORDER, VALVE
 
-from .env import graph_env, reserve_domain_id
-from .topics import CONTROLLERS, DETECTOR, PLANT, PLANT_STATE, RECORDER, VALVE
+from .parts import make_part
 
 LOOP, OBSERVER = "loop", "observer"
 
@@ -50,14 +52,17 @@ class NodeSpec:
     module: str
     params: dict = field(default_factory=dict)
     role: str = LOOP  # loop: in the lock-step ring; observer: only listens (stopped last)
+    #: the resolved scenario and starting point (written once for the graph, handed over as ``part``)
+    part: NodePart | None = None
 
 
 def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float | None = None,
                overrides: list[str] = (), record: str | Path | None = None, pace: float = 0.0,
                executor: str = "events", connect_timeout_s: float = 60.0,
-               extra: list[NodeSpec] = (), detector: dict | None = None) -> list[NodeSpec]:
-    """The loop graph: plant, valve, controllers (+ recorder, + the fault detector with these
-    parameters, + extra nodes)."""
+               extra: list[NodeSpec] = (), detector: dict | None = None,
+               split_after_s: float = 0.0) -> list[NodeSpec]:
+    """The loop graph: plant, valve, controllers (+ recorder, a new file every ``split_after_s`` of
+    simulated time if > 0, + the fault detector with these parameters, + extra nodes)."""
     if Path(scenario).suffix in (".yaml", ".yml"):
         scenario = str(Path(scenario).resolve())
     common = {"scenario": scenario, "fault": fault or "", "fault_onset_s": -1.0 if onset_s is None else float(onset_s),
@@ -67,13 +72,19 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
     nodes = [NodeSpec(CONTROLLERS, "pi_controllers.node"), NodeSpec(VALVE, "valve_actuator.node"),
              NodeSpec(PLANT, "ph_plant_sim.node", {"pace": float(pace)})]
     if record is not None:
-        nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", {"path": str(Path(record).resolve())}, OBSERVER))
+        rec = {"path": str(Path(record).resolve())}
+        if split_after_s > 0:
+            rec["split_after_s"] = float(split_after_s)
+        nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", rec, OBSERVER))
     if detector is not None:
         nodes.append(detector_spec(detector))
     nodes += list(extra)
     names = [n.name for n in nodes]
     for n in nodes:
         n.params = {**common, "graph_nodes": names, **n.params}
+    part = make_part(scenario, fault or None, list(overrides), onset_s)  # resolved and validated once for every node
+    for n in nodes:
+        n.part = part
     return nodes
 
 
@@ -206,9 +217,16 @@ class Launcher:
         env = graph_env(domain_id)
         self.t0 = time.monotonic()
         self.wall_t0 = time.time() - 1.0  # for file times (coarse clocks)
+        written: dict[int, str] = {}  # one file per distinct part (loop_graph: one for the graph)
         for spec in self.nodes:
+            params = dict(spec.params)
+            if spec.part is not None:
+                if id(spec.part) not in written:
+                    path = self.log_dir / f"part{len(written)}.json"
+                    written[id(spec.part)] = str(write_part(path, spec.part))
+                params["part"] = written[id(spec.part)]
             params_file = self.log_dir / f"{spec.name}.params.yaml"
-            params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.params}}, sort_keys=False))
+            params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": params}}, sort_keys=False))
             cmd = [sys.executable, "-m", spec.module, "--ros-args", "--params-file", str(params_file)]
             with open(self.log_dir / f"{spec.name}.stdout", "wb") as out, \
                  open(self.log_dir / f"{spec.name}.stderr", "wb") as err:
@@ -358,17 +376,36 @@ class Launcher:
             result.log_dir = str(self.log_dir)
 
     def _finish_bag(self, path: Path, recorder: _Proc, result: LaunchResult) -> dict | None:
+        """bag_info of the recorded bag (of all its files when split), recovered if unfinished."""
         from phfdi import bagio
 
-        if not path.exists():
+        split = recorder.spec.params.get("split_after_s", 0) > 0
+        parts = bagio.bag_parts(path) if split else [path] if path.exists() else []
+        if not parts:
             return None
+        infos = [self._finish_part(p, recorder, result) for p in parts]
+        if not split:
+            return infos[0]
+        info = dict(infos[0], parts=[i["path"] for i in infos], size_bytes=sum(i["size_bytes"] for i in infos),
+                    messages=sum(i["messages"] for i in infos), chunks=sum(i.get("chunks", 0) for i in infos),
+                    end_s=infos[-1]["end_s"])
+        counts: dict[str, int] = {}
+        for i in infos:
+            for t in i["topics"]:
+                counts[t["topic"]] = counts.get(t["topic"], 0) + t["count"]
+        info["topics"] = [dict(t, count=counts[t["topic"]]) for t in infos[0]["topics"]]
+        return info
+
+    def _finish_part(self, path: Path, recorder: _Proc, result: LaunchResult) -> dict:
+        from phfdi import bagio
+
         info = bagio.bag_info(path)
         if not info["finished"]:
             partial = path.with_name(path.stem + ".partial.mcap")
             os.replace(path, partial)
             rec = bagio.recover(partial, path)
             partial.unlink()
-            result.notes.append(f"the recorder {recorder.describe_exit()} before finishing the bag: recovered "
+            result.notes.append(f"the recorder {recorder.describe_exit()} before finishing {path.name}: recovered "
                                 f"{rec['messages']} messages up to its last complete chunk")
             info = bagio.bag_info(path)
         return info

@@ -5,7 +5,8 @@ simulated time, as the plant does in a launched graph (it prints the same
 JSON lines: connected, progress, done). It publishes the bag's data topics
 (reliable, keep all: a slow reader slows the player down, nothing is lost)
 in log-time order, regenerates /clock from the stamps of /plant/measurement
-for nodes with use_sim_time (as ``ros2 bag play --clock``), and leaves out
+for nodes with use_sim_time (as ``ros2 bag play --clock``; from /measured/sample
+in a bag of a measured record, phfdi bag from-csv), and leaves out
 what a live graph produces itself (/fault_alarm, /diagnostics). After the
 last message it waits until every reader acknowledged everything.
 
@@ -18,11 +19,12 @@ import json
 import sys
 import time
 
-from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main
-from phfdi.ros.recorder import _message_class
-from phfdi.ros.topics import CLOCK, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
-
 from rosgraph_msgs.msg import Clock
+
+from phfdi.ros.recorder import _message_class
+from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main
+from phfdi_base.stamps import split_ns
+from phfdi_base.topics import CLOCK, DIAGNOSTICS, FAULT_ALARM, MEASURED_SAMPLE, MEASUREMENT
 
 PLAYER = "player"
 #: produced by a live graph's own nodes: not replayed
@@ -59,7 +61,9 @@ class PlayerNode(GraphNode):
         unknown = [t for t in wanted if t not in counts]
         if unknown:
             raise NodeStartError(f"parameter topics: {unknown[0]} is not in the bag (it has {', '.join(counts)})")
-        self.samples = counts.get(MEASUREMENT.name, 0)
+        # one sample per /plant/measurement (a run of the graph), else per /measured/sample (a measured record)
+        self.sample_topic = MEASUREMENT.name if MEASUREMENT.name in counts else MEASURED_SAMPLE.name
+        self.samples = counts.get(self.sample_topic, 0)
         self.n_messages = sum(counts[t] for t in wanted)
         self.pubs = {t: self.data_publisher(_message_class(types[t]), t) for t in wanted}
         self.pub_clock = self.create_publisher(Clock, CLOCK.name, 10)
@@ -106,7 +110,7 @@ class PlayerNode(GraphNode):
                     time.sleep(min(delay, 0.1))
             self._publish(self.pubs[channel.topic], message.data)
             self._sent += 1
-            if channel.topic == MEASUREMENT.name:
+            if channel.topic == self.sample_topic:
                 self._tick(message.log_time)
             if time.monotonic() >= until:
                 return
@@ -129,7 +133,7 @@ class PlayerNode(GraphNode):
 
     def _tick(self, stamp_ns: int) -> None:
         if self.pub_clock.get_subscription_count():  # only nodes with use_sim_time listen
-            self._clock_msg.clock.sec, self._clock_msg.clock.nanosec = divmod(stamp_ns, 1_000_000_000)
+            self._clock_msg.clock.sec, self._clock_msg.clock.nanosec = split_ns(stamp_ns)
             self.pub_clock.publish(self._clock_msg)
         self._sample += 1
         if self._sample % self._report_every == 0:

@@ -20,6 +20,9 @@ def read_mapping(path: str | Path, what: str = "file", expected: str = "a mappin
             data = yaml.safe_load(fh)
     except (FileNotFoundError, IsADirectoryError):
         raise UserError(f"no such {what}: {path}") from None
+    except UnicodeDecodeError as exc:
+        line = exc.object.count(b"\n", 0, exc.start) + 1
+        raise UserError(f"{path}: line {line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x})") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -28,3 +31,27 @@ def read_mapping(path: str | Path, what: str = "file", expected: str = "a mappin
     if not isinstance(data, dict):
         raise UserError(f"{path}: expected {expected}")
     return data
+
+
+def list_presets(directory: Path) -> dict[str, str]:
+    """name -> first line of the description of each YAML preset in a directory (``faults.yaml`` left out)."""
+    out = {}
+    for p in sorted(directory.glob("*.yaml")):
+        if p.stem == "faults":
+            continue
+        lines = str(read_mapping(p).get("description", "")).strip().splitlines()
+        out[p.stem] = lines[0] if lines else ""
+    return out
+
+
+def resolve_preset(name_or_path: str, directory: Path, kind: str) -> Path:
+    """A .yaml/.yml path as given, or the preset of that name in ``directory``; a :class:`UserError` listing
+    the presets otherwise."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml"):
+        return p
+    candidate = directory / f"{name_or_path}.yaml"
+    if not candidate.exists():
+        known = ", ".join(list_presets(directory))
+        raise UserError(f"unknown {kind} {name_or_path!r}; presets: {known} (or give a .yaml path)")
+    return candidate

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .stamps import sample_period_ns  # noqa: F401  (the stamps' time base, named with the topics)
+
 # node names (the ROS node name and the launcher's label)
 PLANT = "plant"
 CONTROLLERS = "controllers"
@@ -52,6 +54,8 @@ PLANT_STATE = Topic("/plant/state", "phfdi_interfaces/msg/PlantState", PLANT, Tr
 DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", VALVE, False,
                     "valve health: commands held (not finite / out of range), active faults; the detector's "
                     "input counters, state and processing lag")
+MEASURED_SAMPLE = Topic("/measured/sample", "phfdi_interfaces/msg/MeasuredSample", "player", True,
+                        "one row of a measured record (phfdi bag from-csv): channel names and values")
 FAULT_ALARM = Topic("/fault_alarm", "phfdi_interfaces/msg/FaultAlarm", DETECTOR, False,
                     "the fault detector's state: on every change and as a heartbeat")
 
@@ -75,9 +79,3 @@ def stamp_ns(k: int, dt_ns: int) -> int:
     return k * dt_ns
 
 
-def sample_period_ns(sample_time_s: float) -> int:
-    """The sample time as whole nanoseconds (stamps are exact multiples of it)."""
-    dt_ns = round(sample_time_s * 1e9)
-    if dt_ns <= 0 or abs(dt_ns - sample_time_s * 1e9) > 1e-3:
-        raise ValueError(f"sample_time_s = {sample_time_s} s is not a whole number of nanoseconds")
-    return dt_ns

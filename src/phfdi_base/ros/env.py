@@ -18,7 +18,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from phfdi.errors import UserError
+from phfdi_base.errors import UserError
 
 DISCOVERY_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 #: ROS domain ids usable on Linux (the DDS port formula overflows above 232)

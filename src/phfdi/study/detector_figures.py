@@ -10,8 +10,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .config import DetectorSettings  # noqa: E402
-from .filterbank import coefficient_residuals  # noqa: E402
+from wavelet_fdi.config import DetectorSettings
+from wavelet_fdi.filterbank import coefficient_residuals
+from wavelet_fdi.isolation import CLASSES
+from wavelet_fdi.peers import DETECTORS, LABELS
+from wavelet_fdi.statistics import CusumBank
 
 COLORS = {"wavelet": "tab:blue", "wavelet_bands": "tab:cyan", "cusum": "tab:orange", "focus": "tab:green", "page_hinkley": "tab:red",
           "adwin": "tab:purple"}
@@ -25,8 +28,6 @@ def _save(fig, path: Path) -> Path:
 
 
 def plot_delays(summary: dict, path: Path) -> Path:
-    from .evaluation import DETECTORS, LABELS
-
     faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
     cols = 3
     rows = (len(faults) + cols - 1) // cols
@@ -55,8 +56,6 @@ def plot_delays(summary: dict, path: Path) -> Path:
 
 
 def plot_false_alarms(summary: dict, path: Path) -> Path:
-    from .evaluation import DETECTORS, LABELS
-
     fig, ax = plt.subplots(figsize=(7, 4))
     vals = [summary["false_per_hour"][d] or 0.0 for d in DETECTORS]
     ax.bar([LABELS[d] for d in DETECTORS], vals, color=[COLORS[d] for d in DETECTORS])
@@ -72,7 +71,6 @@ def plot_false_alarms(summary: dict, path: Path) -> Path:
 
 
 def plot_isolation(summary: dict, path: Path) -> Path:
-    from .isolation import CLASSES
 
     faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
     cols = list(CLASSES) + ["pending"]
@@ -155,7 +153,6 @@ def plot_evaluation(summary: dict, records: list[dict], out: Path, signals: dict
 def statistic_paths(increments: np.ndarray, thresholds: np.ndarray, start: int = 0) -> np.ndarray:
     """The CUSUM statistics (N, n_statistics) from a trace's increments, all restarted after every
     threshold crossing, as the detector runs them (without its resets at gaps)."""
-    from .statistics import CusumBank
 
     n, m = increments.shape
     bank = CusumBank(m)

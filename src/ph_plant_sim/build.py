@@ -1,0 +1,167 @@
+"""The plant's part of a scenario: the vessel, its chemistry, feed lines, sensors and disturbances.
+
+A factory from the validated scenario (:class:`phfdi_base.spec.ScenarioSpec`)
+to this core's objects, used alike by the in-process loop (:mod:`phfdi.loop`),
+the plant node and the detector's reference model. The valve's side of the
+starting point (stem positions for these flows) is the valve core's
+(:func:`valve_actuator.build.position_for_opening`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from phfdi_base.blocks import Chain, make_block
+from phfdi_base.errors import UserError
+from phfdi_base.spec import (
+    PlantModelSpec,
+    ScenarioSpec,
+    SensorSpec,
+    checked_block,
+    format_validation,
+    injected_faults,
+    profile,
+)
+from phfdi_base.yamlfile import read_mapping, resolve_preset
+
+from . import feedlines, sensors  # noqa: F401  (register the feed-line and sensor blocks)
+from .chemistry import Chemistry, Component
+from .mixing import MixingZone, ZonedPlant
+from .plant import CstrPlant, Feed, GravityOutlet, Tank
+from .process import PlantProcess
+
+__all__ = ["PLANT_DIR", "PlantStart", "build_plant", "build_process", "feed_lines", "load_plant_model",
+           "plant_start", "sensor_chain"]
+
+#: the plant-model presets (``plant: <name>`` in a scenario)
+PLANT_DIR = Path(str(resources.files("ph_plant_sim"))) / "presets"
+
+
+def load_plant_model(plant: str | PlantModelSpec) -> PlantModelSpec:
+    """A plant model: as given, a preset of :data:`PLANT_DIR` by name, or a .yaml file.
+
+    Examples
+    --------
+    >>> load_plant_model("paper").tank.area_cm2 > 0
+    True
+    """
+    if isinstance(plant, PlantModelSpec):
+        return plant
+    path = resolve_preset(plant, PLANT_DIR, "plant model")
+    try:
+        return PlantModelSpec.model_validate(read_mapping(path))
+    except ValidationError as exc:
+        raise UserError(format_validation(exc, str(path))) from None
+
+
+def build_plant(model: PlantModelSpec) -> CstrPlant:
+    """The vessel of a plant model (a :class:`ZonedPlant` when the probe reads a mixing zone)."""
+    chem_spec = model.chemistry
+    try:
+        chemistry = Chemistry.for_streams(
+            [f.recipe for f in model.feeds.values()],
+            extra_components=[Component(c.name, c.charge, tuple(c.pka)) for c in chem_spec.components],
+            extra_compounds=chem_spec.compounds,
+            pkw=chem_spec.pkw,
+        )
+    except ValueError as exc:
+        raise UserError(f"plant model {model.name!r}: {exc}") from None
+    feeds = [Feed(name, dict(f.recipe), f.flow_ml_s) for name, f in model.feeds.items()]
+    t = model.tank
+    outlet = GravityOutlet(t.outlet.cv, t.outlet.z_cm, t.outlet.n) if t.outlet else None
+    plant = CstrPlant(chemistry, feeds, Tank(t.area_cm2, outlet, t.overflow, t.volume_ml))
+    if model.mixing is not None:  # the probe reads a zone exchanging with the bulk
+        m = model.mixing
+        return ZonedPlant(plant, MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds)))
+    return plant
+
+
+def feed_lines(model: PlantModelSpec, dt_s: float) -> dict[str, Chain]:
+    """Each feed's line blocks (``feeds.<name>.line``) as a chain; feeds without a line are left out."""
+    out = {}
+    for name, f in model.feeds.items():
+        if f.line:
+            out[name] = Chain([_line_block(b.type, b.params, f"plant.feeds.{name}.line.{i}", dt_s)
+                               for i, b in enumerate(f.line)])
+    return out
+
+
+def _line_block(kind: str, params: dict, where: str, dt_s: float):
+    try:
+        return make_block(kind, params, dt_s=dt_s)
+    except (ValueError, TypeError) as exc:
+        raise UserError(f"{where}: {exc}") from None
+
+
+def sensor_chain(spec: SensorSpec, dt_s: float, seed: int, where: str, faults: list) -> Chain:
+    """delay -> lag -> extra effects -> injected faults -> noise."""
+    blocks: list = []
+    if spec.delay_s > 0:
+        blocks.append(checked_block("sensor_delay", {"delay_s": spec.delay_s}, f"sensors.{where}", dt_s))
+    if spec.lag_s > 0:
+        blocks.append(checked_block("sensor_lag", {"tau_s": spec.lag_s}, f"sensors.{where}", dt_s))
+    for i, b in enumerate(spec.extra):
+        blocks.append(checked_block(b.type, b.params, f"sensors.{where}.extra.{i}", dt_s))
+    blocks.extend(faults)
+    if spec.noise_std > 0:
+        blocks.append(checked_block("sensor_noise", {"std": spec.noise_std, "seed": seed}, f"sensors.{where}", dt_s))
+    return Chain(blocks)
+
+
+@dataclass
+class PlantStart:
+    """The plant's side of the loop's starting steady state (at the t=0 setpoints)."""
+
+    flows_ml_s: list[float]  # every feed, plant feed order
+    valve_feed_index: int  # the feed the pH valve drives
+    outlet_opening: float  # fraction of full outlet flow that holds the level setpoint (1 without one)
+
+
+def plant_start(spec: ScenarioSpec, plant: CstrPlant, ph_target: float | None = None) -> PlantStart:
+    """Feed flows that hold the plant at the pH (default: the initial setpoint) and the outlet opening that
+    holds the level setpoint."""
+    vspec = spec.valves.ph
+    names = [f.name for f in plant.feeds]
+    if vspec.feed not in names:
+        raise UserError(f"valves.ph.feed: plant has no feed {vspec.feed!r} (feeds: {', '.join(names)})")
+    k = names.index(vspec.feed)
+    flows = [profile(spec.feeds[n]).value(0.0) if n in spec.feeds else f.flow_ml_s
+             for n, f in zip(names, plant.feeds)]
+    target = spec.setpoints.ph.initial if ph_target is None else ph_target
+    try:
+        flows[k] = plant.flow_for_ph(target, k, flows, vspec.max_flow_ml_s)
+    except ValueError as exc:
+        raise UserError(f"setpoints.ph: {exc}") from None
+    opening = 1.0
+    if spec.setpoints.level_cm is not None and not plant.tank.overflow:
+        level = spec.setpoints.level_cm.initial
+        opening = sum(flows) / plant.tank.outlet.flow(level, 1.0)
+        if not 0.0 < opening <= 1.0:
+            raise UserError(f"setpoints.level_cm: level {level} cm needs an outlet opening of "
+                            f"{100 * opening:.0f} % of full flow, outside 0..100 %")
+    return PlantStart(flows, k, opening)
+
+
+def build_process(spec: ScenarioSpec, plant: CstrPlant, model: PlantModelSpec, flows_ml_s: list[float],
+                  outlet_opening: float) -> PlantProcess:
+    """The plant with its sensors, schedules and feed lines, at rest at these flows and outlet opening."""
+    plant.set_steady_state(flows_ml_s, outlet_opening)
+    dt = spec.sample_time_s
+    # independent noise streams per sensor, derived from the scenario seed
+    process = PlantProcess(
+        plant,
+        sensor_chain(spec.sensors.ph, dt, spec.seed * 2 + 0, "ph", injected_faults(spec, "ph_sensor")),
+        sensor_chain(spec.sensors.level, dt, spec.seed * 2 + 1, "level", injected_faults(spec, "level_sensor")),
+        {name: profile(p) for name, p in spec.feeds.items()},
+        dt,
+        feed_lines(model, dt),
+    )
+    if process.feed_lines:  # at rest the vessel receives what the lines deliver
+        plant.set_steady_state(process.steady_delivery(flows_ml_s), outlet_opening)
+    process.reset_sensors()
+    process.reset_lines(flows_ml_s)
+    return process

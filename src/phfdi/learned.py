@@ -1,0 +1,133 @@
+"""Measured records through the learned detector: read, learn, replay (application floor).
+
+The record is read by :func:`phfdi.records.read_record` (any CSV, Parquet or MCAP bag, a column
+map, the project's reading policy with a note for every repair). One row is one sample: the
+learned detector assumes a roughly uniform sampling (the reader notes gaps and uneven stamps);
+times in alarms are the record's seconds from its first row.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from phfdi_base.errors import UserError
+from wavelet_fdi.learned_detector import LearnedEvent, LearnedModel, LearnedSettings, learn, run_record
+
+#: a channel may miss at most this fraction of the healthy rows the reference learns from
+MAX_MISSING_HEALTHY = 0.2
+
+
+@dataclass
+class MeasuredRecord:
+    path: str
+    time_s: np.ndarray
+    x: np.ndarray  # (n, m)
+    channels: tuple[str, ...]
+    lines: np.ndarray
+    where: str
+    notes: list[str]
+
+
+def read_measured(path: str | Path, column_map=None, channels: Sequence[str] | None = None,
+                  exclude: Sequence[str] = (), encoding: str | None = None) -> MeasuredRecord:
+    """The record's channels as a matrix: ``channels`` (each must exist) or every column but ``exclude``."""
+    from phfdi.records import read_record
+
+    rec = read_record(path, column_map, channels=list(channels) if channels else None, encoding=encoding)
+    if len(rec) == 0:
+        raise UserError(f"{path}: no data rows")
+    names = list(channels) if channels else [n for n in rec.names if n not in set(exclude)]
+    unknown = [e for e in exclude if e not in rec.names]
+    if unknown:
+        raise UserError(f"{path}: --exclude {unknown[0]!r}: no such channel; it has {', '.join(rec.names)}")
+    if not names:
+        raise UserError(f"{path}: no channel left to monitor")
+    x = np.column_stack([rec.signals[n] for n in names]).astype(float)
+    return MeasuredRecord(str(path), np.asarray(rec.time_s, dtype=float), x, tuple(names), np.asarray(rec.lines),
+                          rec.where, rec.note_lines())
+
+
+def _check_healthy(rec: MeasuredRecord, rows: int) -> None:
+    for c, name in enumerate(rec.channels):
+        miss = ~np.isfinite(rec.x[:rows, c])
+        if miss.mean() > MAX_MISSING_HEALTHY:
+            first = int(np.argmax(miss))
+            raise UserError(f"{rec.path}: column {name!r} is missing in {int(miss.sum())} of the {rows} healthy rows "
+                            f"(first at {rec.where} {rec.lines[first]}); the reference needs it in at least "
+                            f"{100 * (1 - MAX_MISSING_HEALTHY):.0f} % of them")
+
+
+def learn_from(rec: MeasuredRecord, rows: int | None = None, settings: LearnedSettings | None = None
+               ) -> LearnedModel:
+    """Fit the learned reference on the first ``rows`` rows of a healthy record (None: all of it)."""
+    n = len(rec.x) if rows is None else int(rows)
+    if n < 2 or n > len(rec.x):
+        raise UserError(f"{rec.path}: --rows {rows}: the record has {len(rec.x)} rows")
+    _check_healthy(rec, n)
+    dt = float(np.median(np.diff(rec.time_s[:n]))) if n > 1 else 1.0
+    if not dt > 0:
+        raise UserError(f"{rec.path}: the healthy rows' time stamps do not increase")
+    s = settings or LearnedSettings()
+    s = LearnedSettings(**{**s.__dict__, "sample_time_s": dt})
+    return learn(rec.x[:n], rec.channels, s, source={"file": rec.path, "rows": n})
+
+
+def event_dict(e: LearnedEvent, rec: MeasuredRecord) -> dict:
+    out = {"kind": e.kind, "time": e.time_s, "line": int(rec.lines[e.index]) if 0 <= e.index < len(rec.lines)
+           else None, "message": e.message}
+    if e.alarm:
+        out["alarm"] = e.alarm
+    return out
+
+
+def alarm_summaries(events: list[LearnedEvent], rec: MeasuredRecord) -> list[dict]:
+    """One dict per alarm (its last state: cleared or not), with the record's time and line of each step."""
+    alarms: dict[int, dict] = {}
+    for e in events:
+        if e.alarm is None:
+            continue
+        a = dict(e.alarm)
+        a["detection_line"] = int(rec.lines[a["detection_index"]])
+        if a.get("cleared_index") is not None:
+            a["cleared_line"] = int(rec.lines[min(a["cleared_index"], len(rec.lines) - 1)])
+        alarms[a["alarm_id"]] = a
+    return [alarms[k] for k in sorted(alarms)]
+
+
+def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | None = None
+                    ) -> tuple[list[LearnedEvent], np.ndarray, LearnedModel]:
+    """Run the learned detector over a record (optionally re-fitting the reference on its first rows)."""
+    missing = [c for c in model.channels if c not in rec.channels]
+    if missing:
+        raise UserError(f"{rec.path}: no column {missing[0]!r} (the reference was learned on "
+                        f"{', '.join(model.channels)})")
+    order = [rec.channels.index(c) for c in model.channels]
+    rec = MeasuredRecord(rec.path, rec.time_s, rec.x[:, order], model.channels, rec.lines, rec.where, rec.notes)
+    if refit_rows is not None:
+        model = learn_from(rec, refit_rows, model.settings)
+    events, states, _ = run_record(model, rec.time_s - rec.time_s[0], rec.x)
+    return events, states, model
+
+
+def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
+    if not alarms:
+        return "no alarm"
+    lines = []
+    for a in alarms:
+        top = ", ".join(f"{c} {v['share']:.0%} ({max(v['bands'], key=v['bands'].get)})"
+                        for c, v in list(a["contributions"].items())[:4])
+        where = f"line {a['detection_line']}" if "detection_line" in a else f"row {a['detection_index']}"
+        onset = "" if a.get("onset_time") is None else f", onset about {a['onset_time']:g} {unit_of_time}"
+        lines.append(f"alarm {a['alarm_id']}: detected {a['detection_time']:g} {unit_of_time} "
+                     f"({where}){onset}, by "
+                     f"{a['statistic']} ({a['statistic_value']:.1f} > {a['threshold']:.1f})")
+        lines.append(f"  channels: {top}")
+        if a.get("cleared_time") is not None:
+            ep = a.get("episode_contributions") or {}
+            lines.append(f"  cleared {a['cleared_time']:g} {unit_of_time}; over the episode: "
+                         + ", ".join(f"{c} {v['share']:.0%}" for c, v in list(ep.items())[:4]))
+    return "\n".join(lines)

@@ -1,0 +1,267 @@
+"""A small interpretable stiction classifier: L2-regularised logistic regression on the indicators.
+
+p(stiction) = 1 / (1 + exp(-(b + sum_i w_i z_i))),  z_i = (x_i - mean_i) / scale_i
+
+x the features of :mod:`.features` (each a published indicator), standardised with the training
+set's weighted mean and standard deviation, so each weight says how much one standard deviation of
+that indicator moves the log-odds, and w_i z_i is that indicator's contribution to one verdict.
+Fitted by :func:`scipy.optimize.minimize` (L-BFGS-B, analytic gradient) on the weighted mean
+log-loss plus (l2 / 2) |w|^2 (the intercept is not penalised).
+
+Training data: the labelled real records (every loop's files share a weight of one, so a loop with
+23 files counts as much as a loop with one) and synthetic loops of :mod:`.training` (their total
+weight ``synthetic_ratio`` times the real loops'). The L2 strength, the synthetic ratio and the
+decision threshold are chosen inside the training data (:func:`choose_hyperparameters`): by
+leave-one-loop-out on its real records, averaged with a 5-fold cross-validation of its synthetic
+loops (criterion "real+synthetic", the default) or alone ("real"); :func:`nested_lolo` evaluates
+that whole procedure with one more loop level outside it, so no choice ever sees the loop it is
+scored on.
+
+The shipped model is ``models/stiction_classifier.json`` (package data), written by
+``benchmarks/train_stiction_classifier.py`` from ``benchmarks/results/stiction_dataset.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import minimize
+
+L2_GRID = (0.01, 0.1, 1.0)
+SYNTHETIC_RATIO_GRID = (0.5, 1.0, 2.0, 4.0)
+#: folds of the synthetic loops' cross-validation inside the hyper-parameter choice
+SYNTHETIC_FOLDS = 5
+#: what the hyper-parameters and the threshold are chosen for: the real records' leave-one-loop-out
+#: alone ("real"), or its mean with the synthetic loops' cross-validation ("real+synthetic")
+CRITERIA = ("real", "real+synthetic")
+MODEL_RESOURCE = "models/stiction_classifier.json"
+
+
+@dataclass
+class LogisticModel:
+    features: list[str]
+    mean: np.ndarray
+    scale: np.ndarray
+    weights: np.ndarray
+    bias: float
+    threshold: float = 0.5
+    l2: float = 0.1
+    synthetic_ratio: float = 1.0
+    info: dict = field(default_factory=dict)
+
+    def z(self, x: np.ndarray) -> np.ndarray:
+        return (np.asarray(x, float) - self.mean) / self.scale
+
+    def probability(self, x: np.ndarray) -> np.ndarray:
+        s = self.z(x) @ self.weights + self.bias
+        return 1.0 / (1.0 + np.exp(-s))
+
+    def contributions(self, x: np.ndarray) -> np.ndarray:
+        """Each feature's term w_i z_i of the log-odds (the intercept is ``bias``)."""
+        return self.z(x) * self.weights
+
+    def to_dict(self) -> dict:
+        return {"kind": "logistic_regression_l2", "features": list(self.features),
+                "mean": [float(v) for v in self.mean], "scale": [float(v) for v in self.scale],
+                "weights": [float(v) for v in self.weights], "bias": float(self.bias),
+                "threshold": float(self.threshold), "l2": self.l2, "synthetic_ratio": self.synthetic_ratio,
+                "info": self.info}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "LogisticModel":
+        return cls(list(d["features"]), np.array(d["mean"], float), np.array(d["scale"], float),
+                   np.array(d["weights"], float), float(d["bias"]), float(d["threshold"]),
+                   float(d.get("l2", 0.1)), float(d.get("synthetic_ratio", 1.0)), dict(d.get("info", {})))
+
+    def save(self, path: str | Path) -> None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+
+
+def load_model(path: str | Path | None = None) -> LogisticModel:
+    """The shipped model (package data) or one from ``path``."""
+    if path is None:
+        text = resources.files("phfdi.loopdiag").joinpath(MODEL_RESOURCE).read_text()
+    else:
+        text = Path(path).read_text()
+    return LogisticModel.from_dict(json.loads(text))
+
+
+# ---- fitting --------------------------------------------------------------------------------
+def fit_logistic(x: np.ndarray, y: np.ndarray, w: np.ndarray, l2: float, features: list[str]) -> LogisticModel:
+    """Weighted L2 logistic regression on standardised features (deterministic: zero start)."""
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    w = np.asarray(w, float) / np.sum(w)
+    mean = w @ x
+    scale = np.sqrt(w @ (x - mean) ** 2)
+    scale = np.where(scale > 1e-12, scale, 1.0)
+    z = (x - mean) / scale
+
+    def objective(theta: np.ndarray) -> tuple[float, np.ndarray]:
+        beta, b = theta[:-1], theta[-1]
+        s = z @ beta + b
+        # log(1 + exp(-s)) for y = 1, log(1 + exp(s)) for y = 0, stably
+        loss = np.logaddexp(0.0, s) - y * s
+        p = 1.0 / (1.0 + np.exp(-s))
+        g = w * (p - y)
+        f = float(w @ loss) + 0.5 * l2 * float(beta @ beta)
+        grad = np.concatenate([z.T @ g + l2 * beta, [float(np.sum(g))]])
+        return f, grad
+
+    res = minimize(objective, np.zeros(z.shape[1] + 1), jac=True, method="L-BFGS-B",
+                   options={"maxiter": 2000, "gtol": 1e-9})
+    return LogisticModel(list(features), mean, scale, res.x[:-1].copy(), float(res.x[-1]), 0.5, l2)
+
+
+def training_weights(groups: list[str], real: np.ndarray, synthetic_ratio: float) -> np.ndarray:
+    """Real records: every group's records share a weight of one. Synthetic records: together
+    ``synthetic_ratio`` times the real groups' total."""
+    groups = list(groups)
+    real = np.asarray(real, bool)
+    count: dict[str, int] = {}
+    for g, r in zip(groups, real):
+        if r:
+            count[g] = count.get(g, 0) + 1
+    n_real_groups = max(len(count), 1)
+    n_syn = int(np.sum(~real))
+    w = np.empty(len(groups))
+    for i, (g, r) in enumerate(zip(groups, real)):
+        w[i] = 1.0 / count[g] if r else synthetic_ratio * n_real_groups / max(n_syn, 1)
+    return w
+
+
+# ---- scoring --------------------------------------------------------------------------------
+def loop_balanced_accuracy(y: np.ndarray, pred: np.ndarray, groups: list[str]) -> float:
+    """Balanced accuracy with every group's records sharing a weight of one."""
+    count: dict[str, int] = {}
+    for g in groups:
+        count[g] = count.get(g, 0) + 1
+    hit = {True: 0.0, False: 0.0}
+    tot = {True: 0.0, False: 0.0}
+    for yi, pi, g in zip(y, pred, groups):
+        wt = 1.0 / count[g]
+        tot[bool(yi)] += wt
+        hit[bool(yi)] += wt * (bool(pi) == bool(yi))
+    rates = [hit[k] / tot[k] for k in (True, False) if tot[k] > 0]
+    return sum(rates) / len(rates) if rates else 0.0
+
+
+def best_threshold(prob: np.ndarray, y: np.ndarray, groups: list[str]) -> tuple[float, float]:
+    """(threshold, loop-balanced accuracy) maximising the latter; ties: nearest 0.5."""
+    return best_threshold_multi([(prob, y, groups)])
+
+
+def best_threshold_multi(sets: list[tuple[np.ndarray, np.ndarray, list[str]]]) -> tuple[float, float]:
+    """(threshold, mean over the sets of their loop-balanced accuracy) maximising the latter;
+    ties: nearest 0.5."""
+    p = np.sort(np.unique(np.concatenate([s[0] for s in sets])))
+    cands = [0.5] + list((p[1:] + p[:-1]) / 2) + [float(p[0]) - 1e-9, float(p[-1]) + 1e-9]
+    scored = [(float(np.mean([loop_balanced_accuracy(y, prob >= c, g) for prob, y, g in sets])), -abs(c - 0.5), c)
+              for c in cands]
+    acc, _, th = max(scored)
+    return float(th), float(acc)
+
+
+@dataclass
+class Data:
+    x: np.ndarray
+    y: np.ndarray
+    groups: list[str]
+    real: np.ndarray  # bool: a real record (False: synthetic)
+    features: list[str]
+
+    def take(self, mask: np.ndarray) -> "Data":
+        idx = np.flatnonzero(mask)
+        return Data(self.x[idx], self.y[idx], [self.groups[i] for i in idx], self.real[idx], self.features)
+
+
+def _fit(d: Data, l2: float, ratio: float) -> LogisticModel:
+    m = fit_logistic(d.x, d.y, training_weights(d.groups, d.real, ratio), l2, d.features)
+    m.synthetic_ratio = ratio
+    return m
+
+
+def lolo_probabilities(d: Data, l2: float, ratio: float) -> np.ndarray:
+    """Out-of-fold p(stiction) of every real record, holding out one real group at a time
+    (synthetic records always train)."""
+    prob = np.full(len(d.y), np.nan)
+    for g in sorted({g for g, r in zip(d.groups, d.real) if r}):
+        held = np.array([gg == g for gg in d.groups]) & d.real
+        model = _fit(d.take(~held), l2, ratio)
+        prob[held] = model.probability(d.x[held])
+    return prob
+
+
+def synthetic_cv_probabilities(d: Data, l2: float, ratio: float, folds: int = SYNTHETIC_FOLDS) -> np.ndarray:
+    """Out-of-fold p(stiction) of every synthetic record: its loops in ``folds`` folds (by sorted
+    group name), each predicted by a model trained on the real records and the other folds."""
+    prob = np.full(len(d.y), np.nan)
+    syn_groups = sorted({g for g, r in zip(d.groups, d.real) if not r})
+    fold_of = {g: k % folds for k, g in enumerate(syn_groups)}
+    for k in range(folds):
+        held = np.array([(not r) and fold_of[g] == k for g, r in zip(d.groups, d.real)])
+        if held.any():
+            prob[held] = _fit(d.take(~held), l2, ratio).probability(d.x[held])
+    return prob
+
+
+def choose_hyperparameters(d: Data, criterion: str = "real+synthetic") -> dict:
+    """L2 strength, synthetic ratio and threshold maximising the loop-balanced accuracy of the
+    leave-one-loop-out predictions on the real records of ``d`` (``criterion`` "real"), or its mean
+    with the balanced accuracy of the synthetic loops' cross-validation ("real+synthetic": a model
+    for the next plant should hold on the simulator's breadth of loops too). Ties: stronger L2,
+    ratio nearest 1."""
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
+    best = None
+    real_idx = np.flatnonzero(d.real)
+    syn_idx = np.flatnonzero(~d.real)
+    groups = [d.groups[i] for i in real_idx]
+    syn_groups = [d.groups[i] for i in syn_idx]
+    for l2 in L2_GRID:
+        for ratio in SYNTHETIC_RATIO_GRID:
+            prob = lolo_probabilities(d, l2, ratio)[real_idx]
+            sets = [(prob, d.y[real_idx], groups)]
+            if criterion == "real+synthetic" and len(syn_idx):
+                sets.append((synthetic_cv_probabilities(d, l2, ratio)[syn_idx], d.y[syn_idx], syn_groups))
+            th, acc = best_threshold_multi(sets)
+            key = (round(acc, 9), l2, -abs(math.log(ratio)))
+            if best is None or key > best[0]:
+                best = (key, {"l2": l2, "synthetic_ratio": ratio, "threshold": th, "inner_balanced_accuracy": acc})
+    assert best is not None
+    return best[1]
+
+
+def train(d: Data, criterion: str = "real+synthetic") -> LogisticModel:
+    """Hyper-parameters by :func:`choose_hyperparameters` on ``d``, then one fit on all of ``d``."""
+    hp = choose_hyperparameters(d, criterion)
+    model = _fit(d, hp["l2"], hp["synthetic_ratio"])
+    model.threshold = hp["threshold"]
+    model.info["inner_balanced_accuracy"] = hp["inner_balanced_accuracy"]
+    model.info["criterion"] = criterion
+    return model
+
+
+def nested_lolo(d: Data, progress=None, criterion: str = "real+synthetic") -> tuple[np.ndarray, np.ndarray, dict]:
+    """Nested leave-one-loop-out: for each real group, :func:`train` on everything else (which
+    chooses its hyper-parameters by an inner leave-one-loop-out) and predict the group.
+    Returns (prob, prediction) for every real record (NaN / False elsewhere) and the choices per fold."""
+    prob = np.full(len(d.y), np.nan)
+    pred = np.zeros(len(d.y), bool)
+    choices = {}
+    real_groups = sorted({g for g, r in zip(d.groups, d.real) if r})
+    for k, g in enumerate(real_groups):
+        held = np.array([gg == g for gg in d.groups]) & d.real
+        model = train(d.take(~held), criterion)
+        prob[held] = model.probability(d.x[held])
+        pred[held] = prob[held] >= model.threshold
+        choices[g] = {"l2": model.l2, "synthetic_ratio": model.synthetic_ratio, "threshold": model.threshold}
+        if progress:
+            progress(k + 1, len(real_groups))
+    return prob, pred, choices

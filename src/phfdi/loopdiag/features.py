@@ -1,0 +1,182 @@
+"""The classifier's features of one loop: each published indicator's value on a common footing.
+
+A feature is the indicator's index on its published scale, with two rules:
+
+* an indicator that does not apply to the loop (Horch's CCF on a level loop, the shape tests when
+  there is no period, ...) takes its *neutral* value, the one that means "no evidence either way"
+  (its published decision threshold, or 0 where the index is 0 for a healthy loop), so it adds
+  nothing to the verdict;
+* unbounded indices are clipped to the range their papers discuss.
+
+The Hammerstein fit (:mod:`.hammerstein`) gives two: the held-out NRMSE gain over the linear model
+of the better friction model (Kano's stiction with S and J, or its J = 0 case, a dead-band/backlash),
+and that of Kano's model alone. Only these two valve models enter, so the features do not depend
+on which other valve models a run fitted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from phfdi.run import Run
+
+from .diagnose import Evidence, Settings, gather_evidence
+from .indicator_set import compute_indicators
+from .indicators import Indicator
+
+
+@dataclass(frozen=True)
+class Feature:
+    name: str
+    source: str  # indicator name (or "hammerstein"/"oscillation")
+    neutral: float
+    low: float
+    high: float
+    description: str
+
+
+FEATURES: tuple[Feature, ...] = (
+    Feature("oscillation_regularity", "oscillation", 0.0, 0.0, math.log1p(10.0),
+            "log(1 + r), r the ACF zero-crossing regularity (Thornhill et al. 2003), r capped at 10"),
+    Feature("horch_ccf", "horch_ccf", 0.5, 0.0, 1.0, "Horch (1999) CCF oddness psi (0 even, 1 odd)"),
+    Feature("horch_histogram", "horch_histogram", 0.5, 0.0, 1.0,
+            "Horch derivative histogram: share of variance a sinusoid explains (0 Gaussian, 1 camel)"),
+    Feature("he_curve_fit", "he_curve_fit", 0.5, 0.0, 1.0, "He et al. (2007) SI (triangle vs sinusoid)"),
+    Feature("kano_stuck", "kano_stuck", 0.0, 0.0, 1.0, "Kano et al. (2004) share of OP travel while stuck"),
+    Feature("area_peak_ratio", "area_peak_ratio", 0.0, -2.0, 2.0, "Singhal & Salsbury (2005) log(A1/A2)"),
+    Feature("relay_shape", "relay_shape", 0.0, -1.0, 1.0, "Rossi & Scali (2005) SI (relay vs sinusoid)"),
+    Feature("bicoherence_ngi", "bicoherence_ngi", 0.0, -0.1, 0.5, "Choudhury et al. (2004) NGI"),
+    Feature("bicoherence_nli", "bicoherence_nli", 0.0, 0.0, 1.0, "Choudhury et al. (2004) NLI (0 if Gaussian)"),
+    Feature("ellipse_apparent_stiction", "ellipse_apparent_stiction", 0.0, 0.0, 1.0,
+            "Choudhury et al. (2006) PV-OP ellipse width along OP / OP span"),
+    Feature("friction_model_gain", "hammerstein", 0.0, -0.5, 1.0,
+            "held-out NRMSE gain of the better of Kano stiction and backlash over the linear model (fraction)"),
+    Feature("stiction_model_gain", "hammerstein", 0.0, -0.5, 1.0,
+            "held-out NRMSE gain of Kano's stiction model (S, J) over the linear one (fraction)"),
+)
+FEATURE_NAMES = tuple(f.name for f in FEATURES)
+
+
+def _clip(v: float, f: Feature) -> float:
+    return float(min(max(v, f.low), f.high))
+
+
+#: the valve models the features use
+FRICTION_CAUSES = ("backlash", "stiction")
+
+
+def hammerstein_gains(ev: Evidence) -> tuple[float | None, float | None]:
+    """(better friction model's gain, Kano stiction model's gain) as fractions of the linear
+    model's held-out NRMSE; None when not identifiable or not fitted."""
+    if not ev.identifiable:
+        return None, None
+    nom = ev.nrmse_nominal
+    if not math.isfinite(nom) or nom <= 0:
+        return None, None
+    gains = {c.cause: (nom - c.model.nrmse_validation) / nom for c in ev.causes if c.cause in FRICTION_CAUSES}
+    if not gains:
+        return None, None
+    return max(gains.values()), gains.get("stiction")
+
+
+def feature_vector(indicators: dict[str, Indicator], ev: Evidence) -> tuple[np.ndarray, dict[str, bool]]:
+    """The features in :data:`FEATURE_NAMES` order and, per feature, whether it was measured
+    (False: neutral value used)."""
+    values, measured = [], {}
+    gain, st_gain = hammerstein_gains(ev)
+    for f in FEATURES:
+        if f.source == "oscillation":
+            r = ev.oscillation.regularity
+            v = math.log1p(min(r, 10.0)) if math.isfinite(r) else math.log1p(10.0)
+        elif f.name == "friction_model_gain":
+            v = gain
+        elif f.name == "stiction_model_gain":
+            v = st_gain
+        else:
+            v = indicators[f.source].value
+        ok = v is not None and math.isfinite(v)
+        measured[f.name] = bool(ok)
+        values.append(_clip(v, f) if ok else f.neutral)
+    return np.array(values), measured
+
+
+@dataclass
+class LoopEvidence:
+    """What the classifier and the report need from one loop."""
+
+    indicators: dict[str, Indicator]
+    evidence: Evidence
+    features: np.ndarray
+    measured: dict[str, bool]
+
+
+def loop_evidence(run: Run, settings: Settings | None = None) -> LoopEvidence:
+    """Indicators, the Hammerstein evidence and the feature vector of one loop (``settings.causes``
+    must include :data:`FRICTION_CAUSES`; the others only matter for the report)."""
+    settings = settings or Settings()
+    missing = [c for c in FRICTION_CAUSES if c not in settings.causes]
+    if missing:
+        settings = Settings(settings.gain_threshold_percent, tuple(settings.causes) + tuple(missing),
+                            settings.process_type, settings.baselines)
+    process_type = settings.process_type or run.metadata.get("process_type", "self_regulating")
+    sp = run["sp"] if "sp" in run else None
+    indicators = compute_indicators(run["op_pct"], run["pv"], sp, run.dt_s, process_type)
+    no_base = Settings(settings.gain_threshold_percent, settings.causes, settings.process_type, baselines=False)
+    ev = gather_evidence(run, no_base)
+    ev.baselines = {k: {"method": k, "index": indicators[k].value, "decision": indicators[k].decision,
+                        "detail": indicators[k].detail} for k in ("horch_ccf", "he_curve_fit")}
+    x, measured = feature_vector(indicators, ev)
+    return LoopEvidence(indicators, ev, x, measured)
+
+
+# ---- the verdict with its evidence ------------------------------------------------------------
+def stiction_verdict(le: LoopEvidence, model=None) -> dict:
+    """The classifier's verdict on one loop and the evidence behind it: every indicator's value,
+    its published decision and its contribution to the log-odds (weight x standardised value; an
+    indicator that does not apply sits at its neutral value, and its contribution is that value's
+    distance from the training mean). Kano's S and J from the Hammerstein fit are listed (in OP
+    units) but are not features."""
+    model = model or _shipped_model()
+    if model.features != list(FEATURE_NAMES):
+        raise ValueError("the model's features are not this version's: retrain it "
+                         "(benchmarks/train_stiction_classifier.py)")
+    p = float(model.probability(le.features))
+    contrib = model.contributions(le.features)
+    evidence = []
+    for f, x, c in zip(FEATURES, le.features, contrib):
+        item = {"feature": f.name, "value": _r4(x), "measured": le.measured[f.name], "contribution": _r4(c),
+                "description": f.description}
+        ind = le.indicators.get(f.source)
+        if ind is not None:
+            item["decision"] = ind.decision
+            item["reference"] = ind.reference
+        evidence.append(item)
+    evidence.sort(key=lambda e: -abs(e["contribution"] or 0.0))
+    out = {"verdict": "stiction" if p >= model.threshold else "no_stiction", "probability": _r4(p),
+           "threshold": _r4(model.threshold), "intercept": _r4(model.bias), "evidence": evidence,
+           "method": "L2 logistic regression on published indicators (docs/loop_diagnosis.md)"}
+    ev = le.evidence
+    st = next((c for c in ev.causes if c.cause == "stiction"), None) if ev.identifiable else None
+    if st is not None:
+        out["kano_s_pct"] = _r4(st.parameters["s_pct"])
+        out["kano_j_pct"] = _r4(st.parameters["j_pct"])
+    return out
+
+
+_MODEL = None
+
+
+def _shipped_model():
+    global _MODEL
+    if _MODEL is None:
+        from .classifier import load_model
+
+        _MODEL = load_model()
+    return _MODEL
+
+
+def _r4(v):
+    return float(f"{float(v):.4g}") if v is not None and math.isfinite(float(v)) else None

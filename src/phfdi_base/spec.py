@@ -1,0 +1,394 @@
+"""The schema of scenarios and plant models: what a validated experiment on the loop is.
+
+A *plant model* is the vessel, its feeds and their chemistry. A *scenario* is
+a whole experiment on the loop: which plant, valves, sensors, controller
+tuning, setpoint profile, faults, duration, noise and seed. Finding the files
+(presets, ``extends:``, the fault library, ``--set`` overrides) is the
+application's business (:mod:`phfdi.scenario`); this module only says what a
+valid one is, so that the cores can take a :class:`ScenarioSpec` without
+depending on the application.
+
+Every error names the key and the problem (:class:`phfdi_base.errors.UserError`).
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib
+import importlib.util
+import sys
+from pathlib import Path
+from typing import Any, Collection, Literal, Sequence
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from .blocks import Block, Injected, make_block
+from .errors import UserError
+from .profiles import Change, Profile
+
+__all__ = [
+    "BlockSpec", "ChangeSpec", "ChemistrySpec", "ComponentSpec", "ControllersSpec", "FaultSite", "FaultSpec",
+    "FeedSpec", "MixingSpec", "OutletSpec", "PISpec", "PlantModelSpec", "ProfileSpec", "ScenarioSpec", "SensorSpec",
+    "SensorsSpec", "SetpointsSpec", "TankSpec", "ValveSpec", "ValvesSpec", "deep_merge", "format_validation",
+    "apply_override", "checked_block", "injected_faults", "load_plugins", "parse_override", "profile",
+    "resolve_scenario", "validate_scenario",
+]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# ---- plant model ----------------------------------------------------------------
+class ComponentSpec(Strict):
+    name: str
+    charge: int
+    pka: list[float] = []
+
+
+class ChemistrySpec(Strict):
+    pkw: float = Field(14.0, gt=10.0, lt=18.0)
+    components: list[ComponentSpec] = []
+    compounds: dict[str, dict[str, float]] = {}
+
+
+class BlockSpec(Strict):
+    type: str
+    params: dict[str, Any] = {}
+
+
+class FeedSpec(Strict):
+    recipe: dict[str, float] = Field(description="compound -> concentration (mol/L)")
+    flow_ml_s: float = Field(0.0, ge=0.0, description="nominal flow when no valve drives the feed (mL/s)")
+    line: list[BlockSpec] = Field([], description=(
+        "blocks between the commanded flow and the vessel (ph_plant_sim.feedlines: line_delay, pump_curve, "
+        "pump_lag), stepped per sample on the flow in mL/s"))
+
+    @field_validator("recipe")
+    @classmethod
+    def _nonnegative(cls, v: dict[str, float]) -> dict[str, float]:
+        for k, c in v.items():
+            if not c >= 0.0:
+                raise ValueError(f"concentration of {k} must be non-negative, got {c}")
+        return v
+
+
+class OutletSpec(Strict):
+    cv: float = Field(gt=0.0, description="drain coefficient, mL/s per cm^n")
+    z_cm: float = Field(0.0, description="outlet head offset (cm)")
+    n: float = Field(0.5, gt=0.0, le=1.0)
+
+
+class TankSpec(Strict):
+    area_cm2: float = Field(gt=0.0)
+    outlet: OutletSpec | None = None
+    overflow: bool = False
+    volume_ml: float | None = Field(None, gt=0.0)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "TankSpec":
+        if self.overflow and self.volume_ml is None:
+            raise ValueError("an overflow vessel needs volume_ml")
+        if not self.overflow and self.outlet is None:
+            raise ValueError("a vessel without overflow needs an outlet")
+        return self
+
+
+class MixingSpec(Strict):
+    """A zone around the inlets and the probe exchanging with the bulk (ph_plant_sim.mixing)."""
+
+    zone_volume_ml: float = Field(gt=0.0)
+    exchange_ml_s: float = Field(ge=0.0, allow_inf_nan=False)
+    feeds: list[str] = Field(description="feeds dosed into the zone; the others enter the bulk")
+
+
+class PlantModelSpec(Strict):
+    name: str
+    description: str = ""
+    chemistry: ChemistrySpec = ChemistrySpec()
+    feeds: dict[str, FeedSpec]
+    tank: TankSpec
+    mixing: MixingSpec | None = None
+
+    @model_validator(mode="after")
+    def _zone_feeds(self) -> "PlantModelSpec":
+        for f in (self.mixing.feeds if self.mixing else []):
+            if f not in self.feeds:
+                raise ValueError(f"mixing.feeds: no feed {f!r} (feeds: {', '.join(self.feeds)})")
+        return self
+
+
+# ---- loop ------------------------------------------------------------------------
+class ChangeSpec(Strict):
+    at_s: float = Field(ge=0.0)
+    value: float
+    ramp_s: float = Field(0.0, ge=0.0)
+
+
+class ProfileSpec(Strict):
+    initial: float
+    changes: list[ChangeSpec] = []
+
+
+class PISpec(Strict):
+    kp: float = Field(gt=0.0, description="% per PV unit")
+    ti_s: float = Field(gt=0.0)
+    action: Literal["direct", "reverse"] = "reverse"
+    antiwindup: Literal["back_calculation", "conditional", "none"] = "back_calculation"
+    tt_s: float | None = Field(None, gt=0.0)
+    u_min: float = 0.0
+    u_max: float = 100.0
+    setpoint_weight: float = Field(1.0, ge=0.0, le=1.0)
+
+
+class ValveSpec(Strict):
+    feed: str | None = Field(None, description="feed the valve manipulates; none for the outlet valve")
+    max_flow_ml_s: float | None = Field(None, gt=0.0)
+    characteristic: Literal["linear", "equal_percentage"] = "linear"
+    rangeability: float = Field(50.0, gt=1.0)
+
+
+class SensorSpec(Strict):
+    delay_s: float = Field(0.0, ge=0.0)
+    lag_s: float = Field(0.0, ge=0.0)
+    noise_std: float = Field(0.0, ge=0.0)
+    extra: list[BlockSpec] = Field([], description="further sensor effects (blocks), after delay and lag")
+
+
+FaultSite = Literal["valve", "valve_flow", "outlet_valve", "ph_sensor", "level_sensor"]
+
+
+class FaultSpec(Strict):
+    type: str
+    where: FaultSite = "valve"
+    params: dict[str, Any] = {}
+    onset_s: float = Field(0.0, ge=0.0)
+    ramp_s: float = Field(0.0, ge=0.0)
+
+
+class SetpointsSpec(Strict):
+    ph: ProfileSpec
+    level_cm: ProfileSpec | None = None
+
+
+class ControllersSpec(Strict):
+    ph: PISpec
+    level: PISpec | None = None
+
+
+class ValvesSpec(Strict):
+    ph: ValveSpec = Field(description="the valve the pH controller drives (the actuator under study)")
+    outlet: ValveSpec | None = Field(None, description="outlet valve the level controller drives")
+
+
+class SensorsSpec(Strict):
+    ph: SensorSpec = SensorSpec()
+    level: SensorSpec = SensorSpec()
+
+
+class ScenarioSpec(Strict):
+    name: str
+    description: str = ""
+    plant: str | PlantModelSpec
+    sample_time_s: float = Field(1.0, gt=0.0)
+    duration_s: float = Field(gt=0.0)
+    seed: int = Field(0, ge=0)
+    setpoints: SetpointsSpec
+    controllers: ControllersSpec
+    valves: ValvesSpec
+    sensors: SensorsSpec = SensorsSpec()
+    feeds: dict[str, ProfileSpec] = Field({}, description="flow schedules (mL/s) of feeds no valve drives")
+    faults: list[FaultSpec] = []
+    plugins: list[str] = Field([], description=(
+        "modules or .py files (relative to the scenario file) that register user blocks before the loop is built"))
+    min_actuator_margin_pct: float = Field(0.0, ge=0.0, lt=50.0, description=(
+        "each pH setpoint must be reachable with the valve between margin and 100 - margin %"))
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "ScenarioSpec":
+        if (self.controllers.level is None) != (self.setpoints.level_cm is None):
+            raise ValueError("setpoints.level_cm and controllers.level go together")
+        if self.controllers.level is not None and self.valves.outlet is None:
+            raise ValueError("controllers.level needs valves.outlet")
+        if self.valves.ph.feed is None or self.valves.ph.max_flow_ml_s is None:
+            raise ValueError("valves.ph needs feed and max_flow_ml_s")
+        for i, f in enumerate(self.faults):
+            if f.onset_s >= self.duration_s:
+                raise ValueError(f"faults.{i}.onset_s = {f.onset_s} s is not before the end of the run "
+                                 f"(duration_s = {self.duration_s} s)")
+        for key, prof in (("setpoints.ph", self.setpoints.ph), ("setpoints.level_cm", self.setpoints.level_cm)):
+            for j, c in enumerate(prof.changes if prof else []):
+                if c.at_s >= self.duration_s:
+                    raise ValueError(f"{key}.changes.{j}.at_s = {c.at_s} s is not before the end of the run")
+        return self
+
+
+# ---- helpers ---------------------------------------------------------------------
+def deep_merge(base: dict, over: dict) -> dict:
+    """``base`` with ``over`` laid on top, mappings merged key by key (neither is changed)."""
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = deep_merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def load_plugins(plugins: list[str]) -> None:
+    """Import user modules (dotted names or .py files) so their blocks register."""
+    for ref in plugins:
+        try:
+            if ref.endswith(".py"):
+                name = f"phfdi_plugin_{Path(ref).stem}"
+                if name in sys.modules:
+                    continue
+                spec = importlib.util.spec_from_file_location(name, ref)
+                if spec is None or not Path(ref).exists():
+                    raise FileNotFoundError(ref)
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[name] = module
+                spec.loader.exec_module(module)
+            else:
+                importlib.import_module(ref)
+        except Exception as exc:  # a user's plugin: report it as bad input, whatever it raised
+            raise UserError(f"plugins: cannot load {ref!r}: {type(exc).__name__}: {exc}") from None
+
+
+def format_validation(exc: ValidationError, source: str) -> str:
+    """One line naming the source, the key and the problem of a pydantic validation error."""
+    err = exc.errors()[0]
+    loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
+    msg = err["msg"]
+    if err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    elif msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    more = f" (and {len(exc.errors()) - 1} more problem(s))" if len(exc.errors()) > 1 else ""
+    return f"{source}: {loc}: {msg}{more}"
+
+
+def validate_scenario(data: dict, source: str = "scenario") -> ScenarioSpec:
+    """A validated scenario; a :class:`UserError` naming ``source``, the key and the problem otherwise."""
+    try:
+        return ScenarioSpec.model_validate(data)
+    except ValidationError as exc:
+        raise UserError(format_validation(exc, source)) from None
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """'a.b.c=value' -> (['a','b','c'], yaml-parsed value)."""
+    if "=" not in text:
+        raise UserError(f"--set expects key=value, got {text!r}")
+    key, value = text.split("=", 1)
+    try:
+        parsed = yaml.safe_load(value)
+    except yaml.YAMLError:
+        parsed = value
+    return key.strip().split("."), parsed
+
+
+def apply_override(data: dict, keys: list[str], value: Any) -> None:
+    """Set ``data[k0][k1]...`` (list items by index) to ``value`` in place; a path through something that is
+    neither a mapping nor a list (or a list index that is not there) is a UserError naming the key."""
+    node = data
+    for i, k in enumerate(keys[:-1]):
+        if isinstance(node, dict) and node.get(k) is None:
+            node[k] = {}  # an empty YAML key (``setpoints:``) or a new one
+        node = _step(node, k, keys, i)
+    if isinstance(node, list):
+        node[_index(node, keys[-1], keys, len(keys) - 1)] = value
+    elif isinstance(node, dict):
+        node[keys[-1]] = value
+    else:
+        _step(node, keys[-1], keys, len(keys) - 1)  # raises: not a mapping
+
+
+def _step(node: Any, key: str, keys: list[str], i: int) -> Any:
+    if isinstance(node, list):
+        return node[_index(node, key, keys, i)]
+    if isinstance(node, dict):
+        return node[key]
+    raise UserError(f"--set {'.'.join(keys)}: {'.'.join(keys[:i]) or 'the scenario'} is "
+                    f"{type(node).__name__} {node!r}, not a mapping")
+
+
+def _index(node: list, key: str, keys: list[str], i: int) -> int:
+    try:
+        k = int(key)
+        node[k]
+    except (ValueError, IndexError):
+        raise UserError(f"--set {'.'.join(keys)}: {'.'.join(keys[:i])} is a list of {len(node)}; "
+                        f"{key!r} is not an index of it") from None
+    return k
+
+
+def resolve_scenario(raw: dict, fault: str | None, library: dict[str, dict], overrides: Sequence[str] = (),
+                     onset_s: float | None = None, source: str = "scenario") -> ScenarioSpec:
+    """A scenario mapping (``extends`` already resolved) made into a validated scenario.
+
+    ``fault`` replaces the scenario's faults with the entry of that name in
+    ``library`` ("none" or "healthy" removes them; None keeps them); ``onset_s``
+    moves every fault's onset; then the ``key=value`` overrides apply. The
+    application calls this with the files it found; a node re-resolves with
+    the same inputs when its fault changes at runtime.
+
+    Examples
+    --------
+    >>> raw = {"name": "demo", "plant": "paper", "duration_s": 100, "setpoints": {"ph": {"initial": 7}},
+    ...        "controllers": {"ph": {"kp": 1, "ti_s": 10}},
+    ...        "valves": {"ph": {"feed": "base", "max_flow_ml_s": 2}}}
+    >>> spec = resolve_scenario(raw, "stuck", {"stuck": {"type": "stiction", "params": {"s_pct": 2}}},
+    ...                         onset_s=50)
+    >>> spec.name, spec.faults[0].type, spec.faults[0].onset_s
+    ('demo-stuck', 'stiction', 50.0)
+    """
+    data = copy.deepcopy(raw)
+    if fault is not None:
+        if fault in ("none", "healthy"):
+            data["faults"] = []
+        else:
+            if fault not in library:
+                raise UserError(f"unknown fault {fault!r}; known: healthy, {', '.join(library)}")
+            entry = dict(library[fault])
+            entry.pop("description", None)
+            data["faults"] = [entry]
+    if onset_s is not None:
+        for f in data.get("faults", []):
+            f["onset_s"] = onset_s
+    for text in overrides:
+        keys, value = parse_override(text)
+        apply_override(data, keys, value)
+    if fault is not None and fault not in ("none", "healthy"):
+        data["name"] = f"{data.get('name', 'scenario')}-{fault}"
+    return validate_scenario(data, source=source)
+
+
+def profile(spec: ProfileSpec) -> Profile:
+    """The piecewise signal a profile spec describes."""
+    return Profile(spec.initial, [Change(c.at_s, c.value, c.ramp_s) for c in spec.changes])
+
+
+def checked_block(kind: str, params: dict, where: str, dt_s: float, max_flow_ml_s: float | None = None) -> Block:
+    """A registered block made from a spec; a :class:`UserError` naming ``where`` if it refuses its parameters."""
+    try:
+        return make_block(kind, params, dt_s=dt_s, max_flow_ml_s=max_flow_ml_s or 1.0)
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"{where}: {kind}: {exc}") from None
+
+
+def injected_faults(spec: ScenarioSpec, site: str, max_flow_ml_s: float | None = None,
+                    flow_blocks: Collection[str] = ()) -> list[Injected]:
+    """The scenario's faults acting at ``site``, each switched on at its onset.
+
+    A fault of a type in ``flow_blocks`` given at ``valve`` acts on the valve's
+    flow (``valve_flow``): the valve core names those types.
+    """
+    out = []
+    for i, f in enumerate(spec.faults):
+        f_site = "valve_flow" if f.type in flow_blocks and f.where == "valve" else f.where
+        if f_site == site:
+            block = checked_block(f.type, f.params, f"faults.{i}", spec.sample_time_s, max_flow_ml_s)
+            out.append(Injected(block, f.onset_s, f.ramp_s))
+    return out

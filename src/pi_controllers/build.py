@@ -1,0 +1,38 @@
+"""The controllers' part of a scenario: both PI loops and their setpoint profiles.
+
+A factory from the validated scenario (:class:`phfdi_base.spec.ScenarioSpec`)
+used alike by the in-process loop and the controllers node.
+"""
+
+from __future__ import annotations
+
+from phfdi_base.spec import PISpec, ScenarioSpec, profile
+
+from .loops import ControllerBank
+from .pi import PIController
+
+__all__ = ["build_controllers", "pi_controller"]
+
+
+def pi_controller(p: PISpec, dt_s: float) -> PIController:
+    """A PI controller from its spec.
+
+    Examples
+    --------
+    >>> pi_controller(PISpec(kp=2.0, ti_s=60.0), 1.0).kp
+    2.0
+    """
+    return PIController(p.kp, p.ti_s, dt_s, p.u_min, p.u_max, p.action, p.antiwindup, p.tt_s, p.setpoint_weight)
+
+
+def build_controllers(spec: ScenarioSpec, valve_command_pct: float, outlet_command_pct: float,
+                      ph: float, level_cm: float) -> ControllerBank:
+    """Both loops, bumpless at the starting steady state (outputs = these commands, at this pH and level)."""
+    dt = spec.sample_time_s
+    c = spec.controllers
+    bank = ControllerBank(pi_controller(c.ph, dt), profile(spec.setpoints.ph),
+                          pi_controller(c.level, dt) if c.level else None,
+                          profile(spec.setpoints.level_cm) if spec.setpoints.level_cm else None,
+                          fixed_level_output_pct=outlet_command_pct)
+    bank.reset(valve_command_pct, ph, outlet_command_pct, level_cm)
+    return bank

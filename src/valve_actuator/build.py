@@ -1,0 +1,108 @@
+"""The valves' part of a scenario: the pH loop's valve and the outlet valve with their injected faults.
+
+A factory from the validated scenario (:class:`phfdi_base.spec.ScenarioSpec`)
+used alike by the in-process loop, the valve node and the detector's
+reference model.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Protocol, Sequence
+
+from phfdi_base.blocks import Chain
+from phfdi_base.errors import UserError
+from phfdi_base.spec import ScenarioSpec, ValveSpec, injected_faults, profile
+
+from .blocks import FLOW_BLOCKS
+from .valve import Valve, ValveOutput
+
+__all__ = ["ValveStep", "build_valve", "build_valves", "check_reachable", "position_for_opening", "start_commands",
+           "step_valves"]
+
+
+def position_for_opening(opening: float, valve: ValveSpec) -> float:
+    """Inverse inherent characteristic: stem position (%) giving a flow fraction.
+
+    Examples
+    --------
+    >>> position_for_opening(0.5, ValveSpec(characteristic="linear"))
+    50.0
+    """
+    if valve.characteristic == "linear":
+        return 100.0 * opening
+    return 100.0 * (1.0 + math.log(opening) / math.log(valve.rangeability))
+
+
+class FlowsAtRest(Protocol):
+    """What the plant says about a steady state (:class:`ph_plant_sim.build.PlantStart`)."""
+
+    flows_ml_s: Sequence[float]
+    valve_feed_index: int
+    outlet_opening: float
+
+
+def start_commands(spec: ScenarioSpec, rest: FlowsAtRest, level_controlled: bool) -> tuple[float, float]:
+    """Stem commands (%) of the pH valve and the outlet valve that give the plant's flows at rest.
+
+    ``level_controlled``: the outlet valve holds a level (else it stays fully open, 100 %).
+    """
+    cmd = position_for_opening(rest.flows_ml_s[rest.valve_feed_index] / spec.valves.ph.max_flow_ml_s, spec.valves.ph)
+    outlet_cmd = position_for_opening(rest.outlet_opening, spec.valves.outlet) if level_controlled else 100.0
+    return cmd, outlet_cmd
+
+
+def check_reachable(spec: ScenarioSpec, rest_at: Callable[[float], FlowsAtRest]) -> None:
+    """Every pH setpoint must be reachable by the healthy valve within the scenario's margin.
+
+    ``rest_at(ph)``: the plant's steady state at that pH (:func:`ph_plant_sim.build.plant_start`).
+    """
+    margin = spec.min_actuator_margin_pct
+    for value in profile(spec.setpoints.ph).values():
+        cmd, _ = start_commands(spec, rest_at(value), False)
+        if not margin <= cmd <= 100.0 - margin:
+            raise UserError(f"setpoints.ph: pH {value} needs the valve at {cmd:.1f} %, "
+                            f"outside the reachable range {margin:.0f}..{100 - margin:.0f} %")
+
+
+def build_valve(vspec: ValveSpec, spec: ScenarioSpec, site: str, command_pct: float | None = None) -> Valve:
+    """One valve with the scenario's faults at ``site`` (stem) and ``site_flow`` (flow), at rest at a command
+    (if one is given)."""
+    max_flow = vspec.max_flow_ml_s or 1.0
+    valve = Valve(max_flow, vspec.characteristic, vspec.rangeability,
+                  Chain(injected_faults(spec, site, max_flow, FLOW_BLOCKS)),
+                  Chain(injected_faults(spec, site + "_flow", max_flow, FLOW_BLOCKS)))
+    if command_pct is not None:
+        valve.reset(command_pct)
+    return valve
+
+
+def build_valves(spec: ScenarioSpec, valve_command_pct: float,
+                 outlet_command_pct: float) -> tuple[Valve, Valve | None]:
+    """The pH loop's valve and the outlet valve (None when the scenario has none), at rest at these commands."""
+    valve = build_valve(spec.valves.ph, spec, "valve", valve_command_pct)
+    outlet = None
+    if spec.valves.outlet is not None:
+        outlet = build_valve(spec.valves.outlet, spec, "outlet_valve", outlet_command_pct)
+    return valve, outlet
+
+
+@dataclass(slots=True)
+class ValveStep:
+    """The valves' answer to one sample's controller outputs."""
+
+    valve: ValveOutput  # the pH loop's valve
+    outlet_position_pct: float  # outlet stem position (the level output itself when there is no outlet valve)
+    outlet_opening: float  # fraction of full outlet flow
+    outlet: ValveOutput | None  # the outlet valve's full output, if there is one
+
+
+def step_valves(valve: Valve, outlet_valve: Valve | None, fixed_outlet_opening: float, t_s: float,
+                ph_command_pct: float, level_command_pct: float) -> ValveStep:
+    """Valve side of a tick: both valves move for the commands of t_s (the in-process loop and the valve node)."""
+    v = valve.step(ph_command_pct, t_s)
+    if outlet_valve is None:
+        return ValveStep(v, level_command_pct, fixed_outlet_opening, None)
+    o = outlet_valve.step(level_command_pct, t_s)
+    return ValveStep(v, o.position_pct, o.opening, o)

@@ -1,0 +1,476 @@
+"""Multichannel wavelet-CUSUM detector on the residuals of a learned healthy reference (ROS-free core).
+
+Per sample, for every channel c of a measured record (docs/detector.md, "Measured data"):
+
+1. the learned reference (:mod:`wavelet_fdi.reference_learned`) predicts x_c from its own
+   past and the other channels; r_c = residual in healthy standard deviations;
+2. a causal stationary wavelet transform (:class:`~wavelet_fdi.filterbank.CausalSwt`,
+   PyWavelets filters) splits r_c into detail bands D1..DJ and the approximation AJ;
+3. a slow observer removes what is left of the channel's drift from AJ: a bias
+   b_c, corrected every ``block_samples`` by ``block_samples / observer_time_constant_s``
+   of the block's mean deviation, frozen while an alarm is up or any statistic is above
+   ``freeze_ratio`` of its threshold (a fault is not learned as the new healthy);
+4. every band is divided by its healthy RMS (measured on the healthy rows,
+   :func:`calibrate`): u = AJ deviation, d_j = D_j coefficient;
+5. one-sided CUSUMs (:class:`~wavelet_fdi.statistics.CusumBank`): mean up (u - k) and
+   down (-u - k) on AJ, and, if enabled, energy (d_j^2 - k_e) on each detail band;
+   an alarm is raised when one crosses its threshold h (in healthy sigmas);
+6. while the alarm is up the CUSUMs restart at every block boundary, so they measure
+   whether the fault is still there (not how long it has been); the alarm clears once a
+   full ``block_samples`` has passed without a crossing. Every alarm names the channels
+   and bands that carry it: each statistic's S/h at the detection (its share of the sum)
+   and, when it clears, over the whole episode.
+
+Any chunking of a record gives the same residuals, statistics, states and events: the
+observer and the restarts act at fixed global sample indices, every recursion runs left
+to right. Bad rows: a missing value (NaN) of a channel counts as healthy for its
+statistics and is reported once per stretch (an ``input`` event); the record reader
+(:mod:`phfdi.records`) is where text cells and broken files are refused.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from phfdi_base.errors import UserError
+
+from .filterbank import CausalSwt, wavelet_filters
+from .reference_learned import LearnedReference, load_json, save_json
+from .statistics import CusumBank, energy_reference
+
+FORMAT = "phfdi-learned-detector/1"
+TIME_RING = 1 << 16  # sample times kept to date an alarm's onset
+
+
+@dataclass
+class LearnedSettings:
+    """Design of the learned detector; every threshold in healthy standard deviations of its band.
+
+    The defaults were chosen on SKAB's valve1 files and scored held out on its other files
+    (benchmarks/skab_select.py; docs/detector.md): one configuration for every record.
+    """
+
+    wavelet: str = "sym4"
+    level: int = 2
+    #: own lags of each channel in the reference, and the ridge penalties (standardised units)
+    lags: int = 2
+    ridge_own: float = 1.0
+    ridge_cross: float = 10.0
+    #: mean CUSUMs on AJ: reference value k and threshold h (healthy sigmas of AJ)
+    mean_k: float = 5.0
+    mean_h: float = 5.0
+    #: energy CUSUMs on the detail bands (off: 0); designed for this variance ratio, threshold h
+    energy_variance_ratio: float = 0.0
+    energy_h: float = 20.0
+    #: observer on AJ: time constant (0: off); frozen above this fraction of a threshold
+    observer_time_constant_s: float = 300.0
+    freeze_ratio: float = 0.5
+    #: while an alarm is up the observer keeps learning with this (longer) time constant, so that a
+    #: lasting new operating point stops alarming eventually; 0: frozen until the alarm clears
+    observer_alarm_time_constant_s: float = 10000.0
+    #: observer updates and in-alarm CUSUM restarts happen every this many samples; an alarm clears
+    #: after this many samples without a crossing
+    block_samples: int = 32
+    #: in alarm, a mean statistic holds the alarm only while its channel's AJ deviation is at least this
+    #: fraction of the episode's peak on that channel (0: any crossing holds it)
+    clear_fraction: float = 0.2
+    #: nominal sample time of the record (s)
+    sample_time_s: float = 1.0
+
+    def check(self) -> "LearnedSettings":
+        try:
+            wavelet_filters(self.wavelet)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+        if not 1 <= self.level <= 8:
+            raise UserError(f"level must be 1..8, got {self.level}")
+        if self.mean_k < 0 or not self.mean_h > 0:
+            raise UserError("mean_k must be >= 0 and mean_h > 0")
+        if self.energy_variance_ratio and not self.energy_variance_ratio > 1.0:
+            raise UserError("energy_variance_ratio must be 0 (off) or above 1")
+        if self.block_samples < 1:
+            raise UserError("block_samples must be at least 1")
+        if self.observer_time_constant_s < 0 or self.observer_alarm_time_constant_s < 0 \
+                or not 0 < self.freeze_ratio <= 1:
+            raise UserError("observer time constants must be >= 0 and freeze_ratio in (0, 1]")
+        if not self.sample_time_s > 0:
+            raise UserError("sample_time_s must be positive")
+        if not 0.0 <= self.clear_fraction < 1.0:
+            raise UserError("clear_fraction must be in [0, 1)")
+        return self
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "LearnedSettings":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise UserError(f"unknown learned-detector setting(s): {', '.join(unknown)}")
+        return cls(**d).check()
+
+    def bands(self) -> list[str]:
+        return [f"D{j + 1}" for j in range(self.level)] + [f"A{self.level}"]
+
+
+@dataclass
+class LearnedModel:
+    """What ``phfdi calibrate --learn`` writes: the reference, the healthy band sigmas, the settings."""
+
+    reference: LearnedReference
+    settings: LearnedSettings
+    #: healthy RMS per channel (rows) and band (columns D1..DJ, AJ), residual-sigma units
+    band_sigma: np.ndarray
+    source: dict = field(default_factory=dict)
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        return self.reference.channels
+
+    def to_dict(self) -> dict:
+        return {"format": FORMAT, "settings": asdict(self.settings), "reference": self.reference.to_dict(),
+                "band_sigma": {c: dict(zip(self.settings.bands(), map(float, row)))
+                               for c, row in zip(self.channels, self.band_sigma)},
+                "source": self.source}
+
+    def save(self, path: str | Path) -> None:
+        save_json(path, self.to_dict())
+
+    @classmethod
+    def load(cls, path: str | Path) -> "LearnedModel":
+        d = load_json(path, FORMAT)
+        return cls.from_dict(d, str(path))
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "model") -> "LearnedModel":
+        settings = LearnedSettings.from_dict(dict(d.get("settings") or {}))
+        ref = LearnedReference.from_dict(d.get("reference") or {}, where)
+        try:
+            bs = d["band_sigma"]
+            sigma = np.array([[float(bs[c][b]) for b in settings.bands()] for c in ref.channels])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{where}: band_sigma missing or incomplete ({exc})") from None
+        if not (np.all(np.isfinite(sigma)) and np.all(sigma > 0)):
+            raise UserError(f"{where}: band_sigma must be positive numbers")
+        return cls(ref, settings, sigma, dict(d.get("source") or {}))
+
+
+def learn(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSettings | None = None,
+          source: dict | None = None) -> LearnedModel:
+    """Fit the reference on healthy rows and measure each band's healthy RMS on the same rows."""
+    s = (settings or LearnedSettings()).check()
+    ref = LearnedReference.fit(x_healthy, channels, s.lags, s.ridge_own, s.ridge_cross)
+    provisional = LearnedModel(ref, s, np.ones((len(ref.channels), s.level + 1)), dict(source or {}))
+    det = LearnedDetector(provisional, alarms=False, record_trace=True)
+    det.process(np.arange(len(x_healthy)) * s.sample_time_s, x_healthy)
+    tr = det.trace()
+    start = det.fill_samples
+    if len(x_healthy) - start < 8 * s.block_samples:
+        raise UserError(f"the healthy part has {len(x_healthy)} rows; calibrating the bands needs at least "
+                        f"{start + 8 * s.block_samples} (more rows, a lower level or smaller blocks)")
+    coef = tr["coef"][start:]  # (n, m, J+1), AJ already observer-corrected
+    coef = np.where(np.isfinite(coef), coef, np.nan)
+    sigma = np.sqrt(np.nanmean(coef ** 2, axis=0))
+    sigma = np.where(np.isfinite(sigma) & (sigma > 1e-9), sigma, 1.0)
+    src = {"healthy_rows": int(len(x_healthy)), **(source or {})}
+    return LearnedModel(ref, s, sigma, src)
+
+
+@dataclass
+class LearnedEvent:
+    """A state change: alarm raised, alarm cleared, or an input problem."""
+
+    kind: str  # "alarm" | "cleared" | "input"
+    time_s: float
+    index: int
+    level: str  # "OK" | "WARN" | "ERROR"
+    message: str
+    alarm: dict | None = None
+
+
+class LearnedDetector:
+    """Feed rows of a measured record in time order; get events (and per-row alarm states) back."""
+
+    def __init__(self, model: LearnedModel, alarms: bool = True, record_trace: bool = False) -> None:
+        self.model = model
+        self.settings = s = model.settings.check()
+        self.channels = model.channels
+        m = len(self.channels)
+        self.m = m
+        self.stream = model.reference.new_state()
+        self.swt = CausalSwt(s.wavelet, s.level, channels=m)
+        self.gain = 2.0 ** (s.level / 2.0)  # DC gain of AJ
+        self.fill_samples = self.swt.fill_samples + model.reference.lags
+        self.bands = s.bands()
+        self.energy = s.energy_variance_ratio > 1.0
+        # statistics: mean up and down per channel, then energy per channel and detail band
+        names, k, h, chan, band = [], [], [], [], []
+        for c, ch in enumerate(self.channels):
+            for kind in ("mean_up", "mean_down"):
+                names.append(f"{ch}.A{s.level}.{kind}")
+                k.append(s.mean_k), h.append(s.mean_h), chan.append(c), band.append(s.level)
+        if self.energy:
+            ke = energy_reference(s.energy_variance_ratio)
+            for c, ch in enumerate(self.channels):
+                for j in range(s.level):
+                    names.append(f"{ch}.D{j + 1}.energy")
+                    k.append(ke), h.append(s.energy_h), chan.append(c), band.append(j)
+        self.stat_names = names
+        self.k = np.array(k)
+        self.h = np.array(h)
+        self.stat_channel = np.array(chan)
+        self.stat_band = np.array(band)
+        self.cusum = CusumBank(len(names))
+        self.alarms_enabled = alarms
+        self.bias = np.zeros(m)
+        self._acc = np.zeros(m)
+        self._acc_n = 0
+        self.in_alarm = False
+        self._last_crossing = -1
+        self._holdoff = False  # an alarm cleared in this block: no new one before the next block boundary
+        self._peak = np.zeros(m)  # per channel, the largest |AJ deviation| of the alarm so far
+        self._rebase = 0  # 1: an alarm cleared in this block; 2: learning the new level over this block
+        self._alarm: dict | None = None
+        self._episode = np.zeros(len(names))
+        self.alarms: list[dict] = []
+        self._missing_open = np.zeros(m, dtype=bool)
+        self.samples_processed = 0
+        self._times = np.full(TIME_RING, np.nan)  # times of the last TIME_RING samples (onset times)
+        self._trace: dict[str, list] | None = {"coef": [], "stat": [], "state": []} if record_trace else None
+
+    # ---- public API ------------------------------------------------------------------
+    def process(self, t_s: Sequence[float], x: np.ndarray) -> tuple[list[LearnedEvent], np.ndarray]:
+        """Rows x (n, m) at times t_s; returns the events and the alarm state (0/1) of each row."""
+        x = np.asarray(x, dtype=float)
+        t = np.asarray(t_s, dtype=float)
+        if x.ndim != 2 or x.shape[1] != self.m:
+            raise UserError(f"expected rows x {self.m} channels ({', '.join(self.channels)}), got shape {x.shape}")
+        if len(t) != len(x):
+            raise UserError(f"{len(t)} time stamps for {len(x)} rows")
+        events: list[LearnedEvent] = []
+        states = np.zeros(len(x), dtype=np.int8)
+        if not len(x):
+            return events, states
+        g = self.samples_processed + np.arange(len(x))
+        self._times[g % TIME_RING] = t
+        r = self.stream.residuals(x)
+        missing = ~np.isfinite(r)
+        events += self._missing_events(missing, t)
+        out = self.swt.process(np.where(missing, 0.0, r))
+        details, approx = out.details, out.approx  # (J, n, m), (n, m)
+        sig = self.model.band_sigma  # (m, J+1)
+        d_norm = details / sig[:, :-1].T[:, None, :]  # (J, n, m)
+        a_raw = approx / self.gain  # AJ in residual units (DC gain removed)
+        b = self.settings.block_samples
+        n = len(x)
+        pos = 0
+        while pos < n:
+            g = self.samples_processed + pos
+            end = min(n, pos + (b - g % b))
+            ev = self._block(t, pos, end, a_raw, d_norm, missing, states)
+            events += ev
+            pos = end
+        self.samples_processed += n
+        return events, states
+
+    def trace(self) -> dict[str, np.ndarray]:
+        if self._trace is None:
+            raise RuntimeError("the detector was built without record_trace")
+        return {k: (np.concatenate(v) if v else np.empty(0)) for k, v in self._trace.items()}
+
+    # ---- one block (observer constant inside) -------------------------------------------
+    def _block(self, t, i0, i1, a_raw, d_norm, missing, states) -> list[LearnedEvent]:
+        s = self.settings
+        g0 = self.samples_processed + i0
+        dev = a_raw[i0:i1] - self.bias  # (nb, m) AJ deviation from the learned healthy level
+        sig = self.model.band_sigma
+        u = dev * self.gain / sig[:, -1]
+        u = np.where(missing[i0:i1], 0.0, u)
+        nb = i1 - i0
+        vals = np.empty((len(self.stat_names), nb))
+        nm = 2 * self.m
+        vals[0:nm:2] = u.T
+        vals[1:nm:2] = -u.T
+        if self.energy:
+            e = d_norm[:, i0:i1, :]  # (J, nb, m)
+            e = np.where(missing[i0:i1][None], 0.0, e)
+            vals[nm:] = (e.transpose(2, 0, 1).reshape(self.m * s.level, nb)) ** 2
+        z = vals - self.k[:, None]
+        warm = g0 < self.fill_samples
+        if warm:  # filters not yet filled: no evidence either way
+            cut = min(nb, self.fill_samples - g0)
+            z[:, :cut] = -self.k[:, None]
+        events: list[LearnedEvent] = []
+        S = self.cusum.update(z, g0)
+        ratio = S / self.h[:, None]
+        cross = (ratio > 1.0).any(axis=0)
+        if self._trace is not None:
+            coef = np.concatenate((d_norm[:, i0:i1, :].transpose(1, 2, 0) * sig[:, :-1],
+                                   (dev * self.gain)[:, :, None]), axis=2)
+            self._trace["coef"].append(np.where(missing[i0:i1][:, :, None], np.nan, coef))
+            self._trace["stat"].append(ratio.T.copy())
+        if self.alarms_enabled:
+            events += self._alarm_logic(t, i0, i1, g0, ratio, cross, states, np.abs(u))
+        if self._trace is not None:
+            self._trace["state"].append(states[i0:i1].copy())
+        # observer: block sums of the deviation; correction at block boundaries when not frozen
+        ok = ~missing[i0:i1]
+        self._acc += np.where(ok, dev, 0.0).sum(axis=0)
+        self._acc_n += nb
+        at_boundary = (g0 + nb) % s.block_samples == 0
+        if at_boundary:
+            frozen = self.alarms_enabled and (self.in_alarm or bool((ratio[:, -1] > s.freeze_ratio).any()))
+            tau = s.observer_alarm_time_constant_s if frozen else s.observer_time_constant_s
+            block_warm = g0 + nb - s.block_samples < self.fill_samples  # by global index: chunking-proof
+            if self._rebase == 2 and self._acc_n:
+                # the block after an alarm cleared because its channels came most of the way back: what is
+                # left of the offset is the new healthy level (else it would raise the alarm again)
+                self.bias = self.bias + self._acc / self._acc_n
+            elif s.observer_time_constant_s > 0 and tau > 0 and not block_warm and self._acc_n:
+                gain = min(1.0, s.block_samples * s.sample_time_s / tau)
+                self.bias = self.bias + gain * self._acc / self._acc_n
+            self._acc[:] = 0.0
+            self._acc_n = 0
+            if self.in_alarm or self._holdoff:
+                self.cusum.restart(g0 + nb - 1)
+                self._holdoff = False
+            if self._rebase == 1:  # the clear's block is over: learn the new level over the next full block
+                self._rebase, self._holdoff = 2, True
+            elif self._rebase == 2:
+                self._rebase = 0
+            self.cusum.renormalise()
+        return events
+
+    def _holding(self, j: int, ratio: np.ndarray, absu: np.ndarray) -> np.ndarray:
+        """In alarm, samples j.. of the block that still carry the fault: a statistic above its threshold,
+        and for the mean statistics a deviation of at least clear_fraction of the episode's peak on its
+        channel (a channel that came most of the way back does not hold the alarm by a small offset)."""
+        rho = self.settings.clear_fraction
+        above = ratio[:, j:] > 1.0
+        if rho <= 0.0:
+            return above.any(axis=0)
+        a = absu[j:]  # (n, m)
+        peak = np.maximum(np.maximum.accumulate(a, axis=0), self._peak)  # running peak per channel
+        strong = (a >= rho * peak).T  # (m, n)
+        nm = 2 * self.m
+        ok = above.copy()
+        ok[:nm] &= np.repeat(strong, 2, axis=0)
+        return ok.any(axis=0)
+
+    def _alarm_logic(self, t, i0, i1, g0, ratio, cross, states, absu) -> list[LearnedEvent]:
+        s = self.settings
+        events: list[LearnedEvent] = []
+        nb = i1 - i0
+        j = 0
+        while j < nb:
+            if not self.in_alarm:
+                if self._holdoff:
+                    break
+                hit = np.flatnonzero(cross[j:])
+                if not len(hit):
+                    break
+                j += int(hit[0])
+                self.in_alarm = True
+                self._last_crossing = g0 + j
+                self._episode[:] = 0.0
+                self._peak = np.zeros(self.m)
+                self._alarm = self._raise(t[i0 + j], g0 + j, ratio[:, j])
+                events.append(LearnedEvent("alarm", float(t[i0 + j]), g0 + j, "ERROR", self._alarm_message(),
+                                           dict(self._alarm)))
+            # in alarm: held while a crossing happened in the last block_samples samples
+            idx = np.arange(j, nb)
+            hold = self._holding(j, ratio, absu)
+            last = np.where(hold, g0 + idx, -1)
+            last = np.maximum(np.maximum.accumulate(last), self._last_crossing)
+            quiet = (g0 + idx) - last >= s.block_samples
+            if quiet.any():
+                q = int(np.argmax(quiet))
+                jc = j + q
+                states[i0 + j:i0 + jc] = 1
+                self._episode += np.clip(ratio[:, j:jc], 0.0, None).sum(axis=1)
+                events.append(self._clear(t[i0 + jc], g0 + jc))
+                self.in_alarm = False
+                self._holdoff = True
+                if self.settings.clear_fraction > 0.0:
+                    self._rebase = 1
+                break
+            states[i0 + j:i1] = 1
+            self._episode += np.clip(ratio[:, j:], 0.0, None).sum(axis=1)
+            self._last_crossing = int(last[-1])
+            self._peak = np.maximum(self._peak, absu[j:].max(axis=0))
+            break
+        return events
+
+    # ---- alarms -----------------------------------------------------------------------
+    def _contributions(self, ratio: np.ndarray) -> dict:
+        w = np.clip(ratio, 0.0, None)
+        tot = float(w.sum()) or 1.0
+        per_channel: dict[str, dict] = {}
+        for i, name in enumerate(self.stat_names):
+            ch = self.channels[self.stat_channel[i]]
+            band = self.bands[self.stat_band[i]]
+            d = per_channel.setdefault(ch, {"share": 0.0, "bands": {}})
+            d["share"] += float(w[i]) / tot
+            d["bands"][band] = d["bands"].get(band, 0.0) + float(w[i]) / tot
+        ranked = sorted(per_channel.items(), key=lambda kv: -kv[1]["share"])
+        return {ch: {"share": round(v["share"], 4), "bands": {b: round(x, 4) for b, x in v["bands"].items() if x > 0}}
+                for ch, v in ranked if v["share"] > 0}
+
+    def _raise(self, t_s: float, index: int, ratio: np.ndarray) -> dict:
+        top = int(np.argmax(ratio))
+        cont = self._contributions(ratio)
+        onset = min(int(self.cusum.last_zero[top]) + 1, int(index))
+        onset_t = float(self._times[onset % TIME_RING]) if index - onset < TIME_RING else math.nan
+        alarm = {"alarm_id": len(self.alarms) + 1, "detection_time": float(t_s), "detection_index": int(index),
+                 "onset_index": onset, "onset_time": onset_t if math.isfinite(onset_t) else None,
+                 "statistic": self.stat_names[top],
+                 "statistic_value": float(ratio[top] * self.h[top]), "threshold": float(self.h[top]),
+                 "channels": list(cont), "contributions": cont, "cleared_time": None}
+        self.alarms.append(alarm)
+        return alarm
+
+    def _alarm_message(self) -> str:
+        a = self._alarm
+        top = ", ".join(f"{c} {v['share']:.0%}" for c, v in list(a["contributions"].items())[:3])
+        return f"alarm {a['alarm_id']}: {a['statistic']} crossed its threshold; channels: {top}"
+
+    def _clear(self, t_s: float, index: int) -> LearnedEvent:
+        a = self._alarm
+        a["cleared_time"] = float(t_s)
+        a["cleared_index"] = int(index)
+        a["episode_contributions"] = self._contributions(self._episode)
+        return LearnedEvent("cleared", float(t_s), int(index), "OK",
+                            f"alarm {a['alarm_id']} cleared: no statistic above its threshold for "
+                            f"{self.settings.block_samples} samples", dict(a))
+
+    def _missing_events(self, missing: np.ndarray, t: np.ndarray) -> list[LearnedEvent]:
+        out = []
+        for c in np.flatnonzero(missing.any(axis=0) | self._missing_open):
+            col = missing[:, c]
+            prev = self._missing_open[c]
+            starts = np.flatnonzero(col & ~np.concatenate(([prev], col[:-1])))
+            for i in starts:
+                out.append(LearnedEvent("input", float(t[i]), self.samples_processed + int(i), "WARN",
+                                        f"{self.channels[c]}: missing from {t[i]:g} s (counted as healthy "
+                                        f"until it returns)"))
+            self._missing_open[c] = bool(col[-1])
+        out.sort(key=lambda e: e.index)
+        return out
+
+
+def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096
+               ) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
+    """A whole record through a fresh detector, in chunks of ``chunk`` rows (None: at once; the
+    result is the same, chunks of a few thousand rows are fastest)."""
+    det = LearnedDetector(model)
+    n = len(x)
+    step = n if not chunk else int(chunk)
+    events, states = [], []
+    for a in range(0, n, max(step, 1)):
+        ev, st = det.process(t_s[a:a + step], x[a:a + step])
+        events += ev
+        states.append(st)
+    return events, (np.concatenate(states) if states else np.zeros(0, dtype=np.int8)), det

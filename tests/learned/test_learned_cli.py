@@ -1,0 +1,103 @@
+"""phfdi calibrate --learn and phfdi replay --reference on measured records, and their bad inputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from phfdi.cli import main
+
+from .test_learned_detector import CHANNELS, plant
+
+
+def write_csv(path, x, extra_header=None, start="2021-05-01 00:00:00"):
+    t0 = np.datetime64(start)
+    cols = ["datetime", *CHANNELS, *(extra_header or [])]
+    lines = [";".join(cols)]
+    for i, row in enumerate(x):
+        cells = ["" if not np.isfinite(v) else f"{v:.6g}" for v in row]
+        lines.append(";".join([str(t0 + np.timedelta64(i, "s")).replace("T", " "), *cells]))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("learned")
+    rng = np.random.default_rng(11)
+    x = plant(2600, 21)
+    onset = int(rng.integers(1300, 2000))
+    x[onset:, 1] += 10 * np.std(x[:400, 1])  # hidden from the detector: a step in "pressure"
+    labels = (np.arange(len(x)) >= onset).astype(float)[:, None]
+    faulty = write_csv(d / "faulty.csv", np.hstack((x, labels)), ["label"])
+    healthy = write_csv(d / "healthy.csv", plant(1000, 22))
+    return {"dir": d, "faulty": faulty, "healthy": healthy, "onset": onset}
+
+
+def test_learn_then_replay_names_the_channel(files, capsys):
+    ref = files["dir"] / "ref.json"
+    assert main(["calibrate", "--learn", str(files["healthy"]), "--rows", "600", "--out", str(ref)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert main(["replay", str(files["faulty"]), "--reference", str(ref), "--refit-rows", "400", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["channels"] == list(CHANNELS)  # the label column is not a channel of the reference
+    (alarm,) = report["alarms"]
+    assert files["onset"] <= alarm["detection_time"] <= files["onset"] + 120
+    assert alarm["channels"][0] == "pressure" and alarm["contributions"]["pressure"]["share"] > 0.5
+    # people's output names it too
+    assert main(["replay", str(files["faulty"]), "--reference", str(ref), "--refit-rows", "400"]) == 0
+    assert "channels: pressure" in capsys.readouterr().out
+
+
+def one_error_line(capsys, argv) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    errors = [ln for ln in err.splitlines() if ": error: " in ln]  # reading notes may come before it
+    assert len(errors) == 1 and "Traceback" not in err
+    return errors[0]
+
+
+def test_malformed_inputs_one_line_exit_2(files, tmp_path, capsys):
+    ref = tmp_path / "ref.json"
+    assert main(["calibrate", "--learn", str(files["healthy"]), "--out", str(ref)]) == 0
+    capsys.readouterr()
+    # a channel of the reference is not in the file
+    short = tmp_path / "short.csv"
+    short.write_text("datetime;flow;pressure\n2021-01-01 00:00:00;1;2\n2021-01-01 00:00:01;1;2\n")
+    assert "current" in one_error_line(capsys, ["replay", str(short), "--reference", str(ref)])
+    # text where numbers belong (the whole column)
+    text = tmp_path / "text.csv"
+    rows = ["datetime;" + ";".join(CHANNELS)] + [f"2021-01-01 00:00:{i:02d};1;2;3;x;5" for i in range(20)]
+    text.write_text("\n".join(rows) + "\n")
+    assert "vibration" in one_error_line(capsys, ["calibrate", "--learn", str(text), "--out", str(tmp_path / "a.json")])
+    # a NaN stretch over the healthy rows
+    x = plant(800, 3)
+    x[100:400, 2] = np.nan
+    gap = write_csv(tmp_path / "gap.csv", x)
+    assert "'current' is missing" in one_error_line(capsys, ["calibrate", "--learn", str(gap), "--rows", "500",
+                                                             "--out", str(tmp_path / "b.json")])
+    # an empty file, a reference that is not one, a bad setting
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    one_error_line(capsys, ["calibrate", "--learn", str(empty), "--out", str(tmp_path / "c.json")])
+    bad = tmp_path / "bad.json"
+    bad.write_text("[1, 2]")
+    one_error_line(capsys, ["replay", str(files["faulty"]), "--reference", str(bad)])
+    one_error_line(capsys, ["calibrate", "--learn", str(files["healthy"]), "--learned", "level=zero",
+                            "--out", str(tmp_path / "d.json")])
+    one_error_line(capsys, ["replay", str(files["faulty"]), "--refit-rows", "10"])
+
+
+def test_nan_stretch_in_the_monitored_part_is_reported_not_fatal(files, tmp_path, capsys):
+    ref = tmp_path / "ref.json"
+    assert main(["calibrate", "--learn", str(files["healthy"]), "--out", str(ref)]) == 0
+    x = plant(1500, 5)
+    x[900:960, 0] = np.nan
+    path = write_csv(tmp_path / "holes.csv", x)
+    capsys.readouterr()
+    assert main(["replay", str(path), "--reference", str(ref), "--refit-rows", "400", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    (problem,) = report["input_problems"]
+    assert "flow" in problem["message"] and problem["line"] == 902

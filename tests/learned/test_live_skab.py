@@ -1,0 +1,49 @@
+"""A SKAB record as a bag through the learned detector NODE over ROS: the same alarms as the offline replay.
+
+Real processes (phfdi replay --live starts a player and the node on a ROS domain it reserves for itself,
+loopback discovery only); the record is the shared SKAB file valve1/3.csv (a real valve closure), the reference
+learned on its first 400 rows.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import pytest
+
+from phfdi.cli import main
+
+from ..ros.conftest import phfdi_cmd
+
+pytestmark = [pytest.mark.ros, pytest.mark.shared_data]
+
+
+@pytest.fixture
+def skab_file(shared_data):
+    path = shared_data / "skab" / "valve1" / "3.csv"
+    if not path.exists():
+        pytest.skip(f"{path} not found")
+    return path
+
+
+def test_bag_of_a_skab_record_through_the_node_gives_the_offline_alarms(skab_file, tmp_path, capsys):
+    ref, bag = tmp_path / "ref.json", tmp_path / "valve1_3.mcap"
+    assert main(["calibrate", "--learn", str(skab_file), "--rows", "400", "--exclude", "anomaly,changepoint",
+                 "--out", str(ref)]) == 0
+    assert main(["bag", "from-csv", str(skab_file), str(bag), "--exclude", "anomaly,changepoint"]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(skab_file), "--reference", str(ref), "--json"]) == 0
+    offline = json.loads(capsys.readouterr().out)
+    assert offline["alarms"], "the offline replay raised no alarm: nothing to compare"
+    # phfdi replay --live reserves a ROS domain of its own (loopback discovery) and stops its processes
+    proc = subprocess.run(phfdi_cmd("replay", "--live", str(bag), "--reference", str(ref), "--json"),
+                          capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr
+    live = json.loads(proc.stdout)
+    assert live["samples"] == offline["samples"]
+    keys = ("alarm_id", "detection_time", "detection_index", "onset_index", "onset_time", "statistic",
+            "statistic_value", "threshold", "channels", "contributions", "cleared_time", "episode_contributions")
+    assert [{k: a.get(k) for k in keys} for a in live["alarms"]] == \
+        [{k: a.get(k) for k in keys} for a in offline["alarms"]]
+    assert "/fault_alarm ALARM at" in proc.stderr and "learned detector node" in proc.stderr

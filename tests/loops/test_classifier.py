@@ -1,0 +1,94 @@
+"""The stiction classifier: deterministic training, weights that follow the evidence, nested
+leave-one-loop-out that never lets a fold see the loop it scores, and the shipped model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phfdi.loopdiag.classifier import (Data, LogisticModel, best_threshold, fit_logistic, load_model,
+                                       nested_lolo, training_weights)
+from phfdi.loopdiag.features import FEATURE_NAMES
+
+
+def _toy(seed: int, n_groups: int = 8, per_group: int = 3, n_syn: int = 40) -> Data:
+    """Feature 0 carries the label, feature 1 is noise; half the groups are positive."""
+    rng = np.random.default_rng(seed)
+    xs, ys, gs, real = [], [], [], []
+    for g in range(n_groups):
+        lab = g % 2 == 0
+        for _ in range(per_group):
+            xs.append([(1.0 if lab else -1.0) + 0.7 * rng.standard_normal(), rng.standard_normal()])
+            ys.append(lab), gs.append(f"L{g}"), real.append(True)
+    for k in range(n_syn):
+        lab = k % 2 == 0
+        xs.append([(1.0 if lab else -1.0) + 0.7 * rng.standard_normal(), rng.standard_normal()])
+        ys.append(lab), gs.append(f"S{k}"), real.append(False)
+    return Data(np.array(xs), np.array(ys), gs, np.array(real), ["signal", "noise"])
+
+
+def test_training_is_reproducible_and_weights_follow_the_evidence():
+    d = _toy(1)
+    w = training_weights(d.groups, d.real, 1.0)
+    a = fit_logistic(d.x, d.y, w, 0.1, d.features)
+    b = fit_logistic(d.x, d.y, w, 0.1, d.features)
+    assert np.array_equal(a.weights, b.weights) and a.bias == b.bias
+    assert a.weights[0] > 1.0 and abs(a.weights[1]) < 0.5 * a.weights[0]
+    # a stronger L2 shrinks the weights
+    assert np.all(np.abs(fit_logistic(d.x, d.y, w, 10.0, d.features).weights) < np.abs(a.weights) + 1e-12)
+
+
+def test_each_real_loop_weighs_one_whatever_its_file_count():
+    w = training_weights(["A", "A", "A", "B", "S1", "S2"], np.array([1, 1, 1, 1, 0, 0], bool), 2.0)
+    assert w[:3].sum() == pytest.approx(1.0) and w[3] == pytest.approx(1.0)
+    assert w[4:].sum() == pytest.approx(2.0 * 2)  # twice the two real loops
+
+
+def test_contributions_sum_to_the_log_odds():
+    d = _toy(2)
+    m = fit_logistic(d.x, d.y, training_weights(d.groups, d.real, 1.0), 0.1, d.features)
+    x = d.x[0]
+    logit = np.log(m.probability(x) / (1 - m.probability(x)))
+    assert m.contributions(x).sum() + m.bias == pytest.approx(logit)
+
+
+def test_threshold_ties_go_to_one_half():
+    prob = np.array([0.1, 0.2, 0.8, 0.9])
+    th, acc = best_threshold(prob, np.array([0, 0, 1, 1], bool), ["a", "b", "c", "d"])
+    assert acc == 1.0 and th == 0.5
+
+
+def test_nested_lolo_separates_and_never_uses_the_held_out_loop(monkeypatch):
+    import phfdi.loopdiag.classifier as clf
+
+    # small grids keep it fast; the nesting is what is tested
+    monkeypatch.setattr(clf, "L2_GRID", (0.1, 1.0))
+    monkeypatch.setattr(clf, "SYNTHETIC_RATIO_GRID", (1.0,))
+    d = _toy(3)
+    prob, pred, choices = nested_lolo(d)
+    real = np.flatnonzero(d.real)
+    assert np.mean(pred[real] == d.y[real]) >= 0.8
+    assert set(choices) == {f"L{g}" for g in range(8)}
+    # a loop whose labels are flipped cannot be learned from the others: the held-out loop is
+    # predicted from the others only, so its (flipped) label is missed
+    flipped = Data(d.x.copy(), d.y.copy(), list(d.groups), d.real.copy(), d.features)
+    held = np.array([g == "L0" for g in flipped.groups])
+    flipped.y[held] = ~flipped.y[held]
+    _, pred_f, _ = nested_lolo(flipped, criterion="real")
+    assert np.mean(pred_f[held] == flipped.y[held]) <= 0.34
+
+
+def test_model_json_round_trip(tmp_path):
+    d = _toy(4)
+    m = fit_logistic(d.x, d.y, training_weights(d.groups, d.real, 1.0), 0.1, d.features)
+    m.threshold = 0.37
+    m.save(tmp_path / "m.json")
+    back = load_model(tmp_path / "m.json")
+    assert isinstance(back, LogisticModel)
+    assert np.allclose(back.probability(d.x), m.probability(d.x)) and back.threshold == 0.37
+
+
+def test_shipped_model_matches_the_features():
+    m = load_model()
+    assert m.features == list(FEATURE_NAMES)
+    assert len(m.weights) == len(FEATURE_NAMES) and np.all(m.scale > 0) and 0 < m.threshold < 1

@@ -1,0 +1,32 @@
+"""Fixtures of the reader tests: a short simulated run (once per session) and the CLI in process."""
+
+from __future__ import annotations
+
+import pytest
+
+_RUN: dict = {}
+
+
+@pytest.fixture(scope="session")
+def short_run():
+    """The paper loop, 900 s, pH 8 from 200 s, healthy (phfdi.run.Run)."""
+    if "run" not in _RUN:
+        from phfdi.loop import simulate
+        from phfdi.scenario import load_scenario
+
+        _RUN["run"] = simulate(load_scenario("paper", fault="healthy", overrides=[
+            "duration_s=900", "setpoints.ph.changes=[{at_s: 200, value: 8.0}]"]))
+    return _RUN["run"]
+
+
+@pytest.fixture
+def run_cli(capsys):
+    """Run `phfdi ...` in process: (exit status, stdout, stderr)."""
+    from phfdi.cli import main
+
+    def run(*argv: object):
+        status = main([str(a) for a in argv])
+        out = capsys.readouterr()
+        return status, out.out, out.err
+
+    return run

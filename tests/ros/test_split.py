@@ -1,0 +1,60 @@
+"""The recorder's split_after_s (phfdi launch --split-s): one run in several complete bag files, nothing lost
+or repeated between them (why: the MCAP writer's per-chunk index grows in memory until a file is finished)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from phfdi import bagio
+from phfdi_base import topics as T
+
+from .conftest import SHORT_RUN, phfdi_cmd
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
+PER_SAMPLE = [t.name for t in T.RECORDED if t.per_sample]
+
+
+def _stamps_s(path) -> dict[str, np.ndarray]:
+    """Stamps (whole seconds: the sample time is 1 s) of the per-sample topics in one file."""
+    out: dict[str, list] = {t: [] for t in PER_SAMPLE}
+    with open(path, "rb") as f:
+        for _s, channel, message in make_reader(f).iter_messages(topics=PER_SAMPLE, log_time_order=False):
+            out[channel.topic].append(message.log_time // 1_000_000_000)
+    return {t: np.asarray(v) for t, v in out.items()}
+
+
+def test_split_run_is_complete_bags_that_together_hold_every_sample_once(tmp_path):
+    bag = tmp_path / "run.mcap"
+    proc = subprocess.run(phfdi_cmd("launch", *SHORT_RUN, "--record", str(bag), "--split-s", "250", "--json"),
+                          capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    parts = [tmp_path / "run.mcap", tmp_path / "run.1.mcap", tmp_path / "run.2.mcap"]  # 0-249, 250-499, 500-600 s
+    assert summary["bag"]["parts"] == [str(p) for p in parts] and not (tmp_path / "run.3.mcap").exists()
+    assert all(summary["bag"]["counts"][t] == 601 for t in PER_SAMPLE)
+    together: dict[str, list] = {t: [] for t in PER_SAMPLE}
+    for i, part in enumerate(parts):
+        info = bagio.bag_info(part)
+        assert info["finished"], part
+        assert bagio.load_run(part).metadata["scenario"] == summary["scenario"]  # each file: the run's metadata
+        for topic, s in _stamps_s(part).items():
+            assert len(s) > 0, (part, topic)
+            # a file takes its interval; at most a few late messages of the previous one
+            assert s.max() < 250 * (i + 1) and s.min() >= 250 * i - 10, (part, topic, s.min(), s.max())
+            together[topic] += s.tolist()
+    for topic, s in together.items():
+        assert sorted(s) == list(range(601)), topic
+
+
+def test_split_needs_a_record_and_no_parts_of_an_earlier_bag(tmp_path):
+    proc = subprocess.run(phfdi_cmd("launch", "--split-s", "100"), capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "--split-s needs --record" in proc.stderr and "Traceback" not in proc.stderr
+    (tmp_path / "old.1.mcap").write_bytes(b"")
+    proc = subprocess.run(phfdi_cmd("launch", "--record", str(tmp_path / "old.mcap"), "--split-s", "100"),
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "old.1.mcap exists" in proc.stderr and "Traceback" not in proc.stderr

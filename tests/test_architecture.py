@@ -1,0 +1,240 @@
+"""The floors of the project run one way (docs/architecture.md), checked on the source with ast.
+
+Every ``import`` counts, at module level or inside a function: an import hidden in a function is still a
+dependency. The checks fail when violated; the tests at the end plant violations in a scratch tree and require
+the checker to find them.
+"""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+
+#: top-level package -> floor. A package may import its own floor's modules and any lower floor, except that
+#: the three plant-side cores (floor 1) do not import each other; wavelet_fdi (floor 2) may import them.
+FLOORS = {
+    "phfdi_base": 0,
+    "ph_plant_sim": 1,
+    "valve_actuator": 1,
+    "pi_controllers": 1,
+    "wavelet_fdi": 2,
+    "phfdi": 3,
+}
+
+#: edges (importing module -> imported module) allowed to go up a floor while a move is in progress (issue 14
+#: emptied it). It may only shrink: an edge that no longer exists fails the test below.
+KNOWN_UPWARD: frozenset[tuple[str, str]] = frozenset()
+#: circles between files still to be broken (same rule: may only shrink). Run.load reads through phfdi.records,
+#: whose MCAP source reads through phfdi.bagio.load_run, which reads .csv/.parquet through Run.load.
+KNOWN_CYCLES: tuple[tuple[str, ...], ...] = (
+    ("phfdi.bagio", "phfdi.records", "phfdi.records.reader", "phfdi.records.record", "phfdi.records.sources",
+     "phfdi.run"),
+)
+
+
+@dataclass(frozen=True)
+class Edge:
+    source: str  # importing module, dotted
+    target: str  # imported module of the project, dotted
+    line: int
+
+    @property
+    def packages(self) -> tuple[str, str]:
+        return self.source.split(".")[0], self.target.split(".")[0]
+
+
+def module_name(path: Path, src: Path) -> str:
+    parts = list(path.relative_to(src).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def project_modules(src: Path) -> dict[str, Path]:
+    """Every module under ``src`` (packages are directories with an ``__init__.py``)."""
+    out = {}
+    for path in src.rglob("*.py"):
+        rel = path.relative_to(src)
+        if all((src / Path(*rel.parts[:i]) / "__init__.py").exists() for i in range(1, len(rel.parts))):
+            out[module_name(path, src)] = path
+    return out
+
+
+def _imported(node: ast.AST, module: str, is_package: bool, modules: dict[str, Path]) -> list[str]:
+    """Names a statement imports; ``from pkg import sub`` names the submodule, not the package."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    if isinstance(node, ast.ImportFrom):
+        if node.level:
+            base = module.split(".")
+            base = base[: len(base) - node.level + (1 if is_package else 0)]
+            target = ".".join(base + ([node.module] if node.module else []))
+        else:
+            target = node.module or ""
+        return [f"{target}.{a.name}" if f"{target}.{a.name}" in modules else target for a in node.names]
+    return []
+
+
+def import_edges(src: Path) -> list[Edge]:
+    """Module -> project module edges, resolved to the longest existing module name."""
+    modules = project_modules(src)
+    edges: set[Edge] = set()
+    for module, path in modules.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for node in ast.walk(tree):
+            for name in _imported(node, module, path.name == "__init__.py", modules):
+                while name and name not in modules:
+                    name = name.rpartition(".")[0]
+                if name and name != module:
+                    edges.add(Edge(module, name, node.lineno))
+    return sorted(edges, key=lambda e: (e.source, e.target, e.line))
+
+
+def floor_violations(edges: list[Edge], floors: dict[str, int] = FLOORS) -> list[str]:
+    """Edges that go up a floor (or sideways between plant-side cores), and packages without a floor."""
+    out = []
+    for e in edges:
+        a, b = e.packages
+        if a == b:
+            continue
+        for p in (a, b):
+            if p not in floors:
+                out.append(f"{p}: no floor declared in tests/test_architecture.py FLOORS")
+        if a not in floors or b not in floors:
+            continue
+        if floors[b] > floors[a] or (floors[b] == floors[a] == 1):
+            out.append(f"{e.source} (line {e.line}) imports {e.target}: {a} (floor {floors[a]}) may not import "
+                       f"{b} (floor {floors[b]})")
+    return sorted(set(out))
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one node (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found = []
+    counter = [0]
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                found.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(found)
+
+
+def module_graph(edges: list[Edge]) -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {}
+    for e in edges:
+        graph.setdefault(e.source, set()).add(e.target)
+    return graph
+
+
+def package_graph(edges: list[Edge]) -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {}
+    for e in edges:
+        a, b = e.packages
+        if a != b:
+            graph.setdefault(a, set()).add(b)
+    return graph
+
+
+# ---- the project -------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def edges() -> list[Edge]:
+    return import_edges(SRC)
+
+
+def test_every_package_has_a_floor():
+    packages = {p.name for p in SRC.iterdir() if (p / "__init__.py").exists()}
+    assert packages == set(FLOORS), "declare the floor of each package in FLOORS (and in docs/architecture.md)"
+
+
+def test_no_import_goes_up_a_floor(edges):
+    left = [e for e in edges if (e.source, e.target) not in KNOWN_UPWARD]
+    assert floor_violations(left) == []
+
+
+def test_known_exceptions_still_exist(edges):
+    present = {(e.source, e.target) for e in edges}
+    assert sorted(KNOWN_UPWARD - present) == [], "these edges are gone: remove them from KNOWN_UPWARD"
+
+
+def test_no_package_cycle(edges):
+    assert cycles(package_graph([e for e in edges if (e.source, e.target) not in KNOWN_UPWARD])) == []
+
+
+def test_no_module_cycle(edges):
+    found = [tuple(c) for c in cycles(module_graph(edges))]
+    assert [c for c in found if c not in KNOWN_CYCLES] == []
+    assert [c for c in KNOWN_CYCLES if c not in found] == [], "these circles are gone: remove them from KNOWN_CYCLES"
+
+
+# ---- the checker finds planted violations -------------------------------------------------------------------
+def _tree(tmp_path: Path, files: dict[str, str]) -> Path:
+    for rel, text in files.items():
+        path = tmp_path / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    return tmp_path
+
+
+PLANTED = {
+    "phfdi_base/__init__.py": "",
+    "phfdi_base/blocks.py": "",
+    "valve_actuator/__init__.py": "",
+    "valve_actuator/valve.py": "from phfdi_base.blocks import *\n",
+    "ph_plant_sim/__init__.py": "",
+    "ph_plant_sim/plant.py": "def f():\n    from phfdi.loop import tick\n",  # hidden in a function
+    "pi_controllers/__init__.py": "",
+    "pi_controllers/pi.py": "import valve_actuator.valve\n",  # sideways between plant-side cores
+    "wavelet_fdi/__init__.py": "",
+    "wavelet_fdi/detector.py": "from ph_plant_sim import plant\nfrom .a import x\n",
+    "wavelet_fdi/a.py": "from . import detector\nx = 1\n",  # a circle between two files
+    "phfdi/__init__.py": "",
+    "phfdi/loop.py": "from ph_plant_sim.plant import *\n",
+}
+
+
+def test_checker_catches_a_core_importing_the_application(tmp_path):
+    found = floor_violations(import_edges(_tree(tmp_path, PLANTED)))
+    assert any(v.startswith("ph_plant_sim.plant (line 2) imports phfdi.loop") for v in found), found
+    assert any(v.startswith("pi_controllers.pi (line 1) imports valve_actuator.valve") for v in found), found
+    assert not any(v.startswith(("valve_actuator.valve", "wavelet_fdi.", "phfdi.loop")) for v in found), found
+
+
+def test_checker_catches_cycles(tmp_path):
+    edges = import_edges(_tree(tmp_path, PLANTED))
+    assert ["wavelet_fdi.a", "wavelet_fdi.detector"] in cycles(module_graph(edges))
+    assert cycles(package_graph(edges)) == [["ph_plant_sim", "phfdi"]]
+
+
+def test_checker_asks_for_a_floor_for_a_new_package(tmp_path):
+    files = dict(PLANTED, **{"newpkg/__init__.py": "import phfdi_base.blocks\n"})
+    assert "newpkg: no floor declared in tests/test_architecture.py FLOORS" in floor_violations(
+        import_edges(_tree(tmp_path, files)))
