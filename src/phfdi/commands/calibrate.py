@@ -93,10 +93,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.scenario import load_scenario
-    from phfdi_base.errors import UserError
     from phfdi.calibration import calibrate, calibrate_from_runs
     from phfdi.replay import load_any
+    from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
 
     if args.learn:
         return run_learn(args)
