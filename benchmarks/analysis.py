@@ -27,7 +27,7 @@ def main() -> int:
 
     from phfdi.run import Run
     from wavelet_fdi.multisignal import from_runs
-    from wavelet_fdi.paperset import PAPER_GROUPING, section6_variants, simulate_variants
+    from phfdi.study.paperset import PAPER_GROUPING, section6_variants, simulate_variants
 
     t0 = time.perf_counter()
     if args.runs:

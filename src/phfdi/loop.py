@@ -20,14 +20,17 @@ from typing import Callable
 
 from ph_plant_sim.build import build_plant, build_process, load_plant_model, plant_start
 from ph_plant_sim.plant import CstrPlant
-from ph_plant_sim.process import PlantProcess
+from ph_plant_sim.process import (
+    PlantProcess,
+    advance_plant,  # noqa: F401  (part of the loop's API)
+)
 from phfdi_base.errors import UserError
 from phfdi_base.signals import SIGNALS
 from phfdi_base.spec import ScenarioSpec, load_plugins
 from pi_controllers.build import build_controllers
 from pi_controllers.loops import ControllerBank
-from valve_actuator.build import build_valves, check_reachable, start_commands
-from valve_actuator.valve import Valve, ValveOutput
+from valve_actuator.build import ValveStep, build_valves, check_reachable, start_commands, step_valves  # noqa: F401  (part of the loop's API)
+from valve_actuator.valve import Valve
 
 from . import __version__
 from .run import Run, RunRecorder
@@ -89,42 +92,6 @@ def signal_names(parts: LoopParts) -> list[str]:
     i = names.index("outlet_valve_position_pct")
     feeds = [f"{f.name}_flow_ml_s" for f in parts.process.plant.feeds]
     return names[:i] + feeds + names[i:]
-
-
-@dataclass(slots=True)
-class ValveStep:
-    """The valves' answer to one sample's controller outputs."""
-
-    valve: ValveOutput  # the pH loop's valve
-    outlet_position_pct: float  # outlet stem position (the level output itself when there is no outlet valve)
-    outlet_opening: float  # fraction of full outlet flow
-    outlet: ValveOutput | None  # the outlet valve's full output, if there is one
-
-
-def step_valves(valve: Valve, outlet_valve: Valve | None, fixed_outlet_opening: float, t_s: float,
-                ph_command_pct: float, level_command_pct: float) -> ValveStep:
-    """Valve side of a tick: both valves move for the commands of t_s (the valve node calls this too)."""
-    v = valve.step(ph_command_pct, t_s)
-    if outlet_valve is None:
-        return ValveStep(v, level_command_pct, fixed_outlet_opening, None)
-    o = outlet_valve.step(level_command_pct, t_s)
-    return ValveStep(v, o.position_pct, o.opening, o)
-
-
-def advance_plant(process: PlantProcess, valve_feed: str, t_s: float, valve_flow_ml_s: float,
-                  outlet_opening: float) -> tuple[list[float], float]:
-    """Plant side of a tick: feed flows and outlet flow of t_s, then integrate to t_s + dt.
-
-    Returns (commanded feed flows in plant feed order, outlet flow), both mL/s,
-    as they were during the sample: the feeds' line blocks (dead time, pump
-    curve) lie between the commanded flow and the vessel, and a run records
-    the commanded flow, as a pump's historian does. The plant node calls this too.
-    """
-    flows = process.feed_flows(t_s, {valve_feed: valve_flow_ml_s})
-    delivered = process.deliver(flows, t_s)
-    outlet_flow = process.plant.outlet_flow(delivered, outlet_opening)
-    process.plant.step(delivered, outlet_opening, process.dt_s)
-    return flows, outlet_flow
 
 
 def tick(parts: LoopParts, k: int) -> dict[str, float]:

@@ -97,7 +97,7 @@ def test_every_figure_axis_has_a_label_with_units(small_analysis, tmp_path, monk
     from wavelet_fdi.analysis import Options
     from wavelet_fdi.multisignal import from_runs
     from phfdi.commands.analyze import load_runs, section7_pairs
-    from wavelet_fdi.paperset import PAPER_GROUPING
+    from phfdi.study.paperset import PAPER_GROUPING
 
     checked = []
 

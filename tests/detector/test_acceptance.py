@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from wavelet_fdi.config import DetectorSettings
-from wavelet_fdi.replay import replay_run
+from phfdi.replay import replay_run
 
 from .detector_helpers import PAPER_FAULTS
 

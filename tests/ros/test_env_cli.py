@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from phfdi.ros.env import ensure_localhost, graph_env, reserve_domain_id
+from phfdi_base.ros.env import ensure_localhost, graph_env, reserve_domain_id
 from phfdi_base.errors import UserError
 
 from .conftest import node_cmd, phfdi_cmd

@@ -96,8 +96,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from phfdi.scenario import load_scenario
     from phfdi_base.errors import UserError
-    from wavelet_fdi.calibration import calibrate, calibrate_from_runs
-    from wavelet_fdi.replay import load_any
+    from phfdi.calibration import calibrate, calibrate_from_runs
+    from phfdi.replay import load_any
 
     if args.learn:
         return run_learn(args)

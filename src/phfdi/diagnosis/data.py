@@ -22,6 +22,7 @@ error, never silently left out.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -95,6 +96,11 @@ class Record:
 class ColumnMap(records.ColumnMap):
     """A :class:`phfdi.records.ColumnMap` checked for diagnosis: signals of known kinds, time, an input and an
     output."""
+
+    @classmethod
+    def of(cls, cmap: records.ColumnMap) -> "ColumnMap":
+        """Any records column map, checked for diagnosis."""
+        return cls(**{f.name: getattr(cmap, f.name) for f in dataclasses.fields(cmap)}).checked()
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "ColumnMap":
