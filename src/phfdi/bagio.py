@@ -35,6 +35,7 @@ from phfdi_base import topics as T
 from phfdi_base.errors import UserError
 from phfdi_base.signals import SIGNALS
 from phfdi_base.stamps import join_ns, seconds_to_ns, split_ns
+from wavelet_fdi.alarm_messages import to_dict as alarm_message_dict
 
 from . import __version__
 
@@ -579,3 +580,7 @@ def bag_parts(path: str | Path) -> list[Path]:
         parts.append(part_path(path, len(parts)))
     return parts
 
+
+def fault_alarms(path: str | Path) -> list[dict]:
+    """Every /fault_alarm message a bag holds, in order (:func:`wavelet_fdi.alarm_messages.to_dict` of each)."""
+    return [alarm_message_dict(m) for m in read_messages(path, T.FAULT_ALARM.name)]

@@ -272,7 +272,7 @@ def test_cli_entries_exit_0_or_one_line_exit_2(seeds, case):
         status, out, err = run_main(*args)
         assert_clean_exit(status, err)
         if status == 0 and case == "replay":
-            from wavelet_fdi.replay import load_any
+            from phfdi.replay import load_any
 
             assert "note:" in err or load_any(path).metadata["notes"] == []
 
