@@ -30,7 +30,7 @@ import numpy as np
 from phfdi.benchmarks import skab
 from phfdi_base.errors import UserError
 
-TOGGLE_PROBABILITIES = (0.02, 0.1)
+TOGGLE_PROBABILITIES = (0.02, 0.05, 0.1)
 
 
 OURS = "ours: learned ARX + wavelet CUSUM"
@@ -82,6 +82,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("data_dir", help="SKAB data directory (its groups as subdirectories of .csv files)")
     ap.add_argument("--out", required=True, help="output directory")
     ap.add_argument("--by-group", action="store_true", help="also score each group (subdirectory) alone")
+    ap.add_argument("--toggler-seeds", type=int, default=0, metavar="N",
+                    help="also print the random togglers' NAB over N seeds (mean, min, max)")
     args = ap.parse_args(argv)
     try:
         paths = skab.find_files(args.data_dir)
@@ -124,6 +126,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{r.file.key} (no labels): ours flags {100 * frac:.2f} % of its {len(r.prediction)} rows after "
               f"the first {skab.TRAIN_ROWS}")
         report[OURS][f"flagged_pct_{r.file.key}"] = 100 * frac
+    for p in TOGGLE_PROBABILITIES if args.toggler_seeds > 0 else ():
+        runs = [skab.score("t", skab.run_detector(skab.random_toggler(p, seed), labelled))
+                for seed in range(args.toggler_seeds)]
+        nab = np.array([r.nab.scores["standard"] for r in runs])
+        f1 = np.array([r.binary.f1 for r in runs])
+        print(f"random toggler p={p} over {len(runs)} seeds: NAB standard mean {nab.mean():.1f} "
+              f"(min {nab.min():.1f}, max {nab.max():.1f}), F1 mean {f1.mean():.2f}")
+        report[f"random toggler p={p}"]["seeds"] = {"nab_standard": nab.tolist(), "f1": f1.tolist()}
     print(f"causality: {causal} files run again with half their test rows give the same predictions on that half")
     print(f"predictions: {len(written)} files under {out / 'predictions'}")
     report[OURS]["causal_files"] = causal
