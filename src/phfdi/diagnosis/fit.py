@@ -344,16 +344,19 @@ class Fitter:
             if not mask.any():
                 continue
             unseen = i not in self.train_records and self.grouped and self.groups[i] not in seen
+            n_fit = max(self.p.init_window, int(round(self.p.adapt * len(rec))))
             if unseen and adapt is not None and self.p.adapt > 0:
-                n_fit = max(self.p.init_window, int(round(self.p.adapt * len(rec))))
                 raws[i], starts[i], info = self._adapt(i, adapt, n_fit, banded_half)
                 adapted[rec.name] = info
+                mask[:n_fit] = False
+            elif unseen and self.p.adapt > 0:  # the same samples scored as for a model that adapts
+                if self.fit_init or banded_half > 0:
+                    starts[i] = self._start_of(i, raws[i], banded_half, n_fit)
+                adapted[rec.name] = {"samples": n_fit, "parameters": {}, "note": "no per-group parameter: start only"}
                 mask[:n_fit] = False
             elif i not in self.train_records and (self.fit_init or banded_half > 0):
                 starts[i] = self._start_of(i, raws[i], banded_half)
                 mask[: self.p.init_window] = False
-            elif unseen and self.p.adapt > 0:
-                adapted[rec.name] = {"samples": 0, "parameters": {}, "note": "no per-group parameter in this model"}
             try:
                 err = self._errors(i, self.predict(i, raws[i], starts[i]))
             except (UserError, ValueError, FloatingPointError):
@@ -423,10 +426,10 @@ class Fitter:
             info["initial_ph"] = float(sol.x[len(own)])
         return model(vals), start(sol.x), info
 
-    def _start_of(self, i: int, raw: dict, half_band: float) -> Start:
+    def _start_of(self, i: int, raw: dict, half_band: float, n_window: int | None = None) -> Start:
         """Unknown start of a validation-only record, fitted on its first samples."""
         window = np.zeros(len(self.p.records[i]), bool)
-        window[: self.p.init_window] = True
+        window[: n_window or self.p.init_window] = True
         x0, lo, hi = [], [], []
         if self.fit_init:
             x0.append(self.first_ph(i)), lo.append(0.0), hi.append(14.0)

@@ -1,0 +1,140 @@
+"""Leave-one-run-out on the real pH rig: can a model fitted on the other runs predict the held-out run?
+
+For each run of ../shared/data/ph_rig (PROVENANCE.md) in turn: fit on the other runs, predict the held-out run
+from its measured pump flows, score the held-out NRMSE (RMSE over the run's own standard deviation, after the
+samples that set its start). Four models, all fitted on the same data:
+
+* nominal: the calibrated ``rig_flask`` preset, only each run's starting pH fitted;
+* best single cause: the catalogue candidate with the lowest held-out error of `phfdi diagnose`;
+* structure search: `phfdi diagnose --structure` (forward selection over the catalogue and the structural
+  candidates: mixing zone, feed dead times, pump curves, carbonate in the caustic, probe dynamics and calibration);
+* black box: a Wiener model (linear dynamics on the acid/base imbalance, fitted titration curve;
+  phfdi.diagnosis.blackbox).
+
+Groups are the days in the file names (2025.02.24, 2025.03.03, 2025.04.07): reagent strengths (and the other
+declared per-group parameters) are fitted per day. A held-out run of a day that is in the fit set uses that day's
+values and only its start is set from its first 20 samples; a run of a day absent from the fit set (the March and
+April titrations, one run each) gets its start and its day's declared parameters from its first ``--adapt``
+fraction (0.2), which is then not scored. Nothing is tuned to any run: the same command for every fold.
+
+    .venv/bin/python benchmarks/rig_holdout.py                 # all five folds, table on stdout
+    .venv/bin/python benchmarks/rig_holdout.py --runs 2025.02.24-005 --dt 1 --json out/rig_holdout.json
+
+Also printed, per run: its in-sample NRMSE under the final structure when it was in the fit set (median over the
+folds that fitted it) beside its held-out NRMSE: a run fitted well but predicted badly is one whose parameters are
+not shared with the other runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from phfdi.diagnosis.blackbox import fit_wiener
+from phfdi.diagnosis.data import ColumnMap, load_record
+from phfdi.diagnosis.model import Evaluator, nominal_raw
+from phfdi.diagnosis.pipeline import Options, diagnose
+
+ROOT = Path(__file__).resolve().parents[1]
+MAP = ROOT / "src" / "phfdi" / "diagnosis" / "maps" / "ph_rig.yaml"
+GROUP = r"^([0-9]{4}\.[0-9]{2}\.[0-9]{2})"
+
+
+def shared_data() -> Path:
+    env = os.environ.get("PHFDI_SHARED_DATA")
+    return Path(env) if env else ROOT.parent / "shared" / "data"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, default=None, help="the ph_rig folder (default ../shared/data/ph_rig)")
+    ap.add_argument("--runs", nargs="*", default=None, help="hold out only runs whose name starts with these")
+    ap.add_argument("--dt", type=float, default=1.0, help="resample onto this sample time (s; default 1)")
+    ap.add_argument("--adapt", type=float, default=0.2)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--search-width", type=int, default=6)
+    ap.add_argument("--search-steps", type=int, default=5)
+    ap.add_argument("--json", type=Path, default=None, help="write the table and the fitted models here")
+    args = ap.parse_args(argv)
+    folder = args.data or shared_data() / "ph_rig"
+    files = sorted(folder.glob("*.csv"))
+    if not files:
+        print(f"rig_holdout: no runs in {folder}", file=sys.stderr)
+        return 2
+    cmap = ColumnMap.from_yaml(MAP)
+    groups = [re.match(GROUP, f.name).group(1) for f in files]
+    nominal = nominal_raw("rig_flask")
+    rows, fitted_in_sample = [], {f.name: [] for f in files}
+    t_all = time.perf_counter()
+    for h, held in enumerate(files):
+        if args.runs and not any(held.name.startswith(r) for r in args.runs):
+            continue
+        fit_files = [f for i, f in enumerate(files) if i != h]
+        fit_recs = [load_record(f, cmap, args.dt) for f in fit_files]
+        val_recs = [load_record(held, cmap, args.dt)]
+        fold_groups = [g for i, g in enumerate(groups) if i != h] + [groups[h]]
+        seen = groups[h] in fold_groups[:-1]
+        t0 = time.perf_counter()
+        say = lambda text: print(f"  [{held.name[:22]}] {text}", file=sys.stderr, flush=True)  # noqa: E731
+        d = diagnose(fit_recs, val_recs, nominal, "rig_flask",
+                     Options(initial="fit", structure=True, groups=fold_groups, adapt=args.adapt,
+                             workers=args.workers, search_width=args.search_width,
+                             search_steps=args.search_steps, progress=say))
+        rep = d.report
+        search = rep["structure_search"]
+        name = held.name
+        best = min(rep["ranking"], key=lambda r: r["nrmse_by_record"].get(name, np.inf))
+        accepted = [s for s in search["path"] if s["accepted"]]
+        final = accepted[-1]
+        # the black box on the same records and masks
+        wf = fit_wiener(d.records, d.train, d.val, ["acid", "base"], "base", fold_groups, args.adapt)
+        row = {"run": name, "group": groups[h], "group_in_fit": seen,
+               "nominal": search["nrmse_by_record_nominal"].get(name),
+               "best_single": best["nrmse_by_record"].get(name), "best_single_cause": best["cause"],
+               "structure": final["nrmse_by_record"].get(name), "structure_path": [s["model"] for s in accepted],
+               "structure_parameters": final["parameters"], "structure_intervals": final["confidence_intervals"],
+               "adapted": final.get("fitted_where", {}).get("adapted", {}),
+               "black_box": wf.nrmse_by_record.get(name), "seconds": time.perf_counter() - t0,
+               "verdict": rep["verdict"], "cause": rep["cause"]}
+        if d.structure is not None:  # in-sample NRMSE of the fitted runs under the final structure
+            for i, rec in enumerate(d.records[:-1]):
+                raw = d.structure.record_raws[i] if d.structure.record_raws else d.structure.raw
+                pred = Evaluator(rec, raw, "fit").predict(raw, d.structure.starts[i]).outputs["ph_measured"]
+                y = rec.outputs["ph_measured"]
+                fitted_in_sample[rec.name].append(float(np.sqrt(np.mean((pred - y) ** 2)) / np.std(y)))
+        rows.append(row)
+        print(f"{name}: nominal {row['nominal']:.3f}, best single ({row['best_single_cause']}) "
+              f"{row['best_single']:.3f}, structure ({' -> '.join(row['structure_path'])}) {row['structure']:.3f}, "
+              f"black box {row['black_box']:.3f}  [{row['seconds']:.0f} s]", file=sys.stderr, flush=True)
+    print(table(rows, fitted_in_sample))
+    print(f"\ntotal {time.perf_counter() - t_all:.0f} s (dt {args.dt} s, {args.workers} workers)")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"rows": rows, "in_sample": fitted_in_sample}, indent=2, default=float))
+    return 0
+
+
+def table(rows: list[dict], in_sample: dict) -> str:
+    out = ["| held-out run | its day in the fit? | nominal | best single cause | structure search | black box (Wiener) "
+           "| structure, in-sample when fitted (median) |",
+           "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        ins = in_sample.get(r["run"]) or []
+        out.append(f"| {r['run']} | {'yes' if r['group_in_fit'] else 'no (--adapt)'} | {r['nominal']:.3f} | "
+                   f"{r['best_single']:.3f} ({r['best_single_cause']}) | {r['structure']:.3f} | "
+                   f"{r['black_box']:.3f} | {np.median(ins):.3f} |" if ins else
+                   f"| {r['run']} | {'yes' if r['group_in_fit'] else 'no (--adapt)'} | {r['nominal']:.3f} | "
+                   f"{r['best_single']:.3f} ({r['best_single_cause']}) | {r['structure']:.3f} | "
+                   f"{r['black_box']:.3f} | - |")
+    return "\n".join(out)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
