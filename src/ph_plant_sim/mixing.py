@@ -71,6 +71,11 @@ def zone_transition(zone: MixingZone, in_zone: np.ndarray, flows_ml_s: np.ndarra
     return e[:2, :2], e[:2, 2:]
 
 
+#: per-sample maps already computed (zone, flows, volume, dt, feed compositions -> A, B c_feed): a fit re-simulates
+#: the same record many times
+_TRANSITIONS: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
 def zone_trajectory(zone: MixingZone, feed_names: Sequence[str], feed_conc: np.ndarray, flows_ml_s: np.ndarray,
                     bulk_volume_ml: np.ndarray, dt_s: float, conc0: np.ndarray,
                     zone_conc0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -90,16 +95,47 @@ def zone_trajectory(zone: MixingZone, feed_names: Sequence[str], feed_conc: np.n
     zone_c = np.empty((n + 1, x.shape[1]))
     bulk_c = np.empty((n + 1, x.shape[1]))
     zone_c[0], bulk_c[0] = x
-    cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
-    for k in range(n):
-        key = (*flows[k].tolist(), round(float(bulk_volume_ml[k]), 9))
+    cache = _TRANSITIONS
+    if len(cache) > 20000:  # a fit visits many zone parameters: keep the cache bounded
+        cache.clear()
+    tag = (zone.zone_volume_ml, zone.exchange_ml_s, tuple(in_zone.tolist()), dt_s, conc_feed.tobytes())
+    vol = np.asarray(bulk_volume_ml, dtype=float)[:n]
+    change = np.flatnonzero(np.any(flows[1:] != flows[:-1], axis=1) | (vol[1:] != vol[:-1])) + 1
+    bounds = np.r_[0, change, n]
+    for k0, k1 in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+        key = (tag, *flows[k0].tolist(), round(float(vol[k0]), 9))
         hit = cache.get(key)
         if hit is None:
-            a, b = zone_transition(zone, in_zone, flows[k], float(bulk_volume_ml[k]), dt_s)
+            a, b = zone_transition(zone, in_zone, flows[k0], float(vol[k0]), dt_s)
             hit = cache[key] = (a, b @ conc_feed)
-        x = hit[0] @ x + hit[1]
-        zone_c[k + 1], bulk_c[k + 1] = x
+        x = _held_segment(hit[0], hit[1], x, k1 - k0, zone_c, bulk_c, k0)
     return zone_c, bulk_c
+
+
+def _held_segment(a: np.ndarray, c: np.ndarray, x: np.ndarray, length: int, zone_c: np.ndarray,
+                  bulk_c: np.ndarray, k0: int) -> np.ndarray:
+    """x_k+1 = a x_k + c over ``length`` samples of held inputs, written to rows k0+1..k0+length.
+
+    In closed form, x_k = x* + a^k (x_0 - x*) with x* = (I - a)^-1 c, the powers through the eigenvalues of a
+    (real and in (0, 1]: a is the exponential of a compartment matrix); a short segment or a nearly singular
+    I - a is stepped.
+    """
+    if length > 4:
+        w, v = np.linalg.eig(a)
+        if np.all(np.abs(w.imag) < 1e-12) and np.all(np.abs(1.0 - w.real) > 1e-9) \
+                and abs(np.linalg.det(v)) > 1e-9:
+            w, v = w.real, v.real
+            x_ss = np.linalg.solve(np.eye(2) - a, c)
+            z = np.linalg.solve(v, x - x_ss)  # (2, m) in the eigenbasis
+            powers = w[None, :] ** np.arange(1, length + 1)[:, None]  # (L, 2)
+            traj = x_ss[None] + np.einsum("ij,lj,jm->lim", v, powers, z)  # (L, 2, m)
+            zone_c[k0 + 1:k0 + length + 1] = traj[:, 0]
+            bulk_c[k0 + 1:k0 + length + 1] = traj[:, 1]
+            return traj[-1]
+    for k in range(k0, k0 + length):
+        x = a @ x + c
+        zone_c[k + 1], bulk_c[k + 1] = x
+    return x
 
 
 class ZonedPlant:
