@@ -31,15 +31,15 @@ def anon_kb(pid: int) -> int:
 
 
 def child(role: str, period_s: float) -> int:
-    from phfdi.ros.env import ensure_localhost
+    from phfdi_base.ros.env import ensure_localhost
 
     ensure_localhost()
     import rclpy
+    from phfdi_interfaces.msg import PlantState
     from rclpy.experimental import EventsExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from phfdi.ros.node import DATA_QOS
-    from phfdi_interfaces.msg import PlantState
+    from phfdi_base.ros.graph_node import DATA_QOS
 
     stop: list[int] = []
     signal.signal(signal.SIGTERM, lambda signum, _frame: stop.append(signum))
@@ -79,7 +79,7 @@ def main() -> int:
     if args.role:
         return child(args.role, args.period_ms / 1000)
 
-    from phfdi.ros.env import graph_env, reserve_domain_id
+    from phfdi_base.ros.env import graph_env, reserve_domain_id
 
     with reserve_domain_id() as lease:
         env = graph_env(lease.domain_id)

@@ -33,7 +33,7 @@ import sys
 import threading
 import time
 
-from phfdi.ros.env import ensure_localhost, graph_env, reserve_domain_id
+from phfdi_base.ros.env import ensure_localhost, graph_env, reserve_domain_id
 
 ensure_localhost()  # before rclpy starts DDS in this process
 
@@ -84,7 +84,7 @@ def _measure(args, run, n: int, domain_id: int, node: subprocess.Popen) -> int:
     from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
     from rclpy.executors import SingleThreadedExecutor
 
-    from phfdi.ros.node import DATA_QOS
+    from phfdi_base.ros.graph_node import DATA_QOS
 
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=domain_id)

@@ -35,7 +35,7 @@ case "$onset" in *.*) ;; *) onset="$onset.0" ;; esac   # ROS double parameters n
 case "$pace" in *.*) ;; *) pace="$pace.0" ;; esac
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST     # DDS stays on this machine
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$("$PY" -m phfdi.ros.env)}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$("$PY" -m phfdi_base.ros.env)}
 nodes="controllers,valve,plant${record:+,recorder}${detector:+,detector}"
 common=(-p "scenario:=$scenario" -p "fault:='$fault'" -p "fault_onset_s:=$onset" -p "graph_nodes:=[$nodes]")
 if [ ${#overrides[@]} -gt 0 ]; then

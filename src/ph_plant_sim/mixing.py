@@ -31,7 +31,6 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from scipy.linalg import expm
 
 from .plant import CstrPlant
 
@@ -66,6 +65,8 @@ def zone_transition(zone: MixingZone, in_zone: np.ndarray, flows_ml_s: np.ndarra
     m[1, 1] = -(qx + q_in) / bulk_volume_ml
     m[0, 2:] = q * in_zone / vz
     m[1, 2:] = q * (1.0 - in_zone) / bulk_volume_ml
+    from scipy.linalg import expm  # here: only plants with a mixing zone pay for importing scipy.linalg
+
     e = expm(m * dt_s)
     return e[:2, :2], e[:2, 2:]
 

@@ -1,7 +1,7 @@
 """ROS 2 node of the plant: owns simulated time (thin wrapper of :class:`PlantProcess`).
 
 Each sample k: publish /plant/measurement and /clock for t_k, wait for
-/valve/state of sample k, then :func:`phfdi.loop.advance_plant` (the same
+/valve/state of sample k, then :func:`ph_plant_sim.process.advance_plant` (the same
 call the in-process simulation makes), go on with k + 1 and publish
 /plant/state for k: as fast as the loop answers (lock-step, ``pace`` 0) or at
 ``pace`` times real time. Prints JSON lines on stdout for the launcher
@@ -13,15 +13,20 @@ call the in-process simulation makes), go on with k + 1 and publish
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 
 from phfdi_interfaces.msg import Measurement, PlantState, ValveState
 from rosgraph_msgs.msg import Clock
 
-from phfdi.loop import advance_plant
-from phfdi.ros.node import GraphNode, ParamSpec, main, to_time
+from phfdi_base.ros.graph_node import GraphNode, ParamSpec, main
+from phfdi_base.spec import load_plugins
+from phfdi_base.stamps import split_ns
 from phfdi_base.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_STATE
+
+from .build import build_plant, build_process, load_plant_model
+from .process import advance_plant
 
 PARAMS = (
     ParamSpec("pace", 0.0, "0: lock-step as fast as the graph answers; F > 0: F times real time (demos)",
@@ -36,12 +41,13 @@ class PlantNode(GraphNode):
 
     def __init__(self) -> None:
         super().__init__(PLANT)
-        from phfdi.loop import build_parts
-
-        parts = build_parts(self.spec)
-        self.process = parts.process  # the plant's own part; valves and controllers live in their nodes
-        self.valve_feed = self.spec.valves.ph.feed
-        self.n_samples = parts.n_samples
+        spec, start = self.spec, self.part.start
+        load_plugins(spec.plugins)
+        model = load_plant_model(spec.plant)
+        # the plant's own part, at the steady state the launcher computed; valves and controllers live in their nodes
+        self.process = build_process(spec, build_plant(model), model, list(start.flows_ml_s), start.outlet_opening)
+        self.valve_feed = spec.valves.ph.feed
+        self.n_samples = int(math.floor(spec.duration_s / spec.sample_time_s + 1e-9)) + 1
         self.feed_names = [f.name for f in self.process.plant.feeds]
         self.pub_measurement = self.data_publisher(Measurement, MEASUREMENT.name)
         self.pub_clock = self.data_publisher(Clock, CLOCK.name)
@@ -73,7 +79,7 @@ class PlantNode(GraphNode):
     def _publish_sample(self, k: int) -> None:
         self._m = m = self.process.measure(k * self.dt_s)
         self.k = k
-        sec, nanosec = divmod(k * self.dt_ns, 1_000_000_000)
+        sec, nanosec = split_ns(k * self.dt_ns)
         msg = self._measurement_msg
         msg.stamp.sec, msg.stamp.nanosec = sec, nanosec
         msg.ph, msg.level_cm = m.ph_measured, m.level_measured_cm

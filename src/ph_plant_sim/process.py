@@ -105,3 +105,19 @@ class PlantProcess:
         flows = self.feed_flows(t_s, valve_flows)
         self.plant.step(self.deliver(flows, t_s), outlet_opening, self.dt_s)
         return flows
+
+
+def advance_plant(process: PlantProcess, valve_feed: str, t_s: float, valve_flow_ml_s: float,
+                  outlet_opening: float) -> tuple[list[float], float]:
+    """Plant side of a tick: feed flows and outlet flow of t_s, then integrate to t_s + dt.
+
+    Returns (commanded feed flows in plant feed order, outlet flow), both mL/s,
+    as they were during the sample: the feeds' line blocks (dead time, pump
+    curve) lie between the commanded flow and the vessel, and a run records
+    the commanded flow, as a pump's historian does. The in-process loop and the plant node call this.
+    """
+    flows = process.feed_flows(t_s, {valve_feed: valve_flow_ml_s})
+    delivered = process.deliver(flows, t_s)
+    outlet_flow = process.plant.outlet_flow(delivered, outlet_opening)
+    process.plant.step(delivered, outlet_opening, process.dt_s)
+    return flows, outlet_flow

@@ -30,12 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
+from phfdi.run import Run
 from phfdi_base import topics as T
 from phfdi_base.errors import UserError
+from phfdi_base.signals import SIGNALS
+from phfdi_base.stamps import join_ns, seconds_to_ns, split_ns
+from wavelet_fdi.alarm_messages import to_dict as alarm_message_dict
 
 from . import __version__
-from phfdi_base.signals import SIGNALS
-from phfdi.run import Run
 
 RUN_METADATA = "phfdi_run"
 INTERFACES_PACKAGE = "phfdi_interfaces"
@@ -196,7 +198,7 @@ def stamp_of_cdr(cdr: bytes) -> int:
     little = cdr[1] == 1
     sec = int.from_bytes(cdr[4:8], "little" if little else "big", signed=True)
     nsec = int.from_bytes(cdr[8:12], "little" if little else "big", signed=False)
-    return sec * 1_000_000_000 + nsec
+    return join_ns(sec, nsec)
 
 
 # ---- run <-> bag --------------------------------------------------------------------
@@ -276,7 +278,7 @@ def load_run(path: str | Path) -> Run:
                 raise UserError(f"{path}: no {T.MEASUREMENT.name} topic: not a bag of the phfdi graph")
             for conn, _t, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
-                ns = msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec
+                ns = join_ns(msg.stamp.sec, msg.stamp.nanosec)
                 _extract(conn.topic, msg, rows[ns])
                 if conn.topic == T.MEASUREMENT.name:
                     measured.add(ns)
@@ -346,7 +348,8 @@ def read_messages(path: str | Path, topic: str) -> list:
 
 
 def _time(store, ns: int):
-    return store.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = split_ns(ns)
+    return store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
@@ -375,7 +378,7 @@ def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES)
         meta.setdefault("sample_time_s", run.dt_s)
         bag.add_metadata(RUN_METADATA, {"json": json.dumps(meta, default=str)})
         for i in range(len(t)):
-            ns = int(round((t[i] - t0) * 1e9))
+            ns = seconds_to_ns(t[i] - t0)
             stamp = _time(store, ns)
             msgs = (
                 (T.MEASUREMENT, ty["phfdi_interfaces/msg/Measurement"](
@@ -577,3 +580,7 @@ def bag_parts(path: str | Path) -> list[Path]:
         parts.append(part_path(path, len(parts)))
     return parts
 
+
+def fault_alarms(path: str | Path) -> list[dict]:
+    """Every /fault_alarm message a bag holds, in order (:func:`wavelet_fdi.alarm_messages.to_dict` of each)."""
+    return [alarm_message_dict(m) for m in read_messages(path, T.FAULT_ALARM.name)]

@@ -20,14 +20,17 @@ from typing import Callable
 
 from ph_plant_sim.build import build_plant, build_process, load_plant_model, plant_start
 from ph_plant_sim.plant import CstrPlant
-from ph_plant_sim.process import PlantProcess
+from ph_plant_sim.process import (
+    PlantProcess,
+    advance_plant,  # noqa: F401  (part of the loop's API)
+)
 from phfdi_base.errors import UserError
 from phfdi_base.signals import SIGNALS
 from phfdi_base.spec import ScenarioSpec, load_plugins
 from pi_controllers.build import build_controllers
 from pi_controllers.loops import ControllerBank
-from valve_actuator.build import build_valves, check_reachable, start_commands
-from valve_actuator.valve import Valve, ValveOutput
+from valve_actuator.build import ValveStep, build_valves, check_reachable, start_commands, step_valves  # noqa: F401  (part of the loop's API)
+from valve_actuator.valve import Valve
 
 from . import __version__
 from .run import Run, RunRecorder
@@ -89,42 +92,6 @@ def signal_names(parts: LoopParts) -> list[str]:
     i = names.index("outlet_valve_position_pct")
     feeds = [f"{f.name}_flow_ml_s" for f in parts.process.plant.feeds]
     return names[:i] + feeds + names[i:]
-
-
-@dataclass(slots=True)
-class ValveStep:
-    """The valves' answer to one sample's controller outputs."""
-
-    valve: ValveOutput  # the pH loop's valve
-    outlet_position_pct: float  # outlet stem position (the level output itself when there is no outlet valve)
-    outlet_opening: float  # fraction of full outlet flow
-    outlet: ValveOutput | None  # the outlet valve's full output, if there is one
-
-
-def step_valves(valve: Valve, outlet_valve: Valve | None, fixed_outlet_opening: float, t_s: float,
-                ph_command_pct: float, level_command_pct: float) -> ValveStep:
-    """Valve side of a tick: both valves move for the commands of t_s (the valve node calls this too)."""
-    v = valve.step(ph_command_pct, t_s)
-    if outlet_valve is None:
-        return ValveStep(v, level_command_pct, fixed_outlet_opening, None)
-    o = outlet_valve.step(level_command_pct, t_s)
-    return ValveStep(v, o.position_pct, o.opening, o)
-
-
-def advance_plant(process: PlantProcess, valve_feed: str, t_s: float, valve_flow_ml_s: float,
-                  outlet_opening: float) -> tuple[list[float], float]:
-    """Plant side of a tick: feed flows and outlet flow of t_s, then integrate to t_s + dt.
-
-    Returns (commanded feed flows in plant feed order, outlet flow), both mL/s,
-    as they were during the sample: the feeds' line blocks (dead time, pump
-    curve) lie between the commanded flow and the vessel, and a run records
-    the commanded flow, as a pump's historian does. The plant node calls this too.
-    """
-    flows = process.feed_flows(t_s, {valve_feed: valve_flow_ml_s})
-    delivered = process.deliver(flows, t_s)
-    outlet_flow = process.plant.outlet_flow(delivered, outlet_opening)
-    process.plant.step(delivered, outlet_opening, process.dt_s)
-    return flows, outlet_flow
 
 
 def tick(parts: LoopParts, k: int) -> dict[str, float]:
@@ -189,6 +156,29 @@ def simulate(spec: ScenarioSpec, progress: Callable[[float], None] | None = None
     return rec.run(run_metadata(spec, "closed_loop"))
 
 
+def _uniform_step(t) -> float:
+    """The sample time of a uniform, increasing time base (s); a :class:`UserError` otherwise."""
+    if len(t) < 2:
+        raise UserError("open-loop inputs need at least two samples")
+    dt = float(t[1] - t[0])
+    if dt <= 0 or not all(abs(d - dt) <= 1e-6 * dt for d in (t[1:] - t[:-1])):
+        raise UserError("open-loop inputs must be uniformly sampled with increasing time_s (resample first)")
+    return dt
+
+
+def _rest_at_first_inputs(parts: LoopParts, valve_cmd: float | None, outlet_cmd: float | None,
+                          flows_at: Callable[[int, float], list[float]]) -> None:
+    """Valves, plant, sensors and feed lines at rest at the first sample's inputs (None: not recorded)."""
+    v0 = parts.valve.reset(valve_cmd) if valve_cmd is not None else None
+    o_cmd0 = outlet_cmd if outlet_cmd is not None else parts.start.outlet_command_pct
+    o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
+    opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
+    q0 = flows_at(0, v0.flow_ml_s if v0 else 0.0)
+    parts.process.plant.set_steady_state(parts.process.steady_delivery(q0), opening0)
+    parts.process.reset_sensors()
+    parts.process.reset_lines(q0)
+
+
 def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inputs") -> Run:
     """Plant, valves and sensors driven by recorded inputs instead of the controllers.
 
@@ -203,11 +193,7 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inpu
     if start not in ("first_inputs", "scenario"):
         raise UserError(f"open-loop start must be 'first_inputs' or 'scenario', got {start!r}")
     t = inputs.time_s
-    if len(t) < 2:
-        raise UserError("open-loop inputs need at least two samples")
-    dt = float(t[1] - t[0])
-    if dt <= 0 or not all(abs(d - dt) <= 1e-6 * dt for d in (t[1:] - t[:-1])):
-        raise UserError("open-loop inputs must be uniformly sampled with increasing time_s (resample first)")
+    dt = _uniform_step(t)
     spec = spec.model_copy(update={"sample_time_s": dt, "duration_s": float(t[-1] - t[0]) or dt})
     parts = build_parts(spec)
     plant = parts.process.plant
@@ -231,14 +217,8 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inpu
         return out
 
     if start == "first_inputs":
-        v0 = parts.valve.reset(float(inputs["valve_command_pct"][0])) if has_cmd else None
-        o_cmd0 = float(outlet_cmd[0]) if outlet_cmd is not None else parts.start.outlet_command_pct
-        o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
-        opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
-        q0 = flows_at(0, v0.flow_ml_s if v0 else 0.0)
-        plant.set_steady_state(parts.process.steady_delivery(q0), opening0)
-        parts.process.reset_sensors()
-        parts.process.reset_lines(q0)
+        _rest_at_first_inputs(parts, float(inputs["valve_command_pct"][0]) if has_cmd else None,
+                              float(outlet_cmd[0]) if outlet_cmd is not None else None, flows_at)
 
     rec = RunRecorder(signal_names(parts), len(t))
     for k in range(len(t)):

@@ -245,7 +245,7 @@ def load_plugins(plugins: list[str]) -> None:
                 if name in sys.modules:
                     continue
                 spec = importlib.util.spec_from_file_location(name, ref)
-                if spec is None or not Path(ref).exists():
+                if spec is None or spec.loader is None or not Path(ref).exists():
                     raise FileNotFoundError(ref)
                 module = importlib.util.module_from_spec(spec)
                 sys.modules[name] = module
@@ -290,17 +290,38 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 
 
 def apply_override(data: dict, keys: list[str], value: Any) -> None:
-    """Set ``data[k0][k1]...`` (list items by index) to ``value`` in place."""
+    """Set ``data[k0][k1]...`` (list items by index) to ``value`` in place; a path through something that is
+    neither a mapping nor a list (or a list index that is not there) is a UserError naming the key."""
     node = data
-    for k in keys[:-1]:
-        if isinstance(node, list):
-            node = node[int(k)]
-        else:
-            node = node.setdefault(k, {})
+    for i, k in enumerate(keys[:-1]):
+        if isinstance(node, dict) and node.get(k) is None:
+            node[k] = {}  # an empty YAML key (``setpoints:``) or a new one
+        node = _step(node, k, keys, i)
     if isinstance(node, list):
-        node[int(keys[-1])] = value
-    else:
+        node[_index(node, keys[-1], keys, len(keys) - 1)] = value
+    elif isinstance(node, dict):
         node[keys[-1]] = value
+    else:
+        _step(node, keys[-1], keys, len(keys) - 1)  # raises: not a mapping
+
+
+def _step(node: Any, key: str, keys: list[str], i: int) -> Any:
+    if isinstance(node, list):
+        return node[_index(node, key, keys, i)]
+    if isinstance(node, dict):
+        return node[key]
+    raise UserError(f"--set {'.'.join(keys)}: {'.'.join(keys[:i]) or 'the scenario'} is "
+                    f"{type(node).__name__} {node!r}, not a mapping")
+
+
+def _index(node: list, key: str, keys: list[str], i: int) -> int:
+    try:
+        k = int(key)
+        node[k]
+    except (ValueError, IndexError):
+        raise UserError(f"--set {'.'.join(keys)}: {'.'.join(keys[:i])} is a list of {len(node)}; "
+                        f"{key!r} is not an index of it") from None
+    return k
 
 
 def resolve_scenario(raw: dict, fault: str | None, library: dict[str, dict], overrides: Sequence[str] = (),

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .stamps import sample_period_ns  # noqa: F401  (the stamps' time base, named with the topics)
+
 # node names (the ROS node name and the launcher's label)
 PLANT = "plant"
 CONTROLLERS = "controllers"
@@ -77,9 +79,3 @@ def stamp_ns(k: int, dt_ns: int) -> int:
     return k * dt_ns
 
 
-def sample_period_ns(sample_time_s: float) -> int:
-    """The sample time as whole nanoseconds (stamps are exact multiples of it)."""
-    dt_ns = round(sample_time_s * 1e9)
-    if dt_ns <= 0 or abs(dt_ns - sample_time_s * 1e9) > 1e-3:
-        raise ValueError(f"sample_time_s = {sample_time_s} s is not a whole number of nanoseconds")
-    return dt_ns

@@ -14,8 +14,9 @@ import sys
 
 from phfdi_interfaces.msg import ControllerOutput, Measurement
 
-from phfdi.ros.node import GraphNode, ParamSpec, main
+from phfdi_base.ros.graph_node import GraphNode, ParamSpec, main
 from phfdi_base.topics import CONTROLLER, CONTROLLERS, MEASUREMENT
+from pi_controllers.build import build_controllers
 
 KP_RANGE = (1e-3, 1e4)  # % of span per unit of the process value
 TI_RANGE = (1e-2, 1e6)  # s
@@ -43,9 +44,9 @@ class ControllersNode(GraphNode):
 
     def __init__(self) -> None:
         super().__init__(CONTROLLERS)
-        from phfdi.loop import build_parts
-
-        self.bank = build_parts(self.spec).controllers  # the controllers' own part only
+        start = self.part.start  # the controllers' own part only, bumpless at the launcher's steady state
+        self.bank = build_controllers(self.spec, start.valve_command_pct, start.outlet_command_pct, start.ph,
+                                      start.level_cm)
         self._apply_tuning()
         self.pub_output = self.data_publisher(ControllerOutput, CONTROLLER.name)
         self.data_subscription(Measurement, MEASUREMENT.name, self._on_measurement)

@@ -8,6 +8,7 @@ reference model.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence
 
 from phfdi_base.blocks import Chain
@@ -15,9 +16,10 @@ from phfdi_base.errors import UserError
 from phfdi_base.spec import ScenarioSpec, ValveSpec, injected_faults, profile
 
 from .blocks import FLOW_BLOCKS
-from .valve import Valve
+from .valve import Valve, ValveOutput
 
-__all__ = ["build_valve", "build_valves", "check_reachable", "position_for_opening", "start_commands"]
+__all__ = ["ValveStep", "build_valve", "build_valves", "check_reachable", "position_for_opening", "start_commands",
+           "step_valves"]
 
 
 def position_for_opening(opening: float, valve: ValveSpec) -> float:
@@ -46,8 +48,11 @@ def start_commands(spec: ScenarioSpec, rest: FlowsAtRest, level_controlled: bool
 
     ``level_controlled``: the outlet valve holds a level (else it stays fully open, 100 %).
     """
-    cmd = position_for_opening(rest.flows_ml_s[rest.valve_feed_index] / spec.valves.ph.max_flow_ml_s, spec.valves.ph)
-    outlet_cmd = position_for_opening(rest.outlet_opening, spec.valves.outlet) if level_controlled else 100.0
+    max_flow = spec.valves.ph.max_flow_ml_s
+    assert max_flow is not None  # the scenario schema requires it for the pH valve
+    cmd = position_for_opening(rest.flows_ml_s[rest.valve_feed_index] / max_flow, spec.valves.ph)
+    outlet = spec.valves.outlet
+    outlet_cmd = position_for_opening(rest.outlet_opening, outlet) if level_controlled and outlet else 100.0
     return cmd, outlet_cmd
 
 
@@ -84,3 +89,23 @@ def build_valves(spec: ScenarioSpec, valve_command_pct: float,
     if spec.valves.outlet is not None:
         outlet = build_valve(spec.valves.outlet, spec, "outlet_valve", outlet_command_pct)
     return valve, outlet
+
+
+@dataclass(slots=True)
+class ValveStep:
+    """The valves' answer to one sample's controller outputs."""
+
+    valve: ValveOutput  # the pH loop's valve
+    outlet_position_pct: float  # outlet stem position (the level output itself when there is no outlet valve)
+    outlet_opening: float  # fraction of full outlet flow
+    outlet: ValveOutput | None  # the outlet valve's full output, if there is one
+
+
+def step_valves(valve: Valve, outlet_valve: Valve | None, fixed_outlet_opening: float, t_s: float,
+                ph_command_pct: float, level_command_pct: float) -> ValveStep:
+    """Valve side of a tick: both valves move for the commands of t_s (the in-process loop and the valve node)."""
+    v = valve.step(ph_command_pct, t_s)
+    if outlet_valve is None:
+        return ValveStep(v, level_command_pct, fixed_outlet_opening, None)
+    o = outlet_valve.step(level_command_pct, t_s)
+    return ValveStep(v, o.position_pct, o.opening, o)

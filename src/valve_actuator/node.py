@@ -1,6 +1,6 @@
 """ROS 2 node of the loop's valves (thin wrapper of :class:`Valve`): the pH valve and the outlet valve.
 
-On /controller/output of sample k it calls :func:`phfdi.loop.step_valves`
+On /controller/output of sample k it calls :func:`valve_actuator.build.step_valves`
 (the same call the in-process simulation makes) and answers with
 /valve/state stamped k.
 
@@ -24,9 +24,11 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, ValveState
 
-from phfdi.loop import step_valves
-from phfdi.ros.node import GraphNode, ParamSpec, main
+from phfdi_base.ros.graph_node import GraphNode, ParamSpec, main
+from phfdi_base.spec import load_plugins, resolve_scenario
 from phfdi_base.topics import CONTROLLER, DIAGNOSTICS, VALVE, VALVE_STATE
+
+from .build import build_valves, step_valves
 
 #: fault sites this node owns (sensor faults belong to the plant node)
 VALVE_SITES = ("valve", "valve_flow", "outlet_valve", "outlet_valve_flow")
@@ -80,14 +82,14 @@ class ValveNode(GraphNode):
 
     # ---- valves from the scenario ---------------------------------------------------------
     def _build_valves(self, spec, runtime: bool = False):
-        from phfdi.loop import build_parts
-
         for f in spec.faults if runtime else ():
             if f.where not in VALVE_SITES:  # the plant node owns sensor faults, fixed at launch
                 raise ValueError(f"fault {f.type} acts on the {f.where.replace('_', ' ')}, not on a valve: "
                                  f"set it on the plant node at launch")
-        parts = build_parts(spec)  # keep the valves only
-        return spec, parts.valve, parts.outlet_valve, parts.start
+        load_plugins(spec.plugins)
+        start = self.part.start  # the steady state the launcher computed (faults do not move it)
+        valve, outlet_valve = build_valves(spec, start.valve_command_pct, start.outlet_command_pct)
+        return spec, valve, outlet_valve, start
 
     def _install_valves(self, built) -> None:
         spec, self.valve, self.outlet_valve, start = built
@@ -102,14 +104,13 @@ class ValveNode(GraphNode):
         names = {p.name for p in params}
         if not names & {"fault", "fault_onset_s"}:
             return None
-        from phfdi.scenario import load_scenario
-
         value = {p.name: p.value for p in params}
         fault = value.get("fault", self.param("fault")) or None
         onset = value.get("fault_onset_s", self.param("fault_onset_s"))
         try:
-            spec = load_scenario(self.param("scenario"), fault=fault, overrides=list(self.param("overrides")),
-                                 onset_s=None if onset < 0 else onset)
+            spec = resolve_scenario(self.part.raw_scenario, fault, self.part.fault_library,
+                                    list(self.param("overrides")), None if onset < 0 else onset,
+                                    source=f"scenario {self.param('scenario')}")
             self._pending_change = self._build_valves(spec, runtime=True)
         except Exception as exc:  # noqa: BLE001 - UserError or ValueError: the reason goes back to the caller
             return str(exc)

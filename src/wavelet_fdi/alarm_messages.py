@@ -6,7 +6,8 @@ Works on rclpy messages and on rosbags' decoded ones alike (same field names).
 from __future__ import annotations
 
 import math
-from pathlib import Path
+
+from phfdi_base.stamps import ns_to_seconds
 
 STATE_NAMES = {0: "OK", 1: "WARN", 2: "ALARM"}
 
@@ -32,7 +33,7 @@ def from_summaries(alarms: list[dict]) -> list[dict]:
 
 
 def _seconds(t) -> float:
-    return t.sec + t.nanosec * 1e-9
+    return ns_to_seconds(t.sec, t.nanosec)
 
 
 def to_dict(msg) -> dict:
@@ -47,14 +48,6 @@ def to_dict(msg) -> dict:
         "statistic": float(msg.statistic), "threshold": float(msg.threshold),
         "wavelet_level": int(msg.wavelet_level), "message": msg.message,
     }
-
-
-def from_bag(path: str | Path) -> list[dict]:
-    """Every /fault_alarm message a bag holds, in order."""
-    from phfdi.bagio import read_messages
-    from phfdi_base.topics import FAULT_ALARM
-
-    return [to_dict(m) for m in read_messages(path, FAULT_ALARM.name)]
 
 
 def per_alarm(messages: list[dict]) -> list[dict]:

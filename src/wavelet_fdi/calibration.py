@@ -20,19 +20,21 @@ Procedure (reproducible: the seeds are stored in the file):
 The same window maxima and tail fit calibrate the peer detectors of the
 evaluation (:mod:`wavelet_fdi.peers`), so every detector is held to the same
 false-alarm rate on the same residual streams.
+
+This module holds the statistics (steps 2-5, :func:`calibrate_from_traces`);
+simulating the healthy runs and running the front end on them (step 1) is the
+application's (:mod:`phfdi.calibration`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
-from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
-from phfdi_base.spec import ScenarioSpec
 
 from .config import Calibration, DetectorSettings
 
@@ -108,50 +110,6 @@ def provisional(settings: DetectorSettings, scenario: str, dt_s: float) -> Calib
                        {n: math.inf for n in names})
 
 
-def front_end_trace(spec: ScenarioSpec, run, settings: DetectorSettings) -> dict[str, np.ndarray]:
-    """Residuals and coefficients of one healthy run through the detector's front end (no alarms)."""
-    from .detector import StreamingDetector
-    from .replay import run_chunks
-
-    both = DetectorSettings(**{**settings.__dict__, "channels": ("ph", "level")})
-    det = StreamingDetector(spec, provisional(both, spec.name, spec.sample_time_s), both, isolate=False,
-                            record_trace=True)
-    run_chunks(det, run)
-    return det.trace()
-
-
-def healthy_traces(spec_for_seed: Callable[[int], ScenarioSpec], seeds: Sequence[int], settings: DetectorSettings,
-                   progress: Callable[[float], None] | None = None) -> list[dict[str, np.ndarray]]:
-    """Front-end traces (residuals, coefficients) of simulated healthy runs, one per seed."""
-    from phfdi.loop import simulate
-
-    out = []
-    for i, seed in enumerate(seeds):
-        spec = spec_for_seed(seed)
-        out.append(front_end_trace(spec, simulate(spec), settings))
-        if progress:
-            progress((i + 1) / len(seeds))
-    return out
-
-
-def calibrate_from_runs(paths: Sequence[str], spec: ScenarioSpec, settings: DetectorSettings | None = None,
-                        progress: Callable[[float], None] | None = None, runs: Sequence | None = None) -> Calibration:
-    """Calibrate on recorded healthy runs of a plant (its model: ``spec``) instead of simulations.
-
-    ``runs``: the runs of ``paths`` already read (e.g. with a column map); read here when None."""
-    from .replay import load_any
-
-    settings = settings or DetectorSettings()
-    traces = []
-    for i, path in enumerate(paths):
-        traces.append(front_end_trace(spec, runs[i] if runs is not None else load_any(path), settings))
-        if progress:
-            progress((i + 1) / len(paths))
-    cal = calibrate_from_traces(traces, settings, spec.name, spec.sample_time_s, [])
-    cal.sources = [str(p) for p in paths]
-    return cal
-
-
 def measure_sigma(traces: list[dict[str, np.ndarray]], bands: list[str]) -> dict[str, dict[str, float]]:
     sigma: dict[str, dict[str, float]] = {}
     for ch, key in (("ph", "ph_residual"), ("level", "level_residual_cm")):
@@ -209,21 +167,3 @@ def calibrate_from_traces(traces: list[dict[str, np.ndarray]], settings: Detecto
         method=(f"window maxima of CUSUMs restarted every {window} samples, exponential fit to the upper "
                 f"{int(100 * TAIL_FRACTION)} %, P(max > h) = {window} / (ARL0 x {len(names)} statistics)"),
         tail_fits=fits)
-
-
-def scenario_for_seed(scenario: str, overrides: Sequence[str] = ()) -> Callable[[int], ScenarioSpec]:
-    def spec(seed: int) -> ScenarioSpec:
-        return load_scenario(scenario, fault="healthy", overrides=list(overrides) + [f"seed={seed}"])
-
-    return spec
-
-
-def calibrate(scenario: str = "paper", settings: DetectorSettings | None = None,
-              seeds: Sequence[int] = DEFAULT_CALIBRATION_SEEDS, overrides: Sequence[str] = (),
-              progress: Callable[[float], None] | None = None) -> Calibration:
-    """Calibrate the detector on healthy runs of a scenario (see the module docstring)."""
-    settings = settings or DetectorSettings()
-    make = scenario_for_seed(scenario, overrides)
-    traces = healthy_traces(make, seeds, settings, progress)
-    dt = make(seeds[0]).sample_time_s
-    return calibrate_from_traces(traces, settings, scenario, dt, seeds)

@@ -76,6 +76,9 @@ class LearnedSettings:
     #: observer updates and in-alarm CUSUM restarts happen every this many samples; an alarm clears
     #: after this many samples without a crossing
     block_samples: int = 32
+    #: in alarm, a mean statistic holds the alarm only while its channel's AJ deviation is at least this
+    #: fraction of the episode's peak on that channel (0: any crossing holds it)
+    clear_fraction: float = 0.2
     #: nominal sample time of the record (s)
     sample_time_s: float = 1.0
 
@@ -97,6 +100,8 @@ class LearnedSettings:
             raise UserError("observer time constants must be >= 0 and freeze_ratio in (0, 1]")
         if not self.sample_time_s > 0:
             raise UserError("sample_time_s must be positive")
+        if not 0.0 <= self.clear_fraction < 1.0:
+            raise UserError("clear_fraction must be in [0, 1)")
         return self
 
     @classmethod
@@ -226,6 +231,8 @@ class LearnedDetector:
         self.in_alarm = False
         self._last_crossing = -1
         self._holdoff = False  # an alarm cleared in this block: no new one before the next block boundary
+        self._peak = np.zeros(m)  # per channel, the largest |AJ deviation| of the alarm so far
+        self._rebase = 0  # 1: an alarm cleared in this block; 2: learning the new level over this block
         self._alarm: dict | None = None
         self._episode = np.zeros(len(names))
         self.alarms: list[dict] = []
@@ -306,7 +313,7 @@ class LearnedDetector:
             self._trace["coef"].append(np.where(missing[i0:i1][:, :, None], np.nan, coef))
             self._trace["stat"].append(ratio.T.copy())
         if self.alarms_enabled:
-            events += self._alarm_logic(t, i0, i1, g0, ratio, cross, states)
+            events += self._alarm_logic(t, i0, i1, g0, ratio, cross, states, np.abs(u))
         if self._trace is not None:
             self._trace["state"].append(states[i0:i1].copy())
         # observer: block sums of the deviation; correction at block boundaries when not frozen
@@ -318,7 +325,11 @@ class LearnedDetector:
             frozen = self.alarms_enabled and (self.in_alarm or bool((ratio[:, -1] > s.freeze_ratio).any()))
             tau = s.observer_alarm_time_constant_s if frozen else s.observer_time_constant_s
             block_warm = g0 + nb - s.block_samples < self.fill_samples  # by global index: chunking-proof
-            if s.observer_time_constant_s > 0 and tau > 0 and not block_warm and self._acc_n:
+            if self._rebase == 2 and self._acc_n:
+                # the block after an alarm cleared because its channels came most of the way back: what is
+                # left of the offset is the new healthy level (else it would raise the alarm again)
+                self.bias = self.bias + self._acc / self._acc_n
+            elif s.observer_time_constant_s > 0 and tau > 0 and not block_warm and self._acc_n:
                 gain = min(1.0, s.block_samples * s.sample_time_s / tau)
                 self.bias = self.bias + gain * self._acc / self._acc_n
             self._acc[:] = 0.0
@@ -326,10 +337,30 @@ class LearnedDetector:
             if self.in_alarm or self._holdoff:
                 self.cusum.restart(g0 + nb - 1)
                 self._holdoff = False
+            if self._rebase == 1:  # the clear's block is over: learn the new level over the next full block
+                self._rebase, self._holdoff = 2, True
+            elif self._rebase == 2:
+                self._rebase = 0
             self.cusum.renormalise()
         return events
 
-    def _alarm_logic(self, t, i0, i1, g0, ratio, cross, states) -> list[LearnedEvent]:
+    def _holding(self, j: int, ratio: np.ndarray, absu: np.ndarray) -> np.ndarray:
+        """In alarm, samples j.. of the block that still carry the fault: a statistic above its threshold,
+        and for the mean statistics a deviation of at least clear_fraction of the episode's peak on its
+        channel (a channel that came most of the way back does not hold the alarm by a small offset)."""
+        rho = self.settings.clear_fraction
+        above = ratio[:, j:] > 1.0
+        if rho <= 0.0:
+            return above.any(axis=0)
+        a = absu[j:]  # (n, m)
+        peak = np.maximum(np.maximum.accumulate(a, axis=0), self._peak)  # running peak per channel
+        strong = (a >= rho * peak).T  # (m, n)
+        nm = 2 * self.m
+        ok = above.copy()
+        ok[:nm] &= np.repeat(strong, 2, axis=0)
+        return ok.any(axis=0)
+
+    def _alarm_logic(self, t, i0, i1, g0, ratio, cross, states, absu) -> list[LearnedEvent]:
         s = self.settings
         events: list[LearnedEvent] = []
         nb = i1 - i0
@@ -345,12 +376,14 @@ class LearnedDetector:
                 self.in_alarm = True
                 self._last_crossing = g0 + j
                 self._episode[:] = 0.0
+                self._peak = np.zeros(self.m)
                 self._alarm = self._raise(t[i0 + j], g0 + j, ratio[:, j])
                 events.append(LearnedEvent("alarm", float(t[i0 + j]), g0 + j, "ERROR", self._alarm_message(),
                                            dict(self._alarm)))
             # in alarm: held while a crossing happened in the last block_samples samples
             idx = np.arange(j, nb)
-            last = np.where(cross[j:], g0 + idx, -1)
+            hold = self._holding(j, ratio, absu)
+            last = np.where(hold, g0 + idx, -1)
             last = np.maximum(np.maximum.accumulate(last), self._last_crossing)
             quiet = (g0 + idx) - last >= s.block_samples
             if quiet.any():
@@ -361,10 +394,13 @@ class LearnedDetector:
                 events.append(self._clear(t[i0 + jc], g0 + jc))
                 self.in_alarm = False
                 self._holdoff = True
+                if self.settings.clear_fraction > 0.0:
+                    self._rebase = 1
                 break
             states[i0 + j:i1] = 1
             self._episode += np.clip(ratio[:, j:], 0.0, None).sum(axis=1)
             self._last_crossing = int(last[-1])
+            self._peak = np.maximum(self._peak, absu[j:].max(axis=0))
             break
         return events
 

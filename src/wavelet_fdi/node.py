@@ -44,8 +44,9 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
 
-from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main, to_time
 from phfdi_base.errors import UserError
+from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main, to_time
+from phfdi_base.stamps import finite_or, join_ns, seconds_to_ns
 from phfdi_base.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
 
 from .alarm_messages import severity_of
@@ -84,7 +85,8 @@ LAG_WINDOW = 4096  # samples whose processing lag the statistics cover
 
 
 def stamp_ns(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
+    """Nanoseconds of a message's stamp."""
+    return join_ns(stamp.sec, stamp.nanosec)
 
 
 def time_s_of(ns: int, dt_ns: int, dt_s: float) -> float:
@@ -246,7 +248,7 @@ class DetectorNode(GraphNode):
             if path:
                 cal, source = Calibration.load(path), path
             else:
-                base = self.spec.name.split("-")[0]
+                base = self.part.base_scenario or self.spec.name  # the scenario the shipped calibrations name
                 cal = load_default_calibration(base, settings)
                 source = f"shipped {base}_{settings.wavelet}_L{settings.level}"
             core = StreamingDetector(self.spec, cal, settings, isolate=self.param("isolate"))
@@ -356,8 +358,8 @@ class DetectorNode(GraphNode):
             return
         msg.fault_class = alarm["fault_class"]
         msg.confidence = float(alarm["confidence"])
-        msg.onset_time = to_time(max(0, round(alarm["onset_time"] * 1e9)))
-        msg.detection_time = to_time(max(0, round(alarm["detection_time"] * 1e9)))
+        msg.onset_time = to_time(seconds_to_ns(alarm["onset_time"]))
+        msg.detection_time = to_time(seconds_to_ns(alarm["detection_time"]))
         msg.severity, msg.severity_unit = severity_of(alarm)
         band = alarm.get("dominant_level") or ""
         msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
@@ -371,7 +373,7 @@ class DetectorNode(GraphNode):
         elif state != FaultAlarm.ALARM:  # an input problem does not hide an active alarm
             state = STATE_OF_LEVEL[ev.level]
         msg = FaultAlarm(loop=self._loop, state=state, message=ev.message)
-        msg.stamp = to_time(max(0, round(ev.time_s * 1e9))) if math.isfinite(ev.time_s) else to_time(self._last_ns)
+        msg.stamp = to_time(finite_or(ev.time_s, self._last_ns))
         self._alarm_fields(msg, ev.alarm)
         if ev.alarm:
             msg.statistic, msg.threshold = float(ev.alarm["statistic_value"]), float(ev.alarm["threshold"])
@@ -387,7 +389,7 @@ class DetectorNode(GraphNode):
                 f"{status['samples_processed']} samples")
         msg = FaultAlarm(loop=self._loop, state=state, message=("state now " if changed else "") + text,
                          statistic=status["worst_statistic_value"], threshold=status["worst_threshold"])
-        msg.stamp = to_time(max(0, round(t_s * 1e9))) if math.isfinite(t_s) else to_time(self._last_ns)
+        msg.stamp = to_time(finite_or(t_s, self._last_ns))
         self._alarm_fields(msg, status["alarm"])
         self.pub_alarm.publish(msg)
         self._last_heartbeat_t = t_s
@@ -427,7 +429,7 @@ class DetectorNode(GraphNode):
                                  name=f"{self.get_name()}: {self._loop} loop state", hardware_id=f"{self._loop}_loop",
                                  message=f"{d['state']}; {d['alarms']} alarm(s); calibration {self.calibration_source}")
         array = DiagnosticArray(status=[inputs, state])
-        array.header.stamp = to_time(max(0, round(t_s * 1e9))) if math.isfinite(t_s) else to_time(self._last_ns)
+        array.header.stamp = to_time(finite_or(t_s, self._last_ns))
         self.pub_diag.publish(array)
         self._last_diag_t = t_s
         self._reported_problems = problems

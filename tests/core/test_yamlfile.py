@@ -40,3 +40,38 @@ def test_commands_refuse_a_broken_column_map_in_one_line(tmp_path, capsys, argv)
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "map.yaml: not valid YAML" in err[0], err
+
+
+def test_non_utf8_yaml_is_one_line(tmp_path):
+    from phfdi_base.errors import UserError
+    from phfdi_base.yamlfile import read_mapping
+
+    path = tmp_path / "s.yaml"
+    path.write_bytes(b"name: x\n\xff\xfe: 1\n")
+    with pytest.raises(UserError, match=r"s.yaml: line 2: not UTF-8 text \(byte 0xff\)"):
+        read_mapping(path)
+
+
+@pytest.mark.parametrize("key, message", [
+    ("duration_s.x", "duration_s is float 10000.0, not a mapping"),
+    ("setpoints.ph.changes.7.value", "setpoints.ph.changes is a list of 1; '7' is not an index of it"),
+    ("setpoints.ph.changes.x", "'x' is not an index of it"),
+])
+def test_override_through_a_value_that_is_no_mapping(key, message):
+    """--set paths through a scalar or past a list's end: one line naming the key (found by the fuzz test)."""
+    from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
+
+    with pytest.raises(UserError, match=message):
+        load_scenario("paper", overrides=[f"{key}=1"])
+
+
+def test_a_scalar_yaml_cannot_build_is_one_line(tmp_path):
+    """PyYAML raises ValueError for a date that does not exist (found by the fuzz test)."""
+    from phfdi_base.errors import UserError
+    from phfdi_base.yamlfile import read_mapping
+
+    path = tmp_path / "s.yaml"
+    path.write_text("name: x\nwhen: 2024-13-45\n")
+    with pytest.raises(UserError, match=r"s.yaml: not valid YAML \(a value cannot be read: month must be in 1..12\)"):
+        read_mapping(path)

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pytest
 
+from phfdi.replay import replay_run
 from wavelet_fdi.config import DetectorSettings
-from wavelet_fdi.replay import replay_run
 
 from .detector_helpers import PAPER_FAULTS
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from wavelet_fdi.evaluation import DETECTORS, EvalConfig, run_evaluation
+from phfdi.study.evaluation import DETECTORS, EvalConfig, run_evaluation
 
 
 def test_small_evaluation_writes_tables_figures_and_results(tmp_path):

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from phfdi.loop import simulate
+from phfdi.replay import detector_inputs
+from phfdi.study.evaluation import alarm_positions
 from wavelet_fdi.detector import StreamingDetector
-from wavelet_fdi.evaluation import alarm_positions
-from wavelet_fdi.replay import detector_inputs
 
 from .detector_helpers import SHORT, short_spec
 

@@ -50,7 +50,7 @@ def test_launch_reports_the_backlash_after_its_onset(launched):
 
 
 def test_bag_holds_the_alarm_the_heartbeat_and_the_detector_diagnostics(launched):
-    msgs = alarm_messages.from_bag(launched["bag"])
+    msgs = bagio.fault_alarms(launched["bag"])
     states = [m["state"] for m in msgs]
     assert states[0] == "OK" and "ALARM" in states
     first_alarm = next(m for m in msgs if m["state"] == "ALARM")
@@ -76,7 +76,7 @@ def test_bag_holds_the_alarm_the_heartbeat_and_the_detector_diagnostics(launched
 
 
 def test_offline_replay_of_the_launched_bag_gives_the_alarms_the_graph_published(launched, offline):
-    published = alarm_messages.per_alarm(alarm_messages.from_bag(launched["bag"]))
+    published = alarm_messages.per_alarm(bagio.fault_alarms(launched["bag"]))
     assert len(offline) == len(published) == 1
     for off, live in zip(offline, published):
         assert off["detection_time"] == live["detection_time"]
@@ -106,6 +106,6 @@ def test_without_a_bag_the_launcher_reports_what_the_detector_published(launched
                           node_events={"detector": events})
     reported, source = received_alarms(result)
     assert source == "as the detector reported them"
-    in_bag = alarm_messages.per_alarm(alarm_messages.from_bag(launched["bag"]))
+    in_bag = alarm_messages.per_alarm(bagio.fault_alarms(launched["bag"]))
     keys = ("onset_time", "detection_time", "fault_class", "confidence", "severity", "severity_unit")
     assert [{k: a[k] for k in keys} for a in reported] == [{k: a[k] for k in keys} for a in in_bag]

@@ -28,7 +28,7 @@ class _Feeder:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
-        from phfdi.ros.node import DATA_QOS
+        from phfdi_base.ros.graph_node import DATA_QOS
 
         self.detector = detector
         self.node = Node("garbage_feeder", context=context)

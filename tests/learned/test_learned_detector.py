@@ -136,3 +136,19 @@ def test_bad_inputs_are_user_errors(tmp_path):
     p.write_text("{}")
     with pytest.raises(UserError, match="not a phfdi-learned-detector"):
         LearnedModel.load(p)
+
+
+def test_alarm_clears_when_a_large_fault_comes_most_of_the_way_back():
+    """A large step that ends at a slightly different level (a new operating point well inside the fault's
+    size): with clear_fraction the alarm ends with the fault; without it the small offset holds it."""
+    x = plant(3000, 9)
+    sd = np.std(x[:400, 3])
+    x[1500:1900, 3] += 100 * sd
+    x[1900:, 3] += 10 * sd  # came back to within 10 % of the step
+    held = {}
+    for rho in (0.0, 0.2):
+        model = learn(x[:400], CHANNELS, LearnedSettings(clear_fraction=rho))
+        _, states, _ = run_record(model, np.arange(len(x), dtype=float), x)
+        assert states[1550:1890].all()
+        held[rho] = states[2000:].mean()
+    assert held[0.2] == 0.0 and held[0.0] > 0.9

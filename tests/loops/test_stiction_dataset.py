@@ -56,7 +56,7 @@ def test_training_from_the_data_set_gives_the_shipped_model(dataset):
     rows = [r for r in dataset["rows"] if not r.get("error") and r["source"] in ("real", "synthetic")]
     d = Data(np.array([r["features"] for r in rows]), np.array([r["stiction"] for r in rows]),
              [r["group"] for r in rows], np.array([r["source"] == "real" for r in rows]), list(FEATURE_NAMES))
-    model = train(d)
+    model = train(d)  # the default criterion, as benchmarks/train_stiction_classifier.py ships
     shipped = load_model()
     assert np.allclose(model.weights, shipped.weights, atol=1e-6)
     assert model.threshold == pytest.approx(shipped.threshold, abs=1e-9)

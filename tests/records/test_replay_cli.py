@@ -138,3 +138,20 @@ def test_bag_to_run_names_its_repairs(short_run, tmp_path, run_cli):
     bad = tmp_path / "m.mcap"
     bad.write_bytes(b"\x89MCAP0\r\n")
     assert "cannot read the bag" in one_error_line(*run_cli("bag", "to-run", bad, tmp_path / "o.csv")[::2])
+
+
+def test_simulate_inputs_with_bad_samples_is_one_line(short_run, tmp_path, run_cli):
+    """Open-loop inputs: a missing or negative flow is named by line and column (not a ValueError of the plant)."""
+    def edit_nan(lines):
+        set_cell(lines, 40, "acid_flow_ml_s", "nan")
+
+    def edit_negative(lines):
+        set_cell(lines, 40, "buffer_flow_ml_s", "-3")
+
+    status, _, err = run_cli("simulate", "--inputs", csv_lines(short_run, tmp_path / "a.csv", edit_nan))
+    *notes, line = err.strip().splitlines()  # the reader's note on the NaN cell, then the one error line
+    assert status == 2 and all(": note: " in n for n in notes) and "Traceback" not in err
+    assert "a.csv: line 41, column 'acid_flow_ml_s': 1 missing value" in line
+    line = one_error_line(*run_cli("simulate", "--inputs",
+                                   csv_lines(short_run, tmp_path / "b.csv", edit_negative))[::2])
+    assert "b.csv: line 41, column 'buffer_flow_ml_s': a flow cannot be negative (-3)" in line

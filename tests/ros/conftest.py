@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from phfdi.ros.env import ensure_localhost, graph_env, reserve_domain_id
+from phfdi_base.ros.env import ensure_localhost, graph_env, reserve_domain_id
 
 ensure_localhost()  # this test process too (its own rclpy nodes)
 

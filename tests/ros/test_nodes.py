@@ -47,7 +47,7 @@ def test_node_help_lists_parameters_with_ranges():
 @pytest.fixture(scope="module")
 def valve_node():
     """The valve node alone (a graph of itself), healthy scenario, on a domain of its own."""
-    from phfdi.ros.env import graph_env, reserve_domain_id
+    from phfdi_base.ros.env import graph_env, reserve_domain_id
 
     lease = reserve_domain_id()
     proc = subprocess.Popen(node_cmd("valve_actuator.node", fault="healthy", graph_nodes="[valve]",
@@ -72,7 +72,7 @@ class _Driver:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
-        from phfdi.ros.node import DATA_QOS
+        from phfdi_base.ros.graph_node import DATA_QOS
 
         self.proc = proc
         self.node = Node("valve_test_driver", context=context)

@@ -131,7 +131,7 @@ def _through_graph(args, spec, out: Path):
     _say(f"      {result.samples_done} samples in {result.run_wall_s:.1f} s wall "
          f"({result.real_time_factor:.0f} x real time) after connecting in {result.connect_s:.1f} s; "
          f"bag {bag} ({result.bag['messages']} messages)")
-    received = alarm_messages.per_alarm(alarm_messages.from_bag(bag))
+    received = alarm_messages.per_alarm(bagio.fault_alarms(bag))
     _say("\n[2/4] alarms the recorder received on /fault_alarm:")
     _say(alarm_messages.format_table(received).replace("\n", "\n    ").replace("  ", "      ", 1))
     run_ = bagio.load_run(bag)
@@ -152,9 +152,9 @@ def _in_process(spec, out: Path):
 
 # ---- 2. offline replay ---------------------------------------------------------------------
 def _offline(run_, record_trace: bool = False):
+    from phfdi.replay import run_chunks, scenario_of
     from wavelet_fdi.config import DetectorSettings, load_default_calibration
     from wavelet_fdi.detector import StreamingDetector
-    from wavelet_fdi.replay import run_chunks, scenario_of
 
     spec = scenario_of(run_)
     settings = DetectorSettings()
@@ -212,7 +212,7 @@ def _healthy_check(args) -> None:
     t0 = time.perf_counter()
     healthy = simulate(load_scenario("paper", fault="healthy", overrides=args.overrides))
     alarms = _offline(healthy).alarms
-    _say(f"      healthy run of the same scenario (in-process, replayed): "
+    _say("      healthy run of the same scenario (in-process, replayed): "
          + (f"{len(alarms)} alarm(s): FALSE ALARM" if alarms else "no alarm")
          + f" ({time.perf_counter() - t0:.1f} s)")
 
@@ -220,7 +220,7 @@ def _healthy_check(args) -> None:
 # ---- 3. figures --------------------------------------------------------------------------
 def _figures(run_, det, out: Path) -> None:
     from phfdi.figures import plot_run
-    from wavelet_fdi.detector_figures import plot_detection
+    from phfdi.study.detector_figures import plot_detection
 
     _say("\n[4/4] figures")
     plot_run(run_, out / "run.png")

@@ -89,7 +89,7 @@ def _map(args):
     cmap = column_map_from_args(args)
     if cmap is None:
         return None
-    return ColumnMap(**{f: getattr(cmap, f) for f in cmap.__dataclass_fields__}).checked()
+    return ColumnMap.of(cmap)
 
 
 def _records(files, cmap, dt, encoding=None):

@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wavelet_fdi.evaluation import EvalConfig, run_evaluation
+    from phfdi.study.evaluation import EvalConfig, run_evaluation
 
     settings = settings_from_args(args)
     common = dict(scenario=args.scenario, onset_s=args.onset, settings=settings, jobs=args.jobs)

@@ -26,9 +26,9 @@ or SIGTERM stops all nodes and leaves a readable bag. See docs/ros_graph.md.
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("launch", help="run a scenario through the ROS 2 node graph (plant, valve, controllers, detector)",
-                       description="Start the plant, valve and controller nodes (and a recorder, and the fault detector) as separate "
-                                   "processes, run the scenario in lock-step simulated time (or paced), stop "
-                                   "everything cleanly and print a summary.",
+                       description="Start the plant, valve and controller nodes (and a recorder, and the fault "
+                                   "detector) as separate processes, run the scenario in lock-step simulated time "
+                                   "(or paced), stop everything cleanly and print a summary.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     add_scenario_args(p)
     p.add_argument("--record", metavar="BAG.mcap", default=None, help="record every topic to this MCAP bag")
@@ -107,10 +107,11 @@ def alarm_event_line(event: dict) -> str | None:
 def received_alarms(result) -> tuple[list[dict], str]:
     """The alarms of the run: as the recorder received them on /fault_alarm (bag), else as the detector
     reported publishing them."""
+    from phfdi import bagio
     from wavelet_fdi import alarm_messages
 
     if result.bag is not None and any(t["topic"] == "/fault_alarm" for t in result.bag["topics"]):
-        messages = [m for part in result.bag.get("parts", [result.bag["path"]]) for m in alarm_messages.from_bag(part)]
+        messages = [m for part in result.bag.get("parts", [result.bag["path"]]) for m in bagio.fault_alarms(part)]
         return alarm_messages.per_alarm(messages), "received in the bag"
     done = [e for e in result.node_events.get("detector", []) if e["event"] == "detector_done"]
     return alarm_messages.from_summaries(done[-1]["alarms"] if done else []), "as the detector reported them"

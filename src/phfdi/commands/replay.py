@@ -75,10 +75,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from phfdi.replay import load_any, replay_run, scenario_of
     from phfdi.scenario import load_scenario
     from phfdi_base.errors import UserError
     from wavelet_fdi.config import Calibration
-    from wavelet_fdi.replay import load_any, replay_run, scenario_of
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
@@ -115,8 +115,8 @@ def run(args: argparse.Namespace) -> int:
 
 def run_learned(args: argparse.Namespace) -> int:
     """The record through the learned reference and the multichannel detector."""
-    from phfdi.learned import alarm_summaries, event_dict, format_alarms as format_learned, read_measured, \
-        replay_measured
+    from phfdi.learned import alarm_summaries, event_dict, read_measured, replay_measured
+    from phfdi.learned import format_alarms as format_learned
     from wavelet_fdi.learned_detector import LearnedModel
 
     model = LearnedModel.load(args.reference)
@@ -142,19 +142,18 @@ def run_learned(args: argparse.Namespace) -> int:
 def run_live_learned(args: argparse.Namespace) -> int:
     """A bag of a measured record (phfdi bag from-csv) through the learned detector NODE over ROS."""
     import math
-    import tempfile
     from pathlib import Path
 
     from phfdi import bagio
     from phfdi.learned import format_alarms as format_learned
     from phfdi.ros.launcher import OBSERVER, Launcher, NodeSpec
+    from phfdi.ros.parts import recorded_part
     from phfdi.ros.player import PLAYER
     from phfdi_base.errors import UserError
     from phfdi_base.topics import DETECTOR, MEASURED_SAMPLE
     from wavelet_fdi.learned_detector import LearnedModel
 
     from .common import Progress
-    from .launch import alarm_event_line
 
     if not args.file.endswith(".mcap"):
         raise UserError(f"--live plays a bag: give an .mcap file, not {args.file}")
@@ -172,17 +171,19 @@ def run_live_learned(args: argparse.Namespace) -> int:
         if event.get("event") == "fault_alarm":
             say(f"/fault_alarm {event['state']} at {event['time_s']:g} s: {event['message']}")
 
-    with tempfile.TemporaryDirectory(prefix="phfdi-replay-") as tmp:
-        common = {"scenario": _scenario_file(args.file, args.scenario, tmp), "fault": "",
-                  "graph_nodes": [PLAYER, DETECTOR]}
-        nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
-                                                        "pace": float(args.pace)}),
-                 NodeSpec(DETECTOR, "phfdi.ros.learned_node",
-                          {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
-        t0 = time.perf_counter()
-        result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
-                          progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
-        elapsed = time.perf_counter() - t0
+    spec = _replay_scenario(args.file, args.scenario)
+    common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
+    nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
+                                                    "pace": float(args.pace)}),
+             NodeSpec(DETECTOR, "phfdi.ros.learned_node",
+                      {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
+    part = recorded_part(spec)  # resolved once; both nodes start from it
+    for node in nodes:
+        node.part = part
+    t0 = time.perf_counter()
+    result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
+                      progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
+    elapsed = time.perf_counter() - t0
     done = [e for e in result.node_events.get(DETECTOR, []) if e["event"] == "detector_done"]
     if result.failure or not done:
         say(f"error: {result.failure or 'the detector node did not report'}"
@@ -214,11 +215,9 @@ def input_problems(diagnostics: dict) -> dict:
                      "command_stale_episodes", "reference_resets") and v}
 
 
-def _scenario_file(bag: str, fallback: str | None, folder: str) -> str:
-    """The bag's own scenario (its metadata) as a file the nodes load; else --scenario (default paper)."""
+def _replay_scenario(bag: str, fallback: str | None):
+    """The bag's own scenario (its metadata); else --scenario (default paper)."""
     from pathlib import Path
-
-    import yaml
 
     from phfdi import bagio
     from phfdi.scenario import load_scenario
@@ -226,22 +225,18 @@ def _scenario_file(bag: str, fallback: str | None, folder: str) -> str:
 
     meta = json.loads(bagio.read_metadata(Path(bag)).get(bagio.RUN_METADATA, {}).get("json", "{}"))
     if fallback or not isinstance(meta.get("spec"), dict):
-        spec = load_scenario(fallback or "paper", fault="healthy")
-    else:
-        spec = validate_scenario(meta["spec"], source=f"{bag} metadata")
-    path = Path(folder) / "scenario.yaml"
-    path.write_text(yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
-    return str(path)
+        return load_scenario(fallback or "paper", fault="healthy")
+    return validate_scenario(meta["spec"], source=f"{bag} metadata")
 
 
 def run_live(args: argparse.Namespace) -> int:
     """The bag through a detector node over ROS: player + detector, started and stopped here."""
     import math
-    import tempfile
     from pathlib import Path
 
     from phfdi import bagio
     from phfdi.ros.launcher import Launcher, NodeSpec, detector_spec
+    from phfdi.ros.parts import recorded_part
     from phfdi.ros.player import PLAYER
     from phfdi_base.errors import UserError
     from phfdi_base.topics import DETECTOR
@@ -266,21 +261,23 @@ def run_live(args: argparse.Namespace) -> int:
         if line:
             say(line)
 
-    with tempfile.TemporaryDirectory(prefix="phfdi-replay-") as tmp:
-        common = {"scenario": _scenario_file(args.file, args.scenario, tmp), "fault": "",
-                  "graph_nodes": [PLAYER, DETECTOR]}
-        detector = {**common, "wavelet": args.wavelet, "level": args.level, "arl0_samples": float(args.arl0),
-                    "channels": [c.strip() for c in args.channels.split(",") if c.strip()],
-                    "isolate": not args.no_isolation}
-        if args.calibration:
-            detector["calibration"] = str(Path(args.calibration).resolve())
-        nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
-                                                        "pace": float(args.pace)}),
-                 detector_spec(detector)]
-        t0 = time.perf_counter()
-        result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
-                          progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
-        elapsed = time.perf_counter() - t0
+    spec = _replay_scenario(args.file, args.scenario)
+    common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
+    detector = {**common, "wavelet": args.wavelet, "level": args.level, "arl0_samples": float(args.arl0),
+                "channels": [c.strip() for c in args.channels.split(",") if c.strip()],
+                "isolate": not args.no_isolation}
+    if args.calibration:
+        detector["calibration"] = str(Path(args.calibration).resolve())
+    nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
+                                                    "pace": float(args.pace)}),
+             detector_spec(detector)]
+    part = recorded_part(spec)  # resolved once; both nodes start from it
+    for node in nodes:
+        node.part = part
+    t0 = time.perf_counter()
+    result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
+                      progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
+    elapsed = time.perf_counter() - t0
     done = [e for e in result.node_events.get(DETECTOR, []) if e["event"] == "detector_done"]
     if result.failure or not done:
         say(f"error: {result.failure or 'the detector node did not report'}"

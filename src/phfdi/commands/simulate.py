@@ -33,7 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def read_inputs(path: str):
     """Recorded open-loop inputs (phfdi.records, run policy): the commands and flows the plant is driven with
     must have every sample; the reader's notes go to stderr."""
-    from phfdi.records import read_record
+    import numpy as np
+
+    from phfdi.records import ReadError, read_record
 
     from .common import print_notes
 
@@ -43,17 +45,26 @@ def read_inputs(path: str):
         if name in ("valve_command_pct", "level_controller_output_pct") or \
                 (name.endswith("_flow_ml_s") and name != "outlet_flow_ml_s"):
             rec.refuse_missing(name, "open-loop inputs need every sample of the commands and feed flows")
+            negative = np.flatnonzero(rec.signals[name] < 0)
+            if name.endswith("_flow_ml_s") and len(negative):
+                i = int(negative[0])
+                raise ReadError(path, f"a flow cannot be negative ({rec.signals[name][i]:g})",
+                                line=int(rec.lines[i]), column=rec.columns.get(name, name), where=rec.where)
     return rec.to_run()
 
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.loop import simulate, simulate_open_loop
-    from phfdi.run import Run
     from phfdi.summary import format_summary, summarize
+    from phfdi_base.errors import UserError
 
     spec = scenario_from_args(args)
     if args.inputs:
-        result = simulate_open_loop(spec, read_inputs(args.inputs))
+        inputs = read_inputs(args.inputs)
+        try:
+            result = simulate_open_loop(spec, inputs)
+        except ValueError as exc:  # the plant core's own check of physical inputs (no steady state, ...)
+            raise UserError(f"{args.inputs}: the plant cannot run on these inputs ({exc})") from None
     else:
         result = simulate(spec, progress=Progress(f"simulate {spec.name}"))
     summary = summarize(result)

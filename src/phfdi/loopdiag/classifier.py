@@ -11,9 +11,11 @@ log-loss plus (l2 / 2) |w|^2 (the intercept is not penalised).
 Training data: the labelled real records (every loop's files share a weight of one, so a loop with
 23 files counts as much as a loop with one) and synthetic loops of :mod:`.training` (their total
 weight ``synthetic_ratio`` times the real loops'). The L2 strength, the synthetic ratio and the
-decision threshold are chosen by leave-one-loop-out inside the training data
-(:func:`choose_hyperparameters`); :func:`nested_lolo` evaluates that whole procedure with one more
-loop level outside it, so no choice ever sees the loop it is scored on.
+decision threshold are chosen inside the training data (:func:`choose_hyperparameters`): by
+leave-one-loop-out on its real records, averaged with a 5-fold cross-validation of its synthetic
+loops (criterion "real+synthetic", the default) or alone ("real"); :func:`nested_lolo` evaluates
+that whole procedure with one more loop level outside it, so no choice ever sees the loop it is
+scored on.
 
 The shipped model is ``models/stiction_classifier.json`` (package data), written by
 ``benchmarks/train_stiction_classifier.py`` from ``benchmarks/results/stiction_dataset.json``.
@@ -31,7 +33,12 @@ import numpy as np
 from scipy.optimize import minimize
 
 L2_GRID = (0.01, 0.1, 1.0)
-SYNTHETIC_RATIO_GRID = (0.5, 1.0, 2.0)
+SYNTHETIC_RATIO_GRID = (0.5, 1.0, 2.0, 4.0)
+#: folds of the synthetic loops' cross-validation inside the hyper-parameter choice
+SYNTHETIC_FOLDS = 5
+#: what the hyper-parameters and the threshold are chosen for: the real records' leave-one-loop-out
+#: alone ("real"), or its mean with the synthetic loops' cross-validation ("real+synthetic")
+CRITERIA = ("real", "real+synthetic")
 MODEL_RESOURCE = "models/stiction_classifier.json"
 
 
@@ -147,9 +154,16 @@ def loop_balanced_accuracy(y: np.ndarray, pred: np.ndarray, groups: list[str]) -
 
 def best_threshold(prob: np.ndarray, y: np.ndarray, groups: list[str]) -> tuple[float, float]:
     """(threshold, loop-balanced accuracy) maximising the latter; ties: nearest 0.5."""
-    p = np.sort(np.unique(prob))
+    return best_threshold_multi([(prob, y, groups)])
+
+
+def best_threshold_multi(sets: list[tuple[np.ndarray, np.ndarray, list[str]]]) -> tuple[float, float]:
+    """(threshold, mean over the sets of their loop-balanced accuracy) maximising the latter;
+    ties: nearest 0.5."""
+    p = np.sort(np.unique(np.concatenate([s[0] for s in sets])))
     cands = [0.5] + list((p[1:] + p[:-1]) / 2) + [float(p[0]) - 1e-9, float(p[-1]) + 1e-9]
-    scored = [(loop_balanced_accuracy(y, prob >= c, groups), -abs(c - 0.5), c) for c in cands]
+    scored = [(float(np.mean([loop_balanced_accuracy(y, prob >= c, g) for prob, y, g in sets])), -abs(c - 0.5), c)
+              for c in cands]
     acc, _, th = max(scored)
     return float(th), float(acc)
 
@@ -184,16 +198,39 @@ def lolo_probabilities(d: Data, l2: float, ratio: float) -> np.ndarray:
     return prob
 
 
-def choose_hyperparameters(d: Data) -> dict:
+def synthetic_cv_probabilities(d: Data, l2: float, ratio: float, folds: int = SYNTHETIC_FOLDS) -> np.ndarray:
+    """Out-of-fold p(stiction) of every synthetic record: its loops in ``folds`` folds (by sorted
+    group name), each predicted by a model trained on the real records and the other folds."""
+    prob = np.full(len(d.y), np.nan)
+    syn_groups = sorted({g for g, r in zip(d.groups, d.real) if not r})
+    fold_of = {g: k % folds for k, g in enumerate(syn_groups)}
+    for k in range(folds):
+        held = np.array([(not r) and fold_of[g] == k for g, r in zip(d.groups, d.real)])
+        if held.any():
+            prob[held] = _fit(d.take(~held), l2, ratio).probability(d.x[held])
+    return prob
+
+
+def choose_hyperparameters(d: Data, criterion: str = "real+synthetic") -> dict:
     """L2 strength, synthetic ratio and threshold maximising the loop-balanced accuracy of the
-    leave-one-loop-out predictions on the real records of ``d`` (ties: stronger L2, ratio 1)."""
+    leave-one-loop-out predictions on the real records of ``d`` (``criterion`` "real"), or its mean
+    with the balanced accuracy of the synthetic loops' cross-validation ("real+synthetic": a model
+    for the next plant should hold on the simulator's breadth of loops too). Ties: stronger L2,
+    ratio nearest 1."""
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
     best = None
     real_idx = np.flatnonzero(d.real)
+    syn_idx = np.flatnonzero(~d.real)
     groups = [d.groups[i] for i in real_idx]
+    syn_groups = [d.groups[i] for i in syn_idx]
     for l2 in L2_GRID:
         for ratio in SYNTHETIC_RATIO_GRID:
             prob = lolo_probabilities(d, l2, ratio)[real_idx]
-            th, acc = best_threshold(prob, d.y[real_idx], groups)
+            sets = [(prob, d.y[real_idx], groups)]
+            if criterion == "real+synthetic" and len(syn_idx):
+                sets.append((synthetic_cv_probabilities(d, l2, ratio)[syn_idx], d.y[syn_idx], syn_groups))
+            th, acc = best_threshold_multi(sets)
             key = (round(acc, 9), l2, -abs(math.log(ratio)))
             if best is None or key > best[0]:
                 best = (key, {"l2": l2, "synthetic_ratio": ratio, "threshold": th, "inner_balanced_accuracy": acc})
@@ -201,16 +238,17 @@ def choose_hyperparameters(d: Data) -> dict:
     return best[1]
 
 
-def train(d: Data) -> LogisticModel:
-    """Hyper-parameters by leave-one-loop-out on ``d``'s real records, then one fit on all of ``d``."""
-    hp = choose_hyperparameters(d)
+def train(d: Data, criterion: str = "real+synthetic") -> LogisticModel:
+    """Hyper-parameters by :func:`choose_hyperparameters` on ``d``, then one fit on all of ``d``."""
+    hp = choose_hyperparameters(d, criterion)
     model = _fit(d, hp["l2"], hp["synthetic_ratio"])
     model.threshold = hp["threshold"]
     model.info["inner_balanced_accuracy"] = hp["inner_balanced_accuracy"]
+    model.info["criterion"] = criterion
     return model
 
 
-def nested_lolo(d: Data, progress=None) -> tuple[np.ndarray, np.ndarray, dict]:
+def nested_lolo(d: Data, progress=None, criterion: str = "real+synthetic") -> tuple[np.ndarray, np.ndarray, dict]:
     """Nested leave-one-loop-out: for each real group, :func:`train` on everything else (which
     chooses its hyper-parameters by an inner leave-one-loop-out) and predict the group.
     Returns (prob, prediction) for every real record (NaN / False elsewhere) and the choices per fold."""
@@ -220,7 +258,7 @@ def nested_lolo(d: Data, progress=None) -> tuple[np.ndarray, np.ndarray, dict]:
     real_groups = sorted({g for g, r in zip(d.groups, d.real) if r})
     for k, g in enumerate(real_groups):
         held = np.array([gg == g for gg in d.groups]) & d.real
-        model = train(d.take(~held))
+        model = train(d.take(~held), criterion)
         prob[held] = model.probability(d.x[held])
         pred[held] = prob[held] >= model.threshold
         choices[g] = {"l2": model.l2, "synthetic_ratio": model.synthetic_ratio, "threshold": model.threshold}

@@ -224,7 +224,7 @@ def _split_at_gaps(grid: records.Record) -> tuple[list[records.Record], list[str
     starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
     long = (stops - starts) > MAX_FILLED_GAP
     edges = [0, *[x for a, b in zip(starts[long], stops[long]) for x in (a, b)], len(grid)]
-    pieces = [grid._subset(slice(a, b)) for a, b in zip(edges[0::2], edges[1::2]) if b > a]
+    pieces = [grid.subset(slice(a, b)) for a, b in zip(edges[0::2], edges[1::2]) if b > a]
     cuts = [f"OP or PV is missing for {b - a} samples in a row (from t = {grid.time_s[a]:g} s)"
             for a, b in zip(starts[long], stops[long])]
     return pieces, cuts

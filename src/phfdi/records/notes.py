@@ -16,11 +16,13 @@ def span(a: int, b: int) -> str:
     return f"{a}" if a == b else f"{a}-{b}"
 
 
-def places(where: str, spans: Sequence[tuple[int, int]]) -> str:
-    """``line 12``, ``lines 31-32, 95-96 and 4 more`` from (first, last) source lines."""
+def places(where: str, spans: Sequence[tuple[int, int]], total: int | None = None) -> str:
+    """``line 12``, ``lines 31-32, 95-96 and 4 more`` from (first, last) source lines; ``total``: how many
+    places there are when ``spans`` lists only the first ones."""
+    total = len(spans) if total is None else total
     shown = ", ".join(span(a, b) for a, b in spans[:LISTED])
-    many = len(spans) > 1 or spans[0][0] != spans[0][1]
-    more = f" and {len(spans) - LISTED} more" if len(spans) > LISTED else ""
+    many = total > 1 or spans[0][0] != spans[0][1]
+    more = f" and {total - LISTED} more" if total > LISTED else ""
     return f"{plural(where, 2 if many else 1)} {shown}{more}"
 
 

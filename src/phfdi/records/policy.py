@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ReadError
-from .notes import counted, places
+from .notes import places
 
 POLICIES = ("run", "historian")
 #: a forward time jump longer than this many sample intervals starts a new segment (historian policy)
@@ -170,8 +170,7 @@ def average_repeats(rows: Rows) -> None:
     ids = np.unique(group[rep])
     groups = [(int(rows.lines[np.argmax(group == g)]), int(rows.lines[len(group) - 1 - np.argmax(group[::-1] == g)]))
               for g in ids[:3]]
-    groups += [(0, 0)] * (len(ids) - len(groups))  # counted, not listed
-    rows.note(f"{places(rows.where, groups)}: {len(ids)} {'stamp' if len(ids) == 1 else 'stamps'} repeated in "
+    rows.note(f"{places(rows.where, groups, len(ids))}: {len(ids)} {'stamp' if len(ids) == 1 else 'stamps'} repeated in "
               f"{len(ids) + len(rep)} rows with different values (first {rows.stamp(int(rep[0]))}), averaged into "
               f"one sample each")
     mask = np.ones(len(rows), bool)

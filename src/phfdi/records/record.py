@@ -81,7 +81,8 @@ class Record:
         return replace(self, signals={c: self.signals[c] for c in channels},
                        units={c: self.units.get(c, "") for c in channels})
 
-    def _subset(self, index: np.ndarray | slice, **changes) -> "Record":
+    def subset(self, index: np.ndarray | slice, **changes) -> "Record":
+        """The samples at ``index`` (a slice or an index array) as a record of their own, notes kept."""
         auto = None if self.automatic is None else self.automatic[index]
         return replace(self, time_s=self.time_s[index], lines=self.lines[index], automatic=auto,
                        signals={k: v[index] for k, v in self.signals.items()}, notes=list(self.notes), **changes)
@@ -95,7 +96,7 @@ class Record:
             padded = np.diff(np.concatenate([[0], keep.astype(np.int8), [0]]))
             for s, e in zip(np.flatnonzero(padded == 1), np.flatnonzero(padded == -1)):
                 if e - s >= min_samples:
-                    seg = self._subset(slice(a + s, a + e), boundaries=[])
+                    seg = self.subset(slice(a + s, a + e), boundaries=[])
                     if e - s < len(self):
                         first, last = self.lines[a + s], self.lines[a + e - 1]
                         seg.notes.append(f"{self.path}: segment {self.where}s {first}-{last} ({e - s} samples)")
@@ -118,6 +119,9 @@ class Record:
         slot = np.round((self.time_s - self.time_s[0]) / dt).astype(np.int64)
         first = np.concatenate([[True], slot[1:] != slot[:-1]])
         n = int(slot[-1]) + 1
+        if n > max(10 * len(self), len(self) + 1000):
+            raise ReadError(self.path, f"a {dt:g} s grid over {self.time_s[0]:g}..{self.time_s[-1]:g} s would hold "
+                                       f"{n:.3g} slots for {len(self)} samples (the time jumps): split the record")
         notes = list(self.notes)
         if not first.all():
             notes.append(f"{self.path}: {int((~first).sum())} samples share a {dt:g} s grid slot with the one before, "

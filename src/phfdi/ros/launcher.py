@@ -35,9 +35,11 @@ from typing import Callable
 import yaml
 
 from phfdi_base.errors import UserError
+from phfdi_base.parts import NodePart, write_part
+from phfdi_base.ros.env import graph_env, reserve_domain_id
 from phfdi_base.topics import CONTROLLERS, DETECTOR, PLANT, PLANT_STATE, RECORDER, VALVE
 
-from .env import graph_env, reserve_domain_id
+from .parts import make_part
 
 LOOP, OBSERVER = "loop", "observer"
 
@@ -50,6 +52,8 @@ class NodeSpec:
     module: str
     params: dict = field(default_factory=dict)
     role: str = LOOP  # loop: in the lock-step ring; observer: only listens (stopped last)
+    #: the resolved scenario and starting point (written once for the graph, handed over as ``part``)
+    part: NodePart | None = None
 
 
 def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float | None = None,
@@ -78,6 +82,9 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
     names = [n.name for n in nodes]
     for n in nodes:
         n.params = {**common, "graph_nodes": names, **n.params}
+    part = make_part(scenario, fault or None, list(overrides), onset_s)  # resolved and validated once for every node
+    for n in nodes:
+        n.part = part
     return nodes
 
 
@@ -210,9 +217,16 @@ class Launcher:
         env = graph_env(domain_id)
         self.t0 = time.monotonic()
         self.wall_t0 = time.time() - 1.0  # for file times (coarse clocks)
+        written: dict[int, str] = {}  # one file per distinct part (loop_graph: one for the graph)
         for spec in self.nodes:
+            params = dict(spec.params)
+            if spec.part is not None:
+                if id(spec.part) not in written:
+                    path = self.log_dir / f"part{len(written)}.json"
+                    written[id(spec.part)] = str(write_part(path, spec.part))
+                params["part"] = written[id(spec.part)]
             params_file = self.log_dir / f"{spec.name}.params.yaml"
-            params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.params}}, sort_keys=False))
+            params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": params}}, sort_keys=False))
             cmd = [sys.executable, "-m", spec.module, "--ros-args", "--params-file", str(params_file)]
             with open(self.log_dir / f"{spec.name}.stdout", "wb") as out, \
                  open(self.log_dir / f"{spec.name}.stderr", "wb") as err:

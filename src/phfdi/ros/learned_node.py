@@ -26,10 +26,10 @@ import traceback
 import numpy as np
 from phfdi_interfaces.msg import FaultAlarm, MeasuredSample
 
-from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main, to_time
 from phfdi_base.errors import UserError
+from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main, to_time
+from phfdi_base.stamps import seconds_to_ns
 from phfdi_base.topics import DETECTOR, FAULT_ALARM, MEASURED_SAMPLE
-
 from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel
 
 PARAMS = (
@@ -110,11 +110,11 @@ class LearnedDetectorNode(GraphNode):
     def _publish(self, ev) -> None:
         state = STATE_OF_KIND.get(ev.kind, self._state if self._state == FaultAlarm.ALARM else FaultAlarm.WARN)
         msg = FaultAlarm(loop=self._loop, state=state, message=ev.message, severity=math.nan, wavelet_level=-1)
-        msg.stamp = to_time(max(0, round(ev.time_s * 1e9)))
+        msg.stamp = to_time(seconds_to_ns(ev.time_s))
         a = ev.alarm
         if a:
             msg.fault_class = "unknown"
-            msg.detection_time = to_time(max(0, round(a["detection_time"] * 1e9)))
+            msg.detection_time = to_time(seconds_to_ns(a["detection_time"]))
             msg.statistic, msg.threshold = float(a["statistic_value"]), float(a["threshold"])
             cont = a["contributions"] if ev.kind == "alarm" else a.get("episode_contributions") or a["contributions"]
             msg.channels = list(cont)

@@ -21,8 +21,9 @@ import time
 
 from rosgraph_msgs.msg import Clock
 
-from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main
 from phfdi.ros.recorder import _message_class
+from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main
+from phfdi_base.stamps import split_ns
 from phfdi_base.topics import CLOCK, DIAGNOSTICS, FAULT_ALARM, MEASURED_SAMPLE, MEASUREMENT
 
 PLAYER = "player"
@@ -132,7 +133,7 @@ class PlayerNode(GraphNode):
 
     def _tick(self, stamp_ns: int) -> None:
         if self.pub_clock.get_subscription_count():  # only nodes with use_sim_time listen
-            self._clock_msg.clock.sec, self._clock_msg.clock.nanosec = divmod(stamp_ns, 1_000_000_000)
+            self._clock_msg.clock.sec, self._clock_msg.clock.nanosec = split_ns(stamp_ns)
             self.pub_clock.publish(self._clock_msg)
         self._sample += 1
         if self._sample % self._report_every == 0:

@@ -29,7 +29,8 @@ import sys
 import time
 from pathlib import Path
 
-from phfdi.ros.node import GraphNode, NodeStartError, ParamSpec, main
+from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main
+from phfdi_base.stamps import seconds_to_ns
 from phfdi_base.topics import BY_NAME, RECORDED, RECORDER
 
 PARAMS = (
@@ -65,7 +66,7 @@ class RecorderNode(GraphNode):
         if unknown:
             raise NodeStartError(f"parameter topics: unknown topic {unknown[0]}; recordable: "
                                  + ", ".join(BY_NAME))
-        self._split_ns = round(self.param("split_after_s") * 1e9)
+        self._split_ns = seconds_to_ns(self.param("split_after_s"))
         stale = bagio.part_path(path, 1)
         if self._split_ns and stale.exists():  # the parts of an earlier split bag would be read as this run's
             raise NodeStartError(f"parameter path: {stale} exists (a part of an earlier split bag); remove "

@@ -10,12 +10,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .config import DetectorSettings  # noqa: E402
-from .filterbank import coefficient_residuals  # noqa: E402
-from .peers import DETECTORS, LABELS  # noqa: E402
+from wavelet_fdi.config import DetectorSettings
+from wavelet_fdi.filterbank import coefficient_residuals
+from wavelet_fdi.isolation import CLASSES
+from wavelet_fdi.peers import DETECTORS, LABELS
+from wavelet_fdi.statistics import CusumBank
 
-COLORS = {"wavelet": "tab:blue", "wavelet_bands": "tab:cyan", "cusum": "tab:orange", "focus": "tab:green", "page_hinkley": "tab:red",
-          "adwin": "tab:purple"}
+COLORS = {"wavelet": "tab:blue", "wavelet_bands": "tab:cyan", "cusum": "tab:orange", "focus": "tab:green",
+          "page_hinkley": "tab:red", "adwin": "tab:purple"}
 
 
 def _save(fig, path: Path) -> Path:
@@ -69,7 +71,6 @@ def plot_false_alarms(summary: dict, path: Path) -> Path:
 
 
 def plot_isolation(summary: dict, path: Path) -> Path:
-    from .isolation import CLASSES
 
     faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
     cols = list(CLASSES) + ["pending"]
@@ -152,7 +153,6 @@ def plot_evaluation(summary: dict, records: list[dict], out: Path, signals: dict
 def statistic_paths(increments: np.ndarray, thresholds: np.ndarray, start: int = 0) -> np.ndarray:
     """The CUSUM statistics (N, n_statistics) from a trace's increments, all restarted after every
     threshold crossing, as the detector runs them (without its resets at gaps)."""
-    from .statistics import CusumBank
 
     n, m = increments.shape
     bank = CusumBank(m)

@@ -23,10 +23,25 @@ from typing import Callable
 
 import numpy as np
 
+from phfdi.calibration import healthy_traces, scenario_for_seed
+from phfdi.loop import build_parts, simulate
+from phfdi.replay import run_chunks
+from phfdi.scenario import load_scenario
+from phfdi.study.detector_figures import plot_evaluation
 from phfdi_base.errors import UserError
-
-from .config import Calibration, DetectorSettings
-from .peers import DETECTORS, LABELS, PEERS, Peer  # noqa: F401  (DETECTORS: part of this module's API)
+from wavelet_fdi.calibration import calibrate_from_traces, statistic_increments, tail_probability, window_maxima
+from wavelet_fdi.config import Calibration, DetectorSettings
+from wavelet_fdi.detector import StreamingDetector
+from wavelet_fdi.peers import (
+    DETECTORS,
+    LABELS,
+    PEERS,
+    Peer,
+    _focus_window_max,
+    _page_hinkley_window_max,
+    calibrate_peers,
+)
+from wavelet_fdi.statistics import CusumBank
 
 #: fault -> (main parameter, three severities: mild, the paper's, strong); other params scale along
 SEVERITIES: dict[str, tuple[str, list[dict]]] = {
@@ -100,7 +115,6 @@ class RunTask:
 def _spec(scenario: str, fault: str, params: dict, seed: int, onset_s: float | None, overrides=()):
     import yaml
 
-    from phfdi.scenario import load_scenario
 
     base = list(overrides) + [f"seed={seed}"]
     if fault == "healthy":
@@ -117,7 +131,6 @@ def _spec(scenario: str, fault: str, params: dict, seed: int, onset_s: float | N
 def noise_free_ph(spec, ph_true: np.ndarray, t: np.ndarray) -> np.ndarray:
     """What the pH probe would read without measurement noise (its delay, lag and faults kept,
     noise faults removed)."""
-    from phfdi.loop import build_parts
 
     quiet = spec.model_copy(deep=True)
     quiet.sensors.ph.noise_std = 0.0
@@ -149,7 +162,6 @@ def bound_delay(signal: np.ndarray, t: np.ndarray, onset_s: float, arl0: float,
 def alarm_positions(z: np.ndarray, h: np.ndarray, clear_samples: int) -> list[int]:
     """Alarms of a union of CUSUMs on increments z (n, N): the detector's raise/confirm/clear logic
     (a crossing within clear_samples of the previous one confirms the alarm instead of raising one)."""
-    from .statistics import CusumBank
 
     out, pos, last = [], 0, None
     n = z.shape[1]
@@ -171,11 +183,7 @@ def alarm_positions(z: np.ndarray, h: np.ndarray, clear_samples: int) -> list[in
 
 def evaluate_run(task: RunTask) -> dict:
     """Simulate one run, run our detector and the peers on its residual, compute the bound."""
-    from phfdi.loop import simulate
 
-    from .calibration import statistic_increments
-    from .detector import StreamingDetector
-    from .replay import run_chunks
 
     spec = _spec(task.scenario, task.fault, task.params, task.seed, task.onset_s, task.overrides)
     run = simulate(spec)
@@ -215,8 +223,6 @@ def evaluate_run(task: RunTask) -> dict:
 
 def heldout_maxima(tr: dict, u: np.ndarray, task: RunTask) -> dict[str, list]:
     """Window maxima (calibration windows) of every statistic on a healthy run."""
-    from .calibration import statistic_increments, window_maxima
-    from .peers import _focus_window_max, _page_hinkley_window_max
 
     window = task.calibration.window_samples
     k = 0.5 * task.settings.mean_shift_sigma
@@ -235,7 +241,6 @@ def heldout_maxima(tr: dict, u: np.ndarray, task: RunTask) -> dict[str, list]:
 def heldout_arl(records: list[dict], summary_thresholds: dict, window: int) -> dict[str, float | None]:
     """ARL0 (samples) of each detector estimated on the held-out healthy runs at its calibrated threshold(s):
     L / P(window max > h), from the same tail fit; a union sums its statistics' probabilities."""
-    from .calibration import tail_probability
 
     pooled: dict[str, list] = {}
     for r in records:
@@ -262,7 +267,6 @@ def heldout_arl(records: list[dict], summary_thresholds: dict, window: int) -> d
 # ---- calibration of everyone on the same healthy runs --------------------------------------
 def _calibration_trace(args) -> dict:
     scenario, seed, settings, overrides = args
-    from .calibration import healthy_traces, scenario_for_seed
 
     tr = healthy_traces(scenario_for_seed(scenario, overrides), [seed], settings)[0]
     keep = ("ph_residual", "level_residual_cm", "ph_monitored", "level_monitored", "ph_coefficients",
@@ -271,8 +275,6 @@ def _calibration_trace(args) -> dict:
 
 
 def calibrate_all(cfg: EvalConfig, pool, say: Callable[[str], None]) -> tuple[Calibration, dict]:
-    from .calibration import calibrate_from_traces, scenario_for_seed
-    from .peers import calibrate_peers
 
     say(f"calibration: {len(cfg.calibration_seeds)} healthy runs (seeds {cfg.calibration_seeds[0]}.."
         f"{cfg.calibration_seeds[-1]})")
@@ -328,7 +330,6 @@ def run_evaluation(cfg: EvalConfig, out_dir: str | Path, progress: Callable[[str
     (out / "results.json").write_text(json.dumps({"config": _config_dict(cfg), "summary": summary,
                                                   "runs": records}, indent=1, default=_json_default))
     (out / "evaluation.md").write_text(markdown(summary, cfg, cal, peers))
-    from .detector_figures import plot_evaluation
 
     plot_evaluation(summary, records, out, signals, cfg.settings)
     say(f"wrote {out / 'evaluation.md'}, results.json and figures")
@@ -413,7 +414,8 @@ def summarise(records: list[dict], cfg: EvalConfig, cal: Calibration, peers: dic
             rows.append(row)
     thresholds = {"wavelet": cal.thresholds, "wavelet_bands": peers["wavelet_bands"]["thresholds"],
                   **{k: peers[k]["threshold"] for k in PEERS}}
-    return {"rows": rows, "heldout_arl0": heldout_arl(records, thresholds, cal.window_samples), "false_alarms": false, "healthy_hours": hours,
+    return {"rows": rows, "heldout_arl0": heldout_arl(records, thresholds, cal.window_samples),
+            "false_alarms": false, "healthy_hours": hours,
             "false_per_hour": {d: false[d] / hours if hours else None for d in DETECTORS},
             "arl0_samples": cfg.settings.arl0_samples, "thresholds": thresholds,
             "sigma_ph": cal.sigma["ph"]["raw"], "adwin_note": peers.get("adwin", {}).get("note", "")}

@@ -28,6 +28,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from phfdi.loop import simulate
+from phfdi.scenario import fault_library, load_scenario
+
 #: the classes of the paper's Section 6, in its order
 PAPER_CLASSES = ("healthy", "backlash", "friction", "deadzone", "saturation")
 #: the paper's grouping of them into three clusters (Figure 35)
@@ -59,7 +62,6 @@ def severity_overrides(fault: str, factor: float) -> list[str]:
     """``--set`` overrides scaling the library fault's severity by ``factor``."""
     if fault == "healthy":
         return []
-    from phfdi.scenario import fault_library
 
     params = fault_library()[fault].get("params", {})
     out = []
@@ -105,8 +107,6 @@ def section7_variants(onset_s: float = 7000.0, faults: Sequence[str] = ("backlas
 
 def _simulate_one(args: tuple) -> object:
     variant, scenario, overrides = args
-    from phfdi.loop import simulate
-    from phfdi.scenario import load_scenario
 
     spec = load_scenario(scenario, fault=variant.label,
                          overrides=[f"seed={variant.seed}", *variant.overrides, *overrides],

@@ -7,14 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
+from phfdi.records import ReadError, read_record
 from phfdi.run import Run
 from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
 from phfdi_base.spec import ScenarioSpec, validate_scenario
-
-from .config import Calibration, DetectorSettings, load_default_calibration
-from .detector import Event, StreamingDetector
-from .inputs import INPUT_SIGNALS
+from wavelet_fdi.config import Calibration, DetectorSettings, load_default_calibration
+from wavelet_fdi.detector import Event, StreamingDetector
+from wavelet_fdi.inputs import INPUT_SIGNALS
 
 DEFAULT_CHUNK = 4096
 
@@ -64,7 +64,6 @@ def load_any(path: str | Path, column_map=None, encoding: str | None = None) -> 
     """A run from .csv/.parquet or an .mcap bag of phfdi launch, read under the run policy of
     :func:`phfdi.records.read_record` (repairs in ``metadata["notes"]``): it needs ph_measured and the pH
     controller output (valve_command_pct or ph_controller_output_pct), by name or through ``column_map``."""
-    from phfdi.records import ReadError, read_record
 
     record = read_record(path, column_map, policy="run", encoding=encoding, required=("ph_measured",))
     if not {"valve_command_pct", "ph_controller_output_pct"} & set(record.signals):

@@ -1,0 +1,168 @@
+"""The start barrier and the data endpoints of a graph node.
+
+Why a barrier: a reliable writer delivers only to readers it has already
+matched, and in lock-step a lost first sample would stall the graph. Every
+node announces on /graph/ready the topics it subscribes to and publishes,
+waits until each of its publishers has matched every announced reader of its
+topic and each of its subscriptions every announced writer (both sides, so no
+sample has to be repaired after the start), then announces ``ready``. The
+plant starts sample 0 once every node named in ``graph_nodes`` is ready.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from phfdi_base.topics import GRAPH_READY
+
+__all__ = ["DATA_QOS", "READY_QOS", "StartBarrierMixin"]
+
+#: every data topic: nothing lost, the writer waits for slow reliable readers
+DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+#: /graph/ready: late joiners get each node's last announcement
+READY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class _CountingPublisher:
+    """A publisher that counts what it published (reported on exit: published vs recorded)."""
+
+    __slots__ = ("_pub", "_counts", "topic_name")
+
+    def __init__(self, pub, counts: dict[str, int]) -> None:
+        self._pub, self._counts, self.topic_name = pub, counts, pub.topic_name
+        counts.setdefault(pub.topic_name, 0)
+
+    def publish(self, msg) -> None:
+        self._pub.publish(msg)
+        self._counts[self.topic_name] += 1
+
+    def get_subscription_count(self) -> int:
+        return self._pub.get_subscription_count()
+
+    def wait_for_all_acked(self, timeout):
+        return self._pub.wait_for_all_acked(timeout)
+
+
+
+class StartBarrierMixin(Node):
+    """Data endpoints, the start barrier and flushing on the way out (a part of ``GraphNode``)."""
+
+    # given by the other parts of GraphNode
+    finished: bool
+    exit_code: int
+    param: Callable[[str], Any]
+
+    def _init_barrier(self) -> None:
+        self.published: dict[str, int] = {}  # messages per topic, printed on exit
+        self._data_publishers: list = []
+        self._data_subscriptions: list = []
+        self._peers: dict[str, tuple[set[str], set[str]]] = {}  # node -> (subscribed, published) topics
+        self._peers_ready: set[str] = set()
+        self._connected = False
+        self._announced_ready = False
+        self._waiting_for = "announcements"
+        self._barrier_t0 = time.monotonic()
+
+    def data_publisher(self, msg_type, topic: str):
+        """A reliable keep-all publisher, counted, part of the start barrier."""
+        pub = _CountingPublisher(self.create_publisher(msg_type, topic, DATA_QOS), self.published)
+        self._data_publishers.append(pub)
+        return pub
+
+    def data_subscription(self, msg_type, topic: str, callback: Callable, raw: bool = False):
+        sub = self.create_subscription(msg_type, topic, callback, DATA_QOS, raw=raw)
+        self._data_subscriptions.append(sub)
+        return sub
+
+    def start_barrier(self) -> None:
+        """Call once all data endpoints exist."""
+        self._ready_pub = self.create_publisher(DiagnosticStatus, GRAPH_READY, READY_QOS)
+        self.create_subscription(DiagnosticStatus, GRAPH_READY, self._on_peer_status, READY_QOS)
+        self._barrier_timer = self.create_timer(0.05, self._check_barrier)
+        self._announce_timer = self.create_timer(0.2, self._announce)
+        self._announce()
+
+    def _announce(self) -> None:
+        # Repeated (transient local alone proved unreliable here for late joiners): every
+        # 0.2 s until connected, then every 1 s as a heartbeat.
+        state = "connected" if self._connected else "ready" if self._announced_ready else "waiting"
+        self._ready_pub.publish(DiagnosticStatus(
+            level=DiagnosticStatus.OK, name=self.get_name(), message=state,
+            values=[KeyValue(key="subscriptions", value=",".join(s.topic_name for s in self._data_subscriptions)),
+                    KeyValue(key="publications", value=",".join(p.topic_name for p in self._data_publishers))]))
+
+    def _on_peer_status(self, msg: DiagnosticStatus) -> None:
+        values = {v.key: set(v.value.split(",")) - {""} for v in msg.values}
+        self._peers[msg.name] = (values.get("subscriptions", set()), values.get("publications", set()))
+        if msg.message in ("ready", "connected"):
+            self._peers_ready.add(msg.name)
+
+    def _unmatched(self) -> str | None:
+        """Why this node's endpoints are not all matched yet (None: they are)."""
+        missing = [n for n in self.param("graph_nodes") if n not in self._peers]
+        if missing:
+            return "waiting for node(s) " + ", ".join(missing)
+        for pub in self._data_publishers:
+            readers = sum(pub.topic_name in subs for subs, _ in self._peers.values())
+            if pub.get_subscription_count() < readers:
+                return f"{pub.topic_name}: {pub.get_subscription_count()} of {readers} readers matched"
+        for sub in self._data_subscriptions:
+            writers = sum(sub.topic_name in pubs for _, pubs in self._peers.values())
+            if sub.get_publisher_count() < writers:
+                return f"{sub.topic_name}: {sub.get_publisher_count()} of {writers} writers matched"
+        return None
+
+    def _check_barrier(self) -> None:
+        if self._connected or self.finished:
+            return
+        why = self._unmatched()
+        if why is None and not self._announced_ready:
+            self._announced_ready = True
+            self._announce()
+        if why is None:
+            waiting = [n for n in self.param("graph_nodes") if n not in self._peers_ready]
+            why = "waiting for node(s) " + ", ".join(waiting) + " to connect" if waiting else None
+        if why is None:
+            self._connected = True
+            self._barrier_timer.cancel()
+            self._announce_timer.cancel()
+            self._announce_timer = self.create_timer(1.0, self._announce)
+            self._announce()
+            self.on_connected()
+            return
+        if why != self._waiting_for:
+            self.get_logger().debug(f"start barrier: {why}")
+        self._waiting_for = why
+        if time.monotonic() - self._barrier_t0 > self.param("connect_timeout_s"):
+            self.get_logger().error(f"the graph did not connect within {self.param('connect_timeout_s'):g} s: "
+                                    f"{why} (announcements from: {', '.join(sorted(self._peers)) or 'none'})")
+            self.exit_code = 3
+            self.finished = True
+            self._barrier_timer.cancel()
+
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    def on_connected(self) -> None:
+        """Every node of the graph is connected (called once)."""
+
+    def flush_publishers(self, timeout_s: float = 2.0) -> bool:
+        """Wait until every reliable reader acknowledged everything published (shared deadline)."""
+        deadline = time.monotonic() + timeout_s
+        ok = True
+        for pub in self._data_publishers:
+            left = max(0.0, deadline - time.monotonic())
+            try:
+                ok = pub.wait_for_all_acked(rclpy.duration.Duration(seconds=left)) and ok
+            except Exception:  # noqa: BLE001 - a destroyed context on the way out
+                ok = False
+        return ok

@@ -1,0 +1,117 @@
+"""The base of every node of the graph (imports rclpy; no side effects at import).
+
+A :class:`GraphNode` is made of small parts: its parameters
+(:mod:`phfdi_base.ros.params`), its part of the resolved scenario
+(:mod:`phfdi_base.parts`: read from the file the launcher wrote, or resolved
+from scenario parameters when started by hand), the start barrier and data
+endpoints (:mod:`phfdi_base.ros.barrier`), simulated-time stamps
+(:mod:`phfdi_base.stamps`) and the hooks the main loop calls
+(:func:`phfdi_base.ros.run.main` runs one node as a process).
+"""
+
+from __future__ import annotations
+
+import json
+
+from builtin_interfaces.msg import Time
+from rclpy.node import Node
+
+from phfdi_base.errors import UserError
+from phfdi_base.parts import NodePart, read_part, resolve_part
+from phfdi_base.stamps import join_ns, sample_index, sample_period_ns, split_ns
+
+from .barrier import DATA_QOS, READY_QOS, StartBarrierMixin
+from .params import COMMON_PARAMS, NodeStartError, ParametersMixin, ParamSpec, common_params, print_parameter_help
+from .run import main
+
+__all__ = ["COMMON_PARAMS", "DATA_QOS", "READY_QOS", "GraphNode", "NodeStartError", "ParamSpec", "main",
+           "print_parameter_help", "time_ns", "to_time"]
+
+
+def to_time(ns: int) -> Time:
+    """A ROS time from nanoseconds."""
+    sec, nanosec = split_ns(ns)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def time_ns(stamp: Time) -> int:
+    """Nanoseconds of a ROS time."""
+    return join_ns(stamp.sec, stamp.nanosec)
+
+
+class GraphNode(ParametersMixin, StartBarrierMixin, Node):
+    """A node of the loop graph: parameters, its part of the scenario, start barrier, stamps."""
+
+    #: parameters of this kind of node, besides COMMON_PARAMS
+    PARAMS: tuple[ParamSpec, ...] = ()
+    #: common parameters this kind of node lets change at runtime
+    RUNTIME_COMMON: tuple[str, ...] = ()
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.finished = False  # set when the node's work is done (the main loop then ends)
+        self.exit_code = 0
+        common = common_params(self.RUNTIME_COMMON)
+        self._specs = {p.name: p for p in common + self.PARAMS}
+        self._declare(common, None)
+        self.part = self._load_part()
+        self.spec = self.part.scenario
+        self.dt_s = self.spec.sample_time_s
+        try:
+            self.dt_ns = sample_period_ns(self.dt_s)
+        except ValueError as exc:
+            raise NodeStartError(f"scenario: {exc}") from None
+        self._declare(self.PARAMS, self.spec)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
+        self._init_barrier()
+        self._last_k = -1  # last input sample taken (next_sample)
+
+    def _load_part(self) -> NodePart:
+        """The part the launcher wrote (``part``), or one resolved from the scenario parameters."""
+        fault = self.param("fault") or None
+        onset = self.param("fault_onset_s")
+        try:
+            if self.param("part"):
+                return read_part(self.param("part"))
+            return resolve_part(self.param("scenario"), fault, list(self.param("overrides")),
+                                None if onset < 0 else onset)
+        except UserError as exc:
+            raise NodeStartError(str(exc)) from None
+
+    # ---- time -----------------------------------------------------------------------
+    def stamp(self, k: int) -> Time:
+        return to_time(k * self.dt_ns)
+
+    def sample_of(self, stamp: Time) -> int | None:
+        """Sample index of a stamp; None if it is not on the sample grid."""
+        return sample_index(time_ns(stamp), self.dt_ns)
+
+    def next_sample(self, stamp: Time, what: str) -> int | None:
+        """Sample index of a new input; None (with a warning) if off the grid or not newer than the last."""
+        k = self.sample_of(stamp)
+        if k is None or k <= self._last_k:
+            self.get_logger().warning(f"ignored a {what} stamped {stamp.sec}.{stamp.nanosec:09d} s "
+                                      f"(last sample {self._last_k})")
+            return None
+        self._last_k = k
+        return k
+
+    # ---- main loop hooks ----------------------------------------------------------------
+    def spin_timeout_s(self) -> float:
+        """How long the main loop may block waiting for work."""
+        return 0.1
+
+    def after_spin(self) -> None:
+        """Called after every executor step (pacing, periodic work)."""
+
+    def drain(self, executor) -> None:
+        """On the way out, before :meth:`close`: take messages still queued (the recorder does)."""
+
+    def close(self) -> None:
+        """Called once on the way out, before the node is destroyed: deliver what was published."""
+        self.flush_publishers()
+        self.report_published()
+
+    def report_published(self) -> None:
+        print(json.dumps({"event": "published", "node": self.get_name(), "counts": self.published}), flush=True)
