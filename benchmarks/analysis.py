@@ -26,8 +26,8 @@ def main() -> int:
     args = ap.parse_args()
 
     from phfdi.run import Run
-    from wavelet_fdi.multisignal import from_runs
     from phfdi.study.paperset import PAPER_GROUPING, section6_variants, simulate_variants
+    from wavelet_fdi.multisignal import from_runs
 
     t0 = time.perf_counter()
     if args.runs:

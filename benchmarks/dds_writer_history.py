@@ -35,11 +35,11 @@ def child(role: str, period_s: float) -> int:
 
     ensure_localhost()
     import rclpy
+    from phfdi_interfaces.msg import PlantState
     from rclpy.experimental import EventsExecutor
     from rclpy.signals import SignalHandlerOptions
 
     from phfdi_base.ros.graph_node import DATA_QOS
-    from phfdi_interfaces.msg import PlantState
 
     stop: list[int] = []
     signal.signal(signal.SIGTERM, lambda signum, _frame: stop.append(signum))

@@ -17,11 +17,11 @@ import time
 import numpy as np
 
 from phfdi.loop import simulate
+from phfdi.replay import detector_inputs, run_chunks
 from phfdi.scenario import load_scenario
 from wavelet_fdi.config import DetectorSettings, load_default_calibration
 from wavelet_fdi.detector import StreamingDetector
 from wavelet_fdi.reference import HealthyReference
-from phfdi.replay import detector_inputs, run_chunks
 
 
 def main() -> int:

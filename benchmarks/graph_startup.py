@@ -1,10 +1,11 @@
 """Benchmark: graph start-up, processes started to graph connected, and the CPU the nodes spent on it.
 
 Launches the loop graph (plant, controllers, valve, recorder, + the detector with --detector) on a short
-scenario (--duration, default 200 s simulated, the setpoint step and the backlash fault moved inside it, so that the run itself costs little) --repeat times and prints
-per launch: the wall time from starting the processes to the connected graph (the launcher's connect_s) and
-the CPU seconds (user + system) all node processes used in total. On a loaded machine the wall time follows
-the load; the CPU seconds are the steadier figure of what start-up costs.
+scenario (--duration, default 200 s simulated, the setpoint step and the backlash fault moved inside it, so
+that the run itself costs little) --repeat times and prints per launch: the wall time from starting the
+processes to the connected graph (the launcher's connect_s) and the CPU seconds (user + system) all node
+processes used in total. On a loaded machine the wall time follows the load; the CPU seconds are the steadier
+figure of what start-up costs.
 
     .venv/bin/python benchmarks/graph_startup.py --repeat 3 --detector
 """

@@ -134,8 +134,8 @@ def main(argv: list[str] | None = None) -> int:
                        "nested_lolo": {k: {kk: (None if isinstance(vv, float) and math.isnan(vv) else vv)
                                            for kk, vv in v.items()} for k, v in results.items()},
                        "script": "benchmarks/train_stiction_classifier.py"})
-    print(f"\nshipped model (criterion {args.criterion}): l2 {model.l2:g}, synthetic x{model.synthetic_ratio:g}, threshold {model.threshold:.3f}, "
-          f"intercept {model.bias:+.3f}")
+    print(f"\nshipped model (criterion {args.criterion}): l2 {model.l2:g}, synthetic x{model.synthetic_ratio:g}, "
+          f"threshold {model.threshold:.3f}, intercept {model.bias:+.3f}")
     print("| feature | mean | scale | weight (log-odds per standard deviation) |\n|---|---|---|---|")
     for f, mu, sc, w in sorted(zip(model.features, model.mean, model.scale, model.weights), key=lambda t: -abs(t[3])):
         print(f"| {f} | {mu:.3g} | {sc:.3g} | {w:+.3f} |")

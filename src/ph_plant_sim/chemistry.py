@@ -25,6 +25,11 @@ Henson & Seborg's invariants map onto this directly: their Wa is
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # numpy is imported where it is used (the scalar paths do not need it)
+    import numpy as np
+
 import math
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
@@ -241,7 +246,7 @@ class ChargeBalance:
             x = x_new
         return min(max(x, PH_MIN), PH_MAX)
 
-    def ph_array(self, conc: "np.ndarray", guess: float | "np.ndarray" = 7.0, tol: float = 1e-11) -> "np.ndarray":
+    def ph_array(self, conc: np.ndarray, guess: float | np.ndarray = 7.0, tol: float = 1e-11) -> np.ndarray:
         """pH for many compositions at once: conc has shape (N, n_components).
 
         The same safeguarded Newton as :meth:`ph`, run element-wise on arrays

@@ -156,6 +156,29 @@ def simulate(spec: ScenarioSpec, progress: Callable[[float], None] | None = None
     return rec.run(run_metadata(spec, "closed_loop"))
 
 
+def _uniform_step(t) -> float:
+    """The sample time of a uniform, increasing time base (s); a :class:`UserError` otherwise."""
+    if len(t) < 2:
+        raise UserError("open-loop inputs need at least two samples")
+    dt = float(t[1] - t[0])
+    if dt <= 0 or not all(abs(d - dt) <= 1e-6 * dt for d in (t[1:] - t[:-1])):
+        raise UserError("open-loop inputs must be uniformly sampled with increasing time_s (resample first)")
+    return dt
+
+
+def _rest_at_first_inputs(parts: LoopParts, valve_cmd: float | None, outlet_cmd: float | None,
+                          flows_at: Callable[[int, float], list[float]]) -> None:
+    """Valves, plant, sensors and feed lines at rest at the first sample's inputs (None: not recorded)."""
+    v0 = parts.valve.reset(valve_cmd) if valve_cmd is not None else None
+    o_cmd0 = outlet_cmd if outlet_cmd is not None else parts.start.outlet_command_pct
+    o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
+    opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
+    q0 = flows_at(0, v0.flow_ml_s if v0 else 0.0)
+    parts.process.plant.set_steady_state(parts.process.steady_delivery(q0), opening0)
+    parts.process.reset_sensors()
+    parts.process.reset_lines(q0)
+
+
 def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inputs") -> Run:
     """Plant, valves and sensors driven by recorded inputs instead of the controllers.
 
@@ -170,11 +193,7 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inpu
     if start not in ("first_inputs", "scenario"):
         raise UserError(f"open-loop start must be 'first_inputs' or 'scenario', got {start!r}")
     t = inputs.time_s
-    if len(t) < 2:
-        raise UserError("open-loop inputs need at least two samples")
-    dt = float(t[1] - t[0])
-    if dt <= 0 or not all(abs(d - dt) <= 1e-6 * dt for d in (t[1:] - t[:-1])):
-        raise UserError("open-loop inputs must be uniformly sampled with increasing time_s (resample first)")
+    dt = _uniform_step(t)
     spec = spec.model_copy(update={"sample_time_s": dt, "duration_s": float(t[-1] - t[0]) or dt})
     parts = build_parts(spec)
     plant = parts.process.plant
@@ -198,14 +217,8 @@ def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inpu
         return out
 
     if start == "first_inputs":
-        v0 = parts.valve.reset(float(inputs["valve_command_pct"][0])) if has_cmd else None
-        o_cmd0 = float(outlet_cmd[0]) if outlet_cmd is not None else parts.start.outlet_command_pct
-        o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
-        opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
-        q0 = flows_at(0, v0.flow_ml_s if v0 else 0.0)
-        plant.set_steady_state(parts.process.steady_delivery(q0), opening0)
-        parts.process.reset_sensors()
-        parts.process.reset_lines(q0)
+        _rest_at_first_inputs(parts, float(inputs["valve_command_pct"][0]) if has_cmd else None,
+                              float(outlet_cmd[0]) if outlet_cmd is not None else None, flows_at)
 
     rec = RunRecorder(signal_names(parts), len(t))
     for k in range(len(t)):

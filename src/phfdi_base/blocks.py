@@ -53,7 +53,7 @@ def register_block(name: str) -> Callable[[type], type]:
 
     def deco(cls: type) -> type:
         BLOCKS[name] = cls
-        cls.block_name = name
+        setattr(cls, "block_name", name)  # noqa: B010  (a new attribute of any class)
         return cls
 
     return deco

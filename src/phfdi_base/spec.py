@@ -245,7 +245,7 @@ def load_plugins(plugins: list[str]) -> None:
                 if name in sys.modules:
                     continue
                 spec = importlib.util.spec_from_file_location(name, ref)
-                if spec is None or not Path(ref).exists():
+                if spec is None or spec.loader is None or not Path(ref).exists():
                     raise FileNotFoundError(ref)
                 module = importlib.util.module_from_spec(spec)
                 sys.modules[name] = module

@@ -28,6 +28,8 @@ def read_mapping(path: str | Path, what: str = "file", expected: str = "a mappin
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or "parse error"
         raise UserError(f"{path}: not valid YAML{where} ({problem})") from None
+    except (ValueError, OverflowError) as exc:  # a scalar YAML types but cannot build, e.g. date 2024-13-45
+        raise UserError(f"{path}: not valid YAML (a value cannot be read: {exc})") from None
     if not isinstance(data, dict):
         raise UserError(f"{path}: expected {expected}")
     return data

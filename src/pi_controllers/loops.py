@@ -34,13 +34,13 @@ class ControllerBank:
     def reset(self, ph_output_pct: float, ph_meas: float, level_output_pct: float, level_meas: float) -> None:
         """Bumpless start: outputs at their given values for the t=0 setpoints."""
         self.ph.reset(ph_output_pct, self.ph_setpoint.value(0.0), ph_meas)
-        if self.level is not None:
+        if self.level is not None and self.level_setpoint is not None:
             self.level.reset(level_output_pct, self.level_setpoint.value(0.0), level_meas)
 
     def compute(self, t_s: float, ph_meas: float, level_meas: float) -> ControllerOutputs:
         sp_ph = self.ph_setpoint.value(t_s)
         u_ph = self.ph.step(sp_ph, ph_meas)
-        if self.level is None:
+        if self.level is None or self.level_setpoint is None:  # built together (build_controllers)
             return ControllerOutputs(t_s, sp_ph, u_ph, float("nan"), self.fixed_level_output_pct)
         sp_level = self.level_setpoint.value(t_s)
         return ControllerOutputs(t_s, sp_ph, u_ph, sp_level, self.level.step(sp_level, level_meas))

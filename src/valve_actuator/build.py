@@ -48,8 +48,11 @@ def start_commands(spec: ScenarioSpec, rest: FlowsAtRest, level_controlled: bool
 
     ``level_controlled``: the outlet valve holds a level (else it stays fully open, 100 %).
     """
-    cmd = position_for_opening(rest.flows_ml_s[rest.valve_feed_index] / spec.valves.ph.max_flow_ml_s, spec.valves.ph)
-    outlet_cmd = position_for_opening(rest.outlet_opening, spec.valves.outlet) if level_controlled else 100.0
+    max_flow = spec.valves.ph.max_flow_ml_s
+    assert max_flow is not None  # the scenario schema requires it for the pH valve
+    cmd = position_for_opening(rest.flows_ml_s[rest.valve_feed_index] / max_flow, spec.valves.ph)
+    outlet = spec.valves.outlet
+    outlet_cmd = position_for_opening(rest.outlet_opening, outlet) if level_controlled and outlet else 100.0
     return cmd, outlet_cmd
 
 

@@ -5,8 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from phfdi.benchmarks.scoring import (NAB_PROFILES, binary_scores, detection_windows, match_changepoints, nab_reward,
-                                      nab_scores, switches)
+from phfdi.benchmarks.scoring import (
+    NAB_PROFILES,
+    binary_scores,
+    detection_windows,
+    match_changepoints,
+    nab_reward,
+    nab_scores,
+    switches,
+)
 
 
 def test_binary_scores_pooled_over_files():

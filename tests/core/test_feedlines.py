@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from phfdi_base.blocks import make_block
+import ph_plant_sim.feedlines  # noqa: F401
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, nominal_raw
 from phfdi.loop import simulate, simulate_open_loop
 from phfdi.run import Run
+from phfdi_base.blocks import make_block
 from phfdi_base.spec import validate_scenario
-import ph_plant_sim.feedlines  # noqa: F401
 
 
 def run_block(name, params, x, dt_s=1.0):

@@ -64,3 +64,14 @@ def test_override_through_a_value_that_is_no_mapping(key, message):
 
     with pytest.raises(UserError, match=message):
         load_scenario("paper", overrides=[f"{key}=1"])
+
+
+def test_a_scalar_yaml_cannot_build_is_one_line(tmp_path):
+    """PyYAML raises ValueError for a date that does not exist (found by the fuzz test)."""
+    from phfdi_base.errors import UserError
+    from phfdi_base.yamlfile import read_mapping
+
+    path = tmp_path / "s.yaml"
+    path.write_text("name: x\nwhen: 2024-13-45\n")
+    with pytest.raises(UserError, match=r"s.yaml: not valid YAML \(a value cannot be read: month must be in 1..12\)"):
+        read_mapping(path)

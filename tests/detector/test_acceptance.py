@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from wavelet_fdi.config import DetectorSettings
 from phfdi.replay import replay_run
+from wavelet_fdi.config import DetectorSettings
 
 from .detector_helpers import PAPER_FAULTS
 

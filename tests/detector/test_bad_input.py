@@ -12,9 +12,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from phfdi.loop import simulate
+from phfdi.replay import detector_inputs
 from wavelet_fdi.detector import StreamingDetector
 from wavelet_fdi.inputs import InputRegularizer
-from phfdi.replay import detector_inputs
 
 from .detector_helpers import SHORT, short_spec
 

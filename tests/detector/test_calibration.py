@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from phfdi.study.evaluation import EvalConfig, alarm_positions
 from phfdi_base.errors import UserError
 from wavelet_fdi.calibration import DEFAULT_CALIBRATION_SEEDS, calibrate_from_traces, tail_threshold, window_maxima
 from wavelet_fdi.config import Calibration, DetectorSettings, load_default_calibration
-from phfdi.study.evaluation import EvalConfig, alarm_positions
 from wavelet_fdi.filterbank import CausalSwt
 from wavelet_fdi.statistics import increments
 

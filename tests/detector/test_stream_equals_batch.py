@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from phfdi.loop import simulate
-from wavelet_fdi.detector import StreamingDetector
-from phfdi.study.evaluation import alarm_positions
 from phfdi.replay import detector_inputs
+from phfdi.study.evaluation import alarm_positions
+from wavelet_fdi.detector import StreamingDetector
 
 from .detector_helpers import SHORT, short_spec
 

@@ -6,8 +6,15 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from phfdi.diagnosis.residual import (characterise, input_correlation, ljung_box, noise_floor, scale_energy,
-                                      significance, significance_f)
+from phfdi.diagnosis.residual import (
+    characterise,
+    input_correlation,
+    ljung_box,
+    noise_floor,
+    scale_energy,
+    significance,
+    significance_f,
+)
 
 
 @pytest.fixture

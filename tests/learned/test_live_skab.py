@@ -47,3 +47,25 @@ def test_bag_of_a_skab_record_through_the_node_gives_the_offline_alarms(skab_fil
     assert [{k: a.get(k) for k in keys} for a in live["alarms"]] == \
         [{k: a.get(k) for k in keys} for a in offline["alarms"]]
     assert "/fault_alarm ALARM at" in proc.stderr and "learned detector node" in proc.stderr
+
+
+@pytest.mark.parametrize("reference", ["", "missing.json", "bad.json"])
+def test_node_refuses_a_bad_reference_in_one_line(reference, tmp_path):
+    """The learned node with no, a missing or a broken reference file: exit 2, one line naming it."""
+    from phfdi_base.ros.env import graph_env, reserve_domain_id
+
+    from ..ros.conftest import node_cmd
+
+    (tmp_path / "bad.json").write_text('{"format": "phfdi-learned-detector/1"}')
+    params = {"graph_nodes": "[detector]"}
+    if reference:
+        params["reference"] = str(tmp_path / reference)
+    lease = reserve_domain_id()
+    try:
+        proc = subprocess.run(node_cmd("phfdi.ros.learned_node", **params), capture_output=True, text=True,
+                              timeout=60, env=graph_env(lease.domain_id), cwd=tmp_path)
+    finally:
+        lease.release()
+    assert proc.returncode == 2, proc.stderr
+    errors = [ln for ln in proc.stderr.splitlines() if "error:" in ln]
+    assert len(errors) == 1 and "reference" in errors[0] and "Traceback" not in proc.stderr

@@ -6,8 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from phfdi.loopdiag.classifier import (Data, LogisticModel, best_threshold, fit_logistic, load_model,
-                                       nested_lolo, training_weights)
+from phfdi.loopdiag.classifier import (
+    Data,
+    LogisticModel,
+    best_threshold,
+    fit_logistic,
+    load_model,
+    nested_lolo,
+    training_weights,
+)
 from phfdi.loopdiag.features import FEATURE_NAMES
 
 

@@ -5,8 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from phfdi.loopdiag.readers import (ColumnMap, LoopDataError, guess_columns, process_type_for, read_loop,
-                                   read_loop_segments)
+from phfdi.loopdiag.readers import (
+    ColumnMap,
+    LoopDataError,
+    guess_columns,
+    process_type_for,
+    read_loop,
+    read_loop_segments,
+)
 
 
 def simple_export(path, n=150, pv=None, dt=10):

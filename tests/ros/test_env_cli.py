@@ -6,8 +6,8 @@ import subprocess
 
 import pytest
 
-from phfdi_base.ros.env import ensure_localhost, graph_env, reserve_domain_id
 from phfdi_base.errors import UserError
+from phfdi_base.ros.env import ensure_localhost, graph_env, reserve_domain_id
 
 from .conftest import node_cmd, phfdi_cmd
 

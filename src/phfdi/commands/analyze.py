@@ -121,10 +121,10 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     import pywt
 
+    from phfdi.study.paperset import PAPER_GROUPING, section6_variants, section7_variants, simulate_variants
     from phfdi_base.errors import UserError
     from wavelet_fdi.analysis import Options
     from wavelet_fdi.multisignal import from_runs
-    from phfdi.study.paperset import PAPER_GROUPING, section6_variants, section7_variants, simulate_variants
     from wavelet_fdi.report import section6_claims, section7_claims, write_all
 
     out = Path(args.out)

@@ -44,8 +44,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     conv.add_argument("output", help="run file to write (.csv or .parquet)")
     conv.set_defaults(func=run_to_run)
     fc = bag_sub.add_parser("from-csv", help="write a measured record (CSV, Parquet) as a bag of "
-                                             "/measured/sample messages", epilog=EXAMPLES,
-                            formatter_class=EPILOG_FORMAT)
+                                             "/measured/sample messages",
+                            description="Write a measured record as an MCAP bag (ros2 profile, schemas embedded): "
+                                        "one phfdi_interfaces/MeasuredSample per row on /measured/sample, which "
+                                        "phfdi replay --live BAG --reference REF plays into the detector node.",
+                            epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     fc.add_argument("input", help="measured record (.csv or .parquet)")
     fc.add_argument("output", help="bag to write (.mcap)")
     fc.add_argument("--exclude", default="", metavar="COLS", help="columns that are not channels (e.g. labels)")

@@ -69,7 +69,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Simulate a scenario healthy with several noise seeds, measure the residual's "
                                    "noise per wavelet band and set each CUSUM threshold so that the detector's "
                                    "average run length to a false alarm is the target. Writes a YAML (or JSON) "
-                                   "file the detector loads.",
+                                   "file the detector loads. With --learn: fit a learned healthy reference on a "
+                                   "measured healthy record instead (any channels, no plant model).",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     p.add_argument("--scenario", default="paper", help="scenario preset or .yaml (default paper)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -93,10 +94,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.scenario import load_scenario
-    from phfdi_base.errors import UserError
     from phfdi.calibration import calibrate, calibrate_from_runs
     from phfdi.replay import load_any
+    from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
 
     if args.learn:
         return run_learn(args)

@@ -152,9 +152,9 @@ def _in_process(spec, out: Path):
 
 # ---- 2. offline replay ---------------------------------------------------------------------
 def _offline(run_, record_trace: bool = False):
+    from phfdi.replay import run_chunks, scenario_of
     from wavelet_fdi.config import DetectorSettings, load_default_calibration
     from wavelet_fdi.detector import StreamingDetector
-    from phfdi.replay import run_chunks, scenario_of
 
     spec = scenario_of(run_)
     settings = DetectorSettings()
@@ -212,7 +212,7 @@ def _healthy_check(args) -> None:
     t0 = time.perf_counter()
     healthy = simulate(load_scenario("paper", fault="healthy", overrides=args.overrides))
     alarms = _offline(healthy).alarms
-    _say(f"      healthy run of the same scenario (in-process, replayed): "
+    _say("      healthy run of the same scenario (in-process, replayed): "
          + (f"{len(alarms)} alarm(s): FALSE ALARM" if alarms else "no alarm")
          + f" ({time.perf_counter() - t0:.1f} s)")
 

@@ -26,9 +26,9 @@ or SIGTERM stops all nodes and leaves a readable bag. See docs/ros_graph.md.
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("launch", help="run a scenario through the ROS 2 node graph (plant, valve, controllers, detector)",
-                       description="Start the plant, valve and controller nodes (and a recorder, and the fault detector) as separate "
-                                   "processes, run the scenario in lock-step simulated time (or paced), stop "
-                                   "everything cleanly and print a summary.",
+                       description="Start the plant, valve and controller nodes (and a recorder, and the fault "
+                                   "detector) as separate processes, run the scenario in lock-step simulated time "
+                                   "(or paced), stop everything cleanly and print a summary.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     add_scenario_args(p)
     p.add_argument("--record", metavar="BAG.mcap", default=None, help="record every topic to this MCAP bag")

@@ -77,8 +77,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.loopdiag.diagnose import Settings
-    from phfdi.loopdiag.plantwide import diagnose_jobs, expand, format_worst, write_table
     from phfdi.loopdiag.hammerstein import ACTUATOR_CAUSES
+    from phfdi.loopdiag.plantwide import diagnose_jobs, expand, format_worst, write_table
     from phfdi.loopdiag.readers import ColumnMap
     from phfdi.loopdiag.report import format_report, format_summary, to_json
     from phfdi_base.errors import UserError

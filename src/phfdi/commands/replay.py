@@ -75,10 +75,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from phfdi.replay import load_any, replay_run, scenario_of
     from phfdi.scenario import load_scenario
     from phfdi_base.errors import UserError
     from wavelet_fdi.config import Calibration
-    from phfdi.replay import load_any, replay_run, scenario_of
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
@@ -115,8 +115,8 @@ def run(args: argparse.Namespace) -> int:
 
 def run_learned(args: argparse.Namespace) -> int:
     """The record through the learned reference and the multichannel detector."""
-    from phfdi.learned import alarm_summaries, event_dict, format_alarms as format_learned, read_measured, \
-        replay_measured
+    from phfdi.learned import alarm_summaries, event_dict, read_measured, replay_measured
+    from phfdi.learned import format_alarms as format_learned
     from wavelet_fdi.learned_detector import LearnedModel
 
     model = LearnedModel.load(args.reference)

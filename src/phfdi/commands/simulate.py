@@ -55,9 +55,8 @@ def read_inputs(path: str):
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.loop import simulate, simulate_open_loop
-    from phfdi_base.errors import UserError
-    from phfdi.run import Run
     from phfdi.summary import format_summary, summarize
+    from phfdi_base.errors import UserError
 
     spec = scenario_from_args(args)
     if args.inputs:

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from phfdi_base.spec import apply_override
 from phfdi_base.errors import UserError
+from phfdi_base.spec import apply_override
 
 from .catalogue import Candidate, Param
 from .fit import Fitter, Problem

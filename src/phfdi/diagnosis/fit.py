@@ -238,7 +238,8 @@ class Fitter:
             variant="+".join(c.variant for c in cands if c.variant), params=flat,
             intervals=intervals, fixed=fixed, main=cands[0].main if len(cands) == 1 else "",
             n_params=n_par, train_sse=sse, n_train=n, aic=aic, bic=bic, val_rmse=res_val["rmse"],
-            val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"], val_whiteness_p=res_val["whiteness_p"],
+            val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"],
+            val_whiteness_p=res_val["whiteness_p"],
             val_structure=res_val["structure"], starts=res_val["starts"],
             raw=raw, nfev=nfev, seconds=time.perf_counter() - t0, message=str(message), identified=identified)
 

@@ -430,10 +430,11 @@ def _decide(nom: FitResult, results: list[FitResult], pairs: list[FitResult], lo
         return finish("explained", winner, conf,
                       f"{winner.cause} brings the held-out error from {nom_ratio:.2f} to {ratio:.2f} x the noise "
                       f"floor ({gain:+.0f} % NRMSE on {main}){margin}", True)
+    why = (f"its error still has structure (Ljung-Box p = {winner.val_whiteness_p:.2g})"
+           if ratio <= opts.explained_ratio else "stays above the noise floor")
     return finish("not_explained", winner, conf,
                   f"no candidate explains the misfit: the closest, {winner.cause}, lowers the held-out error "
-                  f"from {nom_ratio:.2f} to {ratio:.2f} x noise ({gain:+.0f} % NRMSE on {main}) but "
-                  f"{'its error still has structure (Ljung-Box p = ' + format(winner.val_whiteness_p, '.2g') + ')' if ratio <= opts.explained_ratio else 'stays above the noise floor'}"
+                  f"from {nom_ratio:.2f} to {ratio:.2f} x noise ({gain:+.0f} % NRMSE on {main}) but {why}"
                   f"{margin}", True)
 
 

@@ -10,15 +10,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from phfdi_base.errors import UserError
 from phfdi.run import Run
+from phfdi_base.errors import UserError
 
 from .diagnose import Settings
 from .evaluate import Labelled
 from .features import FEATURE_NAMES, FRICTION_CAUSES, loop_evidence
 from .readers import read_loop
-from .training import DrawnLoop
 from .synthetic import simulate_loop
+from .training import DrawnLoop
 
 
 def row_for_run(run: Run, stiction: bool, group: str, source: str, name: str,

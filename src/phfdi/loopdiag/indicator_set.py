@@ -6,8 +6,7 @@ import numpy as np
 
 from .baselines import he_curve_fit, horch_ccf
 from .bicoherence import apparent_stiction, ngi_nli
-from .indicators import (Indicator, area_peak_ratio, horch_histogram, kano_stuck_index, not_applicable,
-                         relay_shape)
+from .indicators import Indicator, area_peak_ratio, horch_histogram, kano_stuck_index, not_applicable, relay_shape
 
 HORCH_CCF_REF = "Horch (1999), Control Eng. Practice 7, 1221-1231: OP-PV cross-correlation odd = stiction"
 HE_REF = "He, Wang, Pottmann & Qin (2007), Ind. Eng. Chem. Res. 46, 4549-4560: triangle vs sinusoid fit"

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ReadError
-from .notes import counted, places
+from .notes import places
 
 POLICIES = ("run", "historian")
 #: a forward time jump longer than this many sample intervals starts a new segment (historian policy)

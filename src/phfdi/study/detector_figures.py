@@ -16,8 +16,8 @@ from wavelet_fdi.isolation import CLASSES
 from wavelet_fdi.peers import DETECTORS, LABELS
 from wavelet_fdi.statistics import CusumBank
 
-COLORS = {"wavelet": "tab:blue", "wavelet_bands": "tab:cyan", "cusum": "tab:orange", "focus": "tab:green", "page_hinkley": "tab:red",
-          "adwin": "tab:purple"}
+COLORS = {"wavelet": "tab:blue", "wavelet_bands": "tab:cyan", "cusum": "tab:orange", "focus": "tab:green",
+          "page_hinkley": "tab:red", "adwin": "tab:purple"}
 
 
 def _save(fig, path: Path) -> Path:

@@ -414,7 +414,8 @@ def summarise(records: list[dict], cfg: EvalConfig, cal: Calibration, peers: dic
             rows.append(row)
     thresholds = {"wavelet": cal.thresholds, "wavelet_bands": peers["wavelet_bands"]["thresholds"],
                   **{k: peers[k]["threshold"] for k in PEERS}}
-    return {"rows": rows, "heldout_arl0": heldout_arl(records, thresholds, cal.window_samples), "false_alarms": false, "healthy_hours": hours,
+    return {"rows": rows, "heldout_arl0": heldout_arl(records, thresholds, cal.window_samples),
+            "false_alarms": false, "healthy_hours": hours,
             "false_per_hour": {d: false[d] / hours if hours else None for d in DETECTORS},
             "arl0_samples": cfg.settings.arl0_samples, "thresholds": thresholds,
             "sigma_ph": cal.sigma["ph"]["raw"], "adwin_note": peers.get("adwin", {}).get("note", "")}

@@ -12,10 +12,11 @@ plant starts sample 0 once every node named in ``graph_nodes`` is ready.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from typing import Any, Callable
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from phfdi_base.topics import GRAPH_READY
@@ -51,8 +52,13 @@ class _CountingPublisher:
 
 
 
-class StartBarrierMixin:
-    """Data endpoints, the start barrier and flushing on the way out (mixed into ``GraphNode``)."""
+class StartBarrierMixin(Node):
+    """Data endpoints, the start barrier and flushing on the way out (a part of ``GraphNode``)."""
+
+    # given by the other parts of GraphNode
+    finished: bool
+    exit_code: int
+    param: Callable[[str], Any]
 
     def _init_barrier(self) -> None:
         self.published: dict[str, int] = {}  # messages per topic, printed on exit

@@ -23,6 +23,7 @@ from rclpy.exceptions import (
     InvalidParameterValueException,
     ParameterUninitializedException,
 )
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from phfdi_base.topics import LOOP_NODES
@@ -108,8 +109,10 @@ def common_params(runtime: Sequence[str]) -> tuple[ParamSpec, ...]:
                  if p.name in runtime else p for p in COMMON_PARAMS)
 
 
-class ParametersMixin:
-    """Declaring, reading and checking parameters (mixed into :class:`~phfdi_base.ros.graph_node.GraphNode`)."""
+class ParametersMixin(Node):
+    """Declaring, reading and checking parameters (a part of :class:`~phfdi_base.ros.graph_node.GraphNode`)."""
+
+    _specs: dict[str, ParamSpec]  # every parameter of the node, by name
 
     # ---- parameters -------------------------------------------------------------
     def _declare(self, specs: Sequence[ParamSpec], scenario) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import signal
 import sys
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import rclpy
 from rclpy.node import Node
@@ -56,7 +56,7 @@ def main(factory: Callable[[], Node], prog: str, summary: str, specs: Sequence[P
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     name = prog.split(".")[0]
     try:
-        node = factory()
+        node: Any = factory()  # a GraphNode: param, finished, spin_timeout_s, after_spin, drain, close, exit_code
     except NodeStartError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
