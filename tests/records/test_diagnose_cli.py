@@ -78,3 +78,15 @@ def test_notes_reach_stderr_and_the_json_report(short_run, tmp_path, run_cli):
     note = "column 'ph_measured': 1 cell not a number (NaN 1), first at line 302: marked missing"
     assert f"phfdi diagnose: note: r.csv: {note}" in err
     assert any(note in n for n in json.loads(out)["notes"])
+
+
+def test_a_jump_in_time_is_refused_not_resampled(tmp_path, run_cli):
+    """A stamp far ahead (a clock jump, a typo) would make a grid of 10^12 samples: one line instead."""
+    rows = ["time_s,valve_command_pct,ph_measured"] + [f"{i},{40 + i % 5},{7 + 0.01 * i}" for i in range(100)]
+    path = tmp_path / "jump.csv"
+    path.write_text("\n".join(rows + ["1e12,40,7"]) + "\n")
+    line = one_error_line(*diagnose(run_cli, path, tmp_path)[::2])
+    assert "jump.csv: time jumps from t = 99 s to 1e+12 s" in line and "must be cut out" in line
+    path.write_text("\n".join(rows) + "\n")
+    line = one_error_line(*diagnose(run_cli, path, tmp_path, "--dt", "1e-9")[::2])
+    assert "--dt 1e-09 s would make" in line

@@ -29,6 +29,8 @@ import sys
 import time
 from pathlib import Path
 
+from phfdi import bagio
+from phfdi.loop import run_metadata
 from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main
 from phfdi_base.stamps import seconds_to_ns
 from phfdi_base.topics import BY_NAME, RECORDED, RECORDER
@@ -56,8 +58,6 @@ class RecorderNode(GraphNode):
 
     def __init__(self) -> None:
         super().__init__(RECORDER)
-        from phfdi import bagio
-        from phfdi.loop import run_metadata
 
         path = self.param("path")
         if not path.endswith(".mcap"):
@@ -86,8 +86,6 @@ class RecorderNode(GraphNode):
         self.start_barrier()
 
     def _open_part(self, path) -> None:
-        from phfdi import bagio
-
         try:
             self.bag = bagio.BagWriter(path, chunk_size=self.param("chunk_size_bytes"),
                                        compression=self.param("compression"))
@@ -99,7 +97,6 @@ class RecorderNode(GraphNode):
 
     def _next_part(self, stamp_ns: int) -> None:
         """Finish this file and go on in the next: the one of the interval that holds ``stamp_ns``."""
-        from phfdi import bagio
 
         self._close_part()
         self._part_end_ns = (stamp_ns // self._split_ns + 1) * self._split_ns
