@@ -17,6 +17,7 @@ from importlib import resources
 from pathlib import Path
 
 from phfdi_base.errors import UserError
+from phfdi_base.yamlfile import read_mapping
 
 from .filterbank import wavelet_filters
 from .statistics import energy_reference
@@ -200,8 +201,6 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":
-        from phfdi_base.yamlfile import read_mapping
-
         path = Path(path)
         if path.suffix.lower() == ".json":
             try:

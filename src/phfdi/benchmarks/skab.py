@@ -25,6 +25,9 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from phfdi_base.errors import UserError
+from wavelet_fdi.learned_detector import LearnedSettings, learn, run_record
+from wavelet_fdi.peers import Peer, calibrate_peers, multichannel_states
+from wavelet_fdi.reference_learned import LearnedReference
 
 from .scoring import BinaryScores, NabResult, binary_scores, match_changepoints, nab_scores, switches
 
@@ -259,7 +262,6 @@ def learned_detector(settings=None) -> Detector:
     fitted on the training rows, then run over the whole file in time order (training rows first,
     so the filters and the observer are warm), one chunk per row block; the test rows' states are
     the prediction."""
-    from wavelet_fdi.learned_detector import LearnedSettings, learn, run_record
 
     s = settings or LearnedSettings()
 
@@ -288,9 +290,6 @@ def peer_detector(name: str, settings=None, arl0_samples: float = PEER_ARL0_SAMP
     on the training rows' residuals only, pooled over the channels, for a false-alarm target of
     ``arl0_samples`` for the union of the channels (each channel m * arl0), by the project's procedure
     (wavelet_fdi.peers.calibrate_peers). An alarm holds the state for ``block_samples`` rows (our clear rule)."""
-    from wavelet_fdi.learned_detector import LearnedSettings
-    from wavelet_fdi.peers import Peer, multichannel_states
-    from wavelet_fdi.reference_learned import LearnedReference
 
     s = settings or LearnedSettings()
 
@@ -308,6 +307,4 @@ def peer_detector(name: str, settings=None, arl0_samples: float = PEER_ARL0_SAMP
 
 
 def _calibrate_peer(name: str, streams: list[np.ndarray], arl0: float, k: float, window: int) -> float:
-    from wavelet_fdi.peers import calibrate_peers
-
     return float(calibrate_peers(streams, arl0, k, window, names=(name,))[name]["threshold"])
