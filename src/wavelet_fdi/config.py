@@ -247,6 +247,9 @@ class Calibration:
         for key in ("mean_shift_sigma", "variance_ratio", "arl0_samples"):
             if key in self.design and not _positive(self.design[key]):
                 raise bad(f"design.{key}", "a positive number")
+        channels = self.design.get("channels")
+        if channels is not None and not (isinstance(channels, list) and all(isinstance(c, str) for c in channels)):
+            raise bad("design.channels", "a list of channel names")
 
 
 def default_calibration_path(scenario: str, wavelet: str, level: int) -> Path:
