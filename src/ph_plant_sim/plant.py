@@ -33,6 +33,8 @@ import numpy as np
 
 from .chemistry import Chemistry
 
+#: sub-steps of one sample beyond which the flows cannot be physical (a refused input, not a long loop)
+MAX_SUBSTEPS = 100_000
 RK4_RATE_STEP = 0.05  # bound on rate * sub-step
 
 
@@ -225,6 +227,9 @@ class CstrPlant:
         level = v / area
         rate = (q_in + outlet.flow(level, opening)) / v + outlet.dflow_dlevel(level, opening) / area
         n_sub = max(1, math.ceil(rate * dt_s / RK4_RATE_STEP))
+        if n_sub > MAX_SUBSTEPS:  # e.g. a flow of 1e20 mL/s from a damaged record: refuse instead of looping for ever
+            raise ValueError(f"the flows ({q_in:g} mL/s in) turn the tank over {rate * dt_s:.3g} times in one "
+                             f"{dt_s:g} s sample, beyond {MAX_SUBSTEPS} integration sub-steps: check the flows' unit")
         h = dt_s / n_sub
         half = 0.5 * h
         w = h / 6.0

@@ -8,7 +8,7 @@ import sys
 import time
 
 from .calibrate import add_detector_args, settings_from_args
-from .common import EPILOG_FORMAT, add_record_args, column_map_from_args, print_notes
+from .common import EPILOG_FORMAT, add_record_args, column_map_from_args, plant_runs_on, print_notes
 
 EXAMPLES = """examples:
   phfdi simulate --fault backlash --out runs/backlash.parquet && phfdi replay runs/backlash.parquet
@@ -120,7 +120,8 @@ def run(args: argparse.Namespace) -> int:
     settings = settings_from_args(args)
     cal = Calibration.load(args.calibration) if args.calibration else None
     t0 = time.perf_counter()
-    result = replay_run(run_, spec, cal, settings, chunk=args.chunk, isolate=not args.no_isolation)
+    with plant_runs_on(args.file):
+        result = replay_run(run_, spec, cal, settings, chunk=args.chunk, isolate=not args.no_isolation)
     elapsed = time.perf_counter() - t0
     print(f"replayed {result.samples} samples in {elapsed:.2f} s ({result.samples / max(elapsed, 1e-9):.0f} "
           f"samples/s, isolation included)", file=sys.stderr)

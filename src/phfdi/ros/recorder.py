@@ -13,7 +13,7 @@ time (``run.mcap``, ``run.1.mcap``, ``run.2.mcap``, ...; :func:`phfdi.bagio.bag_
 each a complete bag with the run's metadata. Why: the MCAP writer keeps an
 index entry per chunk in memory until the file is finished (measured about
 0.7 KiB of Python objects per chunk; at ``pace`` 1 the flush makes a chunk a
-second, about 70 MiB a day), so a recorder that runs for days needs files of
+second, about 60 MiB a day), so a recorder that runs for days needs files of
 bounded length. A file starts with the first message stamped in its interval;
 messages of the previous interval that arrive after it (the topics are not
 ordered with each other) go to the new file.
