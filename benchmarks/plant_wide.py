@@ -15,6 +15,7 @@ stiction verdicts on these loops (they are fresh draws, never trained on).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -56,6 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(reports)} loops ({failed} failed) in {wall:.1f} s on Dask ({where}): "
           f"{60.0 * len(reports) / wall:.1f} loops/minute")
     print(f"stiction verdicts right on {right}/{len(reports) - failed} of these fresh simulated loops")
+    print("load average at the end (1, 5, 15 min): " + ", ".join(f"{v:.1f}" for v in os.getloadavg()))
     return 0
 
 

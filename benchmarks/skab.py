@@ -11,7 +11,12 @@ own scorer (phfdi.benchmarks.scoring) next to the published leaderboard, plus th
 same scores for trivial label-free baselines: a detector that never alarms, one
 that always alarms, a random toggler and Hotelling's T^2, and the labels themselves
 played back as a prediction (a perfect outlier detector: the NAB ceiling of a
-detector that raises one alarm per episode). Files without labels (anomaly-free.csv)
+detector that raises one alarm per episode). With ``--peers``, the change detectors a user
+would otherwise pick (wavelet_fdi.peers: CUSUM, FOCuS from changepoint-online, river's
+Page-Hinkley and ADWIN) run on the SAME residuals as ours (the learned ARX reference fitted on
+the first 400 rows, one peer per channel, alarm = any channel), each threshold calibrated on
+the first 400 rows' residuals only (phfdi.benchmarks.skab.peer_detector), one configuration
+for all files. Files without labels (anomaly-free.csv)
 are predicted and their flagged fraction printed, not scored. Causality is checked:
 each file is run again with its test part cut in half and must give the same
 predictions on the half it saw. OUT/scores.json holds every number printed.
@@ -29,12 +34,21 @@ import numpy as np
 
 from phfdi.benchmarks import skab
 from phfdi_base.errors import UserError
+from wavelet_fdi.peers import PEER_LABELS, PEERS
 
 TOGGLE_PROBABILITIES = (0.02, 0.05, 0.1)
 
 
 OURS = "ours: learned ARX + wavelet CUSUM"
 ORACLE = "labels as prediction (ceiling)"
+
+
+PEER_NAMES = {f"{PEER_LABELS[p]} on our residuals": p for p in PEERS}
+
+
+def peers() -> dict[str, skab.Detector]:
+    """The peer change detectors on the learned reference's residuals (see the module docstring)."""
+    return {label: skab.peer_detector(p) for label, p in PEER_NAMES.items()}
 
 
 def baselines() -> dict[str, skab.Detector]:
@@ -82,6 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("data_dir", help="SKAB data directory (its groups as subdirectories of .csv files)")
     ap.add_argument("--out", required=True, help="output directory")
     ap.add_argument("--by-group", action="store_true", help="also score each group (subdirectory) alone")
+    ap.add_argument("--peers", action="store_true",
+                    help="also run the peer change detectors (CUSUM, FOCuS, Page-Hinkley, ADWIN) on our residuals")
     ap.add_argument("--toggler-seeds", type=int, default=0, metavar="N",
                     help="also print the random togglers' NAB over N seeds (mean, min, max)")
     args = ap.parse_args(argv)
@@ -96,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{sum(len(f.values) - skab.TRAIN_ROWS for f in labelled)} test rows", flush=True)
     out = Path(args.out)
     results, report = [], {}
-    detectors = {OURS: skab.learned_detector(), **baselines()}
+    detectors = {OURS: skab.learned_detector(), **(peers() if args.peers else {}), **baselines()}
     per_detector = {}
     for i, (name, det) in enumerate(detectors.items()):
         t0 = time.perf_counter()
@@ -115,17 +131,26 @@ def main(argv: list[str] | None = None) -> int:
                 report[name][g] = skab.score(name, [r for r in per_file if r.file.group == g]).row()
     written = skab.write_predictions(per_detector[OURS], out)
     causal = causality_check(skab.learned_detector(), files)
-    unlabelled = [r for r in per_detector[OURS] if not r.file.labelled]
+    if args.peers:
+        for name, det in peers().items():
+            causality_check(det, files)
+            report[name]["causal_files"] = len(files)
+        print(f"causality: the peers too, on {len(files)} files", file=sys.stderr)
+    unlabelled = [r for name in per_detector if name == OURS or name in PEER_NAMES
+                  for r in per_detector[name] if not r.file.labelled]
     print(table(results))
     if args.by_group:
         for g in sorted({f.group for f in labelled}):
             print(f"\ngroup {g}:")
             print(table([skab.score(r.name, [x for x in r.files if x.file.group == g]) for r in results], False))
+    if unlabelled:
+        print()
     for r in unlabelled:
         frac = float(np.mean(r.prediction)) if len(r.prediction) else 0.0
-        print(f"\n{r.file.key} (no labels): ours flags {100 * frac:.2f} % of its {len(r.prediction)} rows after "
+        who = next(n for n in per_detector if any(x is r for x in per_detector[n]))
+        print(f"{r.file.key} (no labels): {who} flags {100 * frac:.2f} % of its {len(r.prediction)} rows after "
               f"the first {skab.TRAIN_ROWS}")
-        report[OURS][f"flagged_pct_{r.file.key}"] = 100 * frac
+        report[who][f"flagged_pct_{r.file.key}"] = 100 * frac
     for p in TOGGLE_PROBABILITIES if args.toggler_seeds > 0 else ():
         runs = [skab.score("t", skab.run_detector(skab.random_toggler(p, seed), labelled))
                 for seed in range(args.toggler_seeds)]

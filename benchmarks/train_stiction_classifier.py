@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from phfdi.loopdiag.classifier import CRITERIA, Data, nested_lolo, train
-from phfdi.loopdiag.features import FEATURES
+from phfdi.loopdiag.features import FEATURE_SIGNS, FEATURES
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT / "benchmarks" / "results" / "stiction_dataset.json"
@@ -66,7 +66,8 @@ def table(rows: dict[str, dict]) -> str:
 
 def data_from(rows: list[dict], names: list[str]) -> Data:
     return Data(np.array([r["features"] for r in rows], float), np.array([r["stiction"] for r in rows], bool),
-                [r["group"] for r in rows], np.array([r["source"] == "real" for r in rows], bool), names)
+                [r["group"] for r in rows], np.array([r["source"] == "real" for r in rows], bool), names,
+                list(FEATURE_SIGNS))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import cast
 
 from pydantic import ValidationError
 
@@ -76,7 +77,8 @@ def build_plant(model: PlantModelSpec) -> CstrPlant:
     plant = CstrPlant(chemistry, feeds, Tank(t.area_cm2, outlet, t.overflow, t.volume_ml))
     if model.mixing is not None:  # the probe reads a zone exchanging with the bulk
         m = model.mixing
-        return ZonedPlant(plant, MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds)))
+        # a ZonedPlant stands in for the CstrPlant it wraps (the same interface, delegating)
+        return cast(CstrPlant, ZonedPlant(plant, MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds))))
     return plant
 
 
@@ -132,6 +134,7 @@ def plant_start(spec: ScenarioSpec, plant: CstrPlant, ph_target: float | None = 
     flows = [profile(spec.feeds[n]).value(0.0) if n in spec.feeds else f.flow_ml_s
              for n, f in zip(names, plant.feeds)]
     target = spec.setpoints.ph.initial if ph_target is None else ph_target
+    assert vspec.max_flow_ml_s is not None  # the scenario schema requires it for the pH valve
     try:
         flows[k] = plant.flow_for_ph(target, k, flows, vspec.max_flow_ml_s)
     except ValueError as exc:
@@ -139,7 +142,7 @@ def plant_start(spec: ScenarioSpec, plant: CstrPlant, ph_target: float | None = 
     opening = 1.0
     if spec.setpoints.level_cm is not None and not plant.tank.overflow:
         level = spec.setpoints.level_cm.initial
-        opening = sum(flows) / plant.tank.outlet.flow(level, 1.0)
+        opening = sum(flows) / plant.tank.gravity_outlet.flow(level, 1.0)
         if not 0.0 < opening <= 1.0:
             raise UserError(f"setpoints.level_cm: level {level} cm needs an outlet opening of "
                             f"{100 * opening:.0f} % of full flow, outside 0..100 %")

@@ -26,6 +26,7 @@ from phfdi_base.stamps import split_ns
 from phfdi_base.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_STATE
 
 from .build import build_plant, build_process, load_plant_model
+from .process import Measurement as PlantMeasurement
 from .process import advance_plant
 
 PARAMS = (
@@ -46,7 +47,8 @@ class PlantNode(GraphNode):
         model = load_plant_model(spec.plant)
         # the plant's own part, at the steady state the launcher computed; valves and controllers live in their nodes
         self.process = build_process(spec, build_plant(model), model, list(start.flows_ml_s), start.outlet_opening)
-        self.valve_feed = spec.valves.ph.feed
+        assert spec.valves.ph.feed is not None  # the scenario schema requires it
+        self.valve_feed: str = spec.valves.ph.feed
         self.n_samples = int(math.floor(spec.duration_s / spec.sample_time_s + 1e-9)) + 1
         self.feed_names = [f.name for f in self.process.plant.feeds]
         self.pub_measurement = self.data_publisher(Measurement, MEASUREMENT.name)
@@ -57,7 +59,7 @@ class PlantNode(GraphNode):
         self._measurement_msg, self._clock_msg = Measurement(), Clock()
         self._state_msg = PlantState(feed_names=self.feed_names)
         self.k = -1  # sample waiting for the valves
-        self._m = None  # its measurement
+        self._m: PlantMeasurement | None = None  # its measurement
         self._next_k: int | None = None  # paced mode: sample due at _next_due (wall, monotonic)
         self._next_due = 0.0
         self._pace = self.param("pace")
@@ -95,6 +97,7 @@ class PlantNode(GraphNode):
             self.get_logger().warning(f"ignored a valve state stamped for sample {k} while at sample {self.k}")
             return
         m = self._m
+        assert m is not None  # measured when sample k was published
         flows, outlet_flow = advance_plant(self.process, self.valve_feed, k * self.dt_s, msg.ph_flow_ml_s,
                                            msg.outlet_opening)
         self.k = -1

@@ -33,6 +33,8 @@ import numpy as np
 
 from .chemistry import Chemistry
 
+#: sub-steps of one sample beyond which the flows cannot be physical (a refused input, not a long loop)
+MAX_SUBSTEPS = 100_000
 RK4_RATE_STEP = 0.05  # bound on rate * sub-step
 
 
@@ -84,6 +86,13 @@ class Tank:
         if not self.overflow and self.outlet is None:
             raise ValueError("a vessel without overflow needs an outlet")
 
+    @property
+    def gravity_outlet(self) -> GravityOutlet:
+        """The outlet of a vessel without overflow (there always is one: checked at construction)."""
+        if self.outlet is None:
+            raise ValueError("an overflow vessel has no gravity outlet")
+        return self.outlet
+
 
 @dataclass
 class PlantState:
@@ -119,7 +128,7 @@ class CstrPlant:
 
     def set_state(self, conc_mol_l: Sequence[float], level_cm: float | None = None) -> None:
         """Set composition and level (level ignored for an overflow vessel)."""
-        volume = self.tank.volume_ml if self.tank.overflow else level_cm * self.tank.area_cm2
+        volume = self.tank.volume_ml if self.tank.overflow or level_cm is None else level_cm * self.tank.area_cm2
         if volume is None or volume <= 0:
             raise ValueError("initial liquid volume must be positive")
         self.state = PlantState(
@@ -135,7 +144,7 @@ class CstrPlant:
         conc = self.mixed_inflow(flows_ml_s)
         level = None
         if not self.tank.overflow:
-            level = self.tank.outlet.level_for_flow(sum(flows_ml_s), outlet_opening)
+            level = self.tank.gravity_outlet.level_for_flow(sum(flows_ml_s), outlet_opening)
         self.set_state(conc, level)
 
     def steady_ph(self, flows_ml_s: Sequence[float]) -> float:
@@ -179,7 +188,7 @@ class CstrPlant:
     def outlet_flow(self, flows_ml_s: Sequence[float], outlet_opening: float) -> float:
         if self.tank.overflow:
             return sum(flows_ml_s)
-        return self.tank.outlet.flow(self.level_cm, outlet_opening)
+        return self.tank.gravity_outlet.flow(self.level_cm, outlet_opening)
 
     # ---- dynamics ---------------------------------------------------------------
     def _inflow(self, flows_ml_s: Sequence[float]) -> tuple[float, list[float]]:
@@ -213,11 +222,14 @@ class CstrPlant:
         return self._gravity_map(volume_ml, q_in, opening, dt_s)
 
     def _gravity_map(self, v: float, q_in: float, opening: float, dt_s: float):
-        outlet = self.tank.outlet
+        outlet = self.tank.gravity_outlet
         area = self.tank.area_cm2
         level = v / area
         rate = (q_in + outlet.flow(level, opening)) / v + outlet.dflow_dlevel(level, opening) / area
         n_sub = max(1, math.ceil(rate * dt_s / RK4_RATE_STEP))
+        if n_sub > MAX_SUBSTEPS:  # e.g. a flow of 1e20 mL/s from a damaged record: refuse instead of looping for ever
+            raise ValueError(f"the flows ({q_in:g} mL/s in) turn the tank over {rate * dt_s:.3g} times in one "
+                             f"{dt_s:g} s sample, beyond {MAX_SUBSTEPS} integration sub-steps: check the flows' unit")
         h = dt_s / n_sub
         half = 0.5 * h
         w = h / 6.0
@@ -423,7 +435,7 @@ def _gravity_maps(tank: Tank, v: np.ndarray, q_in: np.ndarray, opening: np.ndarr
     The slope is None when the vectorised path does not apply (a head at or
     below zero, or more than 64 sub-steps).
     """
-    outlet, area = tank.outlet, tank.area_cm2
+    outlet, area = tank.gravity_outlet, tank.area_cm2
     cv_full, z, expo = outlet.cv, outlet.z_cm, outlet.n
     head = v / area + z
     if not np.all(head > 0.0):

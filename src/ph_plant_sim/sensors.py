@@ -99,7 +99,7 @@ class GaussianNoise:
     std: float
     seed: int = 0
     severity: float = 1.0
-    _rng: np.random.Generator | None = field(default=None, repr=False)
+    _rng: np.random.Generator = field(init=False, repr=False)
     _block: np.ndarray | None = field(default=None, repr=False)
     _i: int = field(default=0, repr=False)
 
@@ -213,8 +213,8 @@ class SecondOrderLag:
     tau2_s: float
     dt_s: float = 1.0
     severity: float = 1.0
-    _a: FirstOrderLag | None = field(default=None, repr=False)
-    _b: FirstOrderLag | None = field(default=None, repr=False)
+    _a: FirstOrderLag = field(init=False, repr=False)
+    _b: FirstOrderLag = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._a = FirstOrderLag(self.tau1_s, self.dt_s, self.severity)

@@ -14,6 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
+from phfdi.records import read_record
 from phfdi_base.errors import UserError
 from wavelet_fdi.learned_detector import LearnedEvent, LearnedModel, LearnedSettings, learn, run_record
 
@@ -35,7 +36,6 @@ class MeasuredRecord:
 def read_measured(path: str | Path, column_map=None, channels: Sequence[str] | None = None,
                   exclude: Sequence[str] = (), encoding: str | None = None) -> MeasuredRecord:
     """The record's channels as a matrix: ``channels`` (each must exist) or every column but ``exclude``."""
-    from phfdi.records import read_record
 
     rec = read_record(path, column_map, channels=list(channels) if channels else None, encoding=encoding)
     if len(rec) == 0:

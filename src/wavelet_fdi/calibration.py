@@ -37,6 +37,7 @@ import numpy as np
 from phfdi_base.errors import UserError
 
 from .config import Calibration, DetectorSettings
+from .statistics import increments
 
 #: seeds of the calibration runs: disjoint from the evaluation's (1..99)
 DEFAULT_CALIBRATION_SEEDS = tuple(range(1001, 1017))
@@ -126,7 +127,6 @@ def measure_sigma(traces: list[dict[str, np.ndarray]], bands: list[str]) -> dict
 def statistic_increments(trace: dict[str, np.ndarray], name: str, sigma: dict[str, dict[str, float]],
                          settings: DetectorSettings) -> np.ndarray:
     """Increments of one detector statistic on the monitored samples of a trace."""
-    from .statistics import increments
 
     ch, band, kind = name.split(".")
     j = settings.rows().index(band)

@@ -17,6 +17,7 @@ from importlib import resources
 from pathlib import Path
 
 from phfdi_base.errors import UserError
+from phfdi_base.yamlfile import read_mapping
 
 from .filterbank import wavelet_filters
 from .statistics import energy_reference
@@ -200,8 +201,6 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":
-        from phfdi_base.yamlfile import read_mapping
-
         path = Path(path)
         if path.suffix.lower() == ".json":
             try:
@@ -248,6 +247,9 @@ class Calibration:
         for key in ("mean_shift_sigma", "variance_ratio", "arl0_samples"):
             if key in self.design and not _positive(self.design[key]):
                 raise bad(f"design.{key}", "a positive number")
+        channels = self.design.get("channels")
+        if channels is not None and not (isinstance(channels, list) and all(isinstance(c, str) for c in channels)):
+            raise bad("design.channels", "a list of channel names")
 
 
 def default_calibration_path(scenario: str, wavelet: str, level: int) -> Path:

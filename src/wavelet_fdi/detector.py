@@ -39,6 +39,7 @@ from .config import Calibration, DetectorSettings
 from .filterbank import CausalSwt
 from .history import History
 from .inputs import InputRegularizer
+from .isolation import FaultIsolator
 from .reference import HealthyReference, ReferenceState
 from .statistics import CusumBank, increments
 
@@ -166,7 +167,6 @@ class StreamingDetector:
         self.snapshots: dict[int, ReferenceState] = {}
         self.isolator = None
         if isolate:
-            from .isolation import FaultIsolator
 
             self.isolator = FaultIsolator(spec, calibration, s)
         self.alarms: list[Alarm] = []

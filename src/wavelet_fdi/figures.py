@@ -13,6 +13,7 @@ import numpy as np  # noqa: E402
 import pywt  # noqa: E402
 
 from .multisignal import Multisignal  # noqa: E402
+from .residuals import moving_rms
 
 COLOURS = {"healthy": "tab:green", "backlash": "tab:blue", "friction": "tab:red", "deadzone": "tab:purple",
            "saturation": "tab:orange"}
@@ -292,7 +293,6 @@ def band_panels(rs: Any, which: str, title: str, unit: str, path: Path, onset_s:
     With ``thresholds`` the detector's statistic (trailing RMS over ``window``
     coefficients) is drawn over the residual, with its threshold and first alarm.
     """
-    from .residuals import moving_rms
 
     data = getattr(rs, which)
     bands = [f"D{j}" for j in range(1, rs.level + 1)] + [f"A{rs.level}"]

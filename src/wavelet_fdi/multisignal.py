@@ -24,6 +24,8 @@ from typing import Any, Sequence
 import numpy as np
 import pywt
 
+from phfdi_base.signals import unit_of
+
 #: MATLAB's extension-mode names (dwtmode) -> PyWavelets' names
 MATLAB_MODES = {
     "sym": "symmetric", "symh": "symmetric", "symw": "reflect", "zpd": "zero", "sp0": "constant",
@@ -161,7 +163,6 @@ def from_runs(runs: Sequence[Any], labels: Sequence[str], signal: str = "ph_meas
     if truth_signal and all(truth_signal in r for r in runs):
         truth = np.vstack([resample_mean(r.time_s, r[truth_signal], edges) for r in runs])
     names = list(names) if names is not None else [f"{lab}-{i}" for i, lab in enumerate(labels)]
-    from phfdi_base.signals import unit_of
 
     return Multisignal(data, list(labels), names, 0.5 * (edges[1:] + edges[:-1]) - t0, signal,
                        unit_of(signal), truth, [dict(d) for d in info] if info else [])

@@ -50,6 +50,8 @@ from phfdi_base.stamps import finite_or, join_ns, seconds_to_ns
 from phfdi_base.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
 
 from .alarm_messages import severity_of
+from .config import Calibration, DetectorSettings, load_default_calibration
+from .detector import StreamingDetector
 
 PARAMS = (
     ParamSpec("calibration", "", "calibration file (.yaml/.json) from phfdi calibrate; '' takes the one shipped "
@@ -237,9 +239,6 @@ class DetectorNode(GraphNode):
 
     # ---- parameters -----------------------------------------------------------------------
     def _build_core(self):
-        from .config import Calibration, DetectorSettings, load_default_calibration
-        from .detector import StreamingDetector
-
         try:
             settings = DetectorSettings(wavelet=self.param("wavelet"), level=self.param("level"),
                                         arl0_samples=self.param("arl0_samples"),

@@ -123,25 +123,25 @@ def _page_hinkley_window_max(u: np.ndarray, k: float) -> float:
 
 
 def calibrate_peers(streams: list[np.ndarray], arl0: float, k: float, window: int,
-                    progress=None) -> dict[str, dict]:
-    """Threshold (delta for ADWIN) of each peer for ARL0, from healthy normalised residual streams."""
+                    progress=None, names: tuple[str, ...] = PEERS) -> dict[str, dict]:
+    """Threshold (delta for ADWIN) of each peer in ``names`` for ARL0, from healthy normalised residual streams."""
     out: dict[str, dict] = {}
     p_target = window / arl0
     windows = [s[i:i + window] for s in streams for i in range(0, len(s) - window + 1, window)]
     maxima = {
-        "cusum": np.concatenate([np.maximum(window_maxima(s - k, window), window_maxima(-s - k, window))
-                                 for s in streams]),
-        "focus": np.array([_focus_window_max(w) for w in windows]),
-        "page_hinkley": np.array([_page_hinkley_window_max(w, k) for w in windows]),
+        "cusum": lambda: np.concatenate([np.maximum(window_maxima(s - k, window), window_maxima(-s - k, window))
+                                         for s in streams]),
+        "focus": lambda: np.array([_focus_window_max(w) for w in windows]),
+        "page_hinkley": lambda: np.array([_page_hinkley_window_max(w, k) for w in windows]),
     }
-    for name, m in maxima.items():
-        fit = tail_threshold(m, p_target)
-        out[name] = {"threshold": fit.threshold, "tail_fit": fit.as_dict(), "method": "window maxima, tail fit"}
+    for name in names:
+        if name == "adwin":
+            out[name] = calibrate_adwin(streams, arl0)
+        else:
+            fit = tail_threshold(maxima[name](), p_target)
+            out[name] = {"threshold": fit.threshold, "tail_fit": fit.as_dict(), "method": "window maxima, tail fit"}
         if progress:
             progress(name)
-    out["adwin"] = calibrate_adwin(streams, arl0)
-    if progress:
-        progress("adwin")
     return out
 
 
@@ -168,3 +168,24 @@ def calibrate_adwin(streams: list[np.ndarray], arl0: float) -> dict:
                 f"streams; the most sensitive delta tested is used")
     return {"threshold": chosen, "method": "false alarms counted on the healthy streams per delta",
             "deltas": list(ADWIN_DELTAS), "rates_per_sample": rates, "healthy_samples": total, "note": note}
+
+
+# ---- several channels at once (measured records) -----------------------------------------
+def hold_states(alarm_positions: list[int], n: int, hold_samples: int) -> np.ndarray:
+    """0/1 per sample from point alarms: 1 from each alarm until ``hold_samples`` samples pass without
+    another one (the peers restart after an alarm, so a lasting fault keeps re-alarming and holds the state)."""
+    states = np.zeros(n, dtype=np.int8)
+    for p in sorted(set(int(a) for a in alarm_positions)):
+        states[p:min(n, p + hold_samples)] = 1
+    return states
+
+
+def multichannel_states(peer: Peer, u: np.ndarray, hold_samples: int) -> np.ndarray:
+    """One copy of ``peer`` per column of u (n, m; each healthy ~N(0, 1)); the alarm state (0/1 per row) of
+    their union, each alarm held for ``hold_samples`` rows. Causal: row i depends on rows <= i only."""
+    u = np.asarray(u, dtype=float)
+    if u.ndim != 2:
+        raise ValueError(f"expected rows x channels, got shape {u.shape}")
+    u = np.where(np.isfinite(u), u, 0.0)  # a missing sample counts as healthy, as in our detector
+    pos = [p for c in range(u.shape[1]) for p in peer.alarms(u[:, c])]
+    return hold_states(pos, len(u), hold_samples)

@@ -84,3 +84,20 @@ def test_mismatched_calibration_is_refused_with_a_reason(tmp_path):
     (tmp_path / "bad.yaml").write_text("just text")
     with pytest.raises(UserError, match="not a calibration file"):
         Calibration.load(tmp_path / "bad.yaml")
+
+
+def test_a_damaged_calibration_is_refused_on_load(tmp_path):
+    """Keys the detector reads, with the wrong types (found by the fuzz test): one line naming the key."""
+    import re
+
+    import yaml
+
+    from wavelet_fdi.config import CALIBRATION_DIR
+
+    good = yaml.safe_load((CALIBRATION_DIR / "paper_sym4_L3.yaml").read_text())
+    for key, value, where in (("design", {"channels": [None]}, "design.channels"), ("level", "3", "level"),
+                              ("thresholds", {"ph.R.mean_up": "x"}, "thresholds.ph.R.mean_up")):
+        path = tmp_path / f"{key}.yaml"
+        path.write_text(yaml.safe_dump({**good, key: value}))
+        with pytest.raises(UserError, match=re.escape(f"not a calibration file ({where}: expected")):
+            Calibration.load(path)

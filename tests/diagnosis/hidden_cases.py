@@ -238,9 +238,13 @@ def true_model(rng, cause: str, duration_s: float, excitation: str = "closed") -
 
 
 def make_case(rng: np.random.Generator, cause: str, excitation: str, out_dir: Path,
-              duration_s: float = 2400.0) -> HiddenCase:
-    """Simulate data with ``cause`` hidden (or ``none``, or an effect outside the catalogue) into out_dir/record.csv."""
+              duration_s: float = 2400.0, fresh: np.random.Generator | None = None) -> HiddenCase:
+    """Simulate data with ``cause`` hidden (or ``none``, or an effect outside the catalogue) into out_dir/record.csv.
+
+    ``fresh``: draw the noise seed and the excitation from it instead of ``rng`` (the effect's parameters still
+    come from ``rng``): a generator in the same state as an earlier call's gives another record of that effect."""
     raw, params, main, value = true_model(rng, cause, duration_s, excitation)
+    rng = fresh or rng
     raw["seed"] = int(rng.integers(1, 2**31 - 1))
     raw["duration_s"] = WARMUP_S + duration_s
     raw["sample_time_s"] = 1.0

@@ -99,3 +99,14 @@ def test_shipped_model_matches_the_features():
     m = load_model()
     assert m.features == list(FEATURE_NAMES)
     assert len(m.weights) == len(FEATURE_NAMES) and np.all(m.scale > 0) and 0 < m.threshold < 1
+
+
+def test_weights_are_held_to_the_published_sign():
+    d = _toy(5)
+    flipped_x = d.x.copy()
+    flipped_x[:, 0] = -flipped_x[:, 0]  # the evidence now points the other way
+    w = training_weights(d.groups, d.real, 1.0)
+    free = fit_logistic(flipped_x, d.y, w, 0.1, d.features)
+    bound = fit_logistic(flipped_x, d.y, w, 0.1, d.features, signs=[1, 0])
+    assert free.weights[0] < -1.0
+    assert bound.weights[0] == 0.0 and bound.signs == [1, 0]

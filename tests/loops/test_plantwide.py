@@ -82,3 +82,21 @@ def test_unreadable_job_is_a_row_with_its_error(tmp_path):
 def test_empty_folder_is_one_line(tmp_path, capsys):
     assert main(["loop-diagnose", str(tmp_path)]) == 2
     assert "no .txt, .csv, .parquet files" in capsys.readouterr().err
+
+
+def test_each_stretch_is_a_row_with_its_lines(folder, tmp_path):
+    """A gap in PV cuts a record in two (the historian reader); with --segments each both stretches
+    are rows of the table, each with its source lines, next to the other files' loops."""
+    run = _loop("FIC9", True, 9)
+    run.signals["pv"][150:170] = float("nan")
+    gap = run.to_csv(tmp_path / "FIC9.csv")
+    other = folder / "FIC1.csv"
+    status = main(["loop-diagnose", str(gap), str(other), "--segments", "each", "--out", str(tmp_path / "out"),
+                   "--workers", "1", *FAST])
+    assert status == 0
+    rows = pq.read_table(tmp_path / "out" / "loops.parquet").to_pylist()
+    fic9 = [r for r in rows if r["loop_tag"] == "FIC9"]
+    assert len(fic9) == 2 and all(r["error"] is None for r in fic9)
+    assert [r["samples"] for r in fic9] == [150, len(run) - 170]
+    assert all(r["lines"] for r in fic9) and fic9[0]["lines"] != fic9[1]["lines"]
+    assert [r["loop_tag"] for r in rows].count("FIC1") == 1

@@ -18,7 +18,7 @@ import pytest
 from phfdi.loopdiag.classifier import Data, load_model, train
 from phfdi.loopdiag.dataset import real_row, synthetic_row
 from phfdi.loopdiag.evaluate import read_labels
-from phfdi.loopdiag.features import FEATURE_NAMES
+from phfdi.loopdiag.features import FEATURE_NAMES, FEATURE_SIGNS
 from phfdi.loopdiag.training import draw_loops
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -55,7 +55,8 @@ def test_training_from_the_data_set_gives_the_shipped_model(dataset):
     assert dataset["features"] == list(FEATURE_NAMES)
     rows = [r for r in dataset["rows"] if not r.get("error") and r["source"] in ("real", "synthetic")]
     d = Data(np.array([r["features"] for r in rows]), np.array([r["stiction"] for r in rows]),
-             [r["group"] for r in rows], np.array([r["source"] == "real" for r in rows]), list(FEATURE_NAMES))
+             [r["group"] for r in rows], np.array([r["source"] == "real" for r in rows]), list(FEATURE_NAMES),
+             list(FEATURE_SIGNS))
     model = train(d)  # the default criterion, as benchmarks/train_stiction_classifier.py ships
     shipped = load_model()
     assert np.allclose(model.weights, shipped.weights, atol=1e-6)

@@ -78,3 +78,33 @@ def test_notes_reach_stderr_and_the_json_report(short_run, tmp_path, run_cli):
     note = "column 'ph_measured': 1 cell not a number (NaN 1), first at line 302: marked missing"
     assert f"phfdi diagnose: note: r.csv: {note}" in err
     assert any(note in n for n in json.loads(out)["notes"])
+
+
+def test_a_jump_in_time_is_refused_not_resampled(tmp_path, run_cli):
+    """A stamp far ahead (a clock jump, a typo) would make a grid of 10^12 samples: one line instead."""
+    rows = ["time_s,valve_command_pct,ph_measured"] + [f"{i},{40 + i % 5},{7 + 0.01 * i}" for i in range(100)]
+    path = tmp_path / "jump.csv"
+    path.write_text("\n".join(rows + ["1e12,40,7"]) + "\n")
+    line = one_error_line(*diagnose(run_cli, path, tmp_path)[::2])
+    assert "jump.csv: time jumps from t = 99 s to 1e+12 s" in line and "must be cut out" in line
+    path.write_text("\n".join(rows) + "\n")
+    line = one_error_line(*diagnose(run_cli, path, tmp_path, "--dt", "1e-9")[::2])
+    assert "--dt 1e-09 s would make" in line
+
+
+def test_an_absurd_flow_is_one_line_not_a_hang(short_run, tmp_path, run_cli):
+    """A flow of 1e20 mL/s (a damaged cell) made the plant's integrator loop for ever (found by the fuzz test)."""
+    def edit(lines):
+        set_cell(lines, 40, "buffer_flow_ml_s", "1e20")
+
+    path = csv_lines(short_run, tmp_path / "r.csv", edit)
+    status, out, err = diagnose(run_cli, path, tmp_path, "--candidates", "sensor_bias", "--no-pairs", "--workers", "1")
+    assert "the plant model cannot run on this record's inputs" in one_error_line(status, err)
+    status, _, err = run_cli("simulate", "--inputs", path)
+    assert status == 2 and "beyond 100000 integration sub-steps" in err
+
+
+def test_ljung_box_of_a_flat_error_has_every_key():
+    from phfdi.diagnosis.residual import ljung_box
+
+    assert ljung_box(np.zeros(50)) == {"q": 0.0, "p_value": 1.0, "lags": 12, "white": True, "structure": 0.0}

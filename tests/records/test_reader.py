@@ -241,3 +241,10 @@ def test_summary_is_json_ready(tmp_path):
     r = read_record(write(tmp_path, "time_s,pv\n0,1\n1,\n2,3\n"))
     s = json.loads(json.dumps(r.summary()))
     assert s["channels"]["pv"]["missing"] == 1 and s["notes"] == r.note_lines()
+
+
+def test_on_grid_refuses_a_grid_blown_up_by_a_jump(tmp_path):
+    text = "time_s,pv\n" + "".join(f"{i},{i}\n" for i in range(20)) + "1e9,1\n"
+    rec = read_record(write(tmp_path, text))
+    with pytest.raises(ReadError, match="would hold 1e\\+09 slots for 21 samples"):
+        rec.on_grid(1.0)

@@ -25,6 +25,9 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from phfdi_base.errors import UserError
+from wavelet_fdi.learned_detector import LearnedSettings, learn, run_record
+from wavelet_fdi.peers import Peer, calibrate_peers, multichannel_states
+from wavelet_fdi.reference_learned import LearnedReference
 
 from .scoring import BinaryScores, NabResult, binary_scores, match_changepoints, nab_scores, switches
 
@@ -259,7 +262,6 @@ def learned_detector(settings=None) -> Detector:
     fitted on the training rows, then run over the whole file in time order (training rows first,
     so the filters and the observer are warm), one chunk per row block; the test rows' states are
     the prediction."""
-    from wavelet_fdi.learned_detector import LearnedSettings, learn, run_record
 
     s = settings or LearnedSettings()
 
@@ -271,3 +273,38 @@ def learned_detector(settings=None) -> Detector:
         return states[len(train):]
 
     return detect
+
+
+# ---- the peers on the same residuals ------------------------------------------------------
+#: false-alarm target of a peer over all channels together (samples at 1 Hz: about 2.8 h)
+PEER_ARL0_SAMPLES = 1e4
+#: calibration windows of the training rows' residuals (window maxima, exponential tail fit)
+PEER_WINDOW = 50
+
+
+def peer_detector(name: str, settings=None, arl0_samples: float = PEER_ARL0_SAMPLES,
+                  window: int = PEER_WINDOW) -> Detector:
+    """A peer change detector (wavelet_fdi.peers: CUSUM, FOCuS, Page-Hinkley, ADWIN) on the SAME residuals
+    our detector sees: the learned ARX reference (same settings) fitted on the training rows, its one-step
+    residuals in healthy sigmas, one copy of the peer per channel. Its threshold (ADWIN: delta) is calibrated
+    on the training rows' residuals only, pooled over the channels, for a false-alarm target of
+    ``arl0_samples`` for the union of the channels (each channel m * arl0), by the project's procedure
+    (wavelet_fdi.peers.calibrate_peers). An alarm holds the state for ``block_samples`` rows (our clear rule)."""
+
+    s = settings or LearnedSettings()
+
+    def detect(train: np.ndarray, test: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        ref = LearnedReference.fit(train, SENSOR_COLUMNS, s.lags, s.ridge_own, s.ridge_cross)
+        u = ref.residuals(np.vstack((train, test)))
+        m = u.shape[1]
+        healthy = [u[ref.lags:len(train), c] for c in range(m)]
+        k = 0.5  # design shift: 1 healthy sigma, as in the pH-plant comparison
+        cal = _calibrate_peer(name, healthy, m * arl0_samples, k, window)
+        states = multichannel_states(Peer(name, cal, k), u, s.block_samples)
+        return states[len(train):]
+
+    return detect
+
+
+def _calibrate_peer(name: str, streams: list[np.ndarray], arl0: float, k: float, window: int) -> float:
+    return float(calibrate_peers(streams, arl0, k, window, names=(name,))[name]["threshold"])

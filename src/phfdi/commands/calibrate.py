@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import EPILOG_FORMAT, Progress, add_record_args, column_map_from_args, print_notes
+from .common import EPILOG_FORMAT, Progress, add_record_args, column_map_from_args, plant_runs_on, print_notes
 
 EXAMPLES = """examples:
   phfdi calibrate --out my_calibration.yaml                 # paper scenario, sym4 level 3, ARL0 1e5 samples
@@ -113,8 +113,9 @@ def run(args: argparse.Namespace) -> int:
         for path in args.runs:
             runs.append(load_any(path, cmap, args.encoding))
             print_notes("calibrate", runs[-1].metadata.get("notes", []))
-        cal = calibrate_from_runs(args.runs, spec, settings, runs=runs,
-                                  progress=Progress(f"calibrate on {len(args.runs)} recorded runs", enabled=True))
+        with plant_runs_on(", ".join(args.runs)):
+            cal = calibrate_from_runs(args.runs, spec, settings, runs=runs,
+                                      progress=Progress(f"calibrate on {len(args.runs)} recorded runs", enabled=True))
         source = f"{len(args.runs)} recorded runs"
     else:
         seeds = parse_seeds(args.seeds)

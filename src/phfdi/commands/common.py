@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from contextlib import contextmanager
 
 EPILOG_FORMAT = argparse.RawDescriptionHelpFormatter
 
@@ -91,3 +92,15 @@ def print_notes(command: str, notes: list[str]) -> None:
     """Every repair the reader made, one line each on stderr."""
     for note in notes:
         print(f"phfdi {command}: note: {note}", file=sys.stderr)
+
+
+@contextmanager
+def plant_runs_on(source: str):
+    """The plant core refuses inputs it cannot integrate (no steady state, flows beyond its sub-step bound)
+    with a ValueError; for a user's record that is one line naming the record, not a traceback."""
+    from phfdi_base.errors import UserError
+
+    try:
+        yield
+    except ValueError as exc:
+        raise UserError(f"{source}: the plant model cannot run on this record's inputs ({exc})") from None

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from phfdi_base.errors import UserError
 
-from .common import EPILOG_FORMAT, column_map_from_args, print_notes
+from .common import EPILOG_FORMAT, column_map_from_args, plant_runs_on, print_notes
 
 EXAMPLES = """examples:
   # a run of the project (CSV, Parquet or .mcap bag) against the paper model, segments held out
@@ -167,7 +167,8 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.diagnosis.pipeline import diagnose
     from phfdi.diagnosis.report import to_json
 
-    d = diagnose(fit_records, val_records, nominal, args.model, opts)
+    with plant_runs_on(", ".join(r.name for r in fit_records + val_records)):
+        d = diagnose(fit_records, val_records, nominal, args.model, opts)
     rep = write_all(d, args.out, args.model, command)
     if args.json:
         print(to_json(rep))
@@ -187,7 +188,8 @@ def _calibrate(args, fit_records, val_records, nominal, opts) -> int:
     if all(r.constant_inputs() for r in fit_records + val_records) and args.initial == "steady":
         raise UserError("nothing identifiable: every input is constant and the model starts at rest "
                         "(use --initial fit for records that start mid-transient)")
-    cal = calibrate(fit_records, val_records, nominal, args.calibrate, opts)
+    with plant_runs_on(", ".join(r.name for r in fit_records + val_records)):
+        cal = calibrate(fit_records, val_records, nominal, args.calibrate, opts)
     out = Path(args.out)
     header = (f"written by phfdi diagnose --calibrate: {args.model!r} with "
               f"{fmt_params(cal.params, cal.intervals)}\n"

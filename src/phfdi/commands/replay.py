@@ -8,7 +8,7 @@ import sys
 import time
 
 from .calibrate import add_detector_args, settings_from_args
-from .common import EPILOG_FORMAT, add_record_args, column_map_from_args, print_notes
+from .common import EPILOG_FORMAT, add_record_args, column_map_from_args, plant_runs_on, print_notes
 
 EXAMPLES = """examples:
   phfdi simulate --fault backlash --out runs/backlash.parquet && phfdi replay runs/backlash.parquet
@@ -18,11 +18,22 @@ EXAMPLES = """examples:
   phfdi replay plant.csv --column time_s=t --column ph_measured=pH --column valve_command_pct=OP
   phfdi replay rig.csv --reference ref.json              # a learned reference (phfdi calibrate --learn)
   phfdi replay rig.csv --reference ref.json --refit-rows 400 --json
+  phfdi replay plant.csv --reference out/diagnose/extended_model.yaml   # the model phfdi diagnose extended
 
 With --reference the record's channels go through the learned reference and the
 multichannel wavelet detector instead (any number of channels, no plant model):
 each alarm names the channels and bands that carry it; --refit-rows N re-fits
 the reference on the record's own first N rows with the file's settings.
+
+--reference MODEL.yaml (a scenario file, such as the extended_model.yaml that
+phfdi diagnose writes into its --out directory) keeps the physics reference and
+builds it from that model instead of the run's own or the default scenario (the
+same as --scenario MODEL.yaml): its plant, feeds and valve sizes. Fault blocks and
+sensor effects in it (a valve or probe effect the diagnosis found) are not part of
+the healthy reference (it predicts the process): the detector still looks for
+them, and a note says so. The model's
+setpoint schedule is not run (the reference follows the record's commands), so
+its actuator margin is not checked. Offline only (not with --live).
 
 The detector sees only what a plant would measure: time_s, ph_measured,
 valve_command_pct (or ph_controller_output_pct), level_measured_cm,
@@ -59,8 +70,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_detector_args(p)
     p.add_argument("--no-isolation", action="store_true", help="detect only (no fault class)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
-    p.add_argument("--reference", default=None, metavar="REF.json",
-                   help="a learned reference (phfdi calibrate --learn): watch the record's channels with it")
+    p.add_argument("--reference", default=None, metavar="REF.json|MODEL.yaml",
+                   help="a learned reference (phfdi calibrate --learn): watch the record's channels with it; "
+                        "or a scenario/model .yaml (phfdi diagnose's extended_model.yaml): the physics "
+                        "reference built from it")
     p.add_argument("--refit-rows", type=int, default=None, metavar="N",
                    help="with --reference: re-fit it on the record's first N rows (its settings kept)")
     add_record_args(p)
@@ -82,8 +95,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
+    if args.reference and _is_model_file(args.reference):
+        if args.live:
+            raise UserError(f"--live --reference takes a learned reference (REF.json); replay a model reference "
+                            f"({args.reference}) offline")
+        _model_as_scenario(args)
     if args.refit_rows is not None and not args.reference:
-        raise UserError("--refit-rows goes with --reference")
+        raise UserError("--refit-rows goes with a learned --reference (REF.json)")
     if args.reference and not args.live:
         return run_learned(args)
     if args.reference:
@@ -97,11 +115,13 @@ def run(args: argparse.Namespace) -> int:
     run_ = load_any(args.file, column_map_from_args(args), args.encoding)
     notes = run_.metadata.get("notes", [])
     print_notes("replay", notes)
-    spec = load_scenario(args.scenario, fault="healthy") if args.scenario else scenario_of(run_)
+    spec = getattr(args, "model_spec", None) or (load_scenario(args.scenario, fault="healthy") if args.scenario
+                                                 else scenario_of(run_))
     settings = settings_from_args(args)
     cal = Calibration.load(args.calibration) if args.calibration else None
     t0 = time.perf_counter()
-    result = replay_run(run_, spec, cal, settings, chunk=args.chunk, isolate=not args.no_isolation)
+    with plant_runs_on(args.file):
+        result = replay_run(run_, spec, cal, settings, chunk=args.chunk, isolate=not args.no_isolation)
     elapsed = time.perf_counter() - t0
     print(f"replayed {result.samples} samples in {elapsed:.2f} s ({result.samples / max(elapsed, 1e-9):.0f} "
           f"samples/s, isolation included)", file=sys.stderr)
@@ -111,6 +131,35 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(format_alarms(result.alarms, result.diagnostics))
     return 0
+
+
+def _is_model_file(path: str) -> bool:
+    from pathlib import Path
+
+    return Path(path).suffix.lower() in (".yaml", ".yml")
+
+
+def _model_as_scenario(args: argparse.Namespace) -> None:
+    """--reference MODEL.yaml: the physics reference from that scenario (what --scenario does), said once."""
+    from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
+
+    if args.scenario:
+        raise UserError(f"--reference {args.reference} is a model: give it or --scenario {args.scenario}, not both")
+    full = load_scenario(args.reference)  # one line naming the file if it is not a scenario
+    # The reference is driven by the record's measured commands and never runs the model's setpoint schedule,
+    # so the simulator's design check (every setpoint reachable inside the actuator margin) is not applied: an
+    # extended plant (a stronger reagent, a smaller valve) often cannot reach the nominal schedule's extremes.
+    args.model_spec = load_scenario(args.reference, fault="healthy", overrides=["min_actuator_margin_pct=0"])
+    args.scenario, args.reference = args.reference, None
+    kinds = sorted({f.type for f in full.faults})
+    for name, sensor in (("ph", full.sensors.ph), ("level", full.sensors.level)):
+        kinds += [f"{name} sensor {b.type}" for b in sensor.extra]
+        kinds += [f"{name} sensor {k}" for k in ("delay_s", "lag_s") if getattr(sensor, k)]
+    if kinds:
+        print(f"phfdi replay: note: {args.scenario}: its fault blocks and sensor effects ({', '.join(kinds)}) are "
+              f"not part of the healthy reference (it predicts the process); the detector looks for them",
+              file=sys.stderr)
 
 
 def run_learned(args: argparse.Namespace) -> int:

@@ -32,6 +32,8 @@ from typing import Callable
 
 import numpy as np
 
+from phfdi_base.errors import UserError
+
 from .report import CAUSES
 
 BUFFER_COMPONENT = "unmodelled_buffer"
@@ -383,7 +385,6 @@ def catalogue(ctx: Context, only: list[str] | None = None,
     if only:
         unknown = [c for c in only if c not in CAUSES or c == "none"]
         if unknown:
-            from phfdi_base.errors import UserError
 
             raise UserError(f"unknown candidate {unknown[0]!r}; catalogue: "
                             f"{', '.join(c for c in CAUSES if c != 'none')}")

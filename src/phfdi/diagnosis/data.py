@@ -211,6 +211,18 @@ def _resample(time_s: np.ndarray, signals: dict[str, np.ndarray], dt_s: float) -
     return grid, out
 
 
+def _check_time_gaps(t: np.ndarray, dts: np.ndarray, median_s: float, dt_s: float | None, label: str) -> None:
+    """A jump in time longer than the gaps that are filled, or a --dt that would blow the grid up: refused."""
+    i = int(np.argmax(dts))
+    if dts[i] > (MAX_GAP_SAMPLES + 1) * median_s:
+        raise UserError(f"{label}: time jumps from t = {t[i]:g} s to {t[i + 1]:g} s, a gap of about "
+                        f"{dts[i] / median_s - 1:.0f} samples; gaps of up to {MAX_GAP_SAMPLES} samples are filled, "
+                        f"longer ones must be cut out")
+    if dt_s is not None and (t[-1] - t[0]) / dt_s > 20 * len(t):
+        raise UserError(f"--dt {dt_s:g} s would make {(t[-1] - t[0]) / dt_s:.3g} samples of {len(t)}: use a sample "
+                        f"time near the data's ({median_s:.3g} s)")
+
+
 def make_record(signals: dict[str, np.ndarray], label: str, dt_s: float | None = None,
                 notes: list[str] | None = None) -> Record:
     """Check and resample raw signals (project names, project units) into a :class:`Record`."""
@@ -231,6 +243,7 @@ def make_record(signals: dict[str, np.ndarray], label: str, dt_s: float | None =
         rest[name] = _fill_gaps(name, rest[name], t, label, notes)
         _check_ranges(name, rest[name], t, label)
     median = float(np.median(dts))
+    _check_time_gaps(t, dts, median, dt_s, label)
     uniform = float(np.max(np.abs(dts - median))) <= UNIFORM_TOLERANCE * median
     step = dt_s or median
     if not uniform or (dt_s is not None and abs(dt_s - median) > UNIFORM_TOLERANCE * median):

@@ -8,10 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
+from phfdi.loop import build_parts
+from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
 
 from .extend import load_model_file, write_model
 from .figures import plot_fit, plot_ranking, plot_scalogram
+from .model import Evaluator
 from .pipeline import Diagnosis
 from .report import fmt_num, fmt_params, to_json, verdict_line
 
@@ -43,8 +46,6 @@ def write_extended(d: Diagnosis, out_dir: Path, model: str) -> Path | None:
 
 def _check_closed_loop(path: Path) -> dict:
     """Can `phfdi simulate --scenario` run the file? (An extended plant may not reach the scenario's setpoints.)"""
-    from phfdi.loop import build_parts
-    from phfdi.scenario import load_scenario
 
     try:
         build_parts(load_scenario(str(path)))
@@ -55,8 +56,6 @@ def _check_closed_loop(path: Path) -> dict:
 
 
 def _check_reproduces(d: Diagnosis, path: Path) -> None:
-    from .model import Evaluator
-
     raw = load_model_file(path)
     worst = 0.0
     for i, rec in enumerate(d.records):

@@ -41,6 +41,9 @@ from typing import Callable
 
 import numpy as np
 
+from ph_plant_sim.build import build_plant, load_plant_model
+from phfdi_base.spec import PlantModelSpec
+
 from .catalogue import Context
 from .data import Record
 from .fit import FitResult, Fitter, Problem, fit_task, init_worker
@@ -121,8 +124,6 @@ def split(records_fit: list[Record], records_val: list[Record], blocks: int):
 
 def context_for(nominal: dict, records: list[Record], outputs: list[str]) -> Context:
     """What the catalogue needs to set its bounds and start points: the nominal model and the data's ranges."""
-    from ph_plant_sim.build import build_plant, load_plant_model
-    from phfdi_base.spec import PlantModelSpec
 
     model = load_plant_model(PlantModelSpec.model_validate(nominal["plant"]))
     plant = build_plant(model)

@@ -54,7 +54,7 @@ def ljung_box(e: np.ndarray, lags: int = 20) -> dict:
     lags = min(lags, n // 4)
     den = float(np.dot(e, e))
     if den <= 0 or lags < 1:
-        return {"q": 0.0, "p_value": 1.0, "lags": lags, "white": True}
+        return {"q": 0.0, "p_value": 1.0, "lags": lags, "white": True, "structure": 0.0}
     acf = np.array([np.dot(e[:-k], e[k:]) / den for k in range(1, lags + 1)])
     q = float(n * (n + 2) * np.sum(acf ** 2 / (n - np.arange(1, lags + 1))))
     p = float(stats.chi2.sf(q, lags))

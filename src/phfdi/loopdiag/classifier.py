@@ -6,7 +6,11 @@ x the features of :mod:`.features` (each a published indicator), standardised wi
 set's weighted mean and standard deviation, so each weight says how much one standard deviation of
 that indicator moves the log-odds, and w_i z_i is that indicator's contribution to one verdict.
 Fitted by :func:`scipy.optimize.minimize` (L-BFGS-B, analytic gradient) on the weighted mean
-log-loss plus (l2 / 2) |w|^2 (the intercept is not penalised).
+log-loss plus (l2 / 2) |w|^2 (the intercept is not penalised). With ``signs`` each weight is bounded
+to the sign its paper reads as stiction (:data:`phfdi.loopdiag.features.FEATURE_SIGNS`): with 3
+stiction loops among the real records, an unconstrained fit learns weights against the published
+reading of an indicator (a better Kano fit counting against stiction, say), which no next plant
+would share; bounded, such an indicator gets weight 0.
 
 Training data: the labelled real records (every loop's files share a weight of one, so a loop with
 23 files counts as much as a loop with one) and synthetic loops of :mod:`.training` (their total
@@ -53,6 +57,7 @@ class LogisticModel:
     l2: float = 0.1
     synthetic_ratio: float = 1.0
     info: dict = field(default_factory=dict)
+    signs: list[int] | None = None
 
     def z(self, x: np.ndarray) -> np.ndarray:
         return (np.asarray(x, float) - self.mean) / self.scale
@@ -70,13 +75,14 @@ class LogisticModel:
                 "mean": [float(v) for v in self.mean], "scale": [float(v) for v in self.scale],
                 "weights": [float(v) for v in self.weights], "bias": float(self.bias),
                 "threshold": float(self.threshold), "l2": self.l2, "synthetic_ratio": self.synthetic_ratio,
-                "info": self.info}
+                "signs": self.signs, "info": self.info}
 
     @classmethod
     def from_dict(cls, d: dict) -> "LogisticModel":
         return cls(list(d["features"]), np.array(d["mean"], float), np.array(d["scale"], float),
                    np.array(d["weights"], float), float(d["bias"]), float(d["threshold"]),
-                   float(d.get("l2", 0.1)), float(d.get("synthetic_ratio", 1.0)), dict(d.get("info", {})))
+                   float(d.get("l2", 0.1)), float(d.get("synthetic_ratio", 1.0)), dict(d.get("info", {})),
+                   d.get("signs"))
 
     def save(self, path: str | Path) -> None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -93,8 +99,10 @@ def load_model(path: str | Path | None = None) -> LogisticModel:
 
 
 # ---- fitting --------------------------------------------------------------------------------
-def fit_logistic(x: np.ndarray, y: np.ndarray, w: np.ndarray, l2: float, features: list[str]) -> LogisticModel:
-    """Weighted L2 logistic regression on standardised features (deterministic: zero start)."""
+def fit_logistic(x: np.ndarray, y: np.ndarray, w: np.ndarray, l2: float, features: list[str],
+                 signs: list[int] | None = None) -> LogisticModel:
+    """Weighted L2 logistic regression on standardised features (deterministic: zero start); with
+    ``signs`` (+1, -1, or 0 for free, per feature) each weight is bounded to its sign."""
     x = np.asarray(x, float)
     y = np.asarray(y, float)
     w = np.asarray(w, float) / np.sum(w)
@@ -114,9 +122,14 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, w: np.ndarray, l2: float, feature
         grad = np.concatenate([z.T @ g + l2 * beta, [float(np.sum(g))]])
         return f, grad
 
-    res = minimize(objective, np.zeros(z.shape[1] + 1), jac=True, method="L-BFGS-B",
+    bounds = None
+    if signs is not None:
+        bounds = [(0.0, None) if sg > 0 else (None, 0.0) if sg < 0 else (None, None) for sg in signs]
+        bounds.append((None, None))
+    res = minimize(objective, np.zeros(z.shape[1] + 1), jac=True, method="L-BFGS-B", bounds=bounds,
                    options={"maxiter": 2000, "gtol": 1e-9})
-    return LogisticModel(list(features), mean, scale, res.x[:-1].copy(), float(res.x[-1]), 0.5, l2)
+    return LogisticModel(list(features), mean, scale, res.x[:-1].copy(), float(res.x[-1]), 0.5, l2,
+                         signs=None if signs is None else [int(v) for v in signs])
 
 
 def training_weights(groups: list[str], real: np.ndarray, synthetic_ratio: float) -> np.ndarray:
@@ -175,14 +188,16 @@ class Data:
     groups: list[str]
     real: np.ndarray  # bool: a real record (False: synthetic)
     features: list[str]
+    signs: list[int] | None = None  # weight signs (see fit_logistic); None: unconstrained
 
     def take(self, mask: np.ndarray) -> "Data":
         idx = np.flatnonzero(mask)
-        return Data(self.x[idx], self.y[idx], [self.groups[i] for i in idx], self.real[idx], self.features)
+        return Data(self.x[idx], self.y[idx], [self.groups[i] for i in idx], self.real[idx], self.features,
+                    self.signs)
 
 
 def _fit(d: Data, l2: float, ratio: float) -> LogisticModel:
-    m = fit_logistic(d.x, d.y, training_weights(d.groups, d.real, ratio), l2, d.features)
+    m = fit_logistic(d.x, d.y, training_weights(d.groups, d.real, ratio), l2, d.features, d.signs)
     m.synthetic_ratio = ratio
     return m
 

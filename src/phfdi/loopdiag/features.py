@@ -36,6 +36,9 @@ class Feature:
     low: float
     high: float
     description: str
+    #: the direction the paper reads as stiction: +1 higher values, -1 lower values; the classifier's
+    #: weight is held to this sign (a weight against the published reading is not learned)
+    stiction_sign: int = 1
 
 
 FEATURES: tuple[Feature, ...] = (
@@ -43,7 +46,7 @@ FEATURES: tuple[Feature, ...] = (
             "log(1 + r), r the ACF zero-crossing regularity (Thornhill et al. 2003), r capped at 10"),
     Feature("horch_ccf", "horch_ccf", 0.5, 0.0, 1.0, "Horch (1999) CCF oddness psi (0 even, 1 odd)"),
     Feature("horch_histogram", "horch_histogram", 0.5, 0.0, 1.0,
-            "Horch derivative histogram: share of variance a sinusoid explains (0 Gaussian, 1 camel)"),
+            "Horch derivative histogram: share of variance a sinusoid explains (0 Gaussian, 1 camel)", -1),
     Feature("he_curve_fit", "he_curve_fit", 0.5, 0.0, 1.0, "He et al. (2007) SI (triangle vs sinusoid)"),
     Feature("kano_stuck", "kano_stuck", 0.0, 0.0, 1.0, "Kano et al. (2004) share of OP travel while stuck"),
     Feature("area_peak_ratio", "area_peak_ratio", 0.0, -2.0, 2.0, "Singhal & Salsbury (2005) log(A1/A2)"),
@@ -58,6 +61,7 @@ FEATURES: tuple[Feature, ...] = (
             "held-out NRMSE gain of Kano's stiction model (S, J) over the linear one (fraction)"),
 )
 FEATURE_NAMES = tuple(f.name for f in FEATURES)
+FEATURE_SIGNS = tuple(f.stiction_sign for f in FEATURES)
 
 
 def _clip(v: float, f: Feature) -> float:

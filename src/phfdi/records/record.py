@@ -119,6 +119,9 @@ class Record:
         slot = np.round((self.time_s - self.time_s[0]) / dt).astype(np.int64)
         first = np.concatenate([[True], slot[1:] != slot[:-1]])
         n = int(slot[-1]) + 1
+        if n > max(10 * len(self), len(self) + 1000):
+            raise ReadError(self.path, f"a {dt:g} s grid over {self.time_s[0]:g}..{self.time_s[-1]:g} s would hold "
+                                       f"{n:.3g} slots for {len(self)} samples (the time jumps): split the record")
         notes = list(self.notes)
         if not first.all():
             notes.append(f"{self.path}: {int((~first).sum())} samples share a {dt:g} s grid slot with the one before, "

@@ -34,6 +34,7 @@ from typing import Callable
 
 import yaml
 
+from phfdi import bagio
 from phfdi_base.errors import UserError
 from phfdi_base.parts import NodePart, write_part
 from phfdi_base.ros.env import graph_env, reserve_domain_id
@@ -377,7 +378,6 @@ class Launcher:
 
     def _finish_bag(self, path: Path, recorder: _Proc, result: LaunchResult) -> dict | None:
         """bag_info of the recorded bag (of all its files when split), recovered if unfinished."""
-        from phfdi import bagio
 
         split = recorder.spec.params.get("split_after_s", 0) > 0
         parts = bagio.bag_parts(path) if split else [path] if path.exists() else []
@@ -397,8 +397,6 @@ class Launcher:
         return info
 
     def _finish_part(self, path: Path, recorder: _Proc, result: LaunchResult) -> dict:
-        from phfdi import bagio
-
         info = bagio.bag_info(path)
         if not info["finished"]:
             partial = path.with_name(path.stem + ".partial.mcap")

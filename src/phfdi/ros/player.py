@@ -21,6 +21,7 @@ import time
 
 from rosgraph_msgs.msg import Clock
 
+from phfdi import bagio
 from phfdi.ros.recorder import _message_class
 from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main
 from phfdi_base.stamps import split_ns
@@ -46,7 +47,6 @@ class PlayerNode(GraphNode):
 
     def __init__(self) -> None:
         super().__init__(PLAYER)
-        from phfdi import bagio
 
         path = self.param("path")
         try:

@@ -13,7 +13,7 @@ time (``run.mcap``, ``run.1.mcap``, ``run.2.mcap``, ...; :func:`phfdi.bagio.bag_
 each a complete bag with the run's metadata. Why: the MCAP writer keeps an
 index entry per chunk in memory until the file is finished (measured about
 0.7 KiB of Python objects per chunk; at ``pace`` 1 the flush makes a chunk a
-second, about 70 MiB a day), so a recorder that runs for days needs files of
+second, about 60 MiB a day), so a recorder that runs for days needs files of
 bounded length. A file starts with the first message stamped in its interval;
 messages of the previous interval that arrive after it (the topics are not
 ordered with each other) go to the new file.
@@ -29,6 +29,8 @@ import sys
 import time
 from pathlib import Path
 
+from phfdi import bagio
+from phfdi.loop import run_metadata
 from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main
 from phfdi_base.stamps import seconds_to_ns
 from phfdi_base.topics import BY_NAME, RECORDED, RECORDER
@@ -56,8 +58,6 @@ class RecorderNode(GraphNode):
 
     def __init__(self) -> None:
         super().__init__(RECORDER)
-        from phfdi import bagio
-        from phfdi.loop import run_metadata
 
         path = self.param("path")
         if not path.endswith(".mcap"):
@@ -86,8 +86,6 @@ class RecorderNode(GraphNode):
         self.start_barrier()
 
     def _open_part(self, path) -> None:
-        from phfdi import bagio
-
         try:
             self.bag = bagio.BagWriter(path, chunk_size=self.param("chunk_size_bytes"),
                                        compression=self.param("compression"))
@@ -99,7 +97,6 @@ class RecorderNode(GraphNode):
 
     def _next_part(self, stamp_ns: int) -> None:
         """Finish this file and go on in the next: the one of the interval that holds ``stamp_ns``."""
-        from phfdi import bagio
 
         self._close_part()
         self._part_end_ns = (stamp_ns // self._split_ns + 1) * self._split_ns
