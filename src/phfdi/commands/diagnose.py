@@ -45,7 +45,8 @@ catalogue: stiction backlash deadzone saturation coulomb_viscous_friction leakag
   sensor_delay sensor_lag sensor_bias sensor_drift sensor_gain (sensor),
   buffer reagent_concentration holdup disturbance_flow (process); verdicts: explained, not_explained,
   none, not_identifiable. Structural candidates (--structure, or by name with --candidates): mixing_zone
-  feed_delay carbonate (process), pump_curve (actuator), probe_asymmetric_lag two_point_calibration (sensor). Bad input exits with status 2 and one line naming the problem.
+  feed_delay carbonate (process), pump_curve (actuator), probe_asymmetric_lag two_point_calibration (sensor).
+  Bad input exits with status 2 and one line naming the problem.
 """
 
 
