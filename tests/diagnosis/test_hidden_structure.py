@@ -54,7 +54,7 @@ def draw(rng, cause: str) -> tuple[dict, str, float, float]:
         return ({"mixing": {"zone_volume_ml": v, "exchange_ml_s": x, "feeds": ["base"]}},
                 "zone_volume_ml", v, 0.25 * v)
     if cause == "feed_delay":
-        d = float(rng.uniform(5.0, 20.0))
+        d = float(rng.uniform(8.0, 20.0))  # below about 7 s some draws move the pH by less than 3 x the noise
         return {"line": [{"type": "line_delay", "params": {"delay_s": d}}]}, "delay_s", d, max(1.0, 0.1 * d)
     if cause == "pump_curve":
         thr = float(rng.uniform(0.6, 1.4))
