@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import test_hidden_structure as rig  # the rig-like excitation of the hidden-effect tests
 
 from phfdi.diagnosis.blackbox import fit_wiener
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import nominal_raw
 from phfdi.diagnosis.pipeline import Options, diagnose
 from phfdi.loop import simulate_open_loop
-from phfdi.run import Run
 from phfdi.scenario import validate_scenario
-
-import test_hidden_structure as rig  # the rig-like excitation of the hidden-effect tests
 
 NOMINAL = ["plant.tank.volume_ml=1000"]
 
