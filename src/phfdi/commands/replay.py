@@ -190,30 +190,17 @@ def run_learned(args: argparse.Namespace) -> int:
 
 def run_live_learned(args: argparse.Namespace) -> int:
     """A bag of a measured record (phfdi bag from-csv) through the learned detector NODE over ROS."""
-    import math
     from pathlib import Path
 
-    from phfdi import bagio
     from phfdi.learned import format_alarms as format_learned
-    from phfdi.ros.launcher import OBSERVER, Launcher, NodeSpec
-    from phfdi.ros.parts import recorded_part
+    from phfdi.ros.launcher import OBSERVER, NodeSpec
     from phfdi.ros.player import PLAYER
-    from phfdi_base.errors import UserError
     from phfdi_base.topics import DETECTOR, MEASURED_SAMPLE
     from wavelet_fdi.learned_detector import LearnedModel
 
-    from .common import Progress
 
-    if not args.file.endswith(".mcap"):
-        raise UserError(f"--live plays a bag: give an .mcap file, not {args.file}")
-    if not (math.isfinite(args.pace) and 0.0 <= args.pace <= 1e6):
-        raise UserError(f"--pace {args.pace}: use 0 (as fast as possible) or a factor up to 1e6")
     model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
-    info = bagio.bag_info(args.file)
-    if not info["finished"]:
-        raise UserError(f"{args.file}: the bag is not finished; run phfdi bag recover {args.file} FIXED.mcap")
-    if not any(t["topic"] == MEASURED_SAMPLE.name for t in info["topics"]):
-        raise UserError(f"{args.file}: no {MEASURED_SAMPLE.name} topic: write the record with phfdi bag from-csv")
+    _check_live_bag(args, MEASURED_SAMPLE.name, "write the record with phfdi bag from-csv")
     say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
 
     def on_event(node: str, event: dict) -> None:
@@ -226,19 +213,9 @@ def run_live_learned(args: argparse.Namespace) -> int:
                                                     "pace": float(args.pace)}),
              NodeSpec(DETECTOR, "phfdi.ros.learned_node",
                       {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
-    part = recorded_part(spec)  # resolved once; both nodes start from it
-    for node in nodes:
-        node.part = part
-    t0 = time.perf_counter()
-    result = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir, status=say, clock_node=PLAYER,
-                      progress=Progress(f"replay --live {Path(args.file).name}"), on_event=on_event).run()
-    elapsed = time.perf_counter() - t0
-    done = [e for e in result.node_events.get(DETECTOR, []) if e["event"] == "detector_done"]
-    if result.failure or not done:
-        say(f"error: {result.failure or 'the detector node did not report'}"
-            + (f"; node logs: {result.log_dir}" if result.log_dir else ""))
+    result, report, elapsed = _play_live(args, nodes, spec, say, on_event)
+    if report is None:
         return result.status or 1
-    report = done[-1]
     say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
         f"(ROS domain {result.domain_id})")
     alarms = report["alarms"]
@@ -280,28 +257,15 @@ def _replay_scenario(bag: str, fallback: str | None):
 
 def run_live(args: argparse.Namespace) -> int:
     """The bag through a detector node over ROS: player + detector, started and stopped here."""
-    import math
     from pathlib import Path
 
-    from phfdi import bagio
-    from phfdi.ros.launcher import Launcher, NodeSpec, detector_spec
-    from phfdi.ros.parts import recorded_part
+    from phfdi.ros.launcher import NodeSpec, detector_spec
     from phfdi.ros.player import PLAYER
-    from phfdi_base.errors import UserError
     from phfdi_base.topics import DETECTOR
 
-    from .common import Progress
     from .launch import alarm_event_line
 
-    if not args.file.endswith(".mcap"):
-        raise UserError(f"--live plays a bag: give an .mcap file, not {args.file}")
-    if not (math.isfinite(args.pace) and 0.0 <= args.pace <= 1e6):
-        raise UserError(f"--pace {args.pace}: use 0 (as fast as possible) or a factor up to 1e6")
-    info = bagio.bag_info(args.file)
-    if not info["finished"]:
-        raise UserError(f"{args.file}: the bag is not finished; run phfdi bag recover {args.file} FIXED.mcap")
-    if not any(t["topic"] == "/plant/measurement" for t in info["topics"]):
-        raise UserError(f"{args.file}: no /plant/measurement topic: not a bag of the phfdi graph")
+    _check_live_bag(args, "/plant/measurement", "not a bag of the phfdi graph")
     settings_from_args(args)  # one line for bad detector settings before any process starts
     say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
 
@@ -320,6 +284,53 @@ def run_live(args: argparse.Namespace) -> int:
     nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
                                                     "pace": float(args.pace)}),
              detector_spec(detector)]
+    result, report, elapsed = _play_live(args, nodes, spec, say, on_event)
+    if report is None:
+        return result.status or 1
+    say(f"played {report['samples']} samples through the detector node in {elapsed:.1f} s "
+        f"({result.run_wall_s:.1f} s after the graph connected; ROS domain {result.domain_id})")
+    alarms = report["alarms"]
+    if args.json:
+        print(json.dumps(replay_json(args.file, report["samples"], [], report["diagnostics"],
+                                     [{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms]), indent=2))
+    else:
+        print(format_alarms(alarms, report["diagnostics"]))
+    return result.status
+
+
+
+def _check_live_bag(args: argparse.Namespace, topic: str, hint: str) -> None:
+    """One line (UserError) for a file --live cannot play: not a finished .mcap with ``topic``, or a bad --pace."""
+    import math
+
+    from phfdi import bagio
+    from phfdi_base.errors import UserError
+
+    if not args.file.endswith(".mcap"):
+        raise UserError(f"--live plays a bag: give an .mcap file, not {args.file}")
+    if not (math.isfinite(args.pace) and 0.0 <= args.pace <= 1e6):
+        raise UserError(f"--pace {args.pace}: use 0 (as fast as possible) or a factor up to 1e6")
+    info = bagio.bag_info(args.file)
+    if not info["finished"]:
+        raise UserError(f"{args.file}: the bag is not finished; run phfdi bag recover {args.file} FIXED.mcap")
+    if not any(t["topic"] == topic for t in info["topics"]):
+        raise UserError(f"{args.file}: no {topic} topic: {hint}")
+
+
+def _play_live(args: argparse.Namespace, nodes: list, spec, say, on_event) -> tuple:
+    """Start the player and detector ``nodes`` from one resolved part, play the bag, stop them.
+
+    Returns (launch result, the detector's final report or None when it failed (said), wall seconds).
+    """
+    from pathlib import Path
+
+    from phfdi.ros.launcher import Launcher
+    from phfdi.ros.parts import recorded_part
+    from phfdi.ros.player import PLAYER
+    from phfdi_base.topics import DETECTOR
+
+    from .common import Progress
+
     part = recorded_part(spec)  # resolved once; both nodes start from it
     for node in nodes:
         node.part = part
@@ -331,17 +342,8 @@ def run_live(args: argparse.Namespace) -> int:
     if result.failure or not done:
         say(f"error: {result.failure or 'the detector node did not report'}"
             + (f"; node logs: {result.log_dir}" if result.log_dir else ""))
-        return result.status or 1
-    report = done[-1]
-    say(f"played {report['samples']} samples through the detector node in {elapsed:.1f} s "
-        f"({result.run_wall_s:.1f} s after the graph connected; ROS domain {result.domain_id})")
-    alarms = report["alarms"]
-    if args.json:
-        print(json.dumps(replay_json(args.file, report["samples"], [], report["diagnostics"],
-                                     [{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms]), indent=2))
-    else:
-        print(format_alarms(alarms, report["diagnostics"]))
-    return result.status
+        return result, None, elapsed
+    return result, done[-1], elapsed
 
 
 def format_alarms(alarms: list, diagnostics: dict) -> str:

@@ -44,16 +44,10 @@ UNIFORM_TOLERANCE = 0.01
 
 
 def kind_of(signal: str) -> str:
-    if signal == "time_s":
-        return "time"
-    if signal.endswith("_flow_ml_s"):
-        return "flow"
-    if signal.endswith("_pct"):
-        return "pct"
-    if signal.startswith("ph"):
-        return "ph"
-    if signal.endswith("_cm"):
-        return "level"
+    """Kind of a mapped signal (records.columns.kind_of); a name that says nothing is a user error here."""
+    kind = records.columns.kind_of(signal)
+    if kind is not None:
+        return kind
     raise UserError(f"column map: cannot map onto {signal!r}: use time_s, valve_command_pct, "
                     f"level_controller_output_pct, <feed>_flow_ml_s, ph_measured or level_measured_cm")
 
