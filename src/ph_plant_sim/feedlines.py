@@ -16,12 +16,11 @@ can also hold any user block.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 from phfdi_base.blocks import register_block
 
-from .sensors import TransportDelay, _check
+from .sensors import TransportDelay, _check, lag_step
 
 
 @register_block("line_delay")
@@ -74,12 +73,6 @@ class PumpLag:
         self._y = x0
 
     def step(self, x: float, t_s: float) -> float:
-        if self._y is None:
-            self._y = x
-            return x
-        tau = self.severity * (self.tau_start_s if x > self._y else self.tau_stop_s)
-        if tau <= 0.0:
-            self._y = x
-        else:
-            self._y += (1.0 - math.exp(-self.dt_s / tau)) * (x - self._y)
+        rising = self._y is not None and x > self._y
+        self._y = lag_step(self._y, x, self.severity * (self.tau_start_s if rising else self.tau_stop_s), self.dt_s)
         return self._y

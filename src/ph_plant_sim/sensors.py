@@ -20,6 +20,16 @@ def _check(name: str, value: float, positive: bool = False) -> None:
         raise ValueError(f"{name} must be {'positive' if positive else 'non-negative'} and finite, got {value}")
 
 
+def lag_step(y: float | None, x: float, tau_s: float, dt_s: float) -> float:
+    """One sample of a first-order lag, exact for ``x`` held over the sample of ``dt_s``.
+
+    No state yet (``y`` None) or no lag (``tau_s`` <= 0): the output is ``x``.
+    """
+    if y is None or tau_s <= 0.0:
+        return x
+    return y + (1.0 - math.exp(-dt_s / tau_s)) * (x - y)
+
+
 @register_block("sensor_delay")
 @dataclass
 class TransportDelay:
@@ -79,11 +89,7 @@ class FirstOrderLag:
         self._y = x0
 
     def step(self, x: float, t_s: float) -> float:
-        tau = self.tau_s * self.severity
-        if self._y is None or tau <= 0.0:
-            self._y = x
-            return x
-        self._y += (1.0 - math.exp(-self.dt_s / tau)) * (x - self._y)
+        self._y = lag_step(self._y, x, self.tau_s * self.severity, self.dt_s)
         return self._y
 
 
@@ -193,14 +199,8 @@ class AsymmetricLag:
         self._y = x0
 
     def step(self, x: float, t_s: float) -> float:
-        if self._y is None:
-            self._y = x
-            return x
-        tau = self.severity * (self.tau_up_s if x > self._y else self.tau_down_s)
-        if tau <= 0.0:
-            self._y = x
-        else:
-            self._y += (1.0 - math.exp(-self.dt_s / tau)) * (x - self._y)
+        rising = self._y is not None and x > self._y
+        self._y = lag_step(self._y, x, self.severity * (self.tau_up_s if rising else self.tau_down_s), self.dt_s)
         return self._y
 
 
