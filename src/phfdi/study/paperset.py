@@ -28,9 +28,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from phfdi.faults import catalogue
+from phfdi.faults import catalogue, fault_library
 from phfdi.loop import simulate
-from phfdi.scenario import fault_library, load_scenario
+from phfdi.scenario import load_scenario
 
 #: the classes of the paper's Section 6, in its order
 PAPER_CLASSES = ("healthy", "backlash", "friction", "deadzone", "saturation")
