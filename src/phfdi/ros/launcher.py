@@ -112,6 +112,11 @@ class LaunchResult:
     published: dict[str, int] = field(default_factory=dict)  # messages per topic, as the nodes counted them
     #: JSON lines the nodes other than the clock node printed (e.g. the detector's fault_alarm events)
     node_events: dict[str, list[dict]] = field(default_factory=dict)
+    #: per node, seconds after the launcher started the processes: spawned, main (interpreter and imports
+    #: done), init (rclpy.init), built (node made), matched (own endpoints matched), connected; startup_cpu:
+    #: the node's CPU seconds at the same steps
+    startup: dict[str, dict[str, float]] = field(default_factory=dict)
+    startup_cpu: dict[str, dict[str, float]] = field(default_factory=dict)
 
     @property
     def simulated_s(self) -> float:
@@ -133,6 +138,7 @@ class _Proc:
         self.expected_exit = False
         self.stdout_pos = 0
         self.killed_by_us = False
+        self.spawned = 0.0  # s after the launcher's t0
 
     @property
     def name(self) -> str:
@@ -217,7 +223,8 @@ class Launcher:
     def _spawn_all(self, domain_id: int) -> None:
         env = graph_env(domain_id)
         self.t0 = time.monotonic()
-        self.wall_t0 = time.time() - 1.0  # for file times (coarse clocks)
+        self.t0_wall = time.time()  # start-up trace: nodes report wall clock times
+        self.wall_t0 = self.t0_wall - 1.0  # for file times (coarse clocks)
         written: dict[int, str] = {}  # one file per distinct part (loop_graph: one for the graph)
         for spec in self.nodes:
             params = dict(spec.params)
@@ -234,6 +241,7 @@ class Launcher:
                 popen = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=env,
                                          start_new_session=True, preexec_fn=_die_with_parent)
             self.procs[spec.name] = _Proc(spec, popen, self.log_dir)
+            self.procs[spec.name].spawned = time.monotonic() - self.t0
         self.status(f"started {len(self.nodes)} nodes on ROS domain {domain_id}: "
                     + ", ".join(f"{p.name} (pid {p.popen.pid})" for p in self.procs.values()))
 
@@ -346,7 +354,11 @@ class Launcher:
                 event = _json_event(line)
                 if event is None:
                     continue
-                if event["event"] == "published":
+                if event["event"] == "startup":
+                    result.startup[p.name] = {"spawned": round(p.spawned, 4), **{
+                        k: round(t - self.t0_wall, 4) for k, t in event.get("times", {}).items()}}
+                    result.startup_cpu[p.name] = {k: round(c, 4) for k, c in event.get("cpu", {}).items()}
+                elif event["event"] == "published":
                     for topic, n in event.get("counts", {}).items():
                         result.published[topic] = result.published.get(topic, 0) + n
                 elif p.name != self.clock_node:

@@ -23,6 +23,29 @@ from phfdi_base.errors import UserError
 DISCOVERY_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 #: ROS domain ids usable on Linux (the DDS port formula overflows above 232)
 DOMAIN_IDS = range(1, 233)
+#: restricts the ids :func:`reserve_domain_id` picks from, e.g. ``60-79`` (machines shared by several teams)
+DOMAINS_VAR = "PHFDI_ROS_DOMAINS"
+
+
+def allowed_domain_ids(environ: dict | None = None) -> list[int]:
+    """The domain ids this process may pick: ``PHFDI_ROS_DOMAINS=LO-HI`` (inclusive) if set, else 1..232.
+
+    Examples
+    --------
+    >>> allowed_domain_ids({"PHFDI_ROS_DOMAINS": "60-62"})
+    [60, 61, 62]
+    """
+    value = (os.environ if environ is None else environ).get(DOMAINS_VAR, "").strip()
+    if not value:
+        return list(DOMAIN_IDS)
+    try:
+        lo, _, hi = value.partition("-")
+        ids = list(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        raise UserError(f"{DOMAINS_VAR}={value}: expected LO-HI, e.g. 60-79") from None
+    if not ids or ids[0] not in DOMAIN_IDS or ids[-1] not in DOMAIN_IDS:
+        raise UserError(f"{DOMAINS_VAR}={value}: expected LO-HI within 1..232, e.g. 60-79")
+    return ids
 
 
 def ensure_localhost(environ: dict | None = None) -> None:
@@ -94,9 +117,13 @@ def reserve_domain_id(requested: int | None = None) -> DomainLease:
 
     Held by a lock file (released when this process ends), so parallel
     launches and test workers never share a domain. ``requested`` checks and
-    holds that id instead of picking one.
+    holds that id instead of picking one; otherwise the id is one of :func:`allowed_domain_ids`.
     """
-    candidates = [requested] if requested is not None else random.sample(list(DOMAIN_IDS), len(DOMAIN_IDS))
+    if requested is None:
+        allowed = allowed_domain_ids()
+        candidates = random.sample(allowed, len(allowed))
+    else:
+        candidates = [requested]
     if requested is not None and requested not in DOMAIN_IDS and requested != 0:
         raise UserError(f"--domain-id {requested}: use 0..232")
     for d in candidates:
@@ -111,7 +138,8 @@ def reserve_domain_id(requested: int | None = None) -> DomainLease:
         if requested is not None or _ports_free(_domain_ports(d)):
             return DomainLease(d, fd)
         os.close(fd)
-    raise UserError("no free ROS domain id (1..232) on this machine")
+    ids = allowed_domain_ids()
+    raise UserError(f"no free ROS domain id ({ids[0]}..{ids[-1]}) on this machine")
 
 
 if __name__ == "__main__":  # prints a free domain id (for scripts/launch_graph.sh)
