@@ -102,6 +102,8 @@ class HealthyReference:
         self.plant: CstrPlant = self.process.plant
         self.dt_s = self.spec.sample_time_s
         vspec = self.spec.valves.ph
+        # the scenario schema requires both for the pH valve (phfdi_base.spec.ScenarioSpec)
+        assert vspec.feed is not None and vspec.max_flow_ml_s is not None
         self.valve_feed = vspec.feed
         self.feed_names = [f.name for f in self.plant.feeds]
         self.valve_index = self.feed_names.index(vspec.feed)
@@ -131,6 +133,7 @@ class HealthyReference:
     def new_valve(self, position_blocks=None) -> Valve:
         """A valve like the reference's, optionally with position blocks (isolation hypotheses)."""
         v = self.valve_spec
+        assert v.max_flow_ml_s is not None  # checked in __init__
         return Valve(v.max_flow_ml_s, v.characteristic, v.rangeability, position_blocks or Chain())
 
     # ---- state -------------------------------------------------------------------
