@@ -144,3 +144,58 @@ def test_the_catalogue_search_steps_no_block_point_by_point(monkeypatch):
     run = simulate_loop(acceptance_cases()["stiction"].loop)
     ev = gather_evidence(run, Settings(baselines=False))
     assert len(ev.causes) == 5 and len(calls) == 5
+
+
+# ---- the indicators' fits, vectorised: against the loops they replace -----------------------
+def _fit_sine_loop(y):
+    n = len(y)
+    t = np.arange(n, dtype=float)
+    best = math.inf
+    for length in np.linspace(0.7 * (n + 1), 1.3 * (n + 1), 9):
+        for t0 in np.linspace(-0.3 * n, 0.3 * n, 9) - 0.5:
+            design = np.column_stack([np.sin(np.pi * (t - t0) / length), np.ones(n)])
+            coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+            best = min(best, float(np.mean((y - design @ coef) ** 2)))
+    return best
+
+
+def _fit_relay_loop(y):
+    n = len(y)
+    t = np.arange(n, dtype=float)
+    best = math.inf
+    for tau in np.geomspace(0.3, max(0.6, n / 2), 8):
+        for t0 in np.linspace(-0.1 * n, 0.25 * n, 4):
+            s0 = np.where(t > t0, 1.0 - np.exp(-np.maximum(t - t0, 0.0) / tau), 0.0)
+            for t1 in np.linspace(0.5 * n, 1.05 * n, 6):
+                g = s0 - np.where(t > t1, 1.0 - np.exp(-np.maximum(t - t1, 0.0) / tau), 0.0)
+                gc, yc = g - np.mean(g), y - np.mean(y)
+                sgg = float(gc @ gc)
+                sse = float(yc @ yc) - (float(gc @ yc) ** 2 / sgg if sgg > 0 else 0.0)
+                best = min(best, max(sse, 0.0) / n)
+    return best
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_vectorised_half_cycle_fits_equal_the_loops(seed):
+    from phfdi.loopdiag.indicators import _fit_relay, _fit_sine
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(6, 90))
+    t = np.arange(n)
+    shapes = [np.sin(np.pi * t / n), np.minimum(1.0, t / 3.0), np.exp(-t / 7.0) - 0.3]
+    y = shapes[seed % 3] * rng.uniform(0.5, 5.0) + rng.normal(0.0, 0.05, n) + rng.uniform(-3, 3)
+    assert _fit_sine(y) == pytest.approx(_fit_sine_loop(y), rel=RTOL, abs=1e-15)
+    assert _fit_relay(y, False) == pytest.approx(_fit_relay_loop(y), rel=RTOL, abs=1e-15)
+
+
+def test_normal_density_written_out_equals_scipys():
+    from scipy.stats import norm
+
+    from phfdi.loopdiag.indicators import _sine_noise_loglik
+
+    x = np.random.default_rng(4).standard_normal(500)
+    phases = np.linspace(0.0, 2 * math.pi, 96, endpoint=False)
+    for amp in (0.0, 0.3, 1.0, 1.4):
+        sig = math.sqrt(max(1.0 - 0.5 * amp * amp, 1e-6))
+        dens = norm.pdf(x[:, None], loc=amp * np.sin(phases)[None, :], scale=sig).mean(axis=1)
+        assert _sine_noise_loglik(x, amp, phases) == float(np.sum(np.log(np.maximum(dens, 1e-300))))
