@@ -40,11 +40,14 @@ def position_for_opening(opening: float, valve: ValveSpec) -> float:
 
 
 class FlowsAtRest(Protocol):
-    """What the plant says about a steady state (:class:`ph_plant_sim.build.PlantStart`)."""
+    """What the plant says about a steady state (:class:`ph_plant_sim.build.PlantStart`); read only."""
 
-    flows_ml_s: Sequence[float]
-    valve_feed_index: int
-    outlet_opening: float
+    @property
+    def flows_ml_s(self) -> Sequence[float]: ...  # every feed, plant feed order
+    @property
+    def valve_feed_index(self) -> int: ...  # the feed the pH valve drives
+    @property
+    def outlet_opening(self) -> float: ...  # fraction of full outlet flow at rest
 
 
 def start_commands(spec: ScenarioSpec, rest: FlowsAtRest, level_controlled: bool) -> tuple[float, float]:

@@ -171,5 +171,5 @@ def select_n_changes(contrast: np.ndarray, penalty: str | float = "interval", n:
         return 0
     last = ks[-1]
     width = {k: intervals[k][1] - intervals[k][0] for k in ks[1:-1]}
-    k_best = max(width, key=width.get)
+    k_best = max(width, key=width.__getitem__)
     return k_best if width[k_best] > intervals[last][1] else 0

@@ -15,6 +15,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 from phfdi_base.errors import UserError
 from phfdi_base.yamlfile import read_mapping
@@ -104,7 +105,7 @@ class DetectorSettings:
         the mean of AJ replaces R's. (AJ's mean is R's mean seen through a
         low-pass filter: the same information, later.)
         """
-        out = []
+        out: list[str] = []
         a = f"A{self.level}"
         for ch in self.channels:
             if self.raw_band:
@@ -143,8 +144,9 @@ class Calibration:
     sigma: dict[str, dict[str, float]]
     #: statistic name -> threshold
     thresholds: dict[str, float]
-    #: design values the thresholds belong to
-    design: dict[str, float] = field(default_factory=dict)
+    #: design values the thresholds belong to, as in the file: the CUSUMs' design numbers, ``channels`` (a
+    #: list of names) and ``raw_band`` (a bool)
+    design: dict[str, Any] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=list)
     #: recorded healthy runs it was made from (empty: simulated with ``seeds``)
     sources: list[str] = field(default_factory=list)

@@ -29,9 +29,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
+import numpy.typing as npt
 
 from .config import Calibration, DetectorSettings
 from .filterbank import CausalSwt
@@ -201,7 +202,7 @@ class StreamingDetector:
                              "level_measured_cm": [level_measured_cm],
                              "level_controller_output_pct": [outlet_command_pct], "ph_setpoint": [ph_setpoint]})
 
-    def process(self, chunk: Mapping[str, np.ndarray]) -> list[Event]:
+    def process(self, chunk: Mapping[str, npt.ArrayLike | None]) -> list[Event]:
         """A chunk of samples given as arrays named like run signals (time_s, ph_measured,
         valve_command_pct; optional level_measured_cm, level_controller_output_pct, ph_setpoint,
         <feed>_flow_ml_s of feeds the valve does not drive). Missing optional signals are NaN."""
@@ -267,7 +268,7 @@ class StreamingDetector:
 
     def diagnostics(self) -> dict:
         """Input health and internals for /diagnostics (numbers and flags only)."""
-        d = dict(self.inputs.counts)
+        d: dict[str, Any] = dict(self.inputs.counts)
         d.update({
             "state": self.state,
             "command_stale": self.inputs.command_stale,
@@ -371,6 +372,7 @@ class StreamingDetector:
 
     def _record(self, idx, t, ph, pred, residual, mask, coefs, z) -> None:
         tr = self._trace
+        assert tr is not None, "called with record_trace=True only"
         for key, val in (("index", idx), ("time_s", t), ("ph_measured", ph), ("ph_predicted", pred.ph),
                          ("level_predicted_cm", pred.level_cm), ("ph_residual", residual["ph"]),
                          ("level_residual_cm", residual["level"]), ("ph_monitored", mask["ph"]),
@@ -423,7 +425,7 @@ class StreamingDetector:
         return events
 
     def _crossing(self, row: int, value: float, last_zero: int, gi: int, t_s: float) -> list[Event]:
-        events = []
+        events: list[Event] = []
         if self.state == "alarm":
             if gi - self._last_confirm <= self.clear_samples:
                 self._last_confirm = gi

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from phfdi_base.errors import UserError
 
@@ -211,13 +212,19 @@ class LearnedDetector:
         for c, ch in enumerate(self.channels):
             for kind in ("mean_up", "mean_down"):
                 names.append(f"{ch}.A{s.level}.{kind}")
-                k.append(s.mean_k), h.append(s.mean_h), chan.append(c), band.append(s.level)
+                k.append(s.mean_k)
+                h.append(s.mean_h)
+                chan.append(c)
+                band.append(s.level)
         if self.energy:
             ke = energy_reference(s.energy_variance_ratio)
             for c, ch in enumerate(self.channels):
                 for j in range(s.level):
                     names.append(f"{ch}.D{j + 1}.energy")
-                    k.append(ke), h.append(s.energy_h), chan.append(c), band.append(j)
+                    k.append(ke)
+                    h.append(s.energy_h)
+                    chan.append(c)
+                    band.append(j)
         self.stat_names = names
         self.k = np.array(k)
         self.h = np.array(h)
@@ -242,21 +249,21 @@ class LearnedDetector:
         self._trace: dict[str, list] | None = {"coef": [], "stat": [], "state": []} if record_trace else None
 
     # ---- public API ------------------------------------------------------------------
-    def process(self, t_s: Sequence[float], x: np.ndarray) -> tuple[list[LearnedEvent], np.ndarray]:
+    def process(self, t_s: npt.ArrayLike, x: npt.ArrayLike) -> tuple[list[LearnedEvent], np.ndarray]:
         """Rows x (n, m) at times t_s; returns the events and the alarm state (0/1) of each row."""
-        x = np.asarray(x, dtype=float)
+        rows = np.asarray(x, dtype=float)
         t = np.asarray(t_s, dtype=float)
-        if x.ndim != 2 or x.shape[1] != self.m:
-            raise UserError(f"expected rows x {self.m} channels ({', '.join(self.channels)}), got shape {x.shape}")
-        if len(t) != len(x):
-            raise UserError(f"{len(t)} time stamps for {len(x)} rows")
+        if rows.ndim != 2 or rows.shape[1] != self.m:
+            raise UserError(f"expected rows x {self.m} channels ({', '.join(self.channels)}), got shape {rows.shape}")
+        if len(t) != len(rows):
+            raise UserError(f"{len(t)} time stamps for {len(rows)} rows")
         events: list[LearnedEvent] = []
-        states = np.zeros(len(x), dtype=np.int8)
-        if not len(x):
+        states = np.zeros(len(rows), dtype=np.int8)
+        if not len(rows):
             return events, states
-        g = self.samples_processed + np.arange(len(x))
+        g = self.samples_processed + np.arange(len(rows))
         self._times[g % TIME_RING] = t
-        r = self.stream.residuals(x)
+        r = self.stream.residuals(rows)
         missing = ~np.isfinite(r)
         events += self._missing_events(missing, t)
         out = self.swt.process(np.where(missing, 0.0, r))
@@ -265,11 +272,11 @@ class LearnedDetector:
         d_norm = details / sig[:, :-1].T[:, None, :]  # (J, n, m)
         a_raw = approx / self.gain  # AJ in residual units (DC gain removed)
         b = self.settings.block_samples
-        n = len(x)
+        n = len(rows)
         pos = 0
         while pos < n:
-            g = self.samples_processed + pos
-            end = min(n, pos + (b - g % b))
+            done = self.samples_processed + pos  # rows processed so far: blocks are aligned to them
+            end = min(n, pos + (b - done % b))
             ev = self._block(t, pos, end, a_raw, d_norm, missing, states)
             events += ev
             pos = end
@@ -351,14 +358,14 @@ class LearnedDetector:
         rho = self.settings.clear_fraction
         above = ratio[:, j:] > 1.0
         if rho <= 0.0:
-            return above.any(axis=0)
+            return np.any(above, axis=0)
         a = absu[j:]  # (n, m)
         peak = np.maximum(np.maximum.accumulate(a, axis=0), self._peak)  # running peak per channel
         strong = (a >= rho * peak).T  # (m, n)
         nm = 2 * self.m
         ok = above.copy()
         ok[:nm] &= np.repeat(strong, 2, axis=0)
-        return ok.any(axis=0)
+        return np.any(ok, axis=0)
 
     def _alarm_logic(self, t, i0, i1, g0, ratio, cross, states, absu) -> list[LearnedEvent]:
         s = self.settings
@@ -434,11 +441,13 @@ class LearnedDetector:
 
     def _alarm_message(self) -> str:
         a = self._alarm
+        assert a is not None, "called in alarm only"
         top = ", ".join(f"{c} {v['share']:.0%}" for c, v in list(a["contributions"].items())[:3])
         return f"alarm {a['alarm_id']}: {a['statistic']} crossed its threshold; channels: {top}"
 
     def _clear(self, t_s: float, index: int) -> LearnedEvent:
         a = self._alarm
+        assert a is not None, "called in alarm only"
         a["cleared_time"] = float(t_s)
         a["cleared_index"] = int(index)
         a["episode_contributions"] = self._contributions(self._episode)

@@ -182,7 +182,7 @@ class LagStats:
     """Processing lag (s, wall) of the last samples: arrival of a measurement to the core's result."""
 
     def __init__(self) -> None:
-        self.lags = deque(maxlen=LAG_WINDOW)
+        self.lags: deque[float] = deque(maxlen=LAG_WINDOW)
         self.calls = 0
         self.samples = 0
         self.core_s = 0.0

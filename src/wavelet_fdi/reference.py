@@ -42,7 +42,7 @@ from valve_actuator.build import build_valves, check_reachable, start_commands
 from valve_actuator.valve import Valve
 
 if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
-    from phfdi_base.spec import ScenarioSpec
+    from phfdi_base.spec import PlantModelSpec, ScenarioSpec
 
 RESTART_LEVEL_CM = 1.0
 
@@ -90,7 +90,7 @@ class KnownStart:
     finder that needs) nor reads the plant-model file: a detector node starts about 0.4 s of CPU sooner."""
 
     start: StartPoint  # or any object with the same four fields (phfdi_base.parts.LoopStart)
-    plant_model: object = None  # a validated plant model; None: read the scenario's ``plant``
+    plant_model: PlantModelSpec | None = None  # a validated plant model (or its view); None: the scenario's ``plant``
 
 
 def _healthy_parts(spec: ScenarioSpec, known: KnownStart | None = None
@@ -125,6 +125,8 @@ class HealthyReference:
         self.plant: CstrPlant = self.process.plant
         self.dt_s = self.spec.sample_time_s
         vspec = self.spec.valves.ph
+        # the scenario schema requires both for the pH valve (phfdi_base.spec.ScenarioSpec)
+        assert vspec.feed is not None and vspec.max_flow_ml_s is not None
         self.valve_feed = vspec.feed
         self.feed_names = [f.name for f in self.plant.feeds]
         self.valve_index = self.feed_names.index(vspec.feed)
@@ -154,6 +156,7 @@ class HealthyReference:
     def new_valve(self, position_blocks=None) -> Valve:
         """A valve like the reference's, optionally with position blocks (isolation hypotheses)."""
         v = self.valve_spec
+        assert v.max_flow_ml_s is not None  # checked in __init__
         return Valve(v.max_flow_ml_s, v.characteristic, v.rangeability, position_blocks or Chain())
 
     # ---- state -------------------------------------------------------------------

@@ -96,6 +96,8 @@ class Diagnosis:
     extended_record_raws: list = field(default_factory=list)
     structure: FitResult | None = None  # the structure search's final model (None: nominal, or no search)
     structure_preds: list[Prediction] | None = None
+    singles: list[FitResult] = field(default_factory=list)  # every single candidate's fit (its held-out starts)
+    search_fits: list[FitResult] = field(default_factory=list)  # every model the structure search scored
 
 
 def _say(opts: Options, text: str) -> None:
@@ -240,6 +242,8 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     d.extended_record_raws = [_raw_of(winner, i) for i in range(len(records))] if extended_preds else []
     d.structure = structure_final
     d.structure_preds = structure_preds
+    d.singles = list(results)
+    d.search_fits = [s["fit"] for s in search["path"]] if search is not None else []
     return d
 
 
