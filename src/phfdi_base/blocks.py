@@ -37,6 +37,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable, Protocol, runtime_checkable
 
+from .faults import Fault, register_fault
+
 
 @runtime_checkable
 class Block(Protocol):
@@ -48,12 +50,18 @@ class Block(Protocol):
 BLOCKS: dict[str, type] = {}
 
 
-def register_block(name: str) -> Callable[[type], type]:
-    """Class decorator: make a block available to scenario files as ``type: name``."""
+def register_block(name: str, fault: Fault | None = None) -> Callable[[type], type]:
+    """Class decorator: make a block available to scenario files as ``type: name``.
+
+    ``fault`` enters the fault the block models in the catalogue (:mod:`phfdi_base.faults`): presets,
+    isolation, diagnosis, evaluation and ``--help`` then know it.
+    """
 
     def deco(cls: type) -> type:
         BLOCKS[name] = cls
         setattr(cls, "block_name", name)  # noqa: B010  (a new attribute of any class)
+        if fault is not None:
+            register_fault(fault, name)
         return cls
 
     return deco

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 from dataclasses import asdict
 
+from phfdi.faults import fault_library
 from phfdi.loop import build_parts
-from phfdi.scenario import fault_library, raw_scenario
+from phfdi.scenario import raw_scenario
 from phfdi_base.parts import LoopStart, NodePart
 from phfdi_base.spec import ScenarioSpec, resolve_scenario
 
