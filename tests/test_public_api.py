@@ -21,6 +21,7 @@ from phfdi_base.lazy import type_checking_imports
 #: packages with a public API, and whether they re-export lazily (the cores) or eagerly
 PACKAGES = {
     "phfdi_base": True, "ph_plant_sim": True, "valve_actuator": True, "pi_controllers": True, "wavelet_fdi": True,
+    "phfdi.records": False,
 }
 NAMES = [(p, n) for p in PACKAGES for n in importlib.import_module(p).__all__]
 EXAMPLES = re.compile(r"^Examples\n--------\n", re.M)
@@ -28,6 +29,13 @@ EXAMPLES = re.compile(r"^Examples\n--------\n", re.M)
 
 def _public(package: str, name: str):
     return getattr(importlib.import_module(package), name)
+
+
+def _documented(package: str, name: str):
+    """Where a public name's examples live: its own docstring, or for data (a constant, which has no
+    docstring of its own) the package's."""
+    obj = _public(package, name)
+    return obj if inspect.isclass(obj) or inspect.isroutine(obj) else importlib.import_module(package)
 
 
 @pytest.mark.parametrize("package", PACKAGES)
@@ -38,15 +46,18 @@ def test_package_lists_its_public_names(package):
 
 @pytest.mark.parametrize(("package", "name"), NAMES, ids=[f"{p}.{n}" for p, n in NAMES])
 def test_public_name_exists_with_numpydoc_examples(package, name):
-    obj = _public(package, name)
-    doc = inspect.getdoc(obj) or ""
-    assert doc and obj.__doc__, f"{package}.{name} has no docstring of its own"
-    assert EXAMPLES.search(doc), f"{package}.{name}: its docstring has no numpydoc 'Examples' section"
+    target = _documented(package, name)
+    doc = inspect.getdoc(target) or ""
+    assert doc and target.__doc__, f"{package}.{name} has no docstring of its own"
+    found = EXAMPLES.search(doc)
+    assert found, f"{package}.{name}: its docstring has no numpydoc 'Examples' section"
+    assert target is _public(package, name) or name in doc[found.end():], \
+        f"{package}.{name}: a constant is shown in the package docstring's Examples section"
 
 
 @pytest.mark.parametrize(("package", "name"), NAMES, ids=[f"{p}.{n}" for p, n in NAMES])
 def test_public_examples_run(package, name):
-    tests = doctest.DocTestFinder(recurse=False).find(_public(package, name), f"{package}.{name}", globs={})
+    tests = doctest.DocTestFinder(recurse=False).find(_documented(package, name), f"{package}.{name}", globs={})
     assert sum(len(t.examples) for t in tests) >= 2, f"{package}.{name}: give a runnable example (>>> lines)"
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     report: list[str] = []
