@@ -17,6 +17,10 @@ from phfdi.loop import simulate
 from phfdi.scenario import load_scenario
 from phfdi_base.blocks import BLOCKS, make_block, register_block
 from phfdi_base.faults import FAULTS, Fault, FaultParam, Range
+from wavelet_fdi.config import DetectorSettings, load_default_calibration
+from wavelet_fdi.isolation import classes
+
+from ..detector.detector_helpers import SHORT, short_spec
 
 
 @pytest.fixture
@@ -72,6 +76,18 @@ def test_a_users_fault_is_evaluated_at_its_severities(stem_offset):
                                                         {"offset_pct": 6.0}])
     assert stem_offset in EvalConfig().faults
     assert severity_overrides(stem_offset, 1.2) == ["faults.0.params.offset_pct=3.6"]
+
+
+def test_a_users_fault_is_isolated_and_sized_online(stem_offset):
+    from phfdi.replay import replay_run
+
+    assert stem_offset in classes()
+    run = simulate(short_spec(stem_offset, onset_s=1000.0, duration_s=1600.0))
+    result = replay_run(run, calibration=load_default_calibration("paper", DetectorSettings()), settings=SHORT)
+    first = result.alarms[0]
+    assert first.detection_time_s >= 1000.0 and first.fault_class == stem_offset, (first.fault_class,
+                                                                                   first.alternatives)
+    assert first.parameter["name"] == "offset_pct" and first.parameter["value"] == pytest.approx(3.0, rel=0.05)
 
 
 # ---- the built-in catalogue ------------------------------------------------------------------------------------

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
@@ -167,23 +166,22 @@ def _response(du: np.ndarray, tau_s: float, dt_s: float, integrating: bool) -> n
     return np.cumsum(x) * dt_s if integrating else x
 
 
-@lru_cache(maxsize=16)
-def _lag_spectra(poles: tuple[float, ...], n: int, nfft: int) -> np.ndarray:
-    """Spectra of the unit-gain lags' impulse responses h[k] = (1 - a) a^(k-1), k >= 1, truncated at n."""
-    k = np.arange(n, dtype=float)
-    a = np.asarray(poles)[:, None]
-    h = np.where(k[None, :] >= 1, (1.0 - a) * a ** np.maximum(k[None, :] - 1, 0), 0.0)
-    return np.fft.rfft(h, nfft, axis=1)
-
-
 def _responses(du: np.ndarray, taus_s: np.ndarray, dt_s: float, integrating: bool) -> np.ndarray:
-    """:func:`_response` for many time constants at once (one FFT convolution, exact for the record)."""
-    n = len(du)
-    nfft = 1 << (2 * n - 1).bit_length()
-    poles = tuple(math.exp(-dt_s / t) if t > 0 else 0.0 for t in taus_s)
-    x = np.fft.irfft(np.fft.rfft(du - du[0], nfft)[None, :] * _lag_spectra(poles, n, nfft), nfft, axis=1)[:, :n]
-    x += du[0]
-    return np.cumsum(x, axis=1) * dt_s if integrating else x
+    """:func:`_response` of each row of ``du`` (m, n) for many time constants at once: (m, n_tau, n)
+    (one :func:`scipy.signal.lfilter` call per time constant over all rows)."""
+    out = np.empty((du.shape[0], len(taus_s), du.shape[1]))
+    for i, tau_s in enumerate(taus_s):
+        a = math.exp(-dt_s / tau_s) if tau_s > 0 else 0.0
+        if a <= 0.0:
+            out[:, i, 0] = du[:, 0]
+            out[:, i, 1:] = du[:, :-1]
+        else:
+            # the transposed direct form II state of this filter at rest on du[:, 0] is du[:, 0] itself
+            out[:, i], _ = lfilter([0.0, 1.0 - a], [1.0, -a], du, axis=-1, zi=du[:, :1])
+    if integrating:
+        np.cumsum(out, axis=-1, out=out)
+        out *= dt_s
+    return out
 
 
 def _shift(x: np.ndarray, d: int) -> np.ndarray:
@@ -191,73 +189,128 @@ def _shift(x: np.ndarray, d: int) -> np.ndarray:
     return x[idx]
 
 
+@dataclass(frozen=True)
+class LagTargets:
+    """The PV side of the lag-model search (:func:`fit_lag_model`), computed once for every input
+    tried against the same PV (the valve-model search tries hundreds).
+
+    For horizon h the input's response r gives the increments D_h[j] = r[j + h] - r[j]; target i
+    of horizon h (dy_h[i], sample i + h + d_max) meets, for delay d, D_h[i + s_d] with
+    s_d = d_max - d. The increments of all horizons are laid end to end (horizon h from
+    ``offsets[h]``), so that for every delay at once
+
+        sxy = D . ``xy``,   sxx = D^2 . ``window``,   (integrating) sdr = D . ``drift``
+
+    are three matrix products: column d of ``xy`` holds dy_h at rows offsets[h] + s_d + i, of
+    ``window`` ones there, of ``drift`` the drift column's weight w_h there."""
+
+    dt_s: float
+    split: Split
+    integrating: bool
+    delays: np.ndarray
+    offsets: tuple
+    spans: tuple
+    xy: np.ndarray
+    window: np.ndarray
+    drift: np.ndarray | None
+    syy: float
+    n_residuals: int
+
+    @classmethod
+    def of(cls, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
+           delays: np.ndarray = DELAYS) -> "LagTargets":
+        n_tr = split.n_train
+        hs = split.horizons
+        delays = np.asarray(delays)[np.asarray(delays) < n_tr // 4]
+        d_max = max(int(delays.max()), 0)
+        starts = d_max - delays  # where delay d's window starts in the response's increments
+        # targets: dy_h[k] for k in [h + d_max, n_tr)
+        dys = [y[h + d_max:n_tr] - y[d_max:n_tr - h] for h in hs]
+        w = [0.0] * len(hs)
+        if integrating:
+            # project the drift column (h dt in horizon h's block) out of targets and regressors
+            norm = math.sqrt(sum(len(d) * (h * dt_s) ** 2 for d, h in zip(dys, hs)))
+            w = [h * dt_s / norm for h in hs]
+            c_y = sum(wi * float(d.sum()) for wi, d in zip(w, dys))
+            dys = [d - c_y * wi for d, wi in zip(dys, w)]
+        n_off = int(starts.max()) + 1
+        spans = [len(dy) + n_off - 1 for dy in dys]
+        offsets = np.concatenate(([0], np.cumsum(spans)[:-1])).astype(int)
+        xy = np.zeros((sum(spans), len(delays)))
+        window = np.zeros_like(xy)
+        drift = np.zeros_like(xy) if integrating else None
+        for dy, wi, off in zip(dys, w, offsets):
+            for col, s in enumerate(starts):
+                rows = slice(off + s, off + s + len(dy))
+                xy[rows, col] = dy
+                window[rows, col] = 1.0
+                if drift is not None:
+                    drift[rows, col] = wi
+        syy = float(sum(d @ d for d in dys))
+        return cls(dt_s, split, integrating, delays, tuple(int(o) for o in offsets), tuple(spans), xy, window,
+                   drift, syy, sum(len(d) for d in dys))
+
+
+def _lag_grid(u: np.ndarray, t: LagTargets, gain_sign: int, tau_factors: np.ndarray):
+    """Criterion and gain on the (tau, delay) grid for each input row of ``u`` (m, n): arrays
+    (m, n_tau, n_delay), and the time constants and centred inputs. Each row is computed on its
+    own (stacked matrix products, one per row), so its values do not depend on the batch."""
+    n_tr = t.split.n_train
+    du = u - np.mean(u[:, :n_tr], axis=1, keepdims=True)
+    taus = np.asarray(tau_factors, float) * t.dt_s
+    resp = _responses(du, taus, t.dt_s, t.integrating)  # (m, n_tau, n)
+    inc = np.empty(resp.shape[:2] + (t.xy.shape[0],))
+    for h, off, span in zip(t.split.horizons, t.offsets, t.spans):
+        np.subtract(resp[..., h:h + span], resp[..., :span], out=inc[..., off:off + span])
+    sxy = inc @ t.xy
+    if t.integrating:
+        sdr = inc @ t.drift
+    np.square(inc, out=inc)
+    sxx = inc @ t.window
+    if t.integrating:
+        sxx = sxx - sdr ** 2
+    ok = sxx > 1e-12 * np.maximum(1e-300, sxx.max(axis=(1, 2), keepdims=True))
+    gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
+    if gain_sign:
+        gain = np.where(gain * gain_sign > 0, gain, 0.0)
+    sse = t.syy - 2 * gain * sxy + gain ** 2 * sxx
+    return sse, gain, taus, du
+
+
+def lag_criteria(u: np.ndarray, targets: LagTargets, gain_sign: int = 0,
+                 tau_factors: np.ndarray = TAU_FACTORS) -> np.ndarray:
+    """The training criterion of :func:`fit_lag_model` (``sse_only``) for each row of ``u`` (m, n)
+    at once, equal bit for bit to calling it on each row."""
+    sse, *_ = _lag_grid(np.atleast_2d(u), targets, gain_sign, tau_factors)
+    best = sse.reshape(len(sse), -1).min(axis=1)
+    return np.where(best > targets.syy, targets.syy, best)
+
+
 def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
                   gain_sign: int = 0, delays: np.ndarray = DELAYS,
-                  tau_factors: np.ndarray = TAU_FACTORS, sse_only: bool = False) -> LinearModel | float:
+                  tau_factors: np.ndarray = TAU_FACTORS, sse_only: bool = False,
+                  targets: LagTargets | None = None) -> LinearModel | float:
     """FOPTD (or integrating with lag) from u to y, minimising the pooled h-step prediction error.
 
     Self-regulating: dy_h = K dx_h.  Integrating: dy_h = K dz_h + b h dt (z = dt cumsum x).
     ``gain_sign`` +1 / -1 admits only gains of that sign (0: either). ``sse_only``: return the
-    training criterion alone (the nonlinearity search calls this thousands of times).
+    training criterion alone. ``targets``: the PV side computed beforehand (:class:`LagTargets`
+    of this y, split and delays); many inputs at once: :func:`lag_criteria`.
 
     The increments of the training part from sample ``max(delays)`` on are the residuals for
-    every delay alike; for each horizon the cross products with all delays come from one
-    correlation and one cumulative sum.
+    every delay alike; the cross products of all horizons with all delays come from two matrix
+    products (:class:`LagTargets`).
     """
-    n_tr = split.n_train
-    du = u - float(np.mean(u[split.train]))
-    hs = split.horizons
-    delays = np.asarray(delays)[np.asarray(delays) < n_tr // 4]
-    d_max = max(int(delays.max()), 0)
-    starts = d_max - delays  # where delay d's window starts in the response's increments
-    # targets: dy_h[k] for k in [h + d_max, n_tr)
-    dys = [y[h + d_max:n_tr] - y[d_max:n_tr - h] for h in hs]
-    if integrating:
-        # project the drift column (h dt in horizon h's block) out of targets and regressors
-        norm = math.sqrt(sum(len(d) * (h * dt_s) ** 2 for d, h in zip(dys, hs)))
-        w = [h * dt_s / norm for h in hs]
-        c_y = sum(wi * float(d.sum()) for wi, d in zip(w, dys))
-        dys = [d - c_y * wi for d, wi in zip(dys, w)]
-    syy = float(sum(d @ d for d in dys))
-    taus = np.asarray(tau_factors, float) * dt_s
-    resp = _responses(du, taus, dt_s, integrating)  # (n_tau, n)
-    n_off = int(starts.max()) + 1
-    sxx = np.zeros((len(taus), len(delays)))
-    sxy = np.zeros_like(sxx)
-    sdr = np.zeros_like(sxx)
-    for h, dy, wi in zip(hs, dys, w if integrating else [0.0] * len(hs)):
-        # target i (sample k = i + h + d_max) meets, for delay d, the response increment
-        # D[i + s_d] with D[j] = r[j + h] - r[j] and s_d = d_max - d
-        n_dy = len(dy)
-        span = n_dy + n_off - 1
-        inc = resp[:, h:h + span] - resp[:, :span]
-        sxy += (inc @ _shifted(dy, n_off).T)[:, starts]
-        c2 = np.concatenate((np.zeros((len(taus), 1)), np.cumsum(inc * inc, axis=1)), axis=1)
-        sxx += c2[:, starts + n_dy] - c2[:, starts]
-        if integrating:
-            c1 = np.concatenate((np.zeros((len(taus), 1)), np.cumsum(inc, axis=1)), axis=1)
-            sdr += wi * (c1[:, starts + n_dy] - c1[:, starts])
-    if integrating:
-        sxx = sxx - sdr ** 2
-    ok = sxx > 1e-12 * max(1e-300, float(sxx.max()))
-    gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
-    if gain_sign:
-        gain = np.where(gain * gain_sign > 0, gain, 0.0)
-    sse = syy - 2 * gain * sxy + gain ** 2 * sxx
+    t = targets or LagTargets.of(y, dt_s, split, integrating, delays)
+    sse, gain, taus, du = _lag_grid(u[None, :], t, gain_sign, tau_factors)
+    sse, gain, du = sse[0], gain[0], du[0]
     it, idl = np.unravel_index(int(np.argmin(sse)), sse.shape)
-    best = (float(sse[it, idl]), float(taus[it]), int(delays[idl]), float(gain[it, idl]))
-    if best[0] > syy:
-        best = (syy, 0.0, 0, 0.0)
+    best = (float(sse[it, idl]), float(taus[it]), int(t.delays[idl]), float(gain[it, idl]))
+    if best[0] > t.syy:
+        best = (t.syy, 0.0, 0, 0.0)
     if sse_only:
         return best[0]
-    return _finish_lag_model(du, y, dt_s, split, integrating, best, sum(len(d) for d in dys))
-
-
-def _shifted(dy: np.ndarray, n_off: int) -> np.ndarray:
-    """Rows m[o] = dy placed at offset o in a vector of length len(dy) + n_off - 1 (zeros elsewhere)."""
-    pad = np.zeros(n_off - 1)
-    zp = np.concatenate((pad, dy, pad))
-    return np.lib.stride_tricks.sliding_window_view(zp, len(dy) + n_off - 1)[::-1]
+    return _finish_lag_model(du, y, dt_s, split, integrating, best, t.n_residuals)
 
 
 def _finish_lag_model(du: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
