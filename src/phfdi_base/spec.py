@@ -183,6 +183,24 @@ class SensorsSpec(Strict):
 
 
 class ScenarioSpec(Strict):
+    """A validated scenario: plant, valves, sensors, controller tuning, setpoints, faults, duration, seed.
+
+    Build one with :func:`validate_scenario` (a one-line :class:`~phfdi_base.errors.UserError` for bad
+    input) or, from a preset or file, with the application's ``phfdi.scenario.load_scenario``. Each core
+    builds its part from it (``ph_plant_sim.build``, ``valve_actuator.build``, ``pi_controllers.build``).
+
+    Examples
+    --------
+    >>> from phfdi_base import validate_scenario
+    >>> spec = validate_scenario({
+    ...     "name": "demo", "plant": "paper", "duration_s": 600.0,
+    ...     "setpoints": {"ph": {"initial": 8.0}},
+    ...     "controllers": {"ph": {"kp": 6.0, "ti_s": 10.0, "action": "direct"}},
+    ...     "valves": {"ph": {"feed": "acid", "max_flow_ml_s": 40.0}}})
+    >>> spec.sample_time_s, spec.valves.ph.characteristic
+    (1.0, 'linear')
+    """
+
     name: str
     description: str = ""
     plant: str | PlantModelSpec
@@ -247,7 +265,28 @@ def format_validation(exc: ValidationError, source: str) -> str:
 
 
 def validate_scenario(data: dict, source: str = "scenario") -> ScenarioSpec:
-    """A validated scenario; a :class:`UserError` naming ``source``, the key and the problem otherwise."""
+    """A validated scenario; a :class:`UserError` naming ``source``, the key and the problem otherwise.
+
+    Parameters
+    ----------
+    data : dict
+        The scenario mapping (as read from YAML, ``extends:`` already resolved).
+    source : str
+        What the data came from, for the error message (a file name).
+
+    Returns
+    -------
+    ScenarioSpec
+
+    Examples
+    --------
+    >>> from phfdi_base import UserError, validate_scenario
+    >>> try:
+    ...     validate_scenario({"name": "demo", "plant": "paper", "duration_s": 0.0}, "demo.yaml")
+    ... except UserError as exc:
+    ...     print(str(exc).split(" (and")[0])
+    demo.yaml: duration_s: Input should be greater than 0
+    """
     try:
         return ScenarioSpec.model_validate(data)
     except ValidationError as exc:

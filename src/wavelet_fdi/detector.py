@@ -104,7 +104,28 @@ class Alarm:
 
 @dataclass
 class Event:
-    """A state change worth publishing: alarm raised, diagnosis, alarm cleared, input problem."""
+    """A state change worth publishing: alarm raised, diagnosis, alarm cleared, input problem.
+
+    Attributes
+    ----------
+    kind : {"alarm", "diagnosis", "cleared", "input"}
+    time_s : float
+        Time stamp of the sample that caused it (s).
+    index : int
+        That sample's index on the detector's grid.
+    level : {"OK", "WARN", "ERROR"}
+        Its diagnostic level (as on /diagnostics).
+    message : str
+        One line for a person.
+    alarm : dict or None
+        The alarm's summary (onset, detection, statistic, threshold, isolation) for alarm events.
+
+    Examples
+    --------
+    >>> from wavelet_fdi import Event
+    >>> Event("input", 12.0, 12, "WARN", "valve command missing").level
+    'WARN'
+    """
 
     kind: str  # "alarm" | "diagnosis" | "cleared" | "input"
     time_s: float
@@ -135,7 +156,37 @@ def change_time_glr(u: np.ndarray, min_after: int = 3) -> int:
 
 
 class StreamingDetector:
-    """Feed samples in time order; get events back. See the module docstring."""
+    """Feed samples in time order; get events back. See the module docstring.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+        The loop watched: its healthy reference model is built from the scenario's plant and valves.
+    calibration : Calibration
+        Noise levels and thresholds (:func:`~wavelet_fdi.config.load_default_calibration` or
+        ``phfdi calibrate``); must match ``settings``.
+    settings : DetectorSettings, optional
+    isolate : bool
+        Name the fault after an alarm (:mod:`wavelet_fdi.isolation`).
+    record_trace : bool
+        Keep every sample's residuals and statistics (:meth:`trace`; offline use only).
+
+    Examples
+    --------
+    >>> from phfdi.loop import simulate
+    >>> from phfdi.scenario import load_scenario
+    >>> from wavelet_fdi import DetectorSettings, StreamingDetector, load_default_calibration
+    >>> spec = load_scenario("paper", fault="friction", onset_s=800.0,
+    ...                      overrides=["duration_s=1500", "setpoints.ph.initial=8", "setpoints.ph.changes=[]"])
+    >>> run = simulate(spec)
+    >>> settings = DetectorSettings(warmup_s=300.0)
+    >>> detector = StreamingDetector(spec, load_default_calibration("paper", settings), settings, isolate=False)
+    >>> events = detector.process({name: run[name] for name in ("time_s", "ph_measured", "valve_command_pct")})
+    >>> [(e.kind, e.time_s > 800.0) for e in events], detector.state
+    ([('alarm', True)], 'alarm')
+    >>> detector.update(1500.0, 8.0, 30.0)  # one more sample: no new event
+    []
+    """
 
     def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings | None = None,
                  isolate: bool = True, record_trace: bool = False, known: KnownStart | None = None) -> None:
