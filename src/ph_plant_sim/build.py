@@ -12,21 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import cast
-
-from pydantic import ValidationError
+from typing import TYPE_CHECKING, cast
 
 from phfdi_base.blocks import Chain, make_block
 from phfdi_base.errors import UserError
-from phfdi_base.spec import (
-    PlantModelSpec,
-    ScenarioSpec,
-    SensorSpec,
-    checked_block,
-    format_validation,
-    injected_faults,
-    profile,
-)
+from phfdi_base.spec_tools import checked_block, injected_faults, profile
 from phfdi_base.yamlfile import read_mapping, resolve_preset
 
 from . import feedlines, sensors  # noqa: F401  (register the feed-line and sensor blocks)
@@ -34,6 +24,9 @@ from .chemistry import Chemistry, Component
 from .mixing import MixingZone, ZonedPlant
 from .plant import CstrPlant, Feed, GravityOutlet, Tank
 from .process import PlantProcess
+
+if TYPE_CHECKING:  # the schema (pydantic) only where a plant model file is read: a node gets its model validated
+    from phfdi_base.spec import PlantModelSpec, ScenarioSpec, SensorSpec
 
 __all__ = ["PLANT_DIR", "PlantStart", "build_plant", "build_process", "feed_lines", "load_plant_model",
            "plant_start", "sensor_chain"]
@@ -66,8 +59,12 @@ def load_plant_model(plant: str | PlantModelSpec) -> PlantModelSpec:
     >>> list(model.feeds)
     ['acid', 'buffer', 'base']
     """
-    if isinstance(plant, PlantModelSpec):
+    if not isinstance(plant, str):  # a model already validated (the scenario's own, or one a node part carries)
         return plant
+    from pydantic import ValidationError
+
+    from phfdi_base.spec import PlantModelSpec, format_validation
+
     path = resolve_preset(plant, PLANT_DIR, "plant model")
     try:
         return PlantModelSpec.model_validate(read_mapping(path))

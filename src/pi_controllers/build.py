@@ -6,10 +6,15 @@ used alike by the in-process loop and the controllers node.
 
 from __future__ import annotations
 
-from phfdi_base.spec import PISpec, ScenarioSpec, profile
+from typing import TYPE_CHECKING
+
+from phfdi_base.spec_tools import profile
 
 from .loops import ControllerBank
 from .pi import PIController
+
+if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario (a node's start-up)
+    from phfdi_base.spec import PISpec, ScenarioSpec
 
 __all__ = ["build_controllers", "pi_controller"]
 

@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 
 from phfdi_base.blocks import Chain
 from phfdi_base.errors import UserError
-from phfdi_base.spec import ScenarioSpec, ValveSpec, injected_faults, profile
+from phfdi_base.spec_tools import injected_faults, profile
 
 from .blocks import FLOW_BLOCKS
 from .valve import Valve, ValveOutput
+
+if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario (a node's start-up)
+    from phfdi_base.spec import ScenarioSpec, ValveSpec
 
 __all__ = ["ValveStep", "build_valve", "build_valves", "check_reachable", "position_for_opening", "start_commands",
            "step_valves"]

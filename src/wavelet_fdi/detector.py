@@ -29,20 +29,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 import numpy.typing as npt
-
-from phfdi_base.spec import ScenarioSpec
 
 from .config import Calibration, DetectorSettings
 from .filterbank import CausalSwt
 from .history import History
 from .inputs import InputRegularizer
 from .isolation import FaultIsolator
-from .reference import HealthyReference, ReferenceState
+from .reference import HealthyReference, KnownStart, ReferenceState
 from .statistics import CusumBank, increments
+
+if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
+    from phfdi_base.spec import ScenarioSpec
 
 WARMUP_OBSERVER_GAIN = 0.5  # fraction of a block's mean residual corrected per block during warm-up
 OBSERVER_FREEZE_RATIO = 0.5  # no observer correction while a statistic is above this fraction of its threshold
@@ -188,14 +189,15 @@ class StreamingDetector:
     """
 
     def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings | None = None,
-                 isolate: bool = True, record_trace: bool = False) -> None:
+                 isolate: bool = True, record_trace: bool = False, known: KnownStart | None = None) -> None:
         """``record_trace`` keeps every sample's residuals, coefficients and statistics (offline
-        analysis, calibration and evaluation only: memory grows with the record)."""
+        analysis, calibration and evaluation only: memory grows with the record); ``known``: the
+        starting point and plant model already computed for ``spec`` (the detector node's part)."""
         self.settings = s = settings or DetectorSettings()
         calibration.check(s, spec.sample_time_s)
         self.calibration = calibration
         self.dt_s = spec.sample_time_s
-        self.reference = HealthyReference(spec)
+        self.reference = HealthyReference(spec, known)
         self.names = s.statistic_names()
         self.k = np.array([s.reference_value(n) for n in self.names])
         self.h = np.array([calibration.thresholds[n] for n in self.names])
@@ -220,7 +222,7 @@ class StreamingDetector:
         self.isolator = None
         if isolate:
 
-            self.isolator = FaultIsolator(spec, calibration, s)
+            self.isolator = FaultIsolator(spec, calibration, s, known)
         self.alarms: list[Alarm] = []
         self.state = "starting"
         self._initialized = False

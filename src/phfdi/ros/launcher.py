@@ -72,8 +72,11 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
         common["overrides"] = list(overrides)
     nodes = [NodeSpec(CONTROLLERS, "pi_controllers.node"), NodeSpec(VALVE, "valve_actuator.node"),
              NodeSpec(PLANT, "ph_plant_sim.node", {"pace": float(pace)})]
+    part = make_part(scenario, fault or None, list(overrides), onset_s)  # resolved and validated once for every node
     if record is not None:
-        rec = {"path": str(Path(record).resolve())}
+        from .recorder import graph_run_metadata
+
+        rec = {"path": str(Path(record).resolve()), "run_metadata": graph_run_metadata(part.scenario)}
         if split_after_s > 0:
             rec["split_after_s"] = float(split_after_s)
         nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", rec, OBSERVER))
@@ -83,7 +86,6 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
     names = [n.name for n in nodes]
     for n in nodes:
         n.params = {**common, "graph_nodes": names, **n.params}
-    part = make_part(scenario, fault or None, list(overrides), onset_s)  # resolved and validated once for every node
     for n in nodes:
         n.part = part
     return nodes

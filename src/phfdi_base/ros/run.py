@@ -19,7 +19,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from phfdi_base.errors import UserError
 
-from .env import ensure_localhost
+from .env import ensure_localhost, use_discovery_profile
 from .params import NodeStartError, ParamSpec, common_params, print_parameter_help
 
 __all__ = ["main"]
@@ -45,6 +45,7 @@ def main(factory: Callable[[], Node], prog: str, summary: str, specs: Sequence[P
         return 0
     try:
         ensure_localhost()  # before rclpy creates any DDS participant
+        use_discovery_profile()  # a node started by hand discovers its peers as a launched one does
     except UserError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
