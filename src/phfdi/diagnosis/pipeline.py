@@ -56,6 +56,16 @@ UNITS = {"ph_measured": "pH", "level_measured_cm": "cm"}
 
 @dataclass
 class Options:
+    """The diagnosis's choices and the decision rules' thresholds (see the module docstring).
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import Options
+    >>> options = Options(candidates=["backlash", "sensor_delay"], workers=1)
+    >>> options.blocks, options.alpha, options.min_gain  # held-out blocks, significance, least gain
+    (8, 0.01, 0.05)
+    """
+
     initial: str = "steady"
     candidates: list[str] | None = None
     pairs: bool = True
@@ -82,7 +92,14 @@ class Options:
 
 @dataclass
 class Diagnosis:
-    """The report (JSON-ready) and what the figures need."""
+    """The report (JSON-ready) and what the figures need.
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import Diagnosis
+    >>> Diagnosis({"verdict": "none"}).records
+    []
+    """
 
     report: dict
     records: list[Record] = field(default_factory=list)
@@ -174,6 +191,36 @@ def _identifiable(records: list[Record], initial: str, noise: dict) -> str | Non
 
 def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict, model_name: str,
              options: Options | None = None) -> Diagnosis:
+    """Diagnose the nominal model on measured records (the steps and rules of the module docstring).
+
+    Parameters
+    ----------
+    records_fit : list of Record
+        Records the candidates are fitted on (held-out blocks of them score the fits when
+        ``records_val`` is empty).
+    records_val : list of Record
+        Records that only score the fits.
+    nominal : dict
+        The nominal model, a scenario mapping with its plant inline (:func:`nominal_raw`).
+    model_name : str
+        Its name, for the report.
+    options : Options, optional
+
+    Returns
+    -------
+    Diagnosis
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.diagnosis import diagnose, make_record, nominal_raw
+    >>> noise = np.random.default_rng(0).normal(0.0, 0.01, 600)
+    >>> at_rest = make_record({"time_s": np.arange(600.0), "acid_flow_ml_s": np.full(600, 9.82),
+    ...                        "ph_measured": 12.0 + noise}, "at_rest")
+    >>> report = diagnose([at_rest], [], nominal_raw("paper"), "paper").report
+    >>> report["verdict"], report["cause"]  # no input moves: no record can tell models apart
+    ('not_identifiable', 'none')
+    """
     opts = options or Options()
     t_start = time.perf_counter()
     for rec in records_fit + records_val:
