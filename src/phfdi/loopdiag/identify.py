@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
@@ -166,22 +167,25 @@ def _response(du: np.ndarray, tau_s: float, dt_s: float, integrating: bool) -> n
     return np.cumsum(x) * dt_s if integrating else x
 
 
+@lru_cache(maxsize=16)
+def _lag_spectra(poles: tuple[float, ...], n: int, nfft: int) -> np.ndarray:
+    """Spectra of the unit-gain lags' impulse responses h[k] = (1 - a) a^(k-1), k >= 1, truncated at n."""
+    k = np.arange(n, dtype=float)
+    a = np.asarray(poles)[:, None]
+    h = np.where(k[None, :] >= 1, (1.0 - a) * a ** np.maximum(k[None, :] - 1, 0), 0.0)
+    return np.fft.rfft(h, nfft, axis=1)
+
+
 def _responses(du: np.ndarray, taus_s: np.ndarray, dt_s: float, integrating: bool) -> np.ndarray:
     """:func:`_response` of each row of ``du`` (m, n) for many time constants at once: (m, n_tau, n)
-    (one :func:`scipy.signal.lfilter` call per time constant over all rows)."""
-    out = np.empty((du.shape[0], len(taus_s), du.shape[1]))
-    for i, tau_s in enumerate(taus_s):
-        a = math.exp(-dt_s / tau_s) if tau_s > 0 else 0.0
-        if a <= 0.0:
-            out[:, i, 0] = du[:, 0]
-            out[:, i, 1:] = du[:, :-1]
-        else:
-            # the transposed direct form II state of this filter at rest on du[:, 0] is du[:, 0] itself
-            out[:, i], _ = lfilter([0.0, 1.0 - a], [1.0, -a], du, axis=-1, zi=du[:, :1])
-    if integrating:
-        np.cumsum(out, axis=-1, out=out)
-        out *= dt_s
-    return out
+    (one FFT convolution, exact for the record)."""
+    n = du.shape[-1]
+    nfft = 1 << (2 * n - 1).bit_length()
+    poles = tuple(math.exp(-dt_s / t) if t > 0 else 0.0 for t in taus_s)
+    spectra = np.fft.rfft(du - du[:, :1], nfft, axis=-1)[:, None, :] * _lag_spectra(poles, n, nfft)
+    x = np.fft.irfft(spectra, nfft, axis=-1)[..., :n]
+    x += du[:, :1, None]
+    return np.cumsum(x, axis=-1) * dt_s if integrating else x
 
 
 def _shift(x: np.ndarray, d: int) -> np.ndarray:
@@ -191,30 +195,21 @@ def _shift(x: np.ndarray, d: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class LagTargets:
-    """The PV side of the lag-model search (:func:`fit_lag_model`), computed once for every input
-    tried against the same PV (the valve-model search tries hundreds).
+    """The PV side of the lag-model search (:func:`fit_lag_model`): the h-step increments of the
+    training part and what depends on them alone, computed once for every input tried against
+    the same PV (the valve-model search tries hundreds)."""
 
-    For horizon h the input's response r gives the increments D_h[j] = r[j + h] - r[j]; target i
-    of horizon h (dy_h[i], sample i + h + d_max) meets, for delay d, D_h[i + s_d] with
-    s_d = d_max - d. The increments of all horizons are laid end to end (horizon h from
-    ``offsets[h]``), so that for every delay at once
-
-        sxy = D . ``xy``,   sxx = D^2 . ``window``,   (integrating) sdr = D . ``drift``
-
-    are three matrix products: column d of ``xy`` holds dy_h at rows offsets[h] + s_d + i, of
-    ``window`` ones there, of ``drift`` the drift column's weight w_h there."""
-
+    y: np.ndarray
     dt_s: float
     split: Split
     integrating: bool
     delays: np.ndarray
-    offsets: tuple
-    spans: tuple
-    xy: np.ndarray
-    window: np.ndarray
-    drift: np.ndarray | None
+    starts: np.ndarray
+    n_off: int
+    dys: tuple
+    weights: tuple
+    shifted: tuple
     syy: float
-    n_residuals: int
 
     @classmethod
     def of(cls, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
@@ -233,40 +228,46 @@ class LagTargets:
             w = [h * dt_s / norm for h in hs]
             c_y = sum(wi * float(d.sum()) for wi, d in zip(w, dys))
             dys = [d - c_y * wi for d, wi in zip(dys, w)]
-        n_off = int(starts.max()) + 1
-        spans = [len(dy) + n_off - 1 for dy in dys]
-        offsets = np.concatenate(([0], np.cumsum(spans)[:-1])).astype(int)
-        xy = np.zeros((sum(spans), len(delays)))
-        window = np.zeros_like(xy)
-        drift = np.zeros_like(xy) if integrating else None
-        for dy, wi, off in zip(dys, w, offsets):
-            for col, s in enumerate(starts):
-                rows = slice(off + s, off + s + len(dy))
-                xy[rows, col] = dy
-                window[rows, col] = 1.0
-                if drift is not None:
-                    drift[rows, col] = wi
         syy = float(sum(d @ d for d in dys))
-        return cls(dt_s, split, integrating, delays, tuple(int(o) for o in offsets), tuple(spans), xy, window,
-                   drift, syy, sum(len(d) for d in dys))
+        n_off = int(starts.max()) + 1
+        # contiguous copies: the same products bit for bit as the strided views (tested), faster
+        return cls(y, dt_s, split, integrating, delays, starts, n_off, tuple(dys), tuple(w),
+                   tuple(np.ascontiguousarray(_shifted(dy, n_off).T) for dy in dys), syy)
+
+    @property
+    def n_residuals(self) -> int:
+        return sum(len(d) for d in self.dys)
 
 
 def _lag_grid(u: np.ndarray, t: LagTargets, gain_sign: int, tau_factors: np.ndarray):
     """Criterion and gain on the (tau, delay) grid for each input row of ``u`` (m, n): arrays
-    (m, n_tau, n_delay), and the time constants and centred inputs. Each row is computed on its
-    own (stacked matrix products, one per row), so its values do not depend on the batch."""
+    (m, n_tau, n_delay), and the time constants and centred inputs. Row by row the same arithmetic
+    as for one input, so a batch gives bit for bit the values of its rows one at a time."""
     n_tr = t.split.n_train
     du = u - np.mean(u[:, :n_tr], axis=1, keepdims=True)
     taus = np.asarray(tau_factors, float) * t.dt_s
     resp = _responses(du, taus, t.dt_s, t.integrating)  # (m, n_tau, n)
-    inc = np.empty(resp.shape[:2] + (t.xy.shape[0],))
-    for h, off, span in zip(t.split.horizons, t.offsets, t.spans):
-        np.subtract(resp[..., h:h + span], resp[..., :span], out=inc[..., off:off + span])
-    sxy = inc @ t.xy
-    if t.integrating:
-        sdr = inc @ t.drift
-    np.square(inc, out=inc)
-    sxx = inc @ t.window
+    starts, n_off = t.starts, t.n_off
+    shape = (len(u), len(taus), len(t.delays))
+    sxx = np.zeros(shape)
+    sxy = np.zeros(shape)
+    sdr = np.zeros(shape)
+    # window [s, s + n_dy) of a cumulative sum c: c[s + n_dy - 1] - c[s - 1], with c[-1] = 0
+    first = starts == 0
+    before = np.where(first, 0, starts - 1)
+    for h, dy, wi, shifted in zip(t.split.horizons, t.dys, t.weights, t.shifted):
+        # target i (sample k = i + h + d_max) meets, for delay d, the response increment
+        # D[i + s_d] with D[j] = r[j + h] - r[j] and s_d = d_max - d
+        n_dy = len(dy)
+        span = n_dy + n_off - 1
+        inc = resp[..., h:h + span] - resp[..., :span]
+        sxy += (inc @ shifted)[..., starts]  # stacked matmul: one BLAS call per row, as for one input
+        if t.integrating:
+            c1 = np.cumsum(inc, axis=-1)
+            sdr += wi * (c1[..., starts + n_dy - 1] - np.where(first, 0.0, c1[..., before]))
+        np.multiply(inc, inc, out=inc)
+        c2 = np.cumsum(inc, axis=-1, out=inc)
+        sxx += c2[..., starts + n_dy - 1] - np.where(first, 0.0, c2[..., before])
     if t.integrating:
         sxx = sxx - sdr ** 2
     ok = sxx > 1e-12 * np.maximum(1e-300, sxx.max(axis=(1, 2), keepdims=True))
@@ -298,8 +299,8 @@ def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integ
     of this y, split and delays); many inputs at once: :func:`lag_criteria`.
 
     The increments of the training part from sample ``max(delays)`` on are the residuals for
-    every delay alike; the cross products of all horizons with all delays come from two matrix
-    products (:class:`LagTargets`).
+    every delay alike; for each horizon the cross products with all delays come from one
+    correlation and one cumulative sum.
     """
     t = targets or LagTargets.of(y, dt_s, split, integrating, delays)
     sse, gain, taus, du = _lag_grid(u[None, :], t, gain_sign, tau_factors)
@@ -311,6 +312,13 @@ def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integ
     if sse_only:
         return best[0]
     return _finish_lag_model(du, y, dt_s, split, integrating, best, t.n_residuals)
+
+
+def _shifted(dy: np.ndarray, n_off: int) -> np.ndarray:
+    """Rows m[o] = dy placed at offset o in a vector of length len(dy) + n_off - 1 (zeros elsewhere)."""
+    pad = np.zeros(n_off - 1)
+    zp = np.concatenate((pad, dy, pad))
+    return np.lib.stride_tricks.sliding_window_view(zp, len(dy) + n_off - 1)[::-1]
 
 
 def _finish_lag_model(du: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
