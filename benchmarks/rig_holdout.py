@@ -39,6 +39,9 @@ import numpy as np
 
 from phfdi.diagnosis.blackbox import fit_wiener
 from phfdi.diagnosis.data import ColumnMap, load_record
+from phfdi.diagnosis.evidence import BANDS, evidence
+from phfdi.diagnosis.evidence import figure as evidence_figure
+from phfdi.diagnosis.evidence import table as evidence_table
 from phfdi.diagnosis.model import Evaluator, nominal_raw
 from phfdi.diagnosis.pipeline import Options, diagnose
 
@@ -69,7 +72,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--candidates", nargs="*", default=DEFAULT_CANDIDATES,
                     help="causes tried (default: those a rig with on/off pumps can tell apart, see below)")
     ap.add_argument("--json", type=Path, default=None, help="write the table and the fitted models here")
+    ap.add_argument("--predictions", type=Path, default=None,
+                    help="write each fold's predictions of its held-out run (every model) to DIR/<run>.json, "
+                         "for --evidence")
+    ap.add_argument("--evidence", type=Path, default=None,
+                    help="no fitting: read the folds saved in DIR by --predictions and print, per held-out run, what "
+                         "no fitted model reproduces (pH bands, timing, titration-curve shape, span, offset)")
+    ap.add_argument("--figure", type=Path, default=None, help="with --evidence: write the figure here (PNG)")
     args = ap.parse_args(argv)
+    if args.evidence:
+        return show_evidence(args.evidence, args.figure)
     folder = args.data or shared_data() / "ph_rig"
     files = sorted(folder.glob("*.csv"))
     if not files:
@@ -98,14 +110,14 @@ def main(argv: list[str] | None = None) -> int:
         rep = d.report
         search = rep["structure_search"]
         name = held.name
-        best = min(rep["ranking"], key=lambda r: r["nrmse_by_record"].get(name, np.inf))
+        best = min(d.singles, key=lambda r: r.val_by_record.get(name, np.inf))
         accepted = [s for s in search["path"] if s["accepted"]]
         final = accepted[-1]
         # the black box on the same records and masks
         wf = fit_wiener(d.records, d.train, d.val, ["acid", "base"], "base", fold_groups, args.adapt)
         row = {"run": name, "group": groups[h], "group_in_fit": seen,
                "nominal": search["nrmse_by_record_nominal"].get(name),
-               "best_single": best["nrmse_by_record"].get(name), "best_single_cause": best["cause"],
+               "best_single": best.val_by_record.get(name), "best_single_cause": best.label,
                "structure": final["nrmse_by_record"].get(name), "structure_path": [s["model"] for s in accepted],
                "structure_parameters": final["parameters"], "structure_intervals": final["confidence_intervals"],
                "adapted": final.get("fitted_where", {}).get("adapted", {}),
@@ -118,6 +130,8 @@ def main(argv: list[str] | None = None) -> int:
                 y = rec.outputs["ph_measured"]
                 fitted_in_sample[rec.name].append(float(np.sqrt(np.mean((pred - y) ** 2)) / np.std(y)))
         rows.append(row)
+        if args.predictions:
+            save_fold(args.predictions, d, wf, row, args.adapt, seen)
         print(f"{name}: nominal {row['nominal']:.3f}, best single ({row['best_single_cause']}) "
               f"{row['best_single']:.3f}, structure ({' -> '.join(row['structure_path'])}) {row['structure']:.3f}, "
               f"black box {row['black_box']:.3f}  [{row['seconds']:.0f} s]", file=sys.stderr, flush=True)
@@ -127,6 +141,89 @@ def main(argv: list[str] | None = None) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"rows": rows, "in_sample": fitted_in_sample}, indent=2, default=float))
     return 0
+
+
+def show_evidence(folder: Path, figure_path: Path | None) -> int:
+    """Per held-out run, what the best of all fitted models still misses (phfdi.diagnosis.evidence)."""
+    paths = sorted(folder.glob("*.json")) if folder.is_dir() else []
+    folds = [json.loads(p.read_text()) for p in paths]
+    folds = [f for f in folds if "predictions" in f]
+    if not folds:
+        print(f"rig_holdout: no folds in {folder} (write them with --predictions {folder})", file=sys.stderr)
+        return 2
+    evs = [evidence(f) for f in folds]
+    print(evidence_table(evs))
+    for f, ev in zip(folds, evs):
+        ins = [rmse_in_bands(r) for r in f["fitted_in_sample"]]
+        print(f"{ev.run}: pH-7 crossing errors (s) per model: "
+              + "; ".join(f"{k}: {', '.join('-' if e is None else f'{e:+.0f}' for e in v)}"
+                          for k, v in ev.crossing_error_s.items() if k in ("nominal", "structure", "black_box",
+                                                                             ev.best_model)))
+        print("  fitted in this fold (in-sample RMSE per band acidic/transition/basic, pH): "
+              + "; ".join(f"{r['run'][:22]} {' / '.join(_f(x) for x in b)}" for r, b in zip(f["fitted_in_sample"], ins)))
+    if figure_path:
+        figure_path.parent.mkdir(parents=True, exist_ok=True)
+        evidence_figure(folds, evs, figure_path)
+        print(f"figure: {figure_path}")
+    return 0
+
+
+def _f(x: float) -> str:
+    return "-" if not np.isfinite(x) else f"{x:.2f}"
+
+
+def rmse_in_bands(r: dict) -> list[float]:
+    """RMSE (pH) of a fitted run's in-sample structure prediction per measured pH band."""
+    y, p = np.asarray(r["measured"]), np.asarray(r["structure"])
+    out = []
+    for _, lo, hi in BANDS:
+        m = (y >= lo) & (y < hi)
+        out.append(float(np.sqrt(np.mean((p[m] - y[m]) ** 2))) if m.sum() >= 10 else float("nan"))
+    return out
+
+
+def scored_mask(n: int, adapt: float, seen: bool, init_window: int = 20) -> np.ndarray:
+    """The held-out run's scored samples: all but those that set its start (and, for an unseen day, its
+    declared per-day parameters), as in ``Fitter.validate``."""
+    mask = np.ones(n, bool)
+    mask[: init_window if seen or adapt <= 0 else max(init_window, int(round(adapt * n)))] = False
+    return mask
+
+
+def save_fold(folder: Path, d, wf, row: dict, adapt: float, seen: bool) -> Path:
+    """Every model's prediction of the held-out run (the last record) and the final structure's in-sample
+    predictions of the fitted runs: what ``--evidence`` analyses."""
+    h = len(d.records) - 1
+    rec = d.records[h]
+
+    def pred_of(fit) -> list[float]:
+        raw = fit.record_raws[h] if fit.record_raws else fit.raw
+        return Evaluator(rec, raw, "fit").predict(raw, fit.starts[h]).outputs["ph_measured"].tolist()
+
+    preds = {"nominal": d.nominal[h].outputs["ph_measured"].tolist()}
+    for fit in d.singles:
+        preds[fit.label] = pred_of(fit)
+    for fit in d.search_fits[1:]:
+        preds[f"structure: {fit.label}"] = pred_of(fit)
+    preds["structure"] = pred_of(d.structure) if d.structure is not None else preds["nominal"]
+    preds["black_box"] = wf.predictions[rec.name].tolist()
+    preds["best_single"] = preds[row["best_single_cause"]]
+    fitted = []
+    for i, r in enumerate(d.records[:h]):
+        fit = d.structure
+        raw = (fit.record_raws[i] if fit.record_raws else fit.raw) if fit is not None else None
+        p = Evaluator(r, raw, "fit").predict(raw, fit.starts[i]) if fit is not None else d.nominal[i]
+        fitted.append({"run": r.name, "time_s": (r.time_s - r.time_s[0]).tolist(),
+                       "measured": r.outputs["ph_measured"].tolist(), "structure": p.outputs["ph_measured"].tolist()})
+    out = {"run": rec.name, "group_in_fit": seen, "dt_s": rec.dt_s, "time_s": (rec.time_s - rec.time_s[0]).tolist(),
+           "measured": rec.outputs["ph_measured"].tolist(),
+           "flows_ml_s": {k: v.tolist() for k, v in rec.inputs.items() if k.endswith("_flow_ml_s")},
+           "scored": scored_mask(len(rec), adapt, seen).tolist(), "noise_floor_ph": d.noise.get("ph_measured"),
+           "predictions": preds, "row": row, "fitted_in_sample": fitted}
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{Path(rec.name).stem}.json"
+    path.write_text(json.dumps(out, default=float))
+    return path
 
 
 def table(rows: list[dict], in_sample: dict) -> str:

@@ -244,12 +244,7 @@ def test_checker_asks_for_a_floor_for_a_new_package(tmp_path):
 MAX_FUNCTION_LINES = 80
 #: functions still longer than MAX_FUNCTION_LINES (file, name): may only shrink, as KNOWN_UPWARD
 KNOWN_LONG: frozenset[tuple[str, str]] = frozenset({
-    ("wavelet_fdi/report.py", "markdown"),
-    ("wavelet_fdi/report.py", "section6_claims"),
     ("phfdi/diagnosis/fit.py", "fit"),
-    ("phfdi/loopdiag/figures.py", "plot_loop"),
-    ("phfdi/commands/analyze.py", "run"),
-    ("wavelet_fdi/inputs.py", "_slow_path"),
 })
 
 
@@ -273,3 +268,61 @@ def test_length_checker_catches_a_long_function(tmp_path):
     body = "".join(f"    x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES))
     _tree(tmp_path, {"pkg/__init__.py": "", "pkg/m.py": f"def short():\n    pass\n\n\ndef long():\n{body}"})
     assert long_functions(tmp_path) == {("pkg/m.py", "long")}
+
+
+# ---- one fault catalogue ----------------------------------------------------------------------------------------
+#: modules that still define a fault parameter's search range themselves instead of reading the catalogue
+#: (issue 14, being migrated): may only shrink, as KNOWN_UPWARD
+KNOWN_OWN_BOUNDS: frozenset[str] = frozenset({"phfdi.diagnosis.catalogue"})
+
+
+def _registers_faults(tree: ast.AST) -> bool:
+    """True for a module that declares faults: ``register_block(..., fault=...)`` or ``Fault(...)``."""
+    return any(isinstance(n, ast.Call) and (any(k.arg == "fault" for k in n.keywords)
+                                            or getattr(n.func, "id", "") == "Fault") for n in ast.walk(tree))
+
+
+def _is_number(node: ast.AST) -> bool:
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+        node = node.operand
+    return isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
+
+
+def own_fault_bounds(src: Path, params: set[str]) -> dict[str, list[str]]:
+    """module -> calls outside the modules that declare faults that name a catalogued fault parameter (a string
+    argument) next to a number: a bound (or search range) defined a second time."""
+    out: dict[str, list[str]] = {}
+    for module, path in project_modules(src).items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        if _registers_faults(tree):
+            continue
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Call):
+                continue
+            args = list(node.args) + [k.value for k in node.keywords]
+            named = [a.value for a in args if isinstance(a, ast.Constant) and a.value in params]
+            if named and any(_is_number(a) for a in args):
+                out.setdefault(module, []).append(f"line {node.lineno}: {named[0]}")
+    return out
+
+
+def _catalogued_params() -> set[str]:
+    from phfdi.faults import catalogue
+
+    return {p.name for f in catalogue().values() for p in f.params}
+
+
+def test_fault_parameters_are_bounded_only_in_the_catalogue():
+    found = own_fault_bounds(SRC, _catalogued_params())
+    assert {m: v for m, v in found.items() if m not in KNOWN_OWN_BOUNDS} == {}, \
+        "read the bounds from the fault catalogue (phfdi_base.faults, declared with the block)"
+    assert sorted(KNOWN_OWN_BOUNDS - set(found)) == [], "these read the catalogue now: remove them from KNOWN_OWN_BOUNDS"
+
+
+def test_bounds_checker_catches_a_second_definition(tmp_path):
+    _tree(tmp_path, {"pkg/__init__.py": "",
+                     "pkg/blocks.py": 'X = Fault("b", params=(FaultParam("width_pct", "%", (0, 100)),))\n',
+                     "pkg/fit.py": 'P = Param("width_pct", 0.02, 20.0, "%")\nQ = Param("width_pct", lo, hi)\n',
+                     "pkg/iso.py": 'H = Hypothesis("backlash", "backlash", "width_pct", "% of span", 0.05, 20.0)\n'})
+    assert own_fault_bounds(tmp_path, {"width_pct"}) == {"pkg.fit": ["line 1: width_pct"],
+                                                          "pkg.iso": ["line 1: width_pct"]}

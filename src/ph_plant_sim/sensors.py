@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phfdi_base.blocks import register_block
+from phfdi_base.faults import Fault, FaultParam, Range
 
 
 def _check(name: str, value: float, positive: bool = False) -> None:
@@ -30,7 +31,12 @@ def lag_step(y: float | None, x: float, tau_s: float, dt_s: float) -> float:
     return y + (1.0 - math.exp(-dt_s / tau_s)) * (x - y)
 
 
-@register_block("sensor_delay")
+@register_block("sensor_delay", fault=Fault(
+    "probe_delay", site="ph_sensor", description="pH probe transport delay of 10 s (paper Fig. 16-17)",
+    # the diagnosis fits from no delay up to 600 s (and a fifth of the record)
+    params=(FaultParam("delay_s", "s", (0.0, math.inf), paper=10.0, search=Range(1.0, 120.0, log=True),
+                       diagnosis=Range(0.0, 600.0)),),
+    severities=(5.0, 10.0, 20.0)))
 @dataclass
 class TransportDelay:
     """Pure transport delay: y(t) = x(t - delay_s).

@@ -20,16 +20,13 @@ from typing import Callable
 
 from ph_plant_sim.build import build_plant, build_process, load_plant_model, plant_start
 from ph_plant_sim.plant import CstrPlant
-from ph_plant_sim.process import (
-    PlantProcess,
-    advance_plant,  # noqa: F401  (part of the loop's API)
-)
+from ph_plant_sim.process import PlantProcess, advance_plant
 from phfdi_base.errors import UserError
 from phfdi_base.signals import SIGNALS
 from phfdi_base.spec import ScenarioSpec, load_plugins
 from pi_controllers.build import build_controllers
 from pi_controllers.loops import ControllerBank
-from valve_actuator.build import ValveStep, build_valves, check_reachable, start_commands, step_valves  # noqa: F401  (part of the loop's API)
+from valve_actuator.build import build_valves, check_reachable, start_commands, step_valves
 from valve_actuator.valve import Valve
 
 from . import __version__

@@ -21,7 +21,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from phfdi_base.errors import UserError
-from phfdi_base.signals import SIGNALS, Signal, label, unit_of  # noqa: F401  (re-exported: a run's signals)
+from phfdi_base.signals import unit_of
 
 
 @dataclass

@@ -3,9 +3,9 @@
 A *plant model* (``ph_plant_sim/presets/<name>.yaml``) is the vessel, its
 feeds and their chemistry. A *scenario* (``phfdi/scenarios/<name>.yaml``) is
 a whole experiment on the loop. A scenario may ``extends:`` another and
-override any key. Faults can also come from the fault library
-(``phfdi/scenarios/faults.yaml``) by name. The schema itself is
-:mod:`phfdi_base.spec` (re-exported here for the application's convenience).
+override any key. Faults can also come from the fault library by name: the
+presets of the fault catalogue (:func:`phfdi.faults.fault_library`). The schema itself is
+:mod:`phfdi_base.spec`.
 
 Every error names the key and the problem (:class:`phfdi_base.errors.UserError`).
 """
@@ -15,38 +15,11 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-from ph_plant_sim.build import PLANT_DIR, load_plant_model  # noqa: F401  (the plant presets, for the CLI)
 from phfdi_base.errors import UserError
-from phfdi_base.spec import (  # noqa: F401
-    BlockSpec,
-    ChangeSpec,
-    ChemistrySpec,
-    ComponentSpec,
-    ControllersSpec,
-    FaultSite,
-    FaultSpec,
-    FeedSpec,
-    MixingSpec,
-    OutletSpec,
-    PISpec,
-    PlantModelSpec,
-    ProfileSpec,
-    ScenarioSpec,
-    SensorSpec,
-    SensorsSpec,
-    SetpointsSpec,
-    TankSpec,
-    ValveSpec,
-    ValvesSpec,
-    apply_override,
-    deep_merge,
-    format_validation,
-    load_plugins,
-    parse_override,
-    resolve_scenario,
-    validate_scenario,
-)
-from phfdi_base.yamlfile import list_presets, read_mapping, resolve_preset  # noqa: F401  (list_presets: CLI)
+from phfdi_base.spec import ScenarioSpec, deep_merge, resolve_scenario
+from phfdi_base.yamlfile import read_mapping, resolve_preset
+
+from .faults import fault_library
 
 
 def _package_dir(package: str, sub: str = "") -> Path:
@@ -54,11 +27,6 @@ def _package_dir(package: str, sub: str = "") -> Path:
 
 
 SCENARIO_DIR = _package_dir("phfdi", "scenarios")
-
-
-def fault_library() -> dict[str, dict]:
-    """Named fault presets (the paper's severities), from faults.yaml."""
-    return read_mapping(SCENARIO_DIR / "faults.yaml")["faults"]
 
 
 def _absolutise(data: dict, base: Path) -> None:

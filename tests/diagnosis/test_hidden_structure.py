@@ -18,7 +18,7 @@ import pytest
 from phfdi.diagnosis.model import nominal_raw
 from phfdi.loop import simulate_open_loop
 from phfdi.run import Run
-from phfdi.scenario import validate_scenario
+from phfdi_base.spec import validate_scenario
 
 DT_S = 1.0
 DURATION_S = 700.0

@@ -10,7 +10,7 @@ from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import nominal_raw
 from phfdi.diagnosis.pipeline import Options, diagnose
 from phfdi.loop import simulate_open_loop
-from phfdi.scenario import validate_scenario
+from phfdi_base.spec import validate_scenario
 
 NOMINAL = ["plant.tank.volume_ml=1000"]
 

@@ -34,6 +34,17 @@ def test_reserved_domains_are_exclusive():
             reserve_domain_id(a.domain_id)
 
 
+def test_reserved_domains_stay_in_the_range_the_machine_allows(monkeypatch):
+    monkeypatch.setenv("PHFDI_ROS_DOMAINS", "70-71")
+    with reserve_domain_id() as a, reserve_domain_id() as b:
+        assert {a.domain_id, b.domain_id} == {70, 71}
+        with pytest.raises(UserError, match="no free ROS domain id \\(70..71\\)"):
+            reserve_domain_id()
+    monkeypatch.setenv("PHFDI_ROS_DOMAINS", "70-300")
+    with pytest.raises(UserError, match="PHFDI_ROS_DOMAINS"):
+        reserve_domain_id()
+
+
 @pytest.mark.parametrize("args", [("launch", "--help"), ("bag", "info", "--help"), ("bag", "recover", "--help")])
 def test_subcommands_explain_themselves_with_examples(args):
     out = subprocess.run(phfdi_cmd(*args), capture_output=True, text=True, timeout=60)

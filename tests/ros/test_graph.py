@@ -40,6 +40,21 @@ def test_launch_succeeds_and_leaves_nothing_behind(graph_run):
     assert stale_shm_files(summary["domain_id"]) == []
 
 
+def test_every_node_reports_its_start_up_steps_in_order(graph_run):
+    assert graph_run["proc"].returncode == 0, graph_run["proc"].stderr
+    steps = ("main", "init", "built", "matched", "connected")
+    for node in ("plant", "valve", "controllers", "recorder"):
+        lines = (graph_run["logs"] / f"{node}.stdout").read_text().splitlines()
+        startup = [json.loads(ln) for ln in lines if ln.startswith('{"event": "startup"')]
+        assert len(startup) == 1, (node, lines)
+        times, cpu = startup[0]["times"], startup[0]["cpu"]
+        assert [times[s] for s in steps] == sorted(times[s] for s in steps), (node, times)
+        assert graph_run["t0"] < times["main"] < time.time()
+        assert 0 < cpu["main"] <= cpu["connected"], (node, cpu)
+        # the scenario came validated in the node's part: no schema library, no root finder at start-up
+        assert not {"pydantic", "scipy"} & set(startup[0]["heavy_modules"]), (node, startup[0])
+
+
 def test_graph_run_equals_in_process_simulation(graph_run):
     assert graph_run["proc"].returncode == 0, graph_run["proc"].stderr
     spec = load_scenario("paper", overrides=SHORT_OVERRIDES)

@@ -23,7 +23,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import yaml
 
-    from phfdi.scenario import PLANT_DIR, SCENARIO_DIR, fault_library, list_presets, load_scenario
+    from ph_plant_sim.build import PLANT_DIR
+    from phfdi.faults import fault_library
+    from phfdi.scenario import SCENARIO_DIR, load_scenario
+    from phfdi_base.yamlfile import list_presets
 
     if args.show:
         spec = load_scenario(args.show)

@@ -43,6 +43,7 @@ class WienerFit:
     group_weights: dict[str, float] = field(default_factory=dict)  # reference feed's weight per group
     nrmse_by_record: dict[str, float] = field(default_factory=dict)  # held-out, per validation record
     adapted: dict[str, dict] = field(default_factory=dict)
+    predictions: dict[str, np.ndarray] = field(default_factory=dict)  # per validation record, every sample (pH)
 
 
 def _flows(rec: Record, feeds: list[str]) -> np.ndarray:
@@ -134,6 +135,7 @@ def fit_wiener(records: list[Record], train: list[np.ndarray], val: list[np.ndar
         w_b = math.exp(sol.x[1]) if free_w else w_fixed
         pred = _simulate(flows[i], weights(w_other, w_b), tau, delay, curve, sol.x[0] * scale_u, dt)
         mask[:n_fit] = False
+        fit.predictions[rec.name] = pred
         err = (pred - ys[i])[mask]
         fit.nrmse_by_record[rec.name] = float(np.sqrt(np.mean(err ** 2)) / (np.std(ys[i][mask]) or 1.0))
         if free_w:

@@ -23,6 +23,29 @@ from phfdi_base.errors import UserError
 DISCOVERY_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 #: ROS domain ids usable on Linux (the DDS port formula overflows above 232)
 DOMAIN_IDS = range(1, 233)
+#: restricts the ids :func:`reserve_domain_id` picks from, e.g. ``60-79`` (machines shared by several teams)
+DOMAINS_VAR = "PHFDI_ROS_DOMAINS"
+
+
+def allowed_domain_ids(environ: dict | None = None) -> list[int]:
+    """The domain ids this process may pick: ``PHFDI_ROS_DOMAINS=LO-HI`` (inclusive) if set, else 1..232.
+
+    Examples
+    --------
+    >>> allowed_domain_ids({"PHFDI_ROS_DOMAINS": "60-62"})
+    [60, 61, 62]
+    """
+    value = (os.environ if environ is None else environ).get(DOMAINS_VAR, "").strip()
+    if not value:
+        return list(DOMAIN_IDS)
+    try:
+        lo, _, hi = value.partition("-")
+        ids = list(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        raise UserError(f"{DOMAINS_VAR}={value}: expected LO-HI, e.g. 60-79") from None
+    if not ids or ids[0] not in DOMAIN_IDS or ids[-1] not in DOMAIN_IDS:
+        raise UserError(f"{DOMAINS_VAR}={value}: expected LO-HI within 1..232, e.g. 60-79")
+    return ids
 
 
 def ensure_localhost(environ: dict | None = None) -> None:
@@ -36,9 +59,40 @@ def ensure_localhost(environ: dict | None = None) -> None:
                         f"unset it or set {DISCOVERY_VAR}=LOCALHOST")
 
 
+#: set by the launcher to its PID: a node started by it ends when it ends (:func:`die_with_launcher`)
+LAUNCHER_PID_VAR = "PHFDI_LAUNCHER_PID"
+
+
+def die_with_launcher(environ: dict | None = None) -> bool:
+    """In a node the launcher started (``PHFDI_LAUNCHER_PID`` set): ask for SIGTERM when the launcher dies
+    (``PR_SET_PDEATHSIG``). False if the launcher is gone already (the node should not start)."""
+    value = (os.environ if environ is None else environ).get(LAUNCHER_PID_VAR, "")
+    if not value.isdigit():
+        return True
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1: PR_SET_PDEATHSIG
+    return os.getppid() == int(value)  # else the launcher died before the request: no signal will come
+
+
+#: Fast DDS participant profile of graph processes: faster discovery of nodes that start apart (see the file)
+DISCOVERY_PROFILE = Path(__file__).with_name("fastdds_discovery.xml")
+#: the variables Fast DDS reads its default XML profile from (2.x; 3.x); a user's own profile is left alone
+PROFILE_VARS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+
+
+def use_discovery_profile(environ: dict | None = None) -> None:
+    """Point Fast DDS at :data:`DISCOVERY_PROFILE` unless a profile file is set already."""
+    env = os.environ if environ is None else environ
+    if not any(env.get(v) for v in PROFILE_VARS):
+        env[PROFILE_VARS[0]] = str(DISCOVERY_PROFILE)
+
+
 def graph_env(domain_id: int, base: dict | None = None) -> dict[str, str]:
     """Environment for a process of a graph on ``domain_id``."""
     env = dict(os.environ if base is None else base)
+    use_discovery_profile(env)
     env[DISCOVERY_VAR] = "LOCALHOST"
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env["PYTHONUNBUFFERED"] = "1"
@@ -94,9 +148,13 @@ def reserve_domain_id(requested: int | None = None) -> DomainLease:
 
     Held by a lock file (released when this process ends), so parallel
     launches and test workers never share a domain. ``requested`` checks and
-    holds that id instead of picking one.
+    holds that id instead of picking one; otherwise the id is one of :func:`allowed_domain_ids`.
     """
-    candidates = [requested] if requested is not None else random.sample(list(DOMAIN_IDS), len(DOMAIN_IDS))
+    if requested is None:
+        allowed = allowed_domain_ids()
+        candidates = random.sample(allowed, len(allowed))
+    else:
+        candidates = [requested]
     if requested is not None and requested not in DOMAIN_IDS and requested != 0:
         raise UserError(f"--domain-id {requested}: use 0..232")
     for d in candidates:
@@ -111,7 +169,8 @@ def reserve_domain_id(requested: int | None = None) -> DomainLease:
         if requested is not None or _ports_free(_domain_ports(d)):
             return DomainLease(d, fd)
         os.close(fd)
-    raise UserError("no free ROS domain id (1..232) on this machine")
+    ids = allowed_domain_ids()
+    raise UserError(f"no free ROS domain id ({ids[0]}..{ids[-1]}) on this machine")
 
 
 if __name__ == "__main__":  # prints a free domain id (for scripts/launch_graph.sh)

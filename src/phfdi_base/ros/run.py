@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import time
 from typing import Any, Callable, Sequence
 
 import rclpy
@@ -18,7 +19,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from phfdi_base.errors import UserError
 
-from .env import ensure_localhost
+from .env import die_with_launcher, ensure_localhost, use_discovery_profile
 from .params import NodeStartError, ParamSpec, common_params, print_parameter_help
 
 __all__ = ["main"]
@@ -36,13 +37,18 @@ def main(factory: Callable[[], Node], prog: str, summary: str, specs: Sequence[P
          argv: list[str] | None = None) -> int:
     """Run one graph node (a :class:`~phfdi_base.ros.graph_node.GraphNode` made by ``factory``) as this
     process; returns the exit status."""
+    t_main, cpu_main = time.time(), time.process_time()  # the node's module and imports are loaded (start-up trace)
     argv = list(sys.argv if argv is None else argv)
     own = argv[1:argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
     if "-h" in own or "--help" in own:
         print_parameter_help(prog, summary, common_params(getattr(factory, "RUNTIME_COMMON", ())) + tuple(specs))
         return 0
+    if not die_with_launcher():
+        print(f"{prog}: the launcher that started this node has ended; not starting", file=sys.stderr)
+        return 1
     try:
         ensure_localhost()  # before rclpy creates any DDS participant
+        use_discovery_profile()  # a node started by hand discovers its peers as a launched one does
     except UserError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -54,6 +60,7 @@ def main(factory: Callable[[], Node], prog: str, summary: str, specs: Sequence[P
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    t_init, cpu_init = time.time(), time.process_time()
     name = prog.split(".")[0]
     try:
         node: Any = factory()  # a GraphNode: param, finished, spin_timeout_s, after_spin, drain, close, exit_code
@@ -61,6 +68,8 @@ def main(factory: Callable[[], Node], prog: str, summary: str, specs: Sequence[P
         print(f"{name}: error: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    node._startup_step("main", t_main, cpu_main)
+    node._startup_step("init", t_init, cpu_init)
     executor = _make_executor(node.param("executor"))
     executor.add_node(node)
     try:
