@@ -85,35 +85,41 @@ def _backlash(blocks: Sequence[Backlash], u: np.ndarray) -> np.ndarray:
 
 
 def _stiction(blocks: Sequence[Stiction], u: np.ndarray) -> np.ndarray:
-    """Kano et al. (2004), as :meth:`Stiction.step`, one state per block."""
+    """Kano et al. (2004), as :meth:`Stiction.step`, one state per block.
+
+    The command is the same for every block, so its change ``du`` is a scalar; "keeps moving"
+    (``du * d > 0``) is then ``d == sign(du)`` for the moving blocks, and the jump
+    ``d * 0.5 * (S - J)`` is +-``0.5 * (S - J)`` exactly. A slip needs ``|e| > threshold >= 0``,
+    which already implies ``e != 0``."""
     sev = _col(blocks, "severity")[:, 0]
     big_s = _col(blocks, "s_pct")[:, 0] * sev
     big_j = _col(blocks, "j_pct")[:, 0] * sev
-    s_minus_j = big_s - big_j
+    half = 0.5 * (big_s - big_j)  # == (d * 0.5) * (S - J) for d = 1, and its negative for d = -1
     m = len(blocks)
     out = np.empty((m, len(u)))
-    x0 = float(u[0])
-    y = np.full(m, x0)
-    u_prev = np.full(m, x0)
-    u_s = np.full(m, x0)
-    d = np.zeros(m)  # direction of motion: -1, 0, +1 (an int in the block; exact as a float)
-    stuck = np.ones(m, dtype=bool)
-    for k, x in enumerate(u.tolist()):
+    xs = u.tolist()
+    u_prev = xs[0]
+    y = np.full(m, u_prev)
+    u_s = np.full(m, u_prev)
+    d = np.zeros(m)  # direction of the last motion: -1, 0, +1 (an int in the block; exact as a float)
+    moving = np.zeros(m, dtype=bool)  # not stuck
+    for k, x in enumerate(xs):
         du = x - u_prev
-        keeps_moving = ~stuck & (du * d > 0.0)
-        y = np.where(keeps_moving, x - d * 0.5 * s_minus_j, y)
-        # command stopped or reversed: the valve sticks where it is
-        sticks = ~stuck & ~keeps_moving
-        u_s = np.where(sticks, u_prev, u_s)
-        stuck |= sticks
+        if moving.any():
+            keeps = moving & (d == (1.0 if du > 0.0 else -1.0)) if du != 0.0 else np.zeros(m, dtype=bool)
+            if keeps.any():
+                y = np.where(keeps, x - half if du > 0.0 else x + half, y)
+            # command stopped or reversed: the valve sticks where it is
+            u_s = np.where(moving & ~keeps, u_prev, u_s)
+            moving = keeps
         e = x - u_s
-        direction = np.where(e > 0.0, 1.0, -1.0)
-        threshold = np.where(direction == d, big_j, big_s)
-        slips = ~keeps_moving & (e != 0.0) & (np.abs(e) > threshold)
-        d = np.where(slips, direction, d)
-        stuck &= ~slips
-        y = np.where(slips, x - direction * 0.5 * s_minus_j, y)
-        u_prev = np.full(m, x)
+        direction = np.sign(e)
+        slips = (np.abs(e) > np.where(direction == d, big_j, big_s)) & ~moving
+        if slips.any():
+            d = np.where(slips, direction, d)
+            moving = moving | slips
+            y = np.where(slips, x - direction * half, y)
+        u_prev = x
         out[:, k] = y
     return out
 

@@ -29,7 +29,18 @@ CHANNELS = ("ph", "level")
 
 @dataclass
 class DetectorSettings:
-    """Design of the detector (units in the names; see docs/detector.md)."""
+    """Design of the detector (units in the names; see docs/detector.md).
+
+    Every field has a default (the shipped calibrations' design); the statistics it runs are
+    :meth:`statistic_names`, each needing a threshold in the :class:`Calibration`.
+
+    Examples
+    --------
+    >>> from wavelet_fdi import DetectorSettings
+    >>> settings = DetectorSettings(level=3, warmup_s=300.0)
+    >>> settings.statistic_names()
+    ['ph.R.mean_up', 'ph.R.mean_down', 'ph.D1.energy', 'ph.D2.energy', 'ph.D3.energy', 'ph.A3.energy']
+    """
 
     wavelet: str = "sym4"
     level: int = 3
@@ -133,7 +144,23 @@ def _positive(x: object) -> bool:
 
 @dataclass
 class Calibration:
-    """Measured on healthy runs: noise levels and thresholds for a false-alarm target."""
+    """Measured on healthy runs: noise levels and thresholds for a false-alarm target.
+
+    ``phfdi calibrate`` writes one (YAML or JSON, :meth:`save`, :meth:`load`); one per shipped scenario
+    comes with the package (:func:`load_default_calibration`). :meth:`check` says whether it fits a
+    detector's settings and sample time.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from wavelet_fdi import Calibration, DetectorSettings, load_default_calibration
+    >>> calibration = load_default_calibration("paper", DetectorSettings())
+    >>> calibration.check(DetectorSettings(), 1.0)  # fits: no error
+    >>> path = calibration.save(Path(tempfile.mkdtemp()) / "paper.json")
+    >>> Calibration.load(path).thresholds == calibration.thresholds
+    True
+    """
 
     scenario: str
     wavelet: str
@@ -259,6 +286,21 @@ def default_calibration_path(scenario: str, wavelet: str, level: int) -> Path:
 
 
 def load_default_calibration(scenario: str, settings: DetectorSettings) -> Calibration:
+    """The calibration shipped for a scenario and the settings' wavelet and level.
+
+    Raises
+    ------
+    UserError
+        None is shipped for them (the message lists the shipped ones and the ``phfdi calibrate`` command
+        that makes one).
+
+    Examples
+    --------
+    >>> from wavelet_fdi import DetectorSettings, load_default_calibration
+    >>> calibration = load_default_calibration("paper", DetectorSettings())
+    >>> calibration.wavelet, calibration.level
+    ('sym4', 3)
+    """
     path = default_calibration_path(scenario, settings.wavelet, settings.level)
     if not path.exists():
         shipped = sorted(p.stem for p in CALIBRATION_DIR.glob("*.yaml")) if CALIBRATION_DIR.is_dir() else []

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -49,11 +50,13 @@ import ph_plant_sim.sensors  # noqa: F401  (registers the probe's faults)
 import valve_actuator.blocks  # noqa: F401  (registers the valve's faults)
 from phfdi_base.blocks import Chain, Injected, make_block
 from phfdi_base.faults import Fault, faults
-from phfdi_base.spec import ScenarioSpec
 
 from .config import Calibration, DetectorSettings
 from .history import History
-from .reference import HealthyReference, ReferenceState
+from .reference import HealthyReference, KnownStart, ReferenceState
+
+if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
+    from phfdi_base.spec import ScenarioSpec
 
 GRID_POINTS = 7
 FINE_POINTS = 11
@@ -233,8 +236,9 @@ class FaultIsolator:
     CONFIRMED = 3
     REFINED = 5
 
-    def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings) -> None:
-        self.reference = HealthyReference(spec)  # its own copy: re-simulations never touch the detector's
+    def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings,
+                 known: KnownStart | None = None) -> None:
+        self.reference = HealthyReference(spec, known)  # its own copy: re-simulations never touch the detector's
         self.hypotheses = hypotheses()
         self.dt_s = spec.sample_time_s
         self.sigma_ph = calibration.sigma["ph"]["raw"]

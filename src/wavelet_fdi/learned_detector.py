@@ -54,6 +54,13 @@ class LearnedSettings:
 
     The defaults were chosen on SKAB's valve1 files and scored held out on its other files
     (benchmarks/skab_select.py; docs/detector.md): one configuration for every record.
+
+    Examples
+    --------
+    >>> from wavelet_fdi import LearnedSettings
+    >>> settings = LearnedSettings().check()  # the defaults are valid
+    >>> settings.wavelet, settings.level
+    ('sym4', 2)
     """
 
     wavelet: str = "sym4"
@@ -119,7 +126,19 @@ class LearnedSettings:
 
 @dataclass
 class LearnedModel:
-    """What ``phfdi calibrate --learn`` writes: the reference, the healthy band sigmas, the settings."""
+    """What ``phfdi calibrate --learn`` writes: the reference, the healthy band sigmas, the settings.
+
+    Made by :func:`learn`; saved and read as JSON.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import learn
+    >>> healthy = np.random.default_rng(1).normal(size=(4000, 2))
+    >>> model = learn(healthy, ["flow", "pressure"])
+    >>> model.channels, model.band_sigma.shape  # channels x (D1, D2, A2)
+    (('flow', 'pressure'), (2, 3))
+    """
 
     reference: LearnedReference
     settings: LearnedSettings
@@ -161,7 +180,35 @@ class LearnedModel:
 
 def learn(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSettings | None = None,
           source: dict | None = None) -> LearnedModel:
-    """Fit the reference on healthy rows and measure each band's healthy RMS on the same rows."""
+    """Fit the reference on healthy rows and measure each band's healthy RMS on the same rows.
+
+    Parameters
+    ----------
+    x_healthy : ndarray (n, m)
+        Rows of a healthy record, one column per channel, sampled every ``settings.sample_time_s``.
+    channels : sequence of str
+        The m channel names.
+    settings : LearnedSettings, optional
+    source : dict, optional
+        What the rows came from (kept in the model).
+
+    Returns
+    -------
+    LearnedModel
+
+    Raises
+    ------
+    UserError
+        Too few rows to calibrate the bands.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import learn
+    >>> model = learn(np.random.default_rng(1).normal(size=(4000, 2)), ["flow", "pressure"])
+    >>> model.source["healthy_rows"]
+    4000
+    """
     s = (settings or LearnedSettings()).check()
     ref = LearnedReference.fit(x_healthy, channels, s.lags, s.ridge_own, s.ridge_cross)
     provisional = LearnedModel(ref, s, np.ones((len(ref.channels), s.level + 1)), dict(source or {}))
@@ -193,7 +240,20 @@ class LearnedEvent:
 
 
 class LearnedDetector:
-    """Feed rows of a measured record in time order; get events (and per-row alarm states) back."""
+    """Feed rows of a measured record in time order; get events (and per-row alarm states) back.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import LearnedDetector, learn
+    >>> rows = np.random.default_rng(1).normal(size=(6000, 2))
+    >>> detector = LearnedDetector(learn(rows[:4000], ["flow", "pressure"]))
+    >>> faulty = rows[4000:].copy()
+    >>> faulty[1000:, 0] += 3.0  # the flow shifts by three standard deviations
+    >>> events, states = detector.process(np.arange(2000.0), faulty)
+    >>> [(e.kind, e.index > 1000) for e in events], int(states[-1])
+    ([('alarm', True)], 1)
+    """
 
     def __init__(self, model: LearnedModel, alarms: bool = True, record_trace: bool = False) -> None:
         self.model = model
@@ -473,7 +533,26 @@ class LearnedDetector:
 def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096
                ) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
     """A whole record through a fresh detector, in chunks of ``chunk`` rows (None: at once; the
-    result is the same, chunks of a few thousand rows are fastest)."""
+    result is the same, chunks of a few thousand rows are fastest).
+
+    Returns
+    -------
+    events : list of LearnedEvent
+    states : ndarray of int8
+        Each row's alarm state (0/1).
+    detector : LearnedDetector
+        The detector after the record (its alarms, counters).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import learn, run_record
+    >>> rows = np.random.default_rng(1).normal(size=(6000, 2))
+    >>> model = learn(rows[:4000], ["flow", "pressure"])
+    >>> events, states, _ = run_record(model, np.arange(2000.0), rows[4000:])
+    >>> events, int(states.max())  # healthy rows: no alarm
+    ([], 0)
+    """
     det = LearnedDetector(model)
     n = len(x)
     step = n if not chunk else int(chunk)

@@ -47,7 +47,15 @@ from .data import Record
 
 
 def nominal_raw(model: str, overrides: list[str] = ()) -> dict:
-    """Scenario mapping of ``model`` (name or .yaml) with its plant model inline and ``--set`` overrides applied."""
+    """Scenario mapping of ``model`` (name or .yaml) with its plant model inline and ``--set`` overrides applied.
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import nominal_raw
+    >>> model = nominal_raw("paper", ["sensors.ph.noise_std=0.02"])
+    >>> model["sensors"]["ph"]["noise_std"], isinstance(model["plant"], dict)
+    (0.02, True)
+    """
     raw = raw_scenario(model)
     raw = inline_plant(raw)
     raw.pop("extends", None)

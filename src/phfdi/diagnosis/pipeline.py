@@ -56,6 +56,16 @@ UNITS = {"ph_measured": "pH", "level_measured_cm": "cm"}
 
 @dataclass
 class Options:
+    """The diagnosis's choices and the decision rules' thresholds (see the module docstring).
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import Options
+    >>> options = Options(candidates=["backlash", "sensor_delay"], workers=1)
+    >>> options.blocks, options.alpha, options.min_gain  # held-out blocks, significance, least gain
+    (8, 0.01, 0.05)
+    """
+
     initial: str = "steady"
     candidates: list[str] | None = None
     pairs: bool = True
@@ -82,7 +92,14 @@ class Options:
 
 @dataclass
 class Diagnosis:
-    """The report (JSON-ready) and what the figures need."""
+    """The report (JSON-ready) and what the figures need.
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import Diagnosis
+    >>> Diagnosis({"verdict": "none"}).records
+    []
+    """
 
     report: dict
     records: list[Record] = field(default_factory=list)
@@ -174,6 +191,36 @@ def _identifiable(records: list[Record], initial: str, noise: dict) -> str | Non
 
 def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict, model_name: str,
              options: Options | None = None) -> Diagnosis:
+    """Diagnose the nominal model on measured records (the steps and rules of the module docstring).
+
+    Parameters
+    ----------
+    records_fit : list of Record
+        Records the candidates are fitted on (held-out blocks of them score the fits when
+        ``records_val`` is empty).
+    records_val : list of Record
+        Records that only score the fits.
+    nominal : dict
+        The nominal model, a scenario mapping with its plant inline (:func:`nominal_raw`).
+    model_name : str
+        Its name, for the report.
+    options : Options, optional
+
+    Returns
+    -------
+    Diagnosis
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.diagnosis import diagnose, make_record, nominal_raw
+    >>> noise = np.random.default_rng(0).normal(0.0, 0.01, 600)
+    >>> at_rest = make_record({"time_s": np.arange(600.0), "acid_flow_ml_s": np.full(600, 9.82),
+    ...                        "ph_measured": 12.0 + noise}, "at_rest")
+    >>> report = diagnose([at_rest], [], nominal_raw("paper"), "paper").report
+    >>> report["verdict"], report["cause"]  # no input moves: no record can tell models apart
+    ('not_identifiable', 'none')
+    """
     opts = options or Options()
     t_start = time.perf_counter()
     for rec in records_fit + records_val:
@@ -186,10 +233,7 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     notes = [f"{r.name}: {n}" for r in records for n in r.notes] + [split_note]
     why = _identifiable(records, opts.initial, noise)
     if why is not None:
-        report = _base_report(model_name, records, outputs, noise, notes)
-        report.update({"verdict": "not_identifiable", "cause": "none", "family": "none", "parameters": {},
-                       "confidence": None, "nrmse_nominal": None, "nrmse_extended": None, "gain_percent": None,
-                       "ranking": [], "reason": why})
+        report = _not_identifiable(_base_report(model_name, records, outputs, noise, notes), why)
         return Diagnosis(check_report(report), records, train, val, noise=noise)
     ctx = context_for(nominal, records, outputs)
     problem = Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, opts.candidates,
@@ -211,29 +255,8 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     base = _base_report(model_name, records, outputs, noise, notes)
     base.update(report)
     base["misfit"] = misfit
-    base["nominal"] = {"validation": _val_summary(nom, noise), "train_sse": nom.train_sse,
-                       "combined_rmse_over_noise": math.sqrt(nom.val_cost),
-                       "initial_ph": [s.ph for s in nom.starts] if opts.initial == "fit" else None}
-    base["initial"] = opts.initial
-    base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio,
-                          "floor_ratio": opts.floor_ratio,
-                          "floor_max_structure": opts.floor_max_structure, "whiteness_alpha": opts.whiteness_alpha}
-    if winner is not None and extended_preds is not None:
-        base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
-                                      "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
-                                      if nom.val_nrmse[o] else None} for o in outputs}
-    base["skipped"] = local.skipped
-    if opts.groups is not None:
-        base["groups"] = {r.name: g for r, g in zip(records, opts.groups)}
-        base["adapt"] = opts.adapt
-    structure_final = None
-    structure_preds = None
-    if search is not None:
-        base["structure_search"] = _search_report(search, nom, main=outputs[0], opts=opts)
-        structure_final = search["final"]
-        if structure_final is not None:
-            structure_preds = [local.predict(i, _raw_of(structure_final, i), structure_final.starts[i])
-                               for i in range(len(records))]
+    _describe_fit(base, nom, winner if extended_preds is not None else None, outputs, noise, opts, local, records)
+    structure_final, structure_preds = _structure_result(base, search, nom, outputs, opts, local, len(records))
     base["seconds"] = time.perf_counter() - t_start
     base["candidates_fitted"] = len(results) + len(pairs) + (search["fits"] if search else 0)
     d = Diagnosis(check_report(base), records, train, val, nominal_preds, extended_preds,
@@ -245,6 +268,47 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     d.singles = list(results)
     d.search_fits = [s["fit"] for s in search["path"]] if search is not None else []
     return d
+
+
+def _not_identifiable(report: dict, why: str) -> dict:
+    """The report when no record can tell one model from another (``why`` says so)."""
+    report.update({"verdict": "not_identifiable", "cause": "none", "family": "none", "parameters": {},
+                   "confidence": None, "nrmse_nominal": None, "nrmse_extended": None, "gain_percent": None,
+                   "ranking": [], "reason": why})
+    return report
+
+
+def _describe_fit(base: dict, nom: FitResult, winner: FitResult | None, outputs: list[str], noise: dict,
+                  opts: Options, local: Fitter, records: list[Record]) -> None:
+    """Add to the report the nominal fit, the thresholds, the winner's gain per output (``winner``: None when no
+    extended model is written), what was skipped and the record groups."""
+    base["nominal"] = {"validation": _val_summary(nom, noise), "train_sse": nom.train_sse,
+                       "combined_rmse_over_noise": math.sqrt(nom.val_cost),
+                       "initial_ph": [s.ph for s in nom.starts] if opts.initial == "fit" else None}
+    base["initial"] = opts.initial
+    base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio,
+                          "floor_ratio": opts.floor_ratio,
+                          "floor_max_structure": opts.floor_max_structure, "whiteness_alpha": opts.whiteness_alpha}
+    if winner is not None:
+        base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
+                                      "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
+                                      if nom.val_nrmse[o] else None} for o in outputs}
+    base["skipped"] = local.skipped
+    if opts.groups is not None:
+        base["groups"] = {r.name: g for r, g in zip(records, opts.groups)}
+        base["adapt"] = opts.adapt
+
+
+def _structure_result(base: dict, search: dict | None, nom: FitResult, outputs: list[str], opts: Options,
+                      local: Fitter, n_records: int) -> tuple[FitResult | None, list[Prediction] | None]:
+    """The structure search's report entry, its final model and that model's predictions (None without one)."""
+    if search is None:
+        return None, None
+    base["structure_search"] = _search_report(search, nom, main=outputs[0], opts=opts)
+    final = search["final"]
+    if final is None:
+        return None, None
+    return final, [local.predict(i, _raw_of(final, i), final.starts[i]) for i in range(n_records)]
 
 
 def _raw_of(r: FitResult, i: int) -> dict:

@@ -137,6 +137,19 @@ def clean(o: Any) -> Any:
 
 
 def to_json(report: dict) -> str:
+    """The report as JSON text (numpy values as plain numbers, non-finite numbers as null).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.diagnosis import to_json
+    >>> print(to_json({"verdict": "none", "gain_percent": np.float64("nan"), "samples": np.int64(600)}))
+    {
+      "verdict": "none",
+      "gain_percent": null,
+      "samples": 600
+    }
+    """
     return json.dumps(clean(report), indent=2, allow_nan=False)
 
 
@@ -157,7 +170,16 @@ def fmt_params(params: dict, intervals: dict | None = None) -> str:
 
 
 def verdict_line(report: dict) -> str:
-    """One line: verdict, cause (family) [parameters], confidence, gain."""
+    """One line: verdict, cause (family) [parameters], confidence, gain.
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import verdict_line
+    >>> verdict_line({"verdict": "explained", "cause": "backlash", "family": "actuator",
+    ...               "parameters": {"width_pct": 1.02}, "confidence": 0.97, "gain_percent": 61.0,
+    ...               "nrmse_nominal": 0.42, "nrmse_extended": 0.164})
+    'verdict: explained; cause backlash (actuator) [width_pct = 1.02]; confidence 0.97; held-out NRMSE 0.420 -> 0.164 (+61 %)'
+    """
     v = report["verdict"]
     text = f"verdict: {v.replace('_', ' ')}"
     if report["cause"] != "none":

@@ -53,6 +53,17 @@ FAMILY = {**{c: "actuator" for c in ACTUATOR_CAUSES}, "external_disturbance": "l
 
 @dataclass
 class Settings:
+    """What the loop diagnosis considers: the held-out gain a valve model needs (%), the causes it tries,
+    the process type (None: from the loop tag, LIC -> integrating) and whether the baselines run.
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import Settings
+    >>> settings = Settings(baselines=False)
+    >>> settings.process_type is None, "stiction" in settings.causes
+    (True, True)
+    """
+
     gain_threshold_percent: float = GAIN_THRESHOLD_PERCENT
     causes: tuple[str, ...] = ACTUATOR_CAUSES
     process_type: str | None = None  # None: from the loop tag (LIC -> integrating)

@@ -230,8 +230,9 @@ class LagTargets:
             dys = [d - c_y * wi for d, wi in zip(dys, w)]
         syy = float(sum(d @ d for d in dys))
         n_off = int(starts.max()) + 1
+        # contiguous copies: the same products bit for bit as the strided views (tested), faster
         return cls(y, dt_s, split, integrating, delays, starts, n_off, tuple(dys), tuple(w),
-                   tuple(_shifted(dy, n_off).T for dy in dys), syy)
+                   tuple(np.ascontiguousarray(_shifted(dy, n_off).T) for dy in dys), syy)
 
     @property
     def n_residuals(self) -> int:
@@ -251,7 +252,9 @@ def _lag_grid(u: np.ndarray, t: LagTargets, gain_sign: int, tau_factors: np.ndar
     sxx = np.zeros(shape)
     sxy = np.zeros(shape)
     sdr = np.zeros(shape)
-    zero = np.zeros(shape[:2] + (1,))
+    # window [s, s + n_dy) of a cumulative sum c: c[s + n_dy - 1] - c[s - 1], with c[-1] = 0
+    first = starts == 0
+    before = np.where(first, 0, starts - 1)
     for h, dy, wi, shifted in zip(t.split.horizons, t.dys, t.weights, t.shifted):
         # target i (sample k = i + h + d_max) meets, for delay d, the response increment
         # D[i + s_d] with D[j] = r[j + h] - r[j] and s_d = d_max - d
@@ -259,11 +262,12 @@ def _lag_grid(u: np.ndarray, t: LagTargets, gain_sign: int, tau_factors: np.ndar
         span = n_dy + n_off - 1
         inc = resp[..., h:h + span] - resp[..., :span]
         sxy += (inc @ shifted)[..., starts]  # stacked matmul: one BLAS call per row, as for one input
-        c2 = np.concatenate((zero, np.cumsum(inc * inc, axis=-1)), axis=-1)
-        sxx += c2[..., starts + n_dy] - c2[..., starts]
         if t.integrating:
-            c1 = np.concatenate((zero, np.cumsum(inc, axis=-1)), axis=-1)
-            sdr += wi * (c1[..., starts + n_dy] - c1[..., starts])
+            c1 = np.cumsum(inc, axis=-1)
+            sdr += wi * (c1[..., starts + n_dy - 1] - np.where(first, 0.0, c1[..., before]))
+        np.multiply(inc, inc, out=inc)
+        c2 = np.cumsum(inc, axis=-1, out=inc)
+        sxx += c2[..., starts + n_dy - 1] - np.where(first, 0.0, c2[..., before])
     if t.integrating:
         sxx = sxx - sdr ** 2
     ok = sxx > 1e-12 * np.maximum(1e-300, sxx.max(axis=(1, 2), keepdims=True))

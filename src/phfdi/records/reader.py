@@ -34,6 +34,20 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
     even when ``channels`` is None. ``policy``: "run" (a clock reset is refused) or "historian" (it starts a
     new segment). ``min_samples``: fewer usable samples are refused.
     Raises :class:`ReadError` (one line naming file, line and column) for what cannot be used.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi.records import read_record
+    >>> path = Path(tempfile.mkdtemp()) / "loop.csv"
+    >>> _ = path.write_text("Time (s),PV,OP\\n0,7.0,0.50\\n1,7.1,0.51\\n2,,0.52\\n3,7.3,0.53\\n")
+    >>> record = read_record(path, {"time_s": "Time (s)", "ph_measured": "PV",
+    ...                             "valve_command_pct": {"column": "OP", "unit": "fraction"}})
+    >>> record.signals["ph_measured"], record.signals["valve_command_pct"]
+    (array([7. , 7.1, nan, 7.3]), array([50., 51., 52., 53.]))
+    >>> print(record.notes[0].split(": ", 1)[1])
+    column 'PV': 1 cell not a number (empty 1), first at line 4: marked missing
     """
     if policy not in P.POLICIES:
         raise ValueError(f"policy must be one of {P.POLICIES}, got {policy!r}")
