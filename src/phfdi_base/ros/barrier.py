@@ -108,7 +108,7 @@ class StartBarrierMixin(Node):
         self._startup_step("built")
         self._ready_pub = self.create_publisher(DiagnosticStatus, GRAPH_READY, READY_QOS)
         self.create_subscription(DiagnosticStatus, GRAPH_READY, self._on_peer_status, READY_QOS)
-        self._barrier_timer = self.create_timer(0.05, self._check_barrier)
+        self._barrier_timer = self.create_timer(0.025, self._check_barrier)
         self._announce_timer = self.create_timer(0.2, self._announce)
         self._announce()
 
@@ -126,6 +126,8 @@ class StartBarrierMixin(Node):
         self._peers[msg.name] = (values.get("subscriptions", set()), values.get("publications", set()))
         if msg.message in ("ready", "connected"):
             self._peers_ready.add(msg.name)
+        if not self._connected:
+            self._check_barrier()  # the last peer's "ready" connects the graph now, not at the next timer tick
 
     def _unmatched(self) -> str | None:
         """Why this node's endpoints are not all matched yet (None: they are)."""
