@@ -47,9 +47,6 @@ MIN_SP_R2 = 0.3
 #: OP must move by more than this share of its mean level (or 0.05 % of span) to identify anything
 MIN_OP_MOVEMENT = 1e-3
 
-FAMILY = {**{c: "actuator" for c in ACTUATOR_CAUSES}, "external_disturbance": "loop",
-          "aggressive_tuning": "loop", "none": "none"}
-
 
 @dataclass
 class Settings:

@@ -45,9 +45,6 @@ MAX_FILLED_GAP = 3
 #: relative spread below which a signal counts as constant
 CONSTANT_RTOL = 1e-9
 
-#: process types the identification knows (level loops integrate)
-PROCESS_TYPES = ("self_regulating", "integrating")
-
 
 class LoopDataError(UserError):
     """A loop file that cannot be diagnosed; the message names file and problem."""
