@@ -272,8 +272,8 @@ def test_length_checker_catches_a_long_function(tmp_path):
 
 # ---- one fault catalogue ----------------------------------------------------------------------------------------
 #: modules that still define a fault parameter's search range themselves instead of reading the catalogue
-#: (issue 14, being migrated): may only shrink, as KNOWN_UPWARD
-KNOWN_OWN_BOUNDS: frozenset[str] = frozenset({"phfdi.diagnosis.catalogue"})
+#: (issue 14 emptied it): may only shrink, as KNOWN_UPWARD
+KNOWN_OWN_BOUNDS: frozenset[str] = frozenset()
 
 
 def _registers_faults(tree: ast.AST) -> bool:
@@ -288,10 +288,17 @@ def _is_number(node: ast.AST) -> bool:
     return isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
 
 
-def own_fault_bounds(src: Path, params: set[str]) -> dict[str, list[str]]:
-    """module -> calls outside the modules that declare faults that name a catalogued fault parameter (a string
-    argument) next to a number: a bound (or search range) defined a second time."""
-    out: dict[str, list[str]] = {}
+def _strings(call: ast.Call) -> tuple[list[str], bool]:
+    args = list(call.args) + [k.value for k in call.keywords]
+    return [a.value for a in args if isinstance(a, ast.Constant) and isinstance(a.value, str)], any(map(_is_number, args))
+
+
+def own_fault_bounds(src: Path, params: dict[str, set[str]]) -> dict[str, list[str]]:
+    """module -> places outside the modules that declare faults where a call names a catalogued fault (its
+    name or block, e.g. ``Candidate("backlash", ...)``) and, within it, a call names one of that fault's
+    parameters next to a number (``Param("width_pct", 0.02, 20.0)``): a bound defined a second time.
+    ``params``: fault name or block -> its parameter names."""
+    out: dict[str, set[str]] = {}
     for module, path in project_modules(src).items():
         tree = ast.parse(path.read_text(encoding="utf-8"))
         if _registers_faults(tree):
@@ -299,17 +306,24 @@ def own_fault_bounds(src: Path, params: set[str]) -> dict[str, list[str]]:
         for node in ast.walk(tree):
             if not isinstance(node, ast.Call):
                 continue
-            args = list(node.args) + [k.value for k in node.keywords]
-            named = [a.value for a in args if isinstance(a, ast.Constant) and a.value in params]
-            if named and any(_is_number(a) for a in args):
-                out.setdefault(module, []).append(f"line {node.lineno}: {named[0]}")
-    return out
+            for fault in set(_strings(node)[0]) & set(params):
+                for sub in ast.walk(node):
+                    if isinstance(sub, ast.Call):
+                        names, number = _strings(sub)
+                        named = [n for n in names if n in params[fault]]
+                        if named and number:
+                            out.setdefault(module, set()).add(f"line {sub.lineno}: {fault}.{named[0]}")
+    return {m: sorted(v) for m, v in out.items()}
 
 
-def _catalogued_params() -> set[str]:
+def _catalogued_params() -> dict[str, set[str]]:
     from phfdi.faults import catalogue
 
-    return {p.name for f in catalogue().values() for p in f.params}
+    out: dict[str, set[str]] = {}
+    for f in catalogue().values():
+        for key in (f.name, f.block):
+            out.setdefault(key, set()).update(p.name for p in f.params)
+    return out
 
 
 def test_fault_parameters_are_bounded_only_in_the_catalogue():
@@ -322,7 +336,9 @@ def test_fault_parameters_are_bounded_only_in_the_catalogue():
 def test_bounds_checker_catches_a_second_definition(tmp_path):
     _tree(tmp_path, {"pkg/__init__.py": "",
                      "pkg/blocks.py": 'X = Fault("b", params=(FaultParam("width_pct", "%", (0, 100)),))\n',
-                     "pkg/fit.py": 'P = Param("width_pct", 0.02, 20.0, "%")\nQ = Param("width_pct", lo, hi)\n',
+                     "pkg/fit.py": 'C = [Candidate("backlash", [Param("width_pct", 0.02, 20.0, "%")]),\n'
+                                   '     Candidate("backlash", [Param("width_pct", lo, hi)]),\n'
+                                   '     Candidate("feed_delay", [Param("width_pct", 0.0, 9.0)])]\n',
                      "pkg/iso.py": 'H = Hypothesis("backlash", "backlash", "width_pct", "% of span", 0.05, 20.0)\n'})
-    assert own_fault_bounds(tmp_path, {"width_pct"}) == {"pkg.fit": ["line 1: width_pct"],
-                                                          "pkg.iso": ["line 1: width_pct"]}
+    assert own_fault_bounds(tmp_path, {"backlash": {"width_pct"}}) == {"pkg.fit": ["line 1: backlash.width_pct"],
+                                                                       "pkg.iso": ["line 1: backlash.width_pct"]}

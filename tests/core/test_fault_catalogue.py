@@ -6,6 +6,7 @@ the evaluation, the paper set, the isolation and the diagnosis with no other edi
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,13 +15,16 @@ import pytest
 from phfdi.cli import main
 from phfdi.faults import catalogue, fault_library
 from phfdi.loop import simulate
-from phfdi.scenario import load_scenario
+from phfdi.run import Run
+from phfdi.scenario import load_scenario, raw_scenario
 from phfdi_base.blocks import BLOCKS, make_block, register_block
 from phfdi_base.faults import FAULTS, Fault, FaultParam, Range
+from phfdi_base.spec import validate_scenario
 from wavelet_fdi.config import DetectorSettings, load_default_calibration
 from wavelet_fdi.isolation import classes
 
 from ..detector.detector_helpers import SHORT, short_spec
+from ..diagnosis.hidden_cases import COLUMNS, WARMUP_S, _setpoints
 
 
 @pytest.fixture
@@ -88,6 +92,27 @@ def test_a_users_fault_is_isolated_and_sized_online(stem_offset):
     assert first.detection_time_s >= 1000.0 and first.fault_class == stem_offset, (first.fault_class,
                                                                                    first.alternatives)
     assert first.parameter["name"] == "offset_pct" and first.parameter["value"] == pytest.approx(3.0, rel=0.05)
+
+
+def test_a_users_fault_is_a_diagnosis_candidate_found_in_measured_data(stem_offset, tmp_path, capsys):
+    """Historian columns only (no name, no metadata) reach the diagnosis; it names the block and sizes it."""
+    raw = raw_scenario("paper")
+    raw.update(faults=[{"type": "test_stem_offset", "params": {"offset_pct": 2.2}}], seed=5,
+               duration_s=WARMUP_S + 1700.0)
+    raw["setpoints"]["ph"] = _setpoints(np.random.default_rng(7), 1700.0)
+    run = simulate(validate_scenario(raw))
+    keep = run.time_s >= WARMUP_S
+    data = {c: np.asarray(run[c])[keep] for c in COLUMNS}
+    data["time_s"] = data["time_s"] - data["time_s"][0]
+    path = Run(data, {}).to_csv(tmp_path / "record.csv")
+    with pytest.raises(SystemExit):
+        main(["diagnose", "--help"])
+    assert "test_stem_offset (actuator)" in capsys.readouterr().out
+    assert main(["diagnose", "--data", str(path), "--model", "paper", "--out", str(tmp_path / "rep"), "--json",
+                 "--quiet", "--candidates", "test_stem_offset", "deadzone", "saturation", "--no-pairs"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["verdict"] == "explained" and rep["cause"] == "test_stem_offset" and rep["family"] == "actuator", rep
+    assert rep["parameters"]["offset_pct"] == pytest.approx(2.2, rel=0.05)
 
 
 # ---- the built-in catalogue ------------------------------------------------------------------------------------

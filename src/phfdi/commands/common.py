@@ -8,6 +8,8 @@ import time
 from contextlib import contextmanager
 
 FAULT_PRESETS = "{fault_presets}"
+#: in an epilog: the diagnosis's candidates from catalogued faults of one's own blocks (a line, or nothing)
+OWN_CANDIDATES = "{own_candidates}\n"
 
 
 class EpilogFormat(argparse.RawDescriptionHelpFormatter):
@@ -21,6 +23,14 @@ class EpilogFormat(argparse.RawDescriptionHelpFormatter):
 
             text = text.replace(FAULT_PRESETS, ", ".join(preset_names()))
         return text
+
+    def _format_text(self, text: str) -> str:
+        if OWN_CANDIDATES in text:
+            from phfdi.diagnosis.report import CAUSES, causes
+
+            own = [f"{c} ({family})" for c, family in causes().items() if c not in CAUSES]
+            text = text.replace(OWN_CANDIDATES, f"  Your blocks' faults (fault catalogue): {' '.join(own)}.\n" if own else "")
+        return super()._format_text(text)
 
 
 EPILOG_FORMAT = EpilogFormat

@@ -88,8 +88,9 @@ def calibrate(records_fit, records_val, nominal: dict, keys: list[str], opts: Op
     fitter = Fitter(Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, ["sensor_bias"]))
     if opts.progress:
         opts.progress(f"calibrating {', '.join(keys)} on {len(records)} record(s)")
-    nom = fitter.nominal()
-    res = fitter.fit([cand])
+    with one_blas_thread():  # tiny matrices: BLAS threads only wait (fit.one_blas_thread)
+        nom = fitter.nominal()
+        res = fitter.fit([cand])
     for k, v in res.params.items():
         if not math.isfinite(v):
             raise UserError(f"--calibrate: {k} did not converge")

@@ -513,13 +513,33 @@ def lag1(r: np.ndarray) -> float:
 
 # ---- worker processes -----------------------------------------------------------------
 _WORKER: Fitter | None = None
+_BLAS_LIMIT = None
+
+
+def one_blas_thread():
+    """Limit BLAS/LAPACK (OpenBLAS of numpy and scipy) to one thread; returns the limiter (a context manager).
+
+    A fit does thousands of operations on tiny matrices (4 x 4 matrix exponentials of the mixing zone, the
+    least-squares SVDs): a BLAS thread pool gains nothing there, and on a busy machine its threads wait for
+    each other: one 4 x 4 ``scipy.linalg.expm`` took 24 ms instead of 18 us at load average 28 on 2 cores
+    (benchmarks in docs/diagnosis.md). Setting OMP_NUM_THREADS after numpy is loaded has no effect; threadpoolctl
+    changes the running libraries.
+    """
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def limit_worker_blas() -> None:
+    """One BLAS thread for the rest of this (worker) process's life."""
+    global _BLAS_LIMIT
+    if _BLAS_LIMIT is None:
+        _BLAS_LIMIT = one_blas_thread()
 
 
 def init_worker(problem: Problem) -> None:
     global _WORKER
-    import os
-
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    limit_worker_blas()
     _WORKER = Fitter(problem)
 
 

@@ -46,7 +46,7 @@ from phfdi_base.spec import PlantModelSpec
 
 from .catalogue import Context
 from .data import Record
-from .fit import FitResult, Fitter, Problem, fit_task, init_worker
+from .fit import FitResult, Fitter, Problem, fit_task, init_worker, one_blas_thread
 from .model import Evaluator, Prediction
 from .report import check_report, family_of
 from .residual import analyse, noise_floor, significance, significance_f
@@ -221,6 +221,12 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     >>> report["verdict"], report["cause"]  # no input moves: no record can tell models apart
     ('not_identifiable', 'none')
     """
+    with one_blas_thread():  # tiny matrices, thousands of times: BLAS threads only wait (fit.one_blas_thread)
+        return _diagnose(records_fit, records_val, nominal, model_name, options)
+
+
+def _diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict, model_name: str,
+              options: Options | None = None) -> Diagnosis:
     opts = options or Options()
     t_start = time.perf_counter()
     for rec in records_fit + records_val:

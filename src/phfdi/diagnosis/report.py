@@ -38,6 +38,8 @@ import json
 import math
 from typing import Any
 
+from phfdi.faults import catalogue
+
 #: verdicts, in the order a reader meets them
 VERDICTS = ("explained", "not_explained", "none", "not_identifiable")
 
@@ -71,6 +73,18 @@ CAUSES: dict[str, str] = {
 }
 
 FAMILIES = ("actuator", "sensor", "process", "none")
+#: the family of a catalogued fault (:mod:`phfdi_base.faults`) by where it acts
+SITE_FAMILY = {"valve": "actuator", "valve_flow": "actuator", "ph_sensor": "sensor"}
+
+
+def causes() -> dict[str, str]:
+    """:data:`CAUSES` and, before ``none``, each catalogued fault's block not in it (a block of one's own)."""
+    out = {k: v for k, v in CAUSES.items() if k != "none"}
+    for f in catalogue().values():
+        if f.params:  # a fault without parameters (a seized stem) is not fitted
+            out.setdefault(f.block, SITE_FAMILY[f.site])
+    out["none"] = CAUSES["none"]
+    return out
 
 #: keys every report carries (commands may add more)
 REPORT_KEYS = ("verdict", "cause", "family", "parameters", "confidence", "nrmse_nominal", "nrmse_extended",
@@ -83,12 +97,13 @@ RANKING_KEYS = ("cause", "family", "parameters", "confidence_intervals", "nrmse_
 def family_of(cause: str) -> str:
     """Family of a cause or of a pair ``a+b`` (``actuator+sensor``; one name when both agree)."""
     parts = cause.split("+")
+    known = causes()
     fams = []
     for p in parts:
-        if p not in CAUSES:
-            raise ValueError(f"unknown cause {p!r}; catalogue: {', '.join(CAUSES)}")
-        if CAUSES[p] not in fams:
-            fams.append(CAUSES[p])
+        if p not in known:
+            raise ValueError(f"unknown cause {p!r}; catalogue: {', '.join(known)}")
+        if known[p] not in fams:
+            fams.append(known[p])
     return "+".join(fams)
 
 
