@@ -3,8 +3,8 @@
 A *plant model* (``ph_plant_sim/presets/<name>.yaml``) is the vessel, its
 feeds and their chemistry. A *scenario* (``phfdi/scenarios/<name>.yaml``) is
 a whole experiment on the loop. A scenario may ``extends:`` another and
-override any key. Faults can also come from the fault library
-(``phfdi/scenarios/faults.yaml``) by name. The schema itself is
+override any key. Faults can also come from the fault library by name: the
+presets of the fault catalogue (:func:`phfdi.faults.fault_library`). The schema itself is
 :mod:`phfdi_base.spec`.
 
 Every error names the key and the problem (:class:`phfdi_base.errors.UserError`).
@@ -19,17 +19,14 @@ from phfdi_base.errors import UserError
 from phfdi_base.spec import ScenarioSpec, deep_merge, resolve_scenario
 from phfdi_base.yamlfile import read_mapping, resolve_preset
 
+from .faults import fault_library
+
 
 def _package_dir(package: str, sub: str = "") -> Path:
     return Path(str(resources.files(package))) / sub
 
 
 SCENARIO_DIR = _package_dir("phfdi", "scenarios")
-
-
-def fault_library() -> dict[str, dict]:
-    """Named fault presets (the paper's severities), from faults.yaml."""
-    return read_mapping(SCENARIO_DIR / "faults.yaml")["faults"]
 
 
 def _absolutise(data: dict, base: Path) -> None:

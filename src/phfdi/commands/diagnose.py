@@ -46,6 +46,7 @@ catalogue: stiction backlash deadzone saturation coulomb_viscous_friction leakag
   buffer reagent_concentration holdup disturbance_flow (process); verdicts: explained, not_explained,
   none, not_identifiable. Structural candidates (--structure, or by name with --candidates): mixing_zone
   feed_delay carbonate (process), pump_curve (actuator), probe_asymmetric_lag two_point_calibration (sensor).
+{own_candidates}
   Bad input exits with status 2 and one line naming the problem.
 """
 

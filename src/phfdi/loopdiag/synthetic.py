@@ -31,7 +31,15 @@ from pi_controllers.pi import PIController
 
 @dataclass
 class SyntheticLoop:
-    """One closed loop; ``valve`` is ``(block name, params)`` of :mod:`valve_actuator.blocks` or None."""
+    """One closed loop; ``valve`` is ``(block name, params)`` of :mod:`valve_actuator.blocks` or None.
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import SyntheticLoop, simulate_loop
+    >>> loop = SyntheticLoop(valve=("backlash", {"width_pct": 2.0}), duration_s=1200.0)
+    >>> simulate_loop(loop).names
+    ['time_s', 'op_pct', 'pv', 'sp', 'stem_pct']
+    """
 
     process: str = "foptd"  # or "integrating"
     gain: float = 1.5  # PV units per % of stem travel (per % per s when integrating)
@@ -61,7 +69,15 @@ class SyntheticLoop:
 
 
 def simulate_loop(spec: SyntheticLoop) -> Run:
-    """The closed loop's historian record: time_s, op_pct, pv, sp, and the truth stem_pct."""
+    """The closed loop's historian record: time_s, op_pct, pv, sp, and the truth stem_pct.
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import SyntheticLoop, simulate_loop
+    >>> run = simulate_loop(SyntheticLoop(duration_s=1200.0, dt_s=4.0))
+    >>> len(run), run.metadata["loop_tag"]
+    (300, 'SYN')
+    """
     rng = np.random.default_rng(spec.seed)
     n = int(round(spec.duration_s / spec.dt_s))
     d = int(round(spec.dead_time_s / spec.dt_s))

@@ -1,0 +1,37 @@
+"""The fault catalogue as the application sees it (:mod:`phfdi_base.faults`, filled by the cores).
+
+Importing this module imports the cores' block modules, so every built-in fault is registered; a
+plugin a scenario names registers its own when the scenario is loaded. The presets (``--fault NAME``),
+``phfdi scenarios``, the isolation, the diagnosis, the evaluation and ``--help`` all read it.
+"""
+
+from __future__ import annotations
+
+import ph_plant_sim.sensors  # noqa: F401  (registers the probe's faults)
+import valve_actuator.blocks  # noqa: F401  (registers the valve's faults)
+from phfdi_base.faults import Fault, faults
+
+__all__ = ["catalogue", "fault_library", "preset_names"]
+
+
+def catalogue() -> dict[str, Fault]:
+    """Every registered fault, valve faults first (see :func:`phfdi_base.faults.faults`).
+
+    >>> catalogue()["backlash"].main.name
+    'width_pct'
+    """
+    return faults()
+
+
+def fault_library() -> dict[str, dict]:
+    """Named fault presets (the paper's severities): a scenario ``faults:`` entry per catalogued fault.
+
+    >>> fault_library()["backlash"]["params"]
+    {'width_pct': 0.7}
+    """
+    return {name: f.preset_entry() for name, f in faults().items() if f.preset}
+
+
+def preset_names() -> list[str]:
+    """``--fault`` choices: healthy and each preset."""
+    return ["healthy"] + [name for name, f in faults().items() if f.preset]
