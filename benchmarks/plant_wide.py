@@ -77,9 +77,11 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         jobs = expand([str(folder)])
         step = max(1, len(jobs) // 20)
+        shown = [0]  # loops arrive in chunks: print at each 5 % mark passed
 
         def show(done, total):
-            if done % step == 0 or done == total:
+            if done // step > shown[0] or done == total:
+                shown[0] = done // step
                 print(f"{done}/{total} loops, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
 
         reports = diagnose_jobs(jobs, scheduler=args.scheduler, workers=args.workers, progress=show, chunk=args.chunk)

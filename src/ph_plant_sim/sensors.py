@@ -73,6 +73,25 @@ class TransportDelay:
             y = (1.0 - frac) * y + frac * self._buf[newest - k - 1]
         return y
 
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        """:meth:`step` for each sample of ``x`` in turn (the same arithmetic, vectorised)."""
+        x = np.asarray(x, dtype=float)
+        if len(x) == 0:
+            return x.copy()
+        if not self._buf:
+            self.reset(float(x[0]))
+        hist = np.fromiter(self._buf, dtype=float, count=len(self._buf))
+        both = np.concatenate([hist, x])
+        lag = self.severity * self.delay_s / self.dt_s
+        k = int(lag)
+        frac = lag - k
+        newest = len(hist) + np.arange(len(x))  # where sample j sits once appended
+        y = both[newest - k]
+        if frac > 1e-12:
+            y = (1.0 - frac) * y + frac * both[newest - k - 1]
+        self._buf = deque(both[-self._buf.maxlen:].tolist(), maxlen=self._buf.maxlen)
+        return y
+
 
 @register_block("sensor_lag")
 @dataclass
@@ -145,6 +164,9 @@ class Bias:
     def step(self, x: float, t_s: float) -> float:
         return x + self.severity * self.bias
 
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        return np.asarray(x, dtype=float) + self.severity * self.bias
+
 
 @register_block("sensor_drift")
 @dataclass
@@ -163,6 +185,12 @@ class Drift:
             self._t0 = t_s
         return x + self.severity * self.rate_per_s * (t_s - self._t0)
 
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        t_s = np.asarray(t_s, dtype=float)
+        if self._t0 is None and len(t_s):
+            self._t0 = float(t_s[0])
+        return np.asarray(x, dtype=float) + self.severity * self.rate_per_s * (t_s - self._t0)
+
 
 @register_block("sensor_gain")
 @dataclass
@@ -179,6 +207,10 @@ class Gain:
     def step(self, x: float, t_s: float) -> float:
         g = 1.0 + self.severity * (self.gain - 1.0)
         return self.reference + g * (x - self.reference)
+
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        g = 1.0 + self.severity * (self.gain - 1.0)
+        return self.reference + g * (np.asarray(x, dtype=float) - self.reference)
 
 
 @register_block("sensor_asymmetric_lag")
@@ -253,3 +285,7 @@ class TwoPointCalibration:
     def step(self, x: float, t_s: float) -> float:
         s = 1.0 + self.severity * (self.slope - 1.0)
         return 7.0 + s * (x - 7.0) + self.severity * self.offset
+
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        s = 1.0 + self.severity * (self.slope - 1.0)
+        return 7.0 + s * (np.asarray(x, dtype=float) - 7.0) + self.severity * self.offset

@@ -263,3 +263,27 @@ def test_normal_density_written_out_equals_scipys():
         sig = math.sqrt(max(1.0 - 0.5 * amp * amp, 1e-6))
         dens = norm.pdf(x[:, None], loc=amp * np.sin(phases)[None, :], scale=sig).mean(axis=1)
         assert _sine_noise_loglik(x, amp, phases) == float(np.sum(np.log(np.maximum(dens, 1e-300))))
+
+
+def _triangle_loop(y):
+    n = len(y)
+    t = np.arange(n, dtype=float)
+    best = math.inf
+    for m in range(1, n - 1):
+        design = np.column_stack([np.ones(n), t, np.maximum(t - m, 0.0)])
+        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+        best = min(best, float(np.mean((y - design @ coef) ** 2)))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_he_fits_equal_the_loops(seed):
+    from phfdi.loopdiag.baselines import _sine_mse, _triangle_mse
+
+    rng = np.random.default_rng(10 + seed)
+    n = int(rng.integers(5, 120))
+    t = np.arange(n)
+    shapes = [np.minimum(t, n - t) / n, np.sin(np.pi * t / n), np.where(t < n / 3, t, n / 3) / n]
+    y = 40.0 + shapes[seed % 3] * rng.uniform(0.5, 5.0) + rng.normal(0.0, 0.02, n)
+    assert _triangle_mse(y) == pytest.approx(_triangle_loop(y), rel=RTOL, abs=1e-15)
+    assert _sine_mse(y) == pytest.approx(_fit_sine_loop(y), rel=RTOL, abs=1e-15)

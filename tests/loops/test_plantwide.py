@@ -116,3 +116,13 @@ def test_loops_in_chunks_per_task_keep_their_order_and_progress(folder, tmp_path
         [r.get("stiction", {}).get("probability") for r in one]
     assert "error" in chunked[-1]
     assert sorted(seen) == [(2, 5), (4, 5), (5, 5)]
+
+
+def test_progress_every_5_percent_when_loops_arrive_in_chunks(capsys):
+    from phfdi.commands.loop_diagnose import _progress
+
+    show = _progress(1000)
+    for done in [*range(16, 1000, 16), 1000]:  # 16 loops per task, the last task shorter
+        show(done, 1000)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 20 and lines[0] == "loop-diagnose: 64/1000 loops" and lines[-1].endswith("1000/1000 loops")
