@@ -7,10 +7,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ph_plant_sim.feedlines import LineDelay, PumpCurve
-from ph_plant_sim.sensors import Bias, Drift, Gain, TransportDelay, TwoPointCalibration
+from ph_plant_sim.sensors import Bias, Drift, FirstOrderLag, Gain, TransportDelay, TwoPointCalibration
 from phfdi.diagnosis.model import _run_chain
 from phfdi_base.blocks import Chain
-from ph_plant_sim.sensors import FirstOrderLag
 
 
 def _blocks(delay_s: float, dt_s: float, severity: float):

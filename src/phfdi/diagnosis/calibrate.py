@@ -18,7 +18,7 @@ from phfdi_base.errors import UserError
 from phfdi_base.spec import apply_override
 
 from .catalogue import Candidate, Param
-from .fit import Fitter, Problem
+from .fit import Fitter, Problem, one_blas_thread
 from .pipeline import Options, context_for, split
 from .residual import noise_floor
 

@@ -111,6 +111,35 @@ class Fitter:
         self._nominal: FitResult | None = None
         self._n_resid = sum(int(problem.train[i].sum()) * sum(o in problem.records[i].outputs
                                                               for o in problem.outputs) for i in self.train_records)
+        self._prime()
+
+    def _prime(self) -> None:
+        """Simulate the nominal model once on every record, as the nominal fit does first.
+
+        An evaluator starts its pH solves (and a gravity tank's volume solve) from the first trajectory it
+        simulated; the roots do not depend on it, their last bits do. Priming every process with the nominal
+        makes a fit's result independent of which worker ran it after which other fit (a fit in a valley
+        can end elsewhere on a last-bit difference), so a diagnosis repeats exactly, with any --workers.
+        """
+        for i in range(len(self.p.records)):
+            try:
+                self.predict(i, self.p.nominal, Start(self.first_ph(i) if self.fit_init else None))
+            except (UserError, ValueError, FloatingPointError):
+                pass  # the fits report it (their residual is then 1e3)
+
+    def budget(self, cands: list[Candidate], starts: list[dict] | None = None) -> float:
+        """Evaluations a fit of ``cands`` may use (start grid, zoom and least-squares budgets, as in
+        :meth:`fit`): a weight for scheduling long fits first and for the progress's time estimate."""
+        n_groups = len({self.groups[i] for i in self.train_records}) if self.grouped else 1
+        n_par = sum(n_groups if self.grouped and q.name in c.per_group else 1 for c in cands for q in c.params)
+        n_x = n_par + len(self.train_records) * (int(self.fit_init) + int(any(c.band is not None for c in cands)))
+        grid = len(starts) if starts is not None else len(cands[0].starts)
+        if n_x == 0:
+            return float(max(grid, 1))
+        if any(c.nonsmooth for c in cands) and 0 < n_par <= 2:
+            return float(grid + 6 * (5 ** n_par - 1) + 6 * (n_x + 1) * (n_x + 1))
+        polish = max(c.polish_evals for c in cands)
+        return float(grid + polish * (n_x + 1) * (1 + n_x / 2))
 
     # ---- residuals --------------------------------------------------------------
     def predict(self, i: int, raw: dict, start: Start) -> Prediction:

@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -375,24 +375,30 @@ def _workers(opts: Options, tasks: int) -> int:
 def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options, local: Fitter):
     """Fit every candidate; when the best leaves structure, try pairs of the best ones."""
     workers = _workers(opts, len(labels))
-    t0 = time.perf_counter()
-
-    def note(i: int, total: int, r: FitResult) -> None:
-        _say(opts, f"  {i}/{total} {r.label}: held-out error {math.sqrt(r.val_cost):.3g} x noise "
-                   f"({r.seconds:.1f} s, {time.perf_counter() - t0:.0f} s elapsed)")
 
     def run_all(pool, jobs: list[tuple]) -> list[FitResult]:
-        out = []
+        weights = [local.budget([local.candidates[x] for x in args[0]], *args[1:]) for _, args in jobs]
+        progress = _Progress(opts, [" + ".join(args[0]) for _, args in jobs], weights, workers if pool else 1)
+        out: list[FitResult | None] = [None] * len(jobs)
         if pool is None:
-            for i, (fn, args) in enumerate(jobs, 1):
-                out.append(_local_call(local, fn, args))
-                note(i, len(jobs), out[-1])
+            for j, (fn, args) in enumerate(jobs):
+                progress.started(j)
+                out[j] = _local_call(local, fn, args)
+                progress.done(j, out[j])
             return out
-        futures = [pool.submit(fn, *args) for fn, args in jobs]
-        for i, fut in enumerate(as_completed(futures), 1):
-            out.append(fut.result())
-            note(i, len(jobs), out[-1])
-        return out
+        # longest first (the fits differ 100-fold in cost): two workers finish together
+        order = sorted(range(len(jobs)), key=lambda j: -weights[j])
+        futures = {pool.submit(jobs[j][0], *jobs[j][1]): j for j in order}
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, timeout=_HEARTBEAT_S, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                j = futures[fut]
+                out[j] = fut.result()
+                progress.done(j, out[j])
+            if not finished:
+                progress.heartbeat([futures[f] for f in pending if f.running()])
+        return out  # in the order of the jobs, whatever the order they finished in
 
     pool = None if workers == 1 else ProcessPoolExecutor(max_workers=workers, initializer=init_worker,
                                                          initargs=(problem,))
@@ -412,6 +418,55 @@ def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options
         if pool is not None:
             pool.shutdown()
     return singles, pairs, search
+
+
+_HEARTBEAT_S = 20.0  # a line at least this often while fits run (some take minutes)
+
+
+class _Progress:
+    """Progress of a batch of fits on stderr: each fit as it finishes (fit i of n, its time, elapsed), the
+    estimated time left, and while none finishes, which fits are running.
+
+    The estimate weighs each fit by its evaluation budget (:meth:`Fitter.budget`; fits differ 100-fold):
+    time so far x budget left / budget done. It is an estimate: a fit usually stops before its budget.
+    """
+
+    def __init__(self, opts: Options, labels: list[str], weights: list[float], workers: int) -> None:
+        self.opts, self.labels, self.weights, self.workers = opts, labels, weights, workers
+        self.t0 = time.perf_counter()
+        self.n_done = 0
+        self.w_done = 0.0
+        self.started_at: dict[int, float] = {}
+
+    def started(self, j: int) -> None:
+        self.started_at[j] = time.perf_counter()
+
+    def _eta(self) -> str:
+        left = sum(self.weights) - self.w_done
+        if self.w_done <= 0 or left <= 0:
+            return ""
+        return f", about {_duration(self.elapsed() * left / self.w_done)} left"
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def done(self, j: int, r: FitResult) -> None:
+        self.n_done += 1
+        self.w_done += self.weights[j]
+        _say(self.opts, f"  {self.n_done}/{len(self.labels)} {r.label}: held-out error {math.sqrt(r.val_cost):.3g} "
+                        f"x noise ({r.seconds:.1f} s; {_duration(self.elapsed())} elapsed{self._eta()})")
+
+    def heartbeat(self, running: list[int]) -> None:
+        names = ", ".join(self.labels[j] for j in running) or "waiting for a worker"
+        _say(self.opts, f"  ... {self.n_done}/{len(self.labels)} done, running: {names} "
+                        f"({_duration(self.elapsed())} elapsed{self._eta()})")
+
+
+def _duration(seconds: float) -> str:
+    seconds = max(0.0, seconds)
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
 
 
 #: causes that set one thing of the model (a second variant would overwrite the first)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Sequence
 
 from phfdi_base.errors import UserError
 from phfdi_base.yamlfile import read_mapping
@@ -198,7 +199,7 @@ class ColumnMap:
                    source=source)
 
     @classmethod
-    def from_args(cls, columns: list[str], units: list[str] = (), source: str = "--column") -> "ColumnMap":
+    def from_args(cls, columns: Sequence[str], units: Sequence[str] = (), source: str = "--column") -> "ColumnMap":
         """From ``--column SIGNAL=COLUMN`` items (``mode=COL``, ``quality=COL`` too) and ``--unit SIGNAL=UNIT``."""
         data: dict = {}
         for item in columns:
@@ -232,7 +233,7 @@ def _opt_str(value: object) -> str | None:
     return None if value is None or value == "" else str(value)
 
 
-def _positive(value: object, key: str, source: str) -> float | None:
+def _positive(value: Any, key: str, source: str) -> float | None:  # value: a YAML scalar
     if value is None:
         return None
     try:
@@ -295,7 +296,7 @@ def _quality_specs(spec: object, source: str) -> list[QualitySpec]:
             if sigs is not None and not (isinstance(sigs, list) and all(isinstance(s, str) for s in sigs)):
                 raise UserError(f"{source}: quality.signals: expected a list of signal names")
             out.append(QualitySpec(item["column"], GOOD_WORDS if good is None else _cells(good, "quality.good", source),
-                                   None if sigs is None else tuple(ALIASES.get(s, s) for s in sigs)))
+                                   None if sigs is None else tuple(ALIASES.get(str(s), str(s)) for s in sigs)))
         else:
             raise UserError(f"{source}: quality: expected a column name or {{column: NAME, good: [VALUES]}}")
     return out
