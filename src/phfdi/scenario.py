@@ -19,7 +19,7 @@ from phfdi_base.errors import UserError
 from phfdi_base.spec import ScenarioSpec, deep_merge, resolve_scenario
 from phfdi_base.yamlfile import read_mapping, resolve_preset
 
-from .faults import fault_library
+from .faults import fault_library, preset_name
 
 
 def _package_dir(package: str, sub: str = "") -> Path:
@@ -63,8 +63,9 @@ def load_scenario(name_or_path: str = "paper", fault: str | None = None,
     """Load, apply a named fault and ``key=value`` overrides, validate.
 
     ``fault`` replaces the scenario's faults with the library fault of that
-    name ("none" or "healthy" removes them).
+    name, or of that block ("none" or "healthy" removes them).
     """
+    fault = preset_name(fault) if fault else fault
     library = fault_library() if fault not in (None, "none", "healthy") else {}
     return resolve_scenario(raw_scenario(name_or_path), fault, library, overrides, onset_s,
                             source=f"scenario {name_or_path}")

@@ -15,9 +15,11 @@ import math
 from dataclasses import dataclass, field
 
 from phfdi_base.blocks import register_block
-from phfdi_base.faults import Fault, FaultParam, Range
+from phfdi_base.faults import FAULTS, Fault, FaultParam, Range
 
-#: the valve's stroke, % of span: the physical bounds of a position or a band on it
+#: the valve's stroke, % of span: the physical bounds of a position or a band on it (a band wider than the
+#: stroke leaves no travel). The fits search sub-ranges of it (``search``; ``diagnosis`` where the diagnosis
+#: fits differently, e.g. from "no fault": 0 % friction, no delay, a stop at 100 %).
 SPAN = (0.0, 100.0)
 
 
@@ -398,5 +400,11 @@ class Quantization:
         return c + q * round((x - c) / q) if q > 0.0 else x
 
 
-#: blocks that act on the valve's flow rather than its stem position
-FLOW_BLOCKS = {"leakage"}
+def flow_blocks() -> set[str]:
+    """Blocks that act on the valve's flow rather than its stem position: those of the faults catalogued at
+    ``valve_flow`` (:mod:`phfdi_base.faults`), e.g. ``leakage``.
+
+    >>> sorted(flow_blocks())
+    ['leakage']
+    """
+    return {f.block for f in FAULTS.values() if f.site == "valve_flow"}

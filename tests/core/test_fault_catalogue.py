@@ -140,3 +140,20 @@ def test_a_fault_outside_its_bounds_or_at_an_unknown_site_is_refused():
         FaultParam("width_pct", "% of span", (0.0, 100.0), search=Range(0.05, 200.0, log=True))
     with pytest.raises(ValueError, match="site"):
         Fault("x", site="valve_stem", description="")
+
+
+def test_a_fault_answers_to_its_preset_name_and_its_blocks():
+    from phfdi.diagnosis.catalogue import Context
+    from phfdi.diagnosis.catalogue import catalogue as candidates
+
+    by_block = load_scenario("paper", fault="coulomb_viscous_friction")
+    assert by_block.faults == load_scenario("paper", fault="friction").faults
+    ctx = Context(feeds=["acid", "base"], valve_feed="acid", valve_max_flow_ml_s=40.0, overflow=False,
+                  has_command=True, command_pct=np.linspace(30.0, 60.0, 50), ph_range=(8.0, 11.0),
+                  duration_s=1000.0, dt_s=1.0, total_inflow_ml_s=30.0, feed_strength_mol_l={"acid": 0.1, "base": 0.1},
+                  outputs={"ph_measured"})
+    cands, _ = candidates(ctx, only=["friction", "probe_delay"])
+    assert sorted(c.cause for c in cands) == ["coulomb_viscous_friction", "sensor_delay"]
+    delay = next(c for c in cands if c.cause == "sensor_delay").params[0]
+    # the catalogue's diagnosis range, narrowed by the record (a fifth of 1000 s)
+    assert (delay.low, delay.high) == (0.0, 200.0)

@@ -32,6 +32,7 @@ from typing import Callable
 
 import numpy as np
 
+from phfdi.faults import block_name
 from phfdi.faults import catalogue as fault_catalogue
 from phfdi_base.errors import UserError
 from phfdi_base.faults import Fault
@@ -418,6 +419,8 @@ def catalogue(ctx: Context, only: list[str] | None = None,
     ``structure``: add the structural candidates (:func:`structural_candidates`); they are also added when
     ``only`` names one of them.
     """
+    if only:
+        only = [block_name(c) for c in only]  # a fault's preset name (friction) names its block's cause
     skipped: dict[str, str] = {}
     cands: list[Candidate] = []
     if ctx.has_command:
