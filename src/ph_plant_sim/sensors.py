@@ -89,7 +89,8 @@ class TransportDelay:
         y = both[newest - k]
         if frac > 1e-12:
             y = (1.0 - frac) * y + frac * both[newest - k - 1]
-        self._buf = deque(both[-self._buf.maxlen:].tolist(), maxlen=self._buf.maxlen)
+        keep = self._n + 1  # the buffer's length, as reset makes it
+        self._buf = deque(both[-keep:].tolist(), maxlen=keep)
         return y
 
 
