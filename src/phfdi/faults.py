@@ -11,7 +11,7 @@ import ph_plant_sim.sensors  # noqa: F401  (registers the probe's faults)
 import valve_actuator.blocks  # noqa: F401  (registers the valve's faults)
 from phfdi_base.faults import Fault, faults
 
-__all__ = ["catalogue", "fault_library", "preset_names"]
+__all__ = ["block_name", "catalogue", "fault_library", "preset_name", "preset_names"]
 
 
 def catalogue() -> dict[str, Fault]:
@@ -35,3 +35,23 @@ def fault_library() -> dict[str, dict]:
 def preset_names() -> list[str]:
     """``--fault`` choices: healthy and each preset."""
     return ["healthy"] + [name for name, f in faults().items() if f.preset]
+
+
+def preset_name(name: str) -> str:
+    """The preset named by a fault's name or its block's (``coulomb_viscous_friction`` -> ``friction``).
+
+    >>> preset_name("sensor_delay"), preset_name("backlash"), preset_name("healthy")
+    ('probe_delay', 'backlash', 'healthy')
+    """
+    return next((n for n, f in faults().items() if f.preset and f.block == name and n != name), name)
+
+
+def block_name(name: str) -> str:
+    """The block of a fault named by its preset name (``friction`` -> ``coulomb_viscous_friction``), as the
+    diagnosis names causes; other names unchanged.
+
+    >>> block_name("friction"), block_name("sensor_lag")
+    ('coulomb_viscous_friction', 'sensor_lag')
+    """
+    f = faults().get(name)
+    return f.block if f is not None else name

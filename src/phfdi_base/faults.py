@@ -24,7 +24,6 @@ This module imports nothing of the project: the cores fill the registry, the app
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 __all__ = ["FAULTS", "SITES", "Fault", "FaultParam", "Range", "faults", "register_fault"]
@@ -36,8 +35,18 @@ SITES = ("valve", "valve_flow", "ph_sensor")
 
 @dataclass(frozen=True)
 class Range:
-    """A search range of a parameter, in its unit; ``log`` searches it on a logarithmic scale.
+    """A search range of a parameter, in its unit.
 
+    Parameters
+    ----------
+    low, high : float
+        The range's ends (``high`` may be infinite: the data narrow it).
+    log : bool
+        Search it on a logarithmic scale (``low`` must then be positive).
+
+    Examples
+    --------
+    >>> from phfdi_base import Range
     >>> Range(0.05, 20.0, log=True).contains(0.7)
     True
     """
@@ -47,7 +56,7 @@ class Range:
     log: bool = False
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.low) and self.low < self.high) or (self.log and self.low <= 0.0):
+        if not self.low < self.high or (self.log and self.low <= 0.0):
             raise ValueError(f"bad range [{self.low}, {self.high}] (log={self.log})")
 
     def contains(self, value: float) -> bool:
@@ -58,10 +67,24 @@ class Range:
 class FaultParam:
     """One parameter of a fault: its unit, physical bounds, the preset's value and its search range.
 
-    ``paper`` is the value of the named preset: the paper's where it gives one (Section 5.B).
-    ``search`` (default: ``bounds``) is what the isolation and the diagnosis fit over; ``diagnosis``
-    replaces it for the diagnosis where that fits differently (declared here, never elsewhere).
+    Parameters
+    ----------
+    name : str
+        The block's keyword (``width_pct``).
+    unit : str
+        Its unit (``% of span``).
+    bounds : tuple of float
+        The physical range: what the device can have.
+    paper : float, optional
+        The value of the named preset: the paper's where it gives one (Section 5.B).
+    search : Range, optional
+        What the isolation and the diagnosis fit over (default: ``bounds``), within ``bounds``.
+    diagnosis : Range, optional
+        Replaces ``search`` for the diagnosis where that fits differently (declared here, never elsewhere).
 
+    Examples
+    --------
+    >>> from phfdi_base import FaultParam, Range
     >>> p = FaultParam("width_pct", "% of span", bounds=(0.0, 100.0), paper=0.7, search=Range(0.05, 20.0, log=True))
     >>> p.fit_range("diagnosis")
     Range(low=0.05, high=20.0, log=True)
@@ -97,12 +120,33 @@ class FaultParam:
 class Fault:
     """A fault a block models: preset name, site, parameters (main first), severities.
 
-    ``name`` is the preset's (``--fault NAME``) and the isolation's class; ``block`` the registered block
-    type (the diagnosis's cause), filled in by :func:`phfdi_base.blocks.register_block`. ``severities``
-    are the main parameter's mild, preset and strong values for the evaluation; parameters named in
-    ``scale_with_main`` scale along with it. ``isolate`` False keeps a fault out of the online isolation
-    (e.g. one the isolation's bank cannot re-simulate); ``preset`` False keeps it out of ``--fault``.
+    Parameters
+    ----------
+    name : str
+        The preset's name (``--fault NAME``) and the isolation's class.
+    site : str
+        Where it acts, one of :data:`SITES`.
+    description : str
+        One line for ``phfdi scenarios``.
+    params : tuple of FaultParam
+        Its parameters, the main one first.
+    severities : tuple of float, optional
+        The main parameter's mild, preset and strong values for the evaluation.
+    scale_with_main : tuple of str
+        Parameters that scale along with the main one across severities.
+    onset_s : float
+        The preset's onset (the paper's Section 7: 7000 s).
+    isolate : bool
+        False keeps it out of the online isolation (a fault its bank cannot re-simulate).
+    preset : bool
+        False keeps it out of ``--fault``.
 
+    ``block``, the registered block type (the diagnosis's cause), is filled in by
+    :func:`phfdi_base.blocks.register_block`.
+
+    Examples
+    --------
+    >>> from phfdi_base import Fault, FaultParam
     >>> f = Fault("sticky", site="valve", description="a sticky stem",
     ...           params=(FaultParam("s_pct", "% of span", (0.0, 100.0), paper=1.5),))
     >>> f.main.name, f.preset_params()

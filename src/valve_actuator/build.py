@@ -15,7 +15,7 @@ from phfdi_base.blocks import Chain
 from phfdi_base.errors import UserError
 from phfdi_base.spec_tools import injected_faults, profile
 
-from .blocks import FLOW_BLOCKS
+from .blocks import flow_blocks
 from .valve import Valve, ValveOutput
 
 if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario (a node's start-up)
@@ -112,8 +112,8 @@ def build_valve(vspec: ValveSpec, spec: ScenarioSpec, site: str, command_pct: fl
     """
     max_flow = vspec.max_flow_ml_s or 1.0
     valve = Valve(max_flow, vspec.characteristic, vspec.rangeability,
-                  Chain(injected_faults(spec, site, max_flow, FLOW_BLOCKS)),
-                  Chain(injected_faults(spec, site + "_flow", max_flow, FLOW_BLOCKS)))
+                  Chain(injected_faults(spec, site, max_flow, flow_blocks())),
+                  Chain(injected_faults(spec, site + "_flow", max_flow, flow_blocks())))
     if command_pct is not None:
         valve.reset(command_pct)
     return valve

@@ -7,6 +7,7 @@ the evaluation, the paper set, the isolation and the diagnosis with no other edi
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -118,10 +119,14 @@ def test_a_users_fault_is_a_diagnosis_candidate_found_in_measured_data(stem_offs
 # ---- the built-in catalogue ------------------------------------------------------------------------------------
 def test_every_preset_builds_its_block_with_the_preset_values():
     for name, f in catalogue().items():
+        for p in f.params:
+            assert p.fit_range("isolation").low >= p.bounds[0] and p.fit_range("diagnosis").high <= p.bounds[1]
+        if not f.preset:  # a diagnosis-only fault (sensor lag, bias, drift, gain)
+            assert name not in fault_library()
+            continue
         assert f.preset_entry() == fault_library()[name]
         block = make_block(f.block, f.preset_params(), dt_s=1.0)
         for p in f.params:
-            assert p.fit_range("isolation").low >= p.bounds[0] and p.fit_range("diagnosis").high <= p.bounds[1]
             if p.paper is not None:
                 assert getattr(block, p.name) == p.paper
 
@@ -140,3 +145,42 @@ def test_a_fault_outside_its_bounds_or_at_an_unknown_site_is_refused():
         FaultParam("width_pct", "% of span", (0.0, 100.0), search=Range(0.05, 200.0, log=True))
     with pytest.raises(ValueError, match="site"):
         Fault("x", site="valve_stem", description="")
+
+
+def test_a_fault_answers_to_its_preset_name_and_its_blocks():
+    from phfdi.diagnosis.catalogue import Context
+    from phfdi.diagnosis.catalogue import catalogue as candidates
+
+    by_block = load_scenario("paper", fault="coulomb_viscous_friction")
+    assert by_block.faults == load_scenario("paper", fault="friction").faults
+    ctx = Context(feeds=["acid", "base"], valve_feed="acid", valve_max_flow_ml_s=40.0, overflow=False,
+                  has_command=True, command_pct=np.linspace(30.0, 60.0, 50), ph_range=(8.0, 11.0),
+                  duration_s=1000.0, dt_s=1.0, total_inflow_ml_s=30.0, feed_strength_mol_l={"acid": 0.1, "base": 0.1},
+                  outputs={"ph_measured"})
+    cands, _ = candidates(ctx, only=["friction", "probe_delay"])
+    assert sorted(c.cause for c in cands) == ["coulomb_viscous_friction", "sensor_delay"]
+    delay = next(c for c in cands if c.cause == "sensor_delay").params[0]
+    # the catalogue's diagnosis range, narrowed by the record (a fifth of 1000 s)
+    assert (delay.low, delay.high) == (0.0, 200.0)
+
+
+def test_a_plugins_fault_is_a_preset_of_the_scenario_naming_it(tmp_path):
+    (tmp_path / "slip.py").write_text(
+        "from dataclasses import dataclass\n"
+        "from phfdi_base import Fault, FaultParam, register_block\n\n"
+        "@register_block('test_plugin_slip', fault=Fault('plugin_slip', site='valve', description='slipped stem',\n"
+        "    params=(FaultParam('slip_pct', '% of span', (0.0, 50.0), paper=2.0),)))\n"
+        "@dataclass\n"
+        "class Slip:\n"
+        "    slip_pct: float\n"
+        "    severity: float = 1.0\n"
+        "    def reset(self, x0): pass\n"
+        "    def step(self, x, t_s): return x - self.severity * self.slip_pct\n")
+    (tmp_path / "s.yaml").write_text("extends: paper\nplugins: [slip.py]\n")
+    try:
+        spec = load_scenario(str(tmp_path / "s.yaml"), fault="plugin_slip")
+        assert spec.faults[0].type == "test_plugin_slip" and spec.faults[0].params == {"slip_pct": 2.0}
+    finally:
+        BLOCKS.pop("test_plugin_slip", None)
+        FAULTS.pop("plugin_slip", None)
+        sys.modules.pop("phfdi_plugin_slip", None)
