@@ -526,29 +526,23 @@ def _zoom(resid, x, cost, r, n_par, lower, upper, half: float = 0.12, shrink: fl
 
     Returns (x, cost, residual, evaluations). Each stage spans +-``half`` of the
     [0, 1] coordinate, then ``half / shrink``: six stages reach about 1/400 of
-    the range (0.2 % of a log decade's worth of a valve parameter). From the
-    third stage on, the previous stage's grid is polled again about the current
-    best point: a valve block's cost is a staircase of basins, one per slip the
-    data show, separated by narrow ridges (stiction's S 5 % off its basin costs
-    twice as much as S 8 % off, across a ridge; docs/diagnosis.md), and a grid
-    that shrank below a basin's distance could no longer step over the ridge
-    before it.
+    the range (0.2 % of a log decade's worth of a valve parameter).
     """
     used = 0
     offsets = np.linspace(-1.0, 1.0, 5)
-    for stage in range(stages):
+    for _ in range(stages):
+        grid = itertools.product(*([offsets] * n_par))
         best = (cost, x, r)
-        for h in ((half, half * shrink) if stage >= 2 else (half,)):
-            for d in itertools.product(*([offsets] * n_par)):
-                if not any(d):
-                    continue
-                xt = x.copy()
-                xt[:n_par] = np.clip(x[:n_par] + h * np.asarray(d), lower[:n_par], upper[:n_par])
-                rt = resid(xt)
-                used += 1
-                ct = float(np.sum(rt ** 2))
-                if ct < best[0]:
-                    best = (ct, xt, rt)
+        for d in grid:
+            if not any(d):
+                continue
+            xt = x.copy()
+            xt[:n_par] = np.clip(x[:n_par] + half * np.asarray(d), lower[:n_par], upper[:n_par])
+            rt = resid(xt)
+            used += 1
+            ct = float(np.sum(rt ** 2))
+            if ct < best[0]:
+                best = (ct, xt, rt)
         cost, x, r = best
         half /= shrink
     return x, cost, r, used
