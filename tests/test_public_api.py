@@ -1,7 +1,8 @@
 """The public API of each package: ``__all__`` names what users use, each with a numpydoc docstring whose
 Examples section runs (docs/architecture.md, "Public API").
 
-The examples run here as doctests, so an example that no longer works fails the suite. The cores'
+The examples run here as doctests, so an example that no longer works fails the suite; so does every other
+docstring example in the source (modules of the ROS edge that import rclpy excepted). The cores'
 packages re-export lazily (:mod:`phfdi_base.lazy`): importing one must not import scipy & co.
 """
 
@@ -13,10 +14,13 @@ import inspect
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from phfdi_base.lazy import type_checking_imports
+
+SRC = Path(__file__).resolve().parents[1] / "src"
 
 #: packages with a public API, and whether they re-export lazily (the cores) or eagerly
 PACKAGES = {
@@ -86,3 +90,30 @@ def test_importing_the_cores_stays_cheap():
             "print(sorted(m for m in ('scipy', 'pywt', 'pydantic', 'matplotlib', 'numpy') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def _modules_with_examples() -> list[str]:
+    """Every module of the project's packages whose source holds a ``>>>`` example, except those that import
+    rclpy (the ROS edge runs in its own processes, tests/ros)."""
+    out = []
+    for path in sorted(SRC.rglob("*.py")):
+        rel = path.relative_to(SRC)
+        if not (SRC / rel.parts[0] / "__init__.py").exists():
+            continue
+        text = path.read_text(encoding="utf-8")
+        if ">>>" in text and not re.search(r"^\s*(import|from) rclpy", text, re.M):
+            parts = rel.with_suffix("").parts
+            out.append(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+    return out
+
+
+@pytest.mark.parametrize("module", _modules_with_examples())
+def test_every_docstring_example_runs(module):
+    mod = importlib.import_module(module)
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    report: list[str] = []
+    for t in doctest.DocTestFinder().find(mod, module):
+        runner.run(t, out=report.append)
+    assert runner.tries > 0, f"{module}: its '>>>' lines are not in a docstring"
+    assert runner.failures == 0, "".join(report)
+

@@ -89,11 +89,15 @@ class TransportDelay:
         y = both[newest - k]
         if frac > 1e-12:
             y = (1.0 - frac) * y + frac * both[newest - k - 1]
-        self._buf = deque(both[-self._buf.maxlen:].tolist(), maxlen=self._buf.maxlen)
+        keep = self._n + 1  # the buffer's length, as reset makes it
+        self._buf = deque(both[-keep:].tolist(), maxlen=keep)
         return y
 
 
-@register_block("sensor_lag")
+@register_block("sensor_lag", fault=Fault(
+    "sensor_lag", site="ph_sensor", description="first-order pH probe lag (a diagnosis candidate)",
+    # the diagnosis fits up to 600 s (and a fifth of the record)
+    params=(FaultParam("tau_s", "s", (0.0, math.inf), search=Range(0.0, 600.0)),), isolate=False, preset=False))
 @dataclass
 class FirstOrderLag:
     """First-order lag tau dy/dt = x - y, exact for an input held over each sample:
@@ -150,7 +154,9 @@ class GaussianNoise:
         return x + self.severity * self.std * float(e)
 
 
-@register_block("sensor_bias")
+@register_block("sensor_bias", fault=Fault(
+    "sensor_bias", site="ph_sensor", description="pH probe offset (a diagnosis candidate)",
+    params=(FaultParam("bias", "pH", (-14.0, 14.0), search=Range(-3.0, 3.0)),), isolate=False, preset=False))
 @dataclass
 class Bias:
     """Constant offset: y = x + bias."""
@@ -168,7 +174,10 @@ class Bias:
         return np.asarray(x, dtype=float) + self.severity * self.bias
 
 
-@register_block("sensor_drift")
+@register_block("sensor_drift", fault=Fault(
+    "sensor_drift", site="ph_sensor", description="pH probe drift (a diagnosis candidate)",
+    # the diagnosis fits up to 3 pH over the record, either sign: a range the record's length sets
+    params=(FaultParam("rate_per_s", "pH/s", (-math.inf, math.inf)),), isolate=False, preset=False))
 @dataclass
 class Drift:
     """Linear drift from the moment the block comes to rest: y = x + rate (t - t0)."""
@@ -192,7 +201,10 @@ class Drift:
         return np.asarray(x, dtype=float) + self.severity * self.rate_per_s * (t_s - self._t0)
 
 
-@register_block("sensor_gain")
+@register_block("sensor_gain", fault=Fault(
+    "sensor_gain", site="ph_sensor", description="pH probe slope error about pH 7 (a diagnosis candidate)",
+    params=(FaultParam("gain", "1", (0.0, math.inf), search=Range(0.4, 2.5, log=True)),
+            FaultParam("reference", "pH", (0.0, 14.0), paper=7.0)), isolate=False, preset=False))
 @dataclass
 class Gain:
     """Span error about a reference point: y = ref + gain (x - ref) (pH probe slope error about pH 7)."""

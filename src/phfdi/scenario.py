@@ -16,7 +16,7 @@ from importlib import resources
 from pathlib import Path
 
 from phfdi_base.errors import UserError
-from phfdi_base.spec import ScenarioSpec, deep_merge, resolve_scenario
+from phfdi_base.spec import ScenarioSpec, deep_merge, load_plugins, resolve_scenario
 from phfdi_base.yamlfile import read_mapping, resolve_preset
 
 from .faults import fault_library, preset_name
@@ -65,7 +65,10 @@ def load_scenario(name_or_path: str = "paper", fault: str | None = None,
     ``fault`` replaces the scenario's faults with the library fault of that
     name, or of that block ("none" or "healthy" removes them).
     """
-    fault = preset_name(fault) if fault else fault
-    library = fault_library() if fault not in (None, "none", "healthy") else {}
-    return resolve_scenario(raw_scenario(name_or_path), fault, library, overrides, onset_s,
-                            source=f"scenario {name_or_path}")
+    raw = raw_scenario(name_or_path)
+    library = {}
+    if fault not in (None, "none", "healthy"):
+        load_plugins(raw.get("plugins") or [])  # a plugin's blocks may declare the named fault
+        fault = preset_name(fault)
+        library = fault_library()
+    return resolve_scenario(raw, fault, library, overrides, onset_s, source=f"scenario {name_or_path}")

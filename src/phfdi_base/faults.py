@@ -24,7 +24,6 @@ This module imports nothing of the project: the cores fill the registry, the app
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 __all__ = ["FAULTS", "SITES", "Fault", "FaultParam", "Range", "faults", "register_fault"]
@@ -57,7 +56,7 @@ class Range:
     log: bool = False
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.low) and self.low < self.high) or (self.log and self.low <= 0.0):
+        if not self.low < self.high or (self.log and self.low <= 0.0):
             raise ValueError(f"bad range [{self.low}, {self.high}] (log={self.log})")
 
     def contains(self, value: float) -> bool:

@@ -7,6 +7,7 @@ the evaluation, the paper set, the isolation and the diagnosis with no other edi
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -118,10 +119,14 @@ def test_a_users_fault_is_a_diagnosis_candidate_found_in_measured_data(stem_offs
 # ---- the built-in catalogue ------------------------------------------------------------------------------------
 def test_every_preset_builds_its_block_with_the_preset_values():
     for name, f in catalogue().items():
+        for p in f.params:
+            assert p.fit_range("isolation").low >= p.bounds[0] and p.fit_range("diagnosis").high <= p.bounds[1]
+        if not f.preset:  # a diagnosis-only fault (sensor lag, bias, drift, gain)
+            assert name not in fault_library()
+            continue
         assert f.preset_entry() == fault_library()[name]
         block = make_block(f.block, f.preset_params(), dt_s=1.0)
         for p in f.params:
-            assert p.fit_range("isolation").low >= p.bounds[0] and p.fit_range("diagnosis").high <= p.bounds[1]
             if p.paper is not None:
                 assert getattr(block, p.name) == p.paper
 
@@ -157,3 +162,25 @@ def test_a_fault_answers_to_its_preset_name_and_its_blocks():
     delay = next(c for c in cands if c.cause == "sensor_delay").params[0]
     # the catalogue's diagnosis range, narrowed by the record (a fifth of 1000 s)
     assert (delay.low, delay.high) == (0.0, 200.0)
+
+
+def test_a_plugins_fault_is_a_preset_of_the_scenario_naming_it(tmp_path):
+    (tmp_path / "slip.py").write_text(
+        "from dataclasses import dataclass\n"
+        "from phfdi_base import Fault, FaultParam, register_block\n\n"
+        "@register_block('test_plugin_slip', fault=Fault('plugin_slip', site='valve', description='slipped stem',\n"
+        "    params=(FaultParam('slip_pct', '% of span', (0.0, 50.0), paper=2.0),)))\n"
+        "@dataclass\n"
+        "class Slip:\n"
+        "    slip_pct: float\n"
+        "    severity: float = 1.0\n"
+        "    def reset(self, x0): pass\n"
+        "    def step(self, x, t_s): return x - self.severity * self.slip_pct\n")
+    (tmp_path / "s.yaml").write_text("extends: paper\nplugins: [slip.py]\n")
+    try:
+        spec = load_scenario(str(tmp_path / "s.yaml"), fault="plugin_slip")
+        assert spec.faults[0].type == "test_plugin_slip" and spec.faults[0].params == {"slip_pct": 2.0}
+    finally:
+        BLOCKS.pop("test_plugin_slip", None)
+        FAULTS.pop("plugin_slip", None)
+        sys.modules.pop("phfdi_plugin_slip", None)

@@ -221,20 +221,23 @@ def sensor_candidates(ctx: Context) -> list[Candidate]:
     span = ctx.duration_s
     longest = max(5.0 * ctx.dt_s, min(_param("sensor_delay", "delay_s").high, span / 5.0))
     starts_s = sorted({min(longest * 0.9, max(ctx.dt_s, s)) for s in (1.0, 5.0, 20.0, 80.0)})
+    gain_fixed = {"reference": _preset("sensor_gain", "reference")}
     return [
         Candidate("sensor_delay", [_param("sensor_delay", "delay_s", high=longest)], [{"delay_s": s} for s in starts_s],
                   lambda raw, p: _add_sensor_block(raw, "sensor_delay", {"delay_s": p["delay_s"]}), "delay_s"),
-        Candidate("sensor_lag", [Param("tau_s", 0.0, longest, "s")], [{"tau_s": s} for s in starts_s],
+        Candidate("sensor_lag", [_param("sensor_lag", "tau_s", high=longest)], [{"tau_s": s} for s in starts_s],
                   lambda raw, p: _add_sensor_block(raw, "sensor_lag", {"tau_s": p["tau_s"]}), "tau_s"),
-        Candidate("sensor_bias", [Param("bias", -3.0, 3.0, "pH")], [{"bias": 0.0}],
+        Candidate("sensor_bias", [_param("sensor_bias", "bias")], [{"bias": 0.0}],
                   lambda raw, p: _add_sensor_block(raw, "sensor_bias", {"bias": p["bias"]}), "bias",
                   per_group=("bias",)),
-        Candidate("sensor_drift", [Param("rate_per_s", -3.0 / span, 3.0 / span, "pH/s")], [{"rate_per_s": 0.0}],
+        # up to 3 pH over the record, either sign
+        Candidate("sensor_drift", [_param("sensor_drift", "rate_per_s", -3.0 / span, 3.0 / span)],
+                  [{"rate_per_s": 0.0}],
                   lambda raw, p: _add_sensor_block(raw, "sensor_drift", {"rate_per_s": p["rate_per_s"]}),
                   "rate_per_s"),
-        Candidate("sensor_gain", [Param("gain", 0.4, 2.5, "1", log=True)], [{"gain": 1.0}],
-                  lambda raw, p: _add_sensor_block(raw, "sensor_gain", {"gain": p["gain"], "reference": 7.0}),
-                  "gain", fixed={"reference": 7.0}),
+        Candidate("sensor_gain", [_param("sensor_gain", "gain")], [{"gain": 1.0}],
+                  lambda raw, p: _add_sensor_block(raw, "sensor_gain", {"gain": p["gain"], **gain_fixed}),
+                  "gain", fixed=dict(gain_fixed)),
     ]
 
 
@@ -381,7 +384,8 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
 
 
 #: the faults of the fault catalogue tried with a search of their own (above)
-TAILORED = ("stiction", "backlash", "deadzone", "saturation", "coulomb_viscous_friction", "leakage", "sensor_delay")
+TAILORED = ("stiction", "backlash", "deadzone", "saturation", "coulomb_viscous_friction", "leakage", "sensor_delay",
+            "sensor_lag", "sensor_bias", "sensor_drift", "sensor_gain")
 
 
 def _others(sites: tuple[str, ...]) -> tuple[str, ...]:

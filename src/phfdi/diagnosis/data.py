@@ -26,6 +26,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -105,7 +106,7 @@ class ColumnMap(records.ColumnMap):
         return cls.from_mapping(data, source).checked()
 
     @classmethod
-    def from_args(cls, items: list[str], units: list[str] = (), source: str = "--column") -> "ColumnMap":
+    def from_args(cls, items: Sequence[str], units: Sequence[str] = (), source: str = "--column") -> "ColumnMap":
         return super().from_args(items, units, source).checked()
 
     def checked(self) -> "ColumnMap":

@@ -186,6 +186,41 @@ def _tuning(rng: np.random.Generator, integrating: bool, gain: float, tau: float
     return kp, ti
 
 
+def _draw_class_conditions(rng: np.random.Generator, loop_class: str) -> tuple[str, ...]:
+    """The disturbances and setpoint moves a loop of ``loop_class`` sees (names of
+    :data:`CONDITIONS_BY_CLASS`, ``load_steps`` always for ``healthy_load_steps``)."""
+    if loop_class == "healthy_load_steps":
+        extra = rng.choice(("load_walk", "load_ar", "setpoint_steps", "load_ramps"), size=int(rng.integers(0, 2)),
+                           replace=False).tolist()
+        return tuple(sorted({"load_steps", *extra}))
+    if loop_class == "healthy_oscillatory_tuning":
+        pool = ("load_walk", "load_ar", "load_steps", "load_ramps", "setpoint_steps")
+        return tuple(sorted(rng.choice(pool, size=int(rng.integers(1, 3)), replace=False).tolist()))
+    n_cond = int(rng.integers(0, 3))
+    return tuple(sorted(rng.choice(CONDITIONS_BY_CLASS, size=n_cond, replace=False).tolist())) or (QUIET,)
+
+
+def _draw_class_valve(rng: np.random.Generator, loop_class: str) -> tuple[str, dict] | None:
+    """The valve model of a loop of ``loop_class`` as (block name, parameters in % of travel);
+    None for a healthy valve."""
+    if loop_class == "stiction":
+        s = _logu(rng, 0.3, 6.0)
+        if rng.random() < 0.5:
+            return ("stiction", {"s_pct": s, "j_pct": s * float(rng.uniform(0.0, 1.2))})
+        return ("stiction_he", {"fs_pct": s, "fd_pct": s * float(rng.uniform(0.0, 1.0))})
+    if loop_class == "other_nonlinearity":
+        kind = str(rng.choice(("deadzone", "quantization", "saturation")))
+        if kind == "deadzone":
+            return ("deadzone", {"width_pct": _logu(rng, 0.5, 4.0)})
+        if kind == "quantization":
+            return ("quantization", {"step_pct": _logu(rng, 0.3, 2.0)})
+        # the stem cannot open past a limit a little above where the loop works
+        return ("saturation", {"low_pct": 0.0, "high_pct": 50.0 + _logu(rng, 0.5, 5.0)})
+    if loop_class == "backlash":
+        return ("backlash", {"width_pct": _logu(rng, 0.3, 6.0)})
+    return None
+
+
 def draw_class_spec(rng: np.random.Generator, loop_class: str, tag: str) -> DrawnLoop:
     """One loop of ``loop_class`` (:data:`LOOP_CLASSES`). Process, noise, historian resolution and
     setpoint as in :func:`draw_spec`; in addition
@@ -214,16 +249,7 @@ def draw_class_spec(rng: np.random.Generator, loop_class: str, tag: str) -> Draw
     oscillatory = loop_class == "healthy_oscillatory_tuning" or (loop_class == "stiction" and rng.random() < 0.2)
     kp, ti = _tuning(rng, integrating, gain, tau, theta, oscillatory)
     pv_scale = gain * (1.0 if not integrating else 30.0 * dt)
-    if loop_class == "healthy_load_steps":
-        extra = rng.choice(("load_walk", "load_ar", "setpoint_steps", "load_ramps"), size=int(rng.integers(0, 2)),
-                           replace=False).tolist()
-        conditions = tuple(sorted({"load_steps", *extra}))
-    elif loop_class == "healthy_oscillatory_tuning":
-        pool = ("load_walk", "load_ar", "load_steps", "load_ramps", "setpoint_steps")
-        conditions = tuple(sorted(rng.choice(pool, size=int(rng.integers(1, 3)), replace=False).tolist()))
-    else:
-        n_cond = int(rng.integers(0, 3))
-        conditions = tuple(sorted(rng.choice(CONDITIONS_BY_CLASS, size=n_cond, replace=False).tolist())) or (QUIET,)
+    conditions = _draw_class_conditions(rng, loop_class)
     kw: dict = {}
     if "load_walk" in conditions:
         kw["load_walk_std"] = _logu(rng, 0.005, 0.05)
@@ -252,23 +278,7 @@ def draw_class_spec(rng: np.random.Generator, loop_class: str, tag: str) -> Draw
     if rng.random() < 0.25:
         kw["pv_compression"] = float(noise * _logu(rng, 0.5, 2.0))
         kw["op_compression"] = _logu(rng, 0.02, 0.2)
-    valve = None
-    if loop_class == "stiction":
-        s = _logu(rng, 0.3, 6.0)
-        if rng.random() < 0.5:
-            valve = ("stiction", {"s_pct": s, "j_pct": s * float(rng.uniform(0.0, 1.2))})
-        else:
-            valve = ("stiction_he", {"fs_pct": s, "fd_pct": s * float(rng.uniform(0.0, 1.0))})
-    elif loop_class == "other_nonlinearity":
-        kind = str(rng.choice(("deadzone", "quantization", "saturation")))
-        if kind == "deadzone":
-            valve = ("deadzone", {"width_pct": _logu(rng, 0.5, 4.0)})
-        elif kind == "quantization":
-            valve = ("quantization", {"step_pct": _logu(rng, 0.3, 2.0)})
-        else:  # the stem cannot open past a limit a little above where the loop works
-            valve = ("saturation", {"low_pct": 0.0, "high_pct": 50.0 + _logu(rng, 0.5, 5.0)})
-    elif loop_class == "backlash":
-        valve = ("backlash", {"width_pct": _logu(rng, 0.3, 6.0)})
+    valve = _draw_class_valve(rng, loop_class)
     spec = SyntheticLoop(process="integrating" if integrating else "foptd", gain=gain, time_constant_s=tau,
                          dead_time_s=theta, dt_s=dt, duration_s=duration, kp=kp, ti_s=ti, valve=valve,
                          setpoint_steps=sp_steps, noise_std=noise, pv_quantum=quantum,
@@ -300,3 +310,16 @@ def draw_class_loops(classes: list[str], seed: int, prefix: str) -> list[tuple[D
 def class_round_robin(per_class: int) -> list[str]:
     """Every class of :data:`LOOP_CLASSES` ``per_class`` times, round robin (the fresh test set)."""
     return [c for _ in range(per_class) for c in LOOP_CLASSES]
+
+
+#: the training set's mix, per 10 loops: half sticky valves (as before); of the healthy half, loops
+#: answering load steps and ramps, loops tuned to oscillate, loops under the other disturbances, and
+#: other valve nonlinearities (not stiction). Backlash is left out: Kano's model with J = 0 is the
+#: same dead-band, so either label would be noise.
+TRAINING_MIX = ("stiction", "healthy_load_steps", "stiction", "healthy_oscillatory_tuning", "stiction",
+                "healthy_other", "stiction", "healthy_other", "stiction", "other_nonlinearity")
+
+
+def draw_training_loops(n: int, seed: int, prefix: str = "SYN") -> list[tuple[DrawnLoop, Run]]:
+    """n loops of :func:`draw_class_spec` in the classes of :data:`TRAINING_MIX`, cycled."""
+    return draw_class_loops([TRAINING_MIX[k % len(TRAINING_MIX)] for k in range(n)], seed, prefix)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Self, Sequence
 
 from phfdi_base.errors import UserError
 from phfdi_base.yamlfile import read_mapping
@@ -173,13 +173,13 @@ class ColumnMap:
 
     # ---- constructors --------------------------------------------------------------
     @classmethod
-    def load(cls, path: str | Path) -> "ColumnMap":
+    def load(cls, path: str | Path) -> Self:
         """From a YAML file."""
         data = read_mapping(path, "column map", "a mapping 'signal: column' or 'signal: {column:, unit:}'")
         return cls.from_mapping(data, str(path))
 
     @classmethod
-    def from_mapping(cls, data: dict, source: str = "column map") -> "ColumnMap":
+    def from_mapping(cls, data: dict, source: str = "column map") -> Self:
         """From a dict in either form (see the module docstring)."""
         if not isinstance(data, dict):
             raise UserError(f"{source}: expected a mapping 'signal: column'")
@@ -199,7 +199,7 @@ class ColumnMap:
                    source=source)
 
     @classmethod
-    def from_args(cls, columns: Sequence[str], units: Sequence[str] = (), source: str = "--column") -> "ColumnMap":
+    def from_args(cls, columns: Sequence[str], units: Sequence[str] = (), source: str = "--column") -> Self:
         """From ``--column SIGNAL=COLUMN`` items (``mode=COL``, ``quality=COL`` too) and ``--unit SIGNAL=UNIT``."""
         data: dict = {}
         for item in columns:
@@ -214,7 +214,7 @@ class ColumnMap:
         return cls.from_mapping(data, source)
 
     @classmethod
-    def parse(cls, text: str) -> "ColumnMap":
+    def parse(cls, text: str) -> Self:
         """From ``op=FIC1.OP,pv=FIC1.PV,time=Stamp`` (one argument) or a YAML file name."""
         if text.endswith((".yaml", ".yml")):
             return cls.load(text)
