@@ -126,7 +126,7 @@ VESSEL = ["tanks_in_series", "co2_absorption", "mixing_zone", "feed_delay", "sen
           "reagent_concentration", "carbonate", "buffer"]
 #: the dynamics candidates compete with each other and with the usual suspects of a slow or late response
 DYNAMICS = ["pump_lag", "feed_delay", "sensor_second_order", "sensor_lag", "sensor_delay", "probe_asymmetric_lag",
-            "mixing_zone", "holdup", "reagent_concentration"]
+            "holdup", "reagent_concentration"]
 
 
 def _diagnose(diagnose_json, path, tmp_path, candidates=CANDIDATES) -> dict:
@@ -167,7 +167,7 @@ def test_no_structural_effect_comes_back_none(hidden_rng, diagnose_json, tmp_pat
 @pytest.mark.parametrize("cause", ["pump_lag", "sensor_second_order"])
 def test_dynamics_of_pump_or_probe_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
     """A pump's slow start (on/off dosing) and a probe with two lags: each among the other ways a response comes
-    late or slow (a line dead time, one probe lag or delay, an asymmetric probe, a mixing zone, the holdup)."""
+    late or slow (a line dead time, one probe lag or delay, an asymmetric probe, the holdup, the reagent strength)."""
     path, main, value, tol = make_case(hidden_rng, cause, tmp_path / "data")
     rep = _diagnose(diagnose_json, path, tmp_path, DYNAMICS)
     what = f"hidden {cause} {main} = {value:.4g}"

@@ -360,10 +360,11 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
     out.append(Candidate(
         "co2_absorption", [Param("kla_per_s", 0.01 * turnover, 100.0 * turnover, "1/s", log=True),
                            Param("equilibrium_mol_l", strength * 1e-3, strength, "mol/L", log=True)],
-        [{"kla_per_s": k * turnover, "equilibrium_mol_l": c * strength} for k in (0.1, 1.0, 10.0)
-         for c in (0.01, 0.05, 0.2)],
+        # at a fast kla the level is a constant buffer and kla's gradient vanishes: a denser grid, a longer polish
+        [{"kla_per_s": k * turnover, "equilibrium_mol_l": c * strength} for k in (0.1, 0.4, 1.5, 6.0)
+         for c in (0.01, 0.03, 0.08, 0.2, 0.5)],
         lambda raw, p: _set_air_exchange(raw, p["kla_per_s"], p["equilibrium_mol_l"]), "equilibrium_mol_l",
-        fixed={"pka": list(CARBONATE_PKA)}, structural=True))
+        fixed={"pka": list(CARBONATE_PKA)}, structural=True, polish_evals=60))
     slowest = max(5.0 * ctx.dt_s, min(60.0, ctx.duration_s / 5.0))
     for feed in ctx.feeds:
         out.append(Candidate(
