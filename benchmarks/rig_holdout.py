@@ -152,6 +152,13 @@ def show_evidence(folder: Path, figure_path: Path | None) -> int:
         print(f"rig_holdout: no folds in {folder} (write them with --predictions {folder})", file=sys.stderr)
         return 2
     evs = [evidence(f) for f in folds]
+    in_sample: dict[str, list[float]] = {}
+    for f in folds:  # the final structure's in-sample NRMSE of each run it was fitted on
+        for r in f["fitted_in_sample"]:
+            y, p = np.asarray(r["measured"]), np.asarray(r["structure"])
+            in_sample.setdefault(r["run"], []).append(float(np.sqrt(np.mean((p - y) ** 2)) / np.std(y)))
+    print(table([f["row"] for f in folds], in_sample))
+    print()
     print(evidence_table(evs))
     for f, ev in zip(folds, evs):
         ins = [rmse_in_bands(r) for r in f["fitted_in_sample"]]
