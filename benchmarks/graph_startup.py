@@ -28,6 +28,7 @@ def main() -> int:
     ap.add_argument("--detector", action="store_true", help="add the fault detector node")
     ap.add_argument("--no-record", action="store_true", help="run without the recorder")
     ap.add_argument("--phases", action="store_true", help="print each node's start-up steps (median)")
+    ap.add_argument("--domain-id", type=int, default=None, help="ROS domain of the launches (default: a free one)")
     args = ap.parse_args()
 
     import tempfile
@@ -43,7 +44,7 @@ def main() -> int:
             overrides = [f"duration_s={args.duration:g}", f"setpoints.ph.changes.0.at_s={args.duration / 4:g}"]
             nodes = loop_graph("paper", "backlash", args.duration / 2, overrides, bag,
                                detector={} if args.detector else None)
-            result = Launcher(nodes, status=lambda s: None).run()
+            result = Launcher(nodes, domain_id=args.domain_id, status=lambda s: None).run()
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if result.status != 0:
                 print(f"launch failed: {result.failure or result.notes}", file=sys.stderr)
@@ -51,7 +52,7 @@ def main() -> int:
             cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
             walls.append(result.connect_s)
             cpus.append(cpu)
-            phases.append((result.startup, result.startup_cpu))
+            phases.append((getattr(result, "startup", {}), getattr(result, "startup_cpu", {})))
             print(f"launch {i + 1}: {len(nodes)} nodes, start-up (processes to connected graph) {result.connect_s:.2f} s"
                   f" wall, {cpu:.2f} s CPU of all nodes (whole run of {args.duration:g} s simulated); "
                   f"load average {os.getloadavg()[0]:.1f}")

@@ -244,12 +244,6 @@ def test_checker_asks_for_a_floor_for_a_new_package(tmp_path):
 MAX_FUNCTION_LINES = 80
 #: functions still longer than MAX_FUNCTION_LINES (file, name): may only shrink, as KNOWN_UPWARD
 KNOWN_LONG: frozenset[tuple[str, str]] = frozenset({
-    ("wavelet_fdi/report.py", "markdown"),
-    ("wavelet_fdi/report.py", "section6_claims"),
-    ("phfdi/diagnosis/fit.py", "fit"),
-    ("phfdi/loopdiag/figures.py", "plot_loop"),
-    ("phfdi/commands/analyze.py", "run"),
-    ("wavelet_fdi/inputs.py", "_slow_path"),
 })
 
 
@@ -273,3 +267,77 @@ def test_length_checker_catches_a_long_function(tmp_path):
     body = "".join(f"    x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES))
     _tree(tmp_path, {"pkg/__init__.py": "", "pkg/m.py": f"def short():\n    pass\n\n\ndef long():\n{body}"})
     assert long_functions(tmp_path) == {("pkg/m.py", "long")}
+
+
+# ---- one fault catalogue ----------------------------------------------------------------------------------------
+#: modules that still define a fault parameter's search range themselves instead of reading the catalogue
+#: (issue 14 emptied it): may only shrink, as KNOWN_UPWARD
+KNOWN_OWN_BOUNDS: frozenset[str] = frozenset()
+
+
+def _registers_faults(tree: ast.AST) -> bool:
+    """True for a module that declares faults: ``register_block(..., fault=...)`` or ``Fault(...)``."""
+    return any(isinstance(n, ast.Call) and (any(k.arg == "fault" for k in n.keywords)
+                                            or getattr(n.func, "id", "") == "Fault") for n in ast.walk(tree))
+
+
+def _is_number(node: ast.AST) -> bool:
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+        node = node.operand
+    return isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
+
+
+def _strings(call: ast.Call) -> tuple[list[str], bool]:
+    args = list(call.args) + [k.value for k in call.keywords]
+    return [a.value for a in args if isinstance(a, ast.Constant) and isinstance(a.value, str)], any(map(_is_number, args))
+
+
+def own_fault_bounds(src: Path, params: dict[str, set[str]]) -> dict[str, list[str]]:
+    """module -> places outside the modules that declare faults where a call names a catalogued fault (its
+    name or block, e.g. ``Candidate("backlash", ...)``) and, within it, a call names one of that fault's
+    parameters next to a number (``Param("width_pct", 0.02, 20.0)``): a bound defined a second time.
+    ``params``: fault name or block -> its parameter names."""
+    out: dict[str, set[str]] = {}
+    for module, path in project_modules(src).items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        if _registers_faults(tree):
+            continue
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Call):
+                continue
+            for fault in set(_strings(node)[0]) & set(params):
+                for sub in ast.walk(node):
+                    if isinstance(sub, ast.Call):
+                        names, number = _strings(sub)
+                        named = [n for n in names if n in params[fault]]
+                        if named and number:
+                            out.setdefault(module, set()).add(f"line {sub.lineno}: {fault}.{named[0]}")
+    return {m: sorted(v) for m, v in out.items()}
+
+
+def _catalogued_params() -> dict[str, set[str]]:
+    from phfdi.faults import catalogue
+
+    out: dict[str, set[str]] = {}
+    for f in catalogue().values():
+        for key in (f.name, f.block):
+            out.setdefault(key, set()).update(p.name for p in f.params)
+    return out
+
+
+def test_fault_parameters_are_bounded_only_in_the_catalogue():
+    found = own_fault_bounds(SRC, _catalogued_params())
+    assert {m: v for m, v in found.items() if m not in KNOWN_OWN_BOUNDS} == {}, \
+        "read the bounds from the fault catalogue (phfdi_base.faults, declared with the block)"
+    assert sorted(KNOWN_OWN_BOUNDS - set(found)) == [], "these read the catalogue now: remove them from KNOWN_OWN_BOUNDS"
+
+
+def test_bounds_checker_catches_a_second_definition(tmp_path):
+    _tree(tmp_path, {"pkg/__init__.py": "",
+                     "pkg/blocks.py": 'X = Fault("b", params=(FaultParam("width_pct", "%", (0, 100)),))\n',
+                     "pkg/fit.py": 'C = [Candidate("backlash", [Param("width_pct", 0.02, 20.0, "%")]),\n'
+                                   '     Candidate("backlash", [Param("width_pct", lo, hi)]),\n'
+                                   '     Candidate("feed_delay", [Param("width_pct", 0.0, 9.0)])]\n',
+                     "pkg/iso.py": 'H = Hypothesis("backlash", "backlash", "width_pct", "% of span", 0.05, 20.0)\n'})
+    assert own_fault_bounds(tmp_path, {"backlash": {"width_pct"}}) == {"pkg.fit": ["line 1: backlash.width_pct"],
+                                                                       "pkg.iso": ["line 1: backlash.width_pct"]}

@@ -12,21 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import cast
-
-from pydantic import ValidationError
+from typing import TYPE_CHECKING, cast
 
 from phfdi_base.blocks import Chain, make_block
 from phfdi_base.errors import UserError
-from phfdi_base.spec import (
-    PlantModelSpec,
-    ScenarioSpec,
-    SensorSpec,
-    checked_block,
-    format_validation,
-    injected_faults,
-    profile,
-)
+from phfdi_base.spec_tools import checked_block, injected_faults, profile
 from phfdi_base.yamlfile import read_mapping, resolve_preset
 
 from . import feedlines, sensors  # noqa: F401  (register the feed-line and sensor blocks)
@@ -36,6 +26,9 @@ from .mixing import MixingZone, ZonedPlant
 from .plant import CstrPlant, Feed, GravityOutlet, Tank
 from .process import PlantProcess
 from .series import SeriesPlant, TanksInSeries
+
+if TYPE_CHECKING:  # the schema (pydantic) only where a plant model file is read: a node gets its model validated
+    from phfdi_base.spec import PlantModelSpec, ScenarioSpec, SensorSpec
 
 __all__ = ["PLANT_DIR", "PlantStart", "build_plant", "build_process", "feed_lines", "load_plant_model",
            "plant_start", "sensor_chain"]
@@ -47,13 +40,33 @@ PLANT_DIR = Path(str(resources.files("ph_plant_sim"))) / "presets"
 def load_plant_model(plant: str | PlantModelSpec) -> PlantModelSpec:
     """A plant model: as given, a preset of :data:`PLANT_DIR` by name, or a .yaml file.
 
+    Parameters
+    ----------
+    plant : str or PlantModelSpec
+        A preset name (``"paper"``), a path to a plant-model .yaml, or a model already validated.
+
+    Returns
+    -------
+    PlantModelSpec
+
+    Raises
+    ------
+    UserError
+        No such preset or file, or a file that is not a valid plant model (naming the key).
+
     Examples
     --------
-    >>> load_plant_model("paper").tank.area_cm2 > 0
-    True
+    >>> from ph_plant_sim import load_plant_model
+    >>> model = load_plant_model("paper")
+    >>> list(model.feeds)
+    ['acid', 'buffer', 'base']
     """
-    if isinstance(plant, PlantModelSpec):
+    if not isinstance(plant, str):  # a model already validated (the scenario's own, or one a node part carries)
         return plant
+    from pydantic import ValidationError
+
+    from phfdi_base.spec import PlantModelSpec, format_validation
+
     path = resolve_preset(plant, PLANT_DIR, "plant model")
     try:
         return PlantModelSpec.model_validate(read_mapping(path))
@@ -62,7 +75,25 @@ def load_plant_model(plant: str | PlantModelSpec) -> PlantModelSpec:
 
 
 def build_plant(model: PlantModelSpec) -> CstrPlant:
-    """The vessel of a plant model (a :class:`ZonedPlant` when the probe reads a mixing zone)."""
+    """The vessel of a plant model (a :class:`ZonedPlant` when the probe reads a mixing zone).
+
+    Parameters
+    ----------
+    model : PlantModelSpec
+        From :func:`load_plant_model`.
+
+    Returns
+    -------
+    CstrPlant
+        Not yet at a steady state: :func:`build_process` puts it at one.
+
+    Examples
+    --------
+    >>> from ph_plant_sim import build_plant, load_plant_model
+    >>> plant = build_plant(load_plant_model("paper"))
+    >>> [f.name for f in plant.feeds]
+    ['acid', 'buffer', 'base']
+    """
     chem_spec = model.chemistry
     try:
         streams = [dict(f.recipe) for f in model.feeds.values()]
@@ -132,7 +163,23 @@ def sensor_chain(spec: SensorSpec, dt_s: float, seed: int, where: str, faults: l
 
 @dataclass
 class PlantStart:
-    """The plant's side of the loop's starting steady state (at the t=0 setpoints)."""
+    """The plant's side of the loop's starting steady state (at the t=0 setpoints), from :func:`plant_start`.
+
+    Attributes
+    ----------
+    flows_ml_s : list of float
+        Every feed's flow (mL/s), in the plant's feed order.
+    valve_feed_index : int
+        The feed the pH valve drives.
+    outlet_opening : float
+        Fraction of full outlet flow that holds the level setpoint (1 without one).
+
+    Examples
+    --------
+    >>> from ph_plant_sim import PlantStart
+    >>> PlantStart([9.8, 2.0, 15.6], 0, 0.43).flows_ml_s[0]
+    9.8
+    """
 
     flows_ml_s: list[float]  # every feed, plant feed order
     valve_feed_index: int  # the feed the pH valve drives
@@ -141,7 +188,35 @@ class PlantStart:
 
 def plant_start(spec: ScenarioSpec, plant: CstrPlant, ph_target: float | None = None) -> PlantStart:
     """Feed flows that hold the plant at the pH (default: the initial setpoint) and the outlet opening that
-    holds the level setpoint."""
+    holds the level setpoint.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+        The scenario (valves, setpoints, feed schedules).
+    plant : CstrPlant
+        From :func:`build_plant`.
+    ph_target : float, optional
+        The pH to hold instead of the initial setpoint.
+
+    Returns
+    -------
+    PlantStart
+
+    Raises
+    ------
+    UserError
+        The pH or the level cannot be held with these feeds and this valve.
+
+    Examples
+    --------
+    >>> from ph_plant_sim import build_plant, load_plant_model, plant_start
+    >>> from phfdi.scenario import load_scenario
+    >>> spec = load_scenario("paper")
+    >>> start = plant_start(spec, build_plant(load_plant_model(spec.plant)))
+    >>> [round(q, 2) for q in start.flows_ml_s], round(start.outlet_opening, 3)
+    ([9.82, 2.0, 15.6], 0.427)
+    """
     vspec = spec.valves.ph
     names = [f.name for f in plant.feeds]
     if vspec.feed not in names:
@@ -167,7 +242,37 @@ def plant_start(spec: ScenarioSpec, plant: CstrPlant, ph_target: float | None = 
 
 def build_process(spec: ScenarioSpec, plant: CstrPlant, model: PlantModelSpec, flows_ml_s: list[float],
                   outlet_opening: float) -> PlantProcess:
-    """The plant with its sensors, schedules and feed lines, at rest at these flows and outlet opening."""
+    """The plant with its sensors, schedules and feed lines, at rest at these flows and outlet opening.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+        The scenario (sensors and their faults, feed schedules, sample time, seed).
+    plant : CstrPlant
+        From :func:`build_plant`; put at the steady state of ``flows_ml_s``.
+    model : PlantModelSpec
+        The plant model (its feed lines).
+    flows_ml_s : list of float
+        Every feed's flow (mL/s) at rest, e.g. ``plant_start(...).flows_ml_s``.
+    outlet_opening : float
+        Fraction of full outlet flow at rest.
+
+    Returns
+    -------
+    PlantProcess
+
+    Examples
+    --------
+    >>> from ph_plant_sim import build_plant, build_process, load_plant_model, plant_start
+    >>> from phfdi.scenario import load_scenario
+    >>> spec = load_scenario("paper")
+    >>> model = load_plant_model(spec.plant)
+    >>> plant = build_plant(model)
+    >>> start = plant_start(spec, plant)
+    >>> process = build_process(spec, plant, model, start.flows_ml_s, start.outlet_opening)
+    >>> round(process.measure(0.0).ph_true, 2), round(plant.level_cm, 2)
+    (12.0, 14.0)
+    """
     plant.set_steady_state(flows_ml_s, outlet_opening)
     dt = spec.sample_time_s
     # independent noise streams per sensor, derived from the scenario seed

@@ -250,49 +250,58 @@ class ChargeBalance:
         """pH for many compositions at once: conc has shape (N, n_components).
 
         The same safeguarded Newton as :meth:`ph`, run element-wise on arrays
-        until every correction is below ``tol``.
+        until every correction is below ``tol``. Each iteration works on the
+        elements still iterating only (a trajectory far from its guess needs
+        many more iterations near equivalence than elsewhere), so every
+        element follows exactly the arithmetic it would alone.
         """
         import numpy as np
 
         conc = np.atleast_2d(np.asarray(conc, dtype=float))
         n = conc.shape[0]
-        strong = np.zeros(n)
+        strong_all = np.zeros(n)
         for i, z in self._strong:
-            strong += z * conc[:, i]
+            strong_all += z * conc[:, i]
+        out = np.clip(np.broadcast_to(np.asarray(guess, dtype=float), (n,)).copy(), PH_MIN, PH_MAX)
+        idx = np.arange(n)  # the elements still iterating, and their state
+        x = out.copy()
         lo = np.full(n, PH_MIN)
         hi = np.full(n, PH_MAX)
-        x = np.clip(np.broadcast_to(np.asarray(guess, dtype=float), (n,)).copy(), PH_MIN, PH_MAX)
-        active = np.ones(n, dtype=bool)
+        strong = strong_all
+        weak = [(conc[:, i], z0, d_coef, n_coef) for i, z0, d_coef, n_coef in self._weak]
         for _ in range(200):
             h = 10.0 ** (-x)
             kw_h = self.kw / h
             f = h - kw_h + strong
             dfdh = 1.0 + kw_h / h
-            for i, z0, d_coef, n_coef in self._weak:
-                c = conc[:, i]
-                d = np.zeros(n)
-                dd = np.zeros(n)
+            m = len(x)
+            for c, z0, d_coef, n_coef in weak:
+                d = np.zeros(m)
+                dd = np.zeros(m)
                 for a in d_coef:
                     dd = dd * h + d
                     d = d * h + a
-                num = np.zeros(n)
-                dnum = np.zeros(n)
+                num = np.zeros(m)
+                dnum = np.zeros(m)
                 for a in n_coef:
                     dnum = dnum * h + num
                     num = num * h + a
                 f += c * (z0 - num / d)
                 dfdh -= c * (dnum * d - num * dd) / (d * d)
             df = dfdh * (-LN10 * h)
-            lo = np.where(active & (f > 0.0), x, lo)
-            hi = np.where(active & (f < 0.0), x, hi)
+            lo = np.where(f > 0.0, x, lo)
+            hi = np.where(f < 0.0, x, hi)
             step = np.where(df < 0.0, f / np.where(df < 0.0, df, -1.0), np.nan)
             x_newton = x - step
             ok = np.isfinite(x_newton) & (x_newton > lo) & (x_newton < hi)
             x_new = np.where(ok, x_newton, 0.5 * (lo + hi))
             done = (np.abs(step) < tol) | (hi - lo < tol) | (f == 0.0)
-            x_new = np.where(done & np.isfinite(x_newton), x_newton, x_new)
-            x = np.where(active, x_new, x)
-            active &= ~done
-            if not active.any():
+            x = np.where(done & np.isfinite(x_newton), x_newton, x_new)
+            out[idx] = x
+            if done.all():
                 break
-        return np.clip(x, PH_MIN, PH_MAX)
+            if done.any():  # carry on with the elements still iterating
+                keep = ~done
+                idx, x, lo, hi, strong = idx[keep], x[keep], lo[keep], hi[keep], strong[keep]
+                weak = [(c[keep], z0, d_coef, n_coef) for c, z0, d_coef, n_coef in weak]
+        return np.clip(out, PH_MIN, PH_MAX)

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from phfdi_base.blocks import register_block
 
 from .sensors import TransportDelay, _check, lag_step
@@ -48,6 +50,11 @@ class PumpCurve:
     def step(self, x: float, t_s: float) -> float:
         g = 1.0 + self.severity * (self.gain - 1.0)
         return g * max(0.0, x - self.severity * self.threshold_ml_s)
+
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        """:meth:`step` for each sample of ``x`` (the same arithmetic, vectorised)."""
+        g = 1.0 + self.severity * (self.gain - 1.0)
+        return g * np.maximum(0.0, np.asarray(x, dtype=float) - self.severity * self.threshold_ml_s)
 
 
 @register_block("pump_lag")

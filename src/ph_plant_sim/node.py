@@ -21,7 +21,7 @@ from phfdi_interfaces.msg import Measurement, PlantState, ValveState
 from rosgraph_msgs.msg import Clock
 
 from phfdi_base.ros.graph_node import GraphNode, ParamSpec, main
-from phfdi_base.spec import load_plugins
+from phfdi_base.spec_tools import load_plugins
 from phfdi_base.stamps import split_ns
 from phfdi_base.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_STATE
 
@@ -44,7 +44,7 @@ class PlantNode(GraphNode):
         super().__init__(PLANT)
         spec, start = self.spec, self.part.start
         load_plugins(spec.plugins)
-        model = load_plant_model(spec.plant)
+        model = load_plant_model(self.part.plant_model or spec.plant)  # the part's: read and validated once
         # the plant's own part, at the steady state the launcher computed; valves and controllers live in their nodes
         self.process = build_process(spec, build_plant(model), model, list(start.flows_ml_s), start.outlet_opening)
         assert spec.valves.ph.feed is not None  # the scenario schema requires it

@@ -107,7 +107,29 @@ class PlantState:
 
 
 class CstrPlant:
-    """The neutralization tank. Advance it one sample at a time with :meth:`step`."""
+    """The neutralization tank (a continuously stirred tank reactor). Advance it one sample at a time with
+    :meth:`step`.
+
+    Parameters
+    ----------
+    chemistry : Chemistry
+        The components and their acid-base equilibria.
+    feeds : sequence of Feed
+        The inflows (name, recipe, nominal flow in mL/s).
+    tank : Tank
+        The vessel (area, volume, overflow or gravity outlet).
+
+    Examples
+    --------
+    >>> from ph_plant_sim import build_plant, load_plant_model
+    >>> plant = build_plant(load_plant_model("paper"))
+    >>> plant.set_steady_state([9.82, 2.0, 15.6], 0.427)
+    >>> round(plant.ph, 1)
+    12.0
+    >>> plant.step([12.0, 2.0, 15.6], 0.427, 1.0)  # more acid for one second
+    >>> plant.ph < 12.0
+    True
+    """
 
     def __init__(self, chemistry: Chemistry, feeds: Sequence[Feed], tank: Tank) -> None:
         self.chemistry = chemistry

@@ -32,7 +32,18 @@ class PlantProcess:
     """Tank plus sensors plus the schedule of the feeds no valve manipulates.
 
     ``feed_schedules`` maps a feed name to its flow profile (mL/s); feeds
-    driven by a valve get their flow from :meth:`advance`.
+    driven by a valve get their flow from :meth:`advance`. Build one from a scenario with
+    :func:`ph_plant_sim.build.build_process`.
+
+    Examples
+    --------
+    >>> from ph_plant_sim import PlantProcess, build_plant, load_plant_model
+    >>> plant = build_plant(load_plant_model("paper"))
+    >>> plant.set_steady_state([9.82, 2.0, 15.6], 0.427)
+    >>> process = PlantProcess(plant, dt_s=1.0)
+    >>> m = process.measure(0.0)
+    >>> round(m.ph_measured, 1), round(m.level_measured_cm, 1)
+    (12.0, 14.0)
     """
 
     plant: CstrPlant
@@ -115,6 +126,28 @@ def advance_plant(process: PlantProcess, valve_feed: str, t_s: float, valve_flow
     as they were during the sample: the feeds' line blocks (dead time, pump
     curve) lie between the commanded flow and the vessel, and a run records
     the commanded flow, as a pump's historian does. The in-process loop and the plant node call this.
+
+    Parameters
+    ----------
+    process : PlantProcess
+        The plant with its sensors and feed schedules.
+    valve_feed : str
+        The feed the pH valve drives.
+    t_s : float
+        Time of the sample (s).
+    valve_flow_ml_s : float
+        The valve's flow during the sample (mL/s).
+    outlet_opening : float
+        Fraction of full outlet flow during the sample.
+
+    Examples
+    --------
+    >>> from ph_plant_sim import PlantProcess, advance_plant, build_plant, load_plant_model
+    >>> plant = build_plant(load_plant_model("paper"))
+    >>> plant.set_steady_state([9.82, 2.0, 15.6], 0.427)
+    >>> flows, outlet_ml_s = advance_plant(PlantProcess(plant), "acid", 0.0, 11.8, 0.427)
+    >>> flows, round(outlet_ml_s, 1)
+    ([11.8, 2.0, 15.6], 27.4)
     """
     flows = process.feed_flows(t_s, {valve_feed: valve_flow_ml_s})
     delivered = process.deliver(flows, t_s)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phfdi_base.blocks import register_block
+from phfdi_base.faults import Fault, FaultParam, Range
 
 
 def _check(name: str, value: float, positive: bool = False) -> None:
@@ -30,7 +31,12 @@ def lag_step(y: float | None, x: float, tau_s: float, dt_s: float) -> float:
     return y + (1.0 - math.exp(-dt_s / tau_s)) * (x - y)
 
 
-@register_block("sensor_delay")
+@register_block("sensor_delay", fault=Fault(
+    "probe_delay", site="ph_sensor", description="pH probe transport delay of 10 s (paper Fig. 16-17)",
+    # the diagnosis fits from no delay up to 600 s (and a fifth of the record)
+    params=(FaultParam("delay_s", "s", (0.0, math.inf), paper=10.0, search=Range(1.0, 120.0, log=True),
+                       diagnosis=Range(0.0, 600.0)),),
+    severities=(5.0, 10.0, 20.0)))
 @dataclass
 class TransportDelay:
     """Pure transport delay: y(t) = x(t - delay_s).
@@ -67,8 +73,31 @@ class TransportDelay:
             y = (1.0 - frac) * y + frac * self._buf[newest - k - 1]
         return y
 
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        """:meth:`step` for each sample of ``x`` in turn (the same arithmetic, vectorised)."""
+        x = np.asarray(x, dtype=float)
+        if len(x) == 0:
+            return x.copy()
+        if not self._buf:
+            self.reset(float(x[0]))
+        hist = np.fromiter(self._buf, dtype=float, count=len(self._buf))
+        both = np.concatenate([hist, x])
+        lag = self.severity * self.delay_s / self.dt_s
+        k = int(lag)
+        frac = lag - k
+        newest = len(hist) + np.arange(len(x))  # where sample j sits once appended
+        y = both[newest - k]
+        if frac > 1e-12:
+            y = (1.0 - frac) * y + frac * both[newest - k - 1]
+        keep = self._n + 1  # the buffer's length, as reset makes it
+        self._buf = deque(both[-keep:].tolist(), maxlen=keep)
+        return y
 
-@register_block("sensor_lag")
+
+@register_block("sensor_lag", fault=Fault(
+    "sensor_lag", site="ph_sensor", description="first-order pH probe lag (a diagnosis candidate)",
+    # the diagnosis fits up to 600 s (and a fifth of the record)
+    params=(FaultParam("tau_s", "s", (0.0, math.inf), search=Range(0.0, 600.0)),), isolate=False, preset=False))
 @dataclass
 class FirstOrderLag:
     """First-order lag tau dy/dt = x - y, exact for an input held over each sample:
@@ -125,7 +154,9 @@ class GaussianNoise:
         return x + self.severity * self.std * float(e)
 
 
-@register_block("sensor_bias")
+@register_block("sensor_bias", fault=Fault(
+    "sensor_bias", site="ph_sensor", description="pH probe offset (a diagnosis candidate)",
+    params=(FaultParam("bias", "pH", (-14.0, 14.0), search=Range(-3.0, 3.0)),), isolate=False, preset=False))
 @dataclass
 class Bias:
     """Constant offset: y = x + bias."""
@@ -139,8 +170,14 @@ class Bias:
     def step(self, x: float, t_s: float) -> float:
         return x + self.severity * self.bias
 
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        return np.asarray(x, dtype=float) + self.severity * self.bias
 
-@register_block("sensor_drift")
+
+@register_block("sensor_drift", fault=Fault(
+    "sensor_drift", site="ph_sensor", description="pH probe drift (a diagnosis candidate)",
+    # the diagnosis fits up to 3 pH over the record, either sign: a range the record's length sets
+    params=(FaultParam("rate_per_s", "pH/s", (-math.inf, math.inf)),), isolate=False, preset=False))
 @dataclass
 class Drift:
     """Linear drift from the moment the block comes to rest: y = x + rate (t - t0)."""
@@ -157,8 +194,17 @@ class Drift:
             self._t0 = t_s
         return x + self.severity * self.rate_per_s * (t_s - self._t0)
 
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        t_s = np.asarray(t_s, dtype=float)
+        if self._t0 is None and len(t_s):
+            self._t0 = float(t_s[0])
+        return np.asarray(x, dtype=float) + self.severity * self.rate_per_s * (t_s - self._t0)
 
-@register_block("sensor_gain")
+
+@register_block("sensor_gain", fault=Fault(
+    "sensor_gain", site="ph_sensor", description="pH probe slope error about pH 7 (a diagnosis candidate)",
+    params=(FaultParam("gain", "1", (0.0, math.inf), search=Range(0.4, 2.5, log=True)),
+            FaultParam("reference", "pH", (0.0, 14.0), paper=7.0)), isolate=False, preset=False))
 @dataclass
 class Gain:
     """Span error about a reference point: y = ref + gain (x - ref) (pH probe slope error about pH 7)."""
@@ -173,6 +219,10 @@ class Gain:
     def step(self, x: float, t_s: float) -> float:
         g = 1.0 + self.severity * (self.gain - 1.0)
         return self.reference + g * (x - self.reference)
+
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        g = 1.0 + self.severity * (self.gain - 1.0)
+        return self.reference + g * (np.asarray(x, dtype=float) - self.reference)
 
 
 @register_block("sensor_asymmetric_lag")
@@ -247,3 +297,7 @@ class TwoPointCalibration:
     def step(self, x: float, t_s: float) -> float:
         s = 1.0 + self.severity * (self.slope - 1.0)
         return 7.0 + s * (x - 7.0) + self.severity * self.offset
+
+    def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+        s = 1.0 + self.severity * (self.slope - 1.0)
+        return 7.0 + s * (np.asarray(x, dtype=float) - 7.0) + self.severity * self.offset

@@ -3,8 +3,8 @@
 A *plant model* (``ph_plant_sim/presets/<name>.yaml``) is the vessel, its
 feeds and their chemistry. A *scenario* (``phfdi/scenarios/<name>.yaml``) is
 a whole experiment on the loop. A scenario may ``extends:`` another and
-override any key. Faults can also come from the fault library
-(``phfdi/scenarios/faults.yaml``) by name. The schema itself is
+override any key. Faults can also come from the fault library by name: the
+presets of the fault catalogue (:func:`phfdi.faults.fault_library`). The schema itself is
 :mod:`phfdi_base.spec`.
 
 Every error names the key and the problem (:class:`phfdi_base.errors.UserError`).
@@ -16,8 +16,10 @@ from importlib import resources
 from pathlib import Path
 
 from phfdi_base.errors import UserError
-from phfdi_base.spec import ScenarioSpec, deep_merge, resolve_scenario
+from phfdi_base.spec import ScenarioSpec, deep_merge, load_plugins, resolve_scenario
 from phfdi_base.yamlfile import read_mapping, resolve_preset
+
+from .faults import fault_library, preset_name
 
 
 def _package_dir(package: str, sub: str = "") -> Path:
@@ -25,11 +27,6 @@ def _package_dir(package: str, sub: str = "") -> Path:
 
 
 SCENARIO_DIR = _package_dir("phfdi", "scenarios")
-
-
-def fault_library() -> dict[str, dict]:
-    """Named fault presets (the paper's severities), from faults.yaml."""
-    return read_mapping(SCENARIO_DIR / "faults.yaml")["faults"]
 
 
 def _absolutise(data: dict, base: Path) -> None:
@@ -66,8 +63,12 @@ def load_scenario(name_or_path: str = "paper", fault: str | None = None,
     """Load, apply a named fault and ``key=value`` overrides, validate.
 
     ``fault`` replaces the scenario's faults with the library fault of that
-    name ("none" or "healthy" removes them).
+    name, or of that block ("none" or "healthy" removes them).
     """
-    library = fault_library() if fault not in (None, "none", "healthy") else {}
-    return resolve_scenario(raw_scenario(name_or_path), fault, library, overrides, onset_s,
-                            source=f"scenario {name_or_path}")
+    raw = raw_scenario(name_or_path)
+    library = {}
+    if fault not in (None, "none", "healthy"):
+        load_plugins(raw.get("plugins") or [])  # a plugin's blocks may declare the named fault
+        fault = preset_name(fault)
+        library = fault_library()
+    return resolve_scenario(raw, fault, library, overrides, onset_s, source=f"scenario {name_or_path}")

@@ -37,9 +37,30 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable, Protocol, runtime_checkable
 
+from .faults import Fault, register_fault
+
 
 @runtime_checkable
 class Block(Protocol):
+    """A single-input single-output element stepped once per sample (see the module docstring).
+
+    Methods
+    -------
+    reset(x0)
+        Put the block at rest with input ``x0`` (a pass-through rest: output ``x0``).
+    step(x, t_s)
+        Consume the input ``x`` of the sample at time ``t_s`` (s) and return the output.
+
+    Examples
+    --------
+    >>> from phfdi_base import Block
+    >>> class Doubler:
+    ...     def reset(self, x0): pass
+    ...     def step(self, x, t_s): return 2.0 * x
+    >>> isinstance(Doubler(), Block)
+    True
+    """
+
     def reset(self, x0: float) -> None: ...
 
     def step(self, x: float, t_s: float) -> float: ...
@@ -48,19 +69,73 @@ class Block(Protocol):
 BLOCKS: dict[str, type] = {}
 
 
-def register_block(name: str) -> Callable[[type], type]:
-    """Class decorator: make a block available to scenario files as ``type: name``."""
+def register_block(name: str, fault: Fault | None = None) -> Callable[[type], type]:
+    """Class decorator: make a block available to scenario files as ``type: name``.
+
+    Parameters
+    ----------
+    name : str
+        The block's name in scenario files and in :func:`make_block`.
+    fault : Fault, optional
+        The fault the block models, entered in the catalogue (:mod:`phfdi_base.faults`): presets,
+        isolation, diagnosis, evaluation and ``--help`` then know it.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass
+    >>> from phfdi_base import make_block, register_block
+    >>> @register_block("gain_example")
+    ... @dataclass
+    ... class Gain:
+    ...     gain: float = 1.02
+    ...     def reset(self, x0): pass
+    ...     def step(self, x, t_s): return self.gain * x
+    >>> make_block("gain_example", {"gain": 1.5}).step(2.0, 0.0)
+    3.0
+    >>> from phfdi_base.blocks import BLOCKS
+    >>> del BLOCKS["gain_example"]  # leave the registry as it was
+    """
 
     def deco(cls: type) -> type:
         BLOCKS[name] = cls
         setattr(cls, "block_name", name)  # noqa: B010  (a new attribute of any class)
+        if fault is not None:
+            register_fault(fault, name)
         return cls
 
     return deco
 
 
 def make_block(name: str, params: dict | None = None, **context: float) -> Block:
-    """Instantiate a registered block; ``context`` (e.g. ``dt_s``) is passed if accepted."""
+    """Instantiate a registered block.
+
+    Parameters
+    ----------
+    name : str
+        A name given to :func:`register_block` (the cores register theirs when imported).
+    params : dict, optional
+        The block's constructor keywords (a scenario's ``params``).
+    **context : float
+        Passed when the block takes it (e.g. ``dt_s``, the sample time in s).
+
+    Returns
+    -------
+    Block
+
+    Raises
+    ------
+    ValueError
+        An unknown block or parameter (the message lists the known ones), or a bad value.
+
+    Examples
+    --------
+    >>> import valve_actuator.blocks  # registers the valve blocks
+    >>> from phfdi_base import make_block
+    >>> backlash = make_block("backlash", {"width_pct": 2.0})
+    >>> backlash.reset(50.0)
+    >>> [backlash.step(x, t) for t, x in enumerate([50.0, 52.0, 51.0, 49.0])]
+    [50.0, 51.0, 51.0, 50.0]
+    """
     if name not in BLOCKS:
         raise ValueError(f"unknown block type {name!r}; known: {', '.join(sorted(BLOCKS))}")
     cls = BLOCKS[name]
@@ -78,7 +153,17 @@ def make_block(name: str, params: dict | None = None, **context: float) -> Block
 
 @dataclass
 class Chain:
-    """Blocks in series; itself a block."""
+    """Blocks in series; itself a block.
+
+    Examples
+    --------
+    >>> import valve_actuator.blocks  # registers the valve blocks
+    >>> from phfdi_base import Chain, make_block
+    >>> chain = Chain([make_block("backlash", {"width_pct": 2.0}), make_block("saturation", {"high_pct": 80.0})])
+    >>> chain.reset(50.0)
+    >>> chain.step(95.0, 0.0)
+    80.0
+    """
 
     blocks: list = field(default_factory=list)
 

@@ -13,7 +13,14 @@ from dataclasses import dataclass, field
 
 @dataclass(frozen=True)
 class Change:
-    """At ``at_s`` the value moves to ``value``: a step, or a ramp over ``ramp_s`` seconds."""
+    """At ``at_s`` (s) the value moves to ``value``: a step, or a ramp over ``ramp_s`` seconds.
+
+    Examples
+    --------
+    >>> from phfdi_base import Change, Profile
+    >>> Profile(12.0, [Change(at_s=100.0, value=8.0, ramp_s=40.0)]).value(120.0)
+    10.0
+    """
 
     at_s: float
     value: float
@@ -24,8 +31,22 @@ class Change:
 class Profile:
     """Piecewise signal: ``initial`` until the first change, then each change in turn.
 
-    Changes must be in time order and must not overlap (a ramp ends before
-    the next change starts).
+    Parameters
+    ----------
+    initial : float
+        The value before the first change (in the signal's unit).
+    changes : list of Change (or of dicts with its fields)
+        In time order, not overlapping (a ramp ends before the next change starts); a ``ValueError``
+        names the change otherwise.
+
+    Examples
+    --------
+    >>> from phfdi_base import Profile
+    >>> setpoint = Profile(12.0, [{"at_s": 5000.0, "value": 8.0}])
+    >>> setpoint.value(4999.0), setpoint.value(5000.0)
+    (12.0, 8.0)
+    >>> setpoint.values()
+    [12.0, 8.0]
     """
 
     initial: float

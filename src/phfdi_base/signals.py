@@ -14,6 +14,15 @@ __all__ = ["SIGNALS", "Signal", "label", "unit_of"]
 
 @dataclass(frozen=True)
 class Signal:
+    """One signal of a run: its name (with the unit as a suffix), unit and description.
+
+    Examples
+    --------
+    >>> from phfdi_base.signals import SIGNALS
+    >>> [s.unit for s in SIGNALS if s.name == "valve_position_pct"]
+    ['%']
+    """
+
     name: str
     unit: str
     description: str
@@ -42,7 +51,14 @@ _CATALOGUE = {s.name: s for s in SIGNALS}
 
 
 def unit_of(name: str) -> str:
-    """Unit of a signal from the catalogue, else from its name's suffix."""
+    """Unit of a signal from the catalogue, else from its name's suffix (``"1"`` when neither says).
+
+    Examples
+    --------
+    >>> from phfdi_base import unit_of
+    >>> unit_of("ph_measured"), unit_of("base_flow_ml_s"), unit_of("gain")
+    ('pH', 'mL/s', '1')
+    """
     if name in _CATALOGUE:
         return _CATALOGUE[name].unit
     for suffix, unit in (("_ml_s", "mL/s"), ("_pct", "%"), ("_cm", "cm"), ("_s", "s"), ("_ml", "mL")):
@@ -54,7 +70,14 @@ def unit_of(name: str) -> str:
 
 
 def label(name: str) -> str:
-    """Axis label with unit, e.g. 'valve position (%)'."""
+    """Axis label with unit, for figures.
+
+    Examples
+    --------
+    >>> from phfdi_base import label
+    >>> label("valve_position_pct")
+    'valve position (%)'
+    """
     base = name
     for suffix in ("_ml_s", "_pct", "_cm", "_s"):
         if base.endswith(suffix):

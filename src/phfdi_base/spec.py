@@ -14,18 +14,13 @@ Every error names the key and the problem (:class:`phfdi_base.errors.UserError`)
 from __future__ import annotations
 
 import copy
-import importlib
-import importlib.util
-import sys
-from pathlib import Path
-from typing import Any, Collection, Literal, Sequence
+from typing import Any, Literal, Sequence
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from .blocks import Block, Injected, make_block
 from .errors import UserError
-from .profiles import Change, Profile
+from .spec_tools import checked_block, injected_faults, load_plugins, profile
 
 __all__ = [
     "AirExchangeSpec", "BlockSpec", "ChangeSpec", "ChemistrySpec", "ComponentSpec", "ControllersSpec", "FaultSite",
@@ -210,6 +205,24 @@ class SensorsSpec(Strict):
 
 
 class ScenarioSpec(Strict):
+    """A validated scenario: plant, valves, sensors, controller tuning, setpoints, faults, duration, seed.
+
+    Build one with :func:`validate_scenario` (a one-line :class:`~phfdi_base.errors.UserError` for bad
+    input) or, from a preset or file, with the application's ``phfdi.scenario.load_scenario``. Each core
+    builds its part from it (``ph_plant_sim.build``, ``valve_actuator.build``, ``pi_controllers.build``).
+
+    Examples
+    --------
+    >>> from phfdi_base import validate_scenario
+    >>> spec = validate_scenario({
+    ...     "name": "demo", "plant": "paper", "duration_s": 600.0,
+    ...     "setpoints": {"ph": {"initial": 8.0}},
+    ...     "controllers": {"ph": {"kp": 6.0, "ti_s": 10.0, "action": "direct"}},
+    ...     "valves": {"ph": {"feed": "acid", "max_flow_ml_s": 40.0}}})
+    >>> spec.sample_time_s, spec.valves.ph.characteristic
+    (1.0, 'linear')
+    """
+
     name: str
     description: str = ""
     plant: str | PlantModelSpec
@@ -258,24 +271,6 @@ def deep_merge(base: dict, over: dict) -> dict:
     return out
 
 
-def load_plugins(plugins: list[str]) -> None:
-    """Import user modules (dotted names or .py files) so their blocks register."""
-    for ref in plugins:
-        try:
-            if ref.endswith(".py"):
-                name = f"phfdi_plugin_{Path(ref).stem}"
-                if name in sys.modules:
-                    continue
-                spec = importlib.util.spec_from_file_location(name, ref)
-                if spec is None or spec.loader is None or not Path(ref).exists():
-                    raise FileNotFoundError(ref)
-                module = importlib.util.module_from_spec(spec)
-                sys.modules[name] = module
-                spec.loader.exec_module(module)
-            else:
-                importlib.import_module(ref)
-        except Exception as exc:  # a user's plugin: report it as bad input, whatever it raised
-            raise UserError(f"plugins: cannot load {ref!r}: {type(exc).__name__}: {exc}") from None
 
 
 def format_validation(exc: ValidationError, source: str) -> str:
@@ -295,7 +290,28 @@ def format_validation(exc: ValidationError, source: str) -> str:
 
 
 def validate_scenario(data: dict, source: str = "scenario") -> ScenarioSpec:
-    """A validated scenario; a :class:`UserError` naming ``source``, the key and the problem otherwise."""
+    """A validated scenario; a :class:`UserError` naming ``source``, the key and the problem otherwise.
+
+    Parameters
+    ----------
+    data : dict
+        The scenario mapping (as read from YAML, ``extends:`` already resolved).
+    source : str
+        What the data came from, for the error message (a file name).
+
+    Returns
+    -------
+    ScenarioSpec
+
+    Examples
+    --------
+    >>> from phfdi_base import UserError, validate_scenario
+    >>> try:
+    ...     validate_scenario({"name": "demo", "plant": "paper", "duration_s": 0.0}, "demo.yaml")
+    ... except UserError as exc:
+    ...     print(str(exc).split(" (and")[0])
+    demo.yaml: duration_s: Input should be greater than 0
+    """
     try:
         return ScenarioSpec.model_validate(data)
     except ValidationError as exc:
@@ -390,30 +406,6 @@ def resolve_scenario(raw: dict, fault: str | None, library: dict[str, dict], ove
     return validate_scenario(data, source=source)
 
 
-def profile(spec: ProfileSpec) -> Profile:
-    """The piecewise signal a profile spec describes."""
-    return Profile(spec.initial, [Change(c.at_s, c.value, c.ramp_s) for c in spec.changes])
 
 
-def checked_block(kind: str, params: dict, where: str, dt_s: float, max_flow_ml_s: float | None = None) -> Block:
-    """A registered block made from a spec; a :class:`UserError` naming ``where`` if it refuses its parameters."""
-    try:
-        return make_block(kind, params, dt_s=dt_s, max_flow_ml_s=max_flow_ml_s or 1.0)
-    except (TypeError, ValueError) as exc:
-        raise UserError(f"{where}: {kind}: {exc}") from None
 
-
-def injected_faults(spec: ScenarioSpec, site: str, max_flow_ml_s: float | None = None,
-                    flow_blocks: Collection[str] = ()) -> list[Injected]:
-    """The scenario's faults acting at ``site``, each switched on at its onset.
-
-    A fault of a type in ``flow_blocks`` given at ``valve`` acts on the valve's
-    flow (``valve_flow``): the valve core names those types.
-    """
-    out = []
-    for i, f in enumerate(spec.faults):
-        f_site = "valve_flow" if f.type in flow_blocks and f.where == "valve" else f.where
-        if f_site == site:
-            block = checked_block(f.type, f.params, f"faults.{i}", spec.sample_time_s, max_flow_ml_s)
-            out.append(Injected(block, f.onset_s, f.ramp_s))
-    return out

@@ -14,6 +14,22 @@ def read_mapping(path: str | Path, what: str = "file", expected: str = "a mappin
 
     ``what`` names the file in the not-found message ("no such column map: ..."); ``expected`` says what the
     top level must be when it is not a mapping.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi_base import UserError, read_mapping
+    >>> path = Path(tempfile.mkdtemp()) / "loop.yaml"
+    >>> _ = path.write_text("duration_s: 600")
+    >>> read_mapping(path)
+    {'duration_s': 600}
+    >>> _ = path.write_text("- a list")
+    >>> try:
+    ...     read_mapping(path)
+    ... except UserError as exc:
+    ...     print(str(exc).endswith("expected a mapping at the top level"))
+    True
     """
     try:
         with open(path, encoding="utf-8") as fh:

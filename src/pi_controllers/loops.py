@@ -15,6 +15,15 @@ from .pi import PIController
 
 @dataclass
 class ControllerOutputs:
+    """One sample's setpoints and controller outputs (%); NaN level setpoint without a level loop.
+
+    Examples
+    --------
+    >>> from pi_controllers import ControllerOutputs
+    >>> ControllerOutputs(0.0, 12.0, 24.6, 14.0, 42.7).ph_output_pct
+    24.6
+    """
+
     t_s: float
     ph_setpoint: float
     ph_output_pct: float
@@ -24,6 +33,24 @@ class ControllerOutputs:
 
 @dataclass
 class ControllerBank:
+    """The loop's pH controller and (optionally) level controller, each with its setpoint profile.
+
+    Step it once per sample with :meth:`compute`; :func:`pi_controllers.build.build_controllers` makes
+    one from a scenario.
+
+    Examples
+    --------
+    >>> from phfdi_base import Profile
+    >>> from pi_controllers import ControllerBank, PIController
+    >>> bank = ControllerBank(PIController(6.0, 10.0, action="direct"), Profile(12.0, [{"at_s": 5000.0, "value": 8.0}]))
+    >>> bank.reset(24.6, 12.0, 100.0, float("nan"))
+    >>> bank.compute(0.0, 12.0, float("nan")).ph_output_pct
+    24.6
+    >>> out = bank.compute(5000.0, 12.0, float("nan"))  # setpoint step to pH 8: more acid
+    >>> out.ph_setpoint, out.ph_output_pct, out.level_output_pct
+    (8.0, 48.6, 100.0)
+    """
+
     ph: PIController
     ph_setpoint: Profile
     level: PIController | None = None

@@ -28,17 +28,32 @@ AntiWindup = Literal["back_calculation", "conditional", "none"]
 class PIController:
     """PI controller in engineering units: Kp in % of output per unit of PV.
 
-    Attributes:
-        kp: proportional gain (% / PV unit), positive.
-        ti_s: integral time (s), positive.
-        dt_s: sample time (s).
-        u_min, u_max: output limits (%).
-        action: "reverse" (heating-type: u up when PV below SP) or "direct".
-        antiwindup: "back_calculation" (default), "conditional" or "none".
-        tt_s: tracking time for back-calculation; default Ti (Astrom & Hagglund
-            suggest Ti for PI: fast enough to stop windup, slow enough not to
-            reset on noise).
-        setpoint_weight: b in the proportional term; b < 1 softens setpoint steps.
+    Parameters
+    ----------
+    kp : float
+        Proportional gain (% / PV unit), positive.
+    ti_s : float
+        Integral time (s), positive.
+    dt_s : float
+        Sample time (s).
+    u_min, u_max : float
+        Output limits (%).
+    action : {"reverse", "direct"}
+        "reverse" (heating-type: u up when PV below SP) or "direct".
+    antiwindup : {"back_calculation", "conditional", "none"}
+    tt_s : float, optional
+        Tracking time for back-calculation; default Ti (Astrom & Hagglund suggest Ti for PI: fast enough
+        to stop windup, slow enough not to reset on noise).
+    setpoint_weight : float
+        b in the proportional term; b < 1 softens setpoint steps.
+
+    Examples
+    --------
+    >>> from pi_controllers import PIController
+    >>> pi = PIController(kp=2.0, ti_s=60.0, dt_s=1.0)
+    >>> pi.reset(50.0, 8.0, 8.0)  # bumpless: output 50 % at SP = PV = 8
+    >>> pi.step(8.0, 7.5), round(pi.step(8.0, 7.5), 4)
+    (51.0, 51.0167)
     """
 
     kp: float

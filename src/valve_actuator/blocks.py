@@ -15,6 +15,16 @@ import math
 from dataclasses import dataclass, field
 
 from phfdi_base.blocks import register_block
+from phfdi_base.faults import FAULTS, Fault, FaultParam, Range
+
+#: the valve's stroke, % of span: the physical bounds of a position or a band on it (a band wider than the
+#: stroke leaves no travel). The fits search sub-ranges (``search``): a dead-band or stick band log-spaced
+#: from 0.05 or 0.1 % to 20 % of span (the isolation's ranges; the diagnosis, which had 0.02 and 0.05 %
+#: before issue 14, uses them too: its start grids begin at 0.15 and 0.3 %; benchmarks/diagnose_hidden.py
+#: --seed 2026 unchanged at 32/32, 6/6, 4/4). Where the diagnosis must also reach "no fault" (0 % friction,
+#: no delay, a stop at 100 %) or fits another form (a dead-zone about a free centre), its range is declared
+#: as ``diagnosis`` in the same entry.
+SPAN = (0.0, 100.0)
 
 
 def _positive(name: str, value: float, allow_zero: bool = True) -> None:
@@ -22,7 +32,11 @@ def _positive(name: str, value: float, allow_zero: bool = True) -> None:
         raise ValueError(f"{name} must be {'non-negative' if allow_zero else 'positive'} and finite, got {value}")
 
 
-@register_block("backlash")
+@register_block("backlash", fault=Fault(
+    "backlash", site="valve",
+    description="backlash (dead-band) of 0.7 % of span on the acid valve stem (paper Fig. 18-20)",
+    params=(FaultParam("width_pct", "% of span", SPAN, paper=0.7, search=Range(0.05, 20.0, log=True)),),
+    severities=(0.35, 0.7, 1.4)))
 @dataclass
 class Backlash:
     """Backlash (dead-band) of total width ``width_pct``.
@@ -58,79 +72,14 @@ class Backlash:
         return self._y
 
 
-@register_block("deadzone")
-@dataclass
-class DeadZone:
-    """Dead-zone of width ``width_pct`` around ``center_pct``.
-
-    Textbook (ISA): a range of input through which the output stays unchanged
-    whatever the direction of change (Simulink Dead Zone block, shifted):
-
-        y = c                     if |x - c| <= w/2
-        y = x - sign(x - c) w/2   otherwise
-
-    Static, so no input-output phase lag, unlike backlash. ``center_pct``
-    None means the command at which the block comes to rest (at the fault's
-    onset: the operating point), which is how the paper's Simulink dead zone
-    acts on its controller's deviation signal: small corrections around the
-    operating point do not move the valve, so the loop turns sluggish.
-    """
-
-    width_pct: float
-    center_pct: float | None = None
-    severity: float = 1.0
-    _c: float = field(default=0.0, repr=False)
-
-    def __post_init__(self) -> None:
-        _positive("width_pct", self.width_pct)
-        if self.center_pct is not None:
-            self._c = self.center_pct
-
-    def reset(self, x0: float) -> None:
-        if self.center_pct is None:
-            self._c = x0
-
-    def step(self, x: float, t_s: float) -> float:
-        half = 0.5 * self.width_pct * self.severity
-        e = x - self._c
-        if e > half:
-            return x - half
-        if e < -half:
-            return x + half
-        return self._c
-
-
-@register_block("saturation")
-@dataclass
-class Saturation:
-    """Saturation: the stem cannot travel below ``low_pct`` or above ``high_pct``.
-
-        y = min(max(x, low), high)
-
-    The paper's limits 0 and 0.5 are read as fractions of span: a stem that
-    cannot open past 50 % (an obstruction or a failing actuator supply).
-    With severity s the limits move linearly from [0, 100] to [low, high].
-    """
-
-    low_pct: float = 0.0
-    high_pct: float = 100.0
-    severity: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not (0.0 <= self.low_pct < self.high_pct <= 100.0):
-            raise ValueError(f"saturation limits need 0 <= low_pct < high_pct <= 100, got {self.low_pct}, {self.high_pct}")
-
-    def reset(self, x0: float) -> None:
-        pass
-
-    def step(self, x: float, t_s: float) -> float:
-        s = self.severity
-        lo = s * self.low_pct
-        hi = 100.0 + s * (self.high_pct - 100.0)
-        return min(max(x, lo), hi)
-
-
-@register_block("coulomb_viscous_friction")
+@register_block("coulomb_viscous_friction", fault=Fault(
+    "friction", site="valve",
+    description="Coulomb 1 % + viscous friction (mobility 0.1 1/s) on the stem (paper Fig. 21-22)",
+    params=(FaultParam("coulomb_pct", "% of span", SPAN, paper=1.0, search=Range(0.05, 10.0, log=True),
+                       diagnosis=Range(0.0, 20.0)),
+            # a stem time constant from 0.1 s to 1000 s
+            FaultParam("mobility_per_s", "1/s", (0.0, math.inf), paper=0.1, search=Range(1e-3, 10.0, log=True))),
+    severities=(0.5, 1.0, 2.0)))
 @dataclass
 class CoulombViscousFriction:
     """Coulomb plus viscous friction on the stem.
@@ -180,7 +129,97 @@ class CoulombViscousFriction:
         return self._y
 
 
-@register_block("stiction")
+@register_block("deadzone", fault=Fault(
+    "deadzone", site="valve",
+    description="dead-zone [-50, 50] % about zero - the paper's width 1 on its 0..1 valve signal (Fig. 23-24)",
+    # Read in the same units as the saturation limits (fractions of span): the valve stays shut until the
+    # command passes 50 %, then lags it by 50 %. About 0 % a zone of 200 % covers the whole stroke.
+    params=(FaultParam("width_pct", "% of span", (0.0, 200.0), paper=100.0, search=Range(0.5, 199.0, log=True),
+                       diagnosis=Range(0.0, 100.0)),
+            FaultParam("center_pct", "% of span", SPAN, paper=0.0)),
+    severities=(50.0, 100.0, 150.0)))
+@dataclass
+class DeadZone:
+    """Dead-zone of width ``width_pct`` around ``center_pct``.
+
+    Textbook (ISA): a range of input through which the output stays unchanged
+    whatever the direction of change (Simulink Dead Zone block, shifted):
+
+        y = c                     if |x - c| <= w/2
+        y = x - sign(x - c) w/2   otherwise
+
+    Static, so no input-output phase lag, unlike backlash. ``center_pct``
+    None means the command at which the block comes to rest (at the fault's
+    onset: the operating point), which is how the paper's Simulink dead zone
+    acts on its controller's deviation signal: small corrections around the
+    operating point do not move the valve, so the loop turns sluggish.
+    """
+
+    width_pct: float
+    center_pct: float | None = None
+    severity: float = 1.0
+    _c: float = field(default=0.0, repr=False)
+
+    def __post_init__(self) -> None:
+        _positive("width_pct", self.width_pct)
+        if self.center_pct is not None:
+            self._c = self.center_pct
+
+    def reset(self, x0: float) -> None:
+        if self.center_pct is None:
+            self._c = x0
+
+    def step(self, x: float, t_s: float) -> float:
+        half = 0.5 * self.width_pct * self.severity
+        e = x - self._c
+        if e > half:
+            return x - half
+        if e < -half:
+            return x + half
+        return self._c
+
+
+@register_block("saturation", fault=Fault(
+    "saturation", site="valve", description="stem cannot open past 50 % of span (paper Fig. 25-26)",
+    # the diagnosis's range includes 100 % (no stop): a stop above every command is no fault
+    params=(FaultParam("high_pct", "% of span", SPAN, paper=50.0, search=Range(1.0, 99.0),
+                       diagnosis=Range(1.0, 100.0)),
+            FaultParam("low_pct", "% of span", SPAN, paper=0.0)),
+    severities=(60.0, 50.0, 40.0)))
+@dataclass
+class Saturation:
+    """Saturation: the stem cannot travel below ``low_pct`` or above ``high_pct``.
+
+        y = min(max(x, low), high)
+
+    The paper's limits 0 and 0.5 are read as fractions of span: a stem that
+    cannot open past 50 % (an obstruction or a failing actuator supply).
+    With severity s the limits move linearly from [0, 100] to [low, high].
+    """
+
+    low_pct: float = 0.0
+    high_pct: float = 100.0
+    severity: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.low_pct < self.high_pct <= 100.0):
+            raise ValueError(f"saturation limits need 0 <= low_pct < high_pct <= 100, got {self.low_pct}, {self.high_pct}")
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        s = self.severity
+        lo = s * self.low_pct
+        hi = 100.0 + s * (self.high_pct - 100.0)
+        return min(max(x, lo), hi)
+
+
+@register_block("stiction", fault=Fault(
+    "stiction", site="valve", description="stiction, Kano model S = 1.5 %, J = 0.5 % of span",
+    params=(FaultParam("s_pct", "% of span", SPAN, paper=1.5, search=Range(0.1, 20.0, log=True)),
+            FaultParam("j_pct", "% of span", SPAN, paper=0.5, search=Range(0.0, 20.0))),
+    severities=(0.75, 1.5, 3.0), scale_with_main=("j_pct",)))
 @dataclass
 class Stiction:
     """Valve stiction, the two-parameter data-driven model of Kano et al. (2004).
@@ -283,7 +322,38 @@ class HeStiction:
         return self._y
 
 
-@register_block("blocking")
+@register_block("leakage", fault=Fault(
+    "leakage", site="valve_flow", description="acid valve seat leakage of 2 mL/s", isolate=False,
+    # at most half the valve's rated flow (the diagnosis fits up to 0.5 x the valve's maximum flow)
+    params=(FaultParam("flow_ml_s", "mL/s", (0.0, math.inf), paper=2.0),)))
+@dataclass
+class Leakage:
+    """Seat leakage: the valve passes ``flow_ml_s`` even when shut.
+
+    A flow block (acts on the valve's flow in mL/s, not on its position):
+
+        q = q_valve + leak * (1 - q_valve / q_max)
+
+    so a shut valve passes ``leak`` and a fully open one its rated maximum.
+    """
+
+    flow_ml_s: float
+    max_flow_ml_s: float = 1.0
+    severity: float = 1.0
+
+    def __post_init__(self) -> None:
+        _positive("flow_ml_s", self.flow_ml_s)
+
+    def reset(self, x0: float) -> None:
+        pass
+
+    def step(self, x: float, t_s: float) -> float:
+        leak = self.flow_ml_s * self.severity
+        return x + leak * max(0.0, 1.0 - x / self.max_flow_ml_s)
+
+
+@register_block("blocking", fault=Fault(
+    "blocking", site="valve", description="acid valve stem seizes where it is"))
 @dataclass
 class Blocking:
     """Blocked (seized) stem: the position freezes at ``position_pct``.
@@ -332,32 +402,11 @@ class Quantization:
         return c + q * round((x - c) / q) if q > 0.0 else x
 
 
-@register_block("leakage")
-@dataclass
-class Leakage:
-    """Seat leakage: the valve passes ``flow_ml_s`` even when shut.
+def flow_blocks() -> set[str]:
+    """Blocks that act on the valve's flow rather than its stem position: those of the faults catalogued at
+    ``valve_flow`` (:mod:`phfdi_base.faults`), e.g. ``leakage``.
 
-    A flow block (acts on the valve's flow in mL/s, not on its position):
-
-        q = q_valve + leak * (1 - q_valve / q_max)
-
-    so a shut valve passes ``leak`` and a fully open one its rated maximum.
+    >>> sorted(flow_blocks())
+    ['leakage']
     """
-
-    flow_ml_s: float
-    max_flow_ml_s: float = 1.0
-    severity: float = 1.0
-
-    def __post_init__(self) -> None:
-        _positive("flow_ml_s", self.flow_ml_s)
-
-    def reset(self, x0: float) -> None:
-        pass
-
-    def step(self, x: float, t_s: float) -> float:
-        leak = self.flow_ml_s * self.severity
-        return x + leak * max(0.0, 1.0 - x / self.max_flow_ml_s)
-
-
-#: blocks that act on the valve's flow rather than its stem position
-FLOW_BLOCKS = {"leakage"}
+    return {f.block for f in FAULTS.values() if f.site == "valve_flow"}

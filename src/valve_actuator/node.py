@@ -25,7 +25,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, ValveState
 
 from phfdi_base.ros.graph_node import GraphNode, ParamSpec, main
-from phfdi_base.spec import load_plugins, resolve_scenario
+from phfdi_base.spec_tools import load_plugins
 from phfdi_base.topics import CONTROLLER, DIAGNOSTICS, VALVE, VALVE_STATE
 
 from .build import build_valves, step_valves
@@ -108,6 +108,8 @@ class ValveNode(GraphNode):
         fault = value.get("fault", self.param("fault")) or None
         onset = value.get("fault_onset_s", self.param("fault_onset_s"))
         try:
+            from phfdi_base.spec import resolve_scenario  # the schema only on a runtime fault change
+
             spec = resolve_scenario(self.part.raw_scenario, fault, self.part.fault_library,
                                     list(self.param("overrides")), None if onset < 0 else onset,
                                     source=f"scenario {self.param('scenario')}")

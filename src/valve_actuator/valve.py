@@ -27,6 +27,20 @@ def inherent_characteristic(position_pct: float, kind: Characteristic, rangeabil
     linear: f = x. equal_percentage: f = R^(x - 1) for x > 0 (equal position
     increments give equal percentage flow changes), 0 when shut, with x the
     position as a fraction of span and R the rangeability.
+
+    Parameters
+    ----------
+    position_pct : float
+        Stem position (% of span), clipped to 0..100.
+    kind : {"linear", "equal_percentage"}
+    rangeability : float
+        Largest over smallest controllable flow (equal percentage only).
+
+    Examples
+    --------
+    >>> from valve_actuator import inherent_characteristic
+    >>> inherent_characteristic(50.0, "linear"), round(inherent_characteristic(50.0, "equal_percentage"), 4)
+    (0.5, 0.1414)
     """
     x = min(max(position_pct / 100.0, 0.0), 1.0)
     if kind == "linear":
@@ -38,6 +52,17 @@ def inherent_characteristic(position_pct: float, kind: Characteristic, rangeabil
 
 @dataclass(slots=True)
 class ValveOutput:
+    """A valve's answer to one sample's command: stem position (% of span), opening (fraction of maximum
+    flow), flow (mL/s) and the injected fault's severity (0 healthy .. 1 full).
+
+    Examples
+    --------
+    >>> from valve_actuator import Valve
+    >>> out = Valve(max_flow_ml_s=40.0).reset(25.0)
+    >>> out.opening, out.flow_ml_s
+    (0.25, 10.0)
+    """
+
     position_pct: float
     opening: float  # fraction of maximum flow, 0..1
     flow_ml_s: float
@@ -60,6 +85,30 @@ class Valve:
 
     Non-finite commands are not applied: the valve holds its last position and
     counts them in ``rejected_commands``.
+
+    Parameters
+    ----------
+    max_flow_ml_s : float
+        Flow when fully open (mL/s).
+    characteristic : {"linear", "equal_percentage"}
+        Inherent characteristic (:func:`inherent_characteristic`).
+    rangeability : float
+        For the equal-percentage characteristic.
+    position_blocks, flow_blocks : Chain
+        Blocks between command and stem position (backlash, stiction, ...) and on the flow (leakage).
+
+    Examples
+    --------
+    >>> import valve_actuator.blocks  # registers the valve blocks
+    >>> from phfdi_base import Chain, make_block
+    >>> from valve_actuator import Valve
+    >>> valve = Valve(40.0, position_blocks=Chain([make_block("backlash", {"width_pct": 2.0})]))
+    >>> valve.reset(50.0).flow_ml_s
+    20.0
+    >>> [valve.step(command, t).position_pct for t, command in enumerate([52.0, 51.0, 49.0])]
+    [51.0, 51.0, 50.0]
+    >>> valve.step(float("nan"), 3.0).position_pct, valve.rejected_commands  # holds on a bad command
+    (50.0, 1)
     """
 
     max_flow_ml_s: float = 1.0

@@ -78,6 +78,15 @@ def variance_change_points(y: np.ndarray, max_changes: int = 6, min_distance: in
     first. A segment of zero energy costs as if its mean square were
     ``eps * mean(y^2)`` (finite, so exactly-zero stretches stay segmentable).
     Cost: O(max_changes n^2) operations, about 20 ms for n = 723 here.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import variance_change_points
+    >>> rng = np.random.default_rng(0)
+    >>> y = np.concatenate([rng.normal(0.0, 1.0, 300), rng.normal(0.0, 4.0, 200)])
+    >>> variance_change_points(y, max_changes=3).points
+    [300]
     """
     y = np.asarray(y, dtype=float)
     if y.ndim != 1:
@@ -171,5 +180,5 @@ def select_n_changes(contrast: np.ndarray, penalty: str | float = "interval", n:
         return 0
     last = ks[-1]
     width = {k: intervals[k][1] - intervals[k][0] for k in ks[1:-1]}
-    k_best = max(width, key=width.get)
+    k_best = max(width, key=width.__getitem__)
     return k_best if width[k_best] > intervals[last][1] else 0

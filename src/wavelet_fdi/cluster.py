@@ -18,7 +18,7 @@ two formulas; they are tested against hand-computed cases.
 from __future__ import annotations
 
 import warnings
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
@@ -27,6 +27,9 @@ from scipy.spatial.distance import pdist, squareform
 from scipy.special import comb
 
 METHODS = ("hierarchical", "kmeans")
+
+#: labels of a partition: any sequence of hashable labels, or an integer/string array
+Labels = Sequence[Any] | np.ndarray
 
 
 def hierarchical(features: np.ndarray, n_clusters: int, method: str = "ward",
@@ -69,28 +72,28 @@ def _check_k(k: int, n: int) -> None:
         raise ValueError(f"cannot make {k} clusters of {n} rows")
 
 
-def canonical(labels: Sequence) -> np.ndarray:
+def canonical(labels: Labels) -> np.ndarray:
     """Relabel 0, 1, ... in order of first appearance (so equal partitions have equal labels)."""
-    labels = list(labels)
-    first = {lab: i for i, lab in reversed(list(enumerate(labels)))}
-    order = sorted(first, key=first.get)
+    items = list(labels)
+    first = {lab: i for i, lab in reversed(list(enumerate(items)))}
+    order = sorted(first, key=first.__getitem__)
     code = {lab: i for i, lab in enumerate(order)}
-    return np.array([code[lab] for lab in labels], dtype=int)
+    return np.array([code[lab] for lab in items], dtype=int)
 
 
-def adjusted_rand_index(a: Sequence, b: Sequence) -> float:
+def adjusted_rand_index(a: Labels, b: Labels) -> float:
     """Adjusted Rand index of two partitions of the same items (Hubert and Arabie 1985).
 
     ARI = (sum_ij C(n_ij, 2) - E) / (max - E), with n_ij the contingency
     table, E = sum_i C(a_i, 2) sum_j C(b_j, 2) / C(n, 2) and
     max = (sum_i C(a_i, 2) + sum_j C(b_j, 2)) / 2.
     """
-    a, b = canonical(a), canonical(b)
-    if len(a) != len(b):
-        raise ValueError(f"partitions of {len(a)} and {len(b)} items")
-    n = len(a)
-    table = np.zeros((a.max() + 1, b.max() + 1))
-    np.add.at(table, (a, b), 1)
+    code_a, code_b = canonical(a), canonical(b)
+    if len(code_a) != len(code_b):
+        raise ValueError(f"partitions of {len(code_a)} and {len(code_b)} items")
+    n = len(code_a)
+    table = np.zeros((code_a.max() + 1, code_b.max() + 1))
+    np.add.at(table, (code_a, code_b), 1)
     sum_ij = comb(table, 2).sum()
     sum_a = comb(table.sum(axis=1), 2).sum()
     sum_b = comb(table.sum(axis=0), 2).sum()
@@ -101,21 +104,21 @@ def adjusted_rand_index(a: Sequence, b: Sequence) -> float:
     return float((sum_ij - expected) / (maximum - expected))
 
 
-def silhouette(features: np.ndarray, labels: Sequence) -> float:
+def silhouette(features: np.ndarray, labels: Labels) -> float:
     """Mean silhouette (Rousseeuw 1987): (b - a) / max(a, b) per row, 0 for rows alone in their cluster."""
     x = np.atleast_2d(np.asarray(features, dtype=float))
-    labels = canonical(labels)
-    k = labels.max() + 1
+    codes = canonical(labels)
+    k = codes.max() + 1
     if not 2 <= k <= len(x) - 1:
         raise ValueError(f"silhouette needs 2..{len(x) - 1} clusters, got {k}")
     d = squareform(pdist(x))
     s = np.zeros(len(x))
     for i in range(len(x)):
-        own = labels == labels[i]
+        own = codes == codes[i]
         if own.sum() == 1:
             continue
         a = d[i, own].sum() / (own.sum() - 1)
-        b = min(d[i, labels == c].mean() for c in range(k) if c != labels[i])
+        b = min(d[i, codes == c].mean() for c in range(k) if c != codes[i])
         s[i] = (b - a) / max(a, b) if max(a, b) > 0 else 0.0
     return float(s.mean())
 
@@ -127,14 +130,14 @@ def choose_n_clusters(features: np.ndarray, k_range: Sequence[int] = range(2, 9)
     scores = {k: silhouette(features, cluster(features, k, method, seed)) for k in k_range if 2 <= k <= n - 1}
     if not scores:
         raise ValueError(f"no number of clusters to choose from for {n} rows")
-    return max(scores, key=scores.get), scores
+    return max(scores, key=scores.__getitem__), scores
 
 
-def contingency(clusters: Sequence[int], labels: Sequence[str]) -> tuple[list[str], np.ndarray]:
+def contingency(clusters: Labels, labels: Sequence[str]) -> tuple[list[str], np.ndarray]:
     """Rows per (cluster, class): the classes in order of appearance and the (k, n_classes) counts."""
     classes = list(dict.fromkeys(labels))
-    clusters = canonical(clusters)
-    table = np.zeros((clusters.max() + 1, len(classes)), dtype=int)
-    for c, lab in zip(clusters, labels):
+    codes = canonical(clusters)
+    table = np.zeros((codes.max() + 1, len(classes)), dtype=int)
+    for c, lab in zip(codes, labels):
         table[c, classes.index(lab)] += 1
     return classes, table

@@ -53,6 +53,15 @@ def compress_energy(dec: Decomposition, retain: float = 0.99, keep_approx: bool 
     the largest details until ``retain`` is reached. Hard thresholding: kept
     coefficients are unchanged. The reported threshold is the smallest kept
     magnitude.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import compress_energy, decompose
+    >>> dec = decompose(np.sin(np.linspace(0.0, 20.0, 1440))[None, :], "sym4", level=7)
+    >>> c = compress_energy(dec, retain=0.99)
+    >>> round(float(c.nonzero_pct[0]), 2), bool(c.energy_retained_pct[0] >= 99.0)
+    (1.35, True)
     """
     if not 0.0 < retain <= 1.0:
         raise ValueError(f"retain must be in (0, 1], got {retain}")

@@ -15,6 +15,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 from phfdi_base.errors import UserError
 from phfdi_base.yamlfile import read_mapping
@@ -28,7 +29,18 @@ CHANNELS = ("ph", "level")
 
 @dataclass
 class DetectorSettings:
-    """Design of the detector (units in the names; see docs/detector.md)."""
+    """Design of the detector (units in the names; see docs/detector.md).
+
+    Every field has a default (the shipped calibrations' design); the statistics it runs are
+    :meth:`statistic_names`, each needing a threshold in the :class:`Calibration`.
+
+    Examples
+    --------
+    >>> from wavelet_fdi import DetectorSettings
+    >>> settings = DetectorSettings(level=3, warmup_s=300.0)
+    >>> settings.statistic_names()
+    ['ph.R.mean_up', 'ph.R.mean_down', 'ph.D1.energy', 'ph.D2.energy', 'ph.D3.energy', 'ph.A3.energy']
+    """
 
     wavelet: str = "sym4"
     level: int = 3
@@ -104,7 +116,7 @@ class DetectorSettings:
         the mean of AJ replaces R's. (AJ's mean is R's mean seen through a
         low-pass filter: the same information, later.)
         """
-        out = []
+        out: list[str] = []
         a = f"A{self.level}"
         for ch in self.channels:
             if self.raw_band:
@@ -132,7 +144,23 @@ def _positive(x: object) -> bool:
 
 @dataclass
 class Calibration:
-    """Measured on healthy runs: noise levels and thresholds for a false-alarm target."""
+    """Measured on healthy runs: noise levels and thresholds for a false-alarm target.
+
+    ``phfdi calibrate`` writes one (YAML or JSON, :meth:`save`, :meth:`load`); one per shipped scenario
+    comes with the package (:func:`load_default_calibration`). :meth:`check` says whether it fits a
+    detector's settings and sample time.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from wavelet_fdi import Calibration, DetectorSettings, load_default_calibration
+    >>> calibration = load_default_calibration("paper", DetectorSettings())
+    >>> calibration.check(DetectorSettings(), 1.0)  # fits: no error
+    >>> path = calibration.save(Path(tempfile.mkdtemp()) / "paper.json")
+    >>> Calibration.load(path).thresholds == calibration.thresholds
+    True
+    """
 
     scenario: str
     wavelet: str
@@ -143,8 +171,9 @@ class Calibration:
     sigma: dict[str, dict[str, float]]
     #: statistic name -> threshold
     thresholds: dict[str, float]
-    #: design values the thresholds belong to
-    design: dict[str, float] = field(default_factory=dict)
+    #: design values the thresholds belong to, as in the file: the CUSUMs' design numbers, ``channels`` (a
+    #: list of names) and ``raw_band`` (a bool)
+    design: dict[str, Any] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=list)
     #: recorded healthy runs it was made from (empty: simulated with ``seeds``)
     sources: list[str] = field(default_factory=list)
@@ -257,6 +286,21 @@ def default_calibration_path(scenario: str, wavelet: str, level: int) -> Path:
 
 
 def load_default_calibration(scenario: str, settings: DetectorSettings) -> Calibration:
+    """The calibration shipped for a scenario and the settings' wavelet and level.
+
+    Raises
+    ------
+    UserError
+        None is shipped for them (the message lists the shipped ones and the ``phfdi calibrate`` command
+        that makes one).
+
+    Examples
+    --------
+    >>> from wavelet_fdi import DetectorSettings, load_default_calibration
+    >>> calibration = load_default_calibration("paper", DetectorSettings())
+    >>> calibration.wavelet, calibration.level
+    ('sym4', 3)
+    """
     path = default_calibration_path(scenario, settings.wavelet, settings.level)
     if not path.exists():
         shipped = sorted(p.stem for p in CALIBRATION_DIR.glob("*.yaml")) if CALIBRATION_DIR.is_dir() else []

@@ -29,19 +29,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
-
-from phfdi_base.spec import ScenarioSpec
+import numpy.typing as npt
 
 from .config import Calibration, DetectorSettings
 from .filterbank import CausalSwt
 from .history import History
 from .inputs import InputRegularizer
 from .isolation import FaultIsolator
-from .reference import HealthyReference, ReferenceState
+from .reference import HealthyReference, KnownStart, ReferenceState
 from .statistics import CusumBank, increments
+
+if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
+    from phfdi_base.spec import ScenarioSpec
 
 WARMUP_OBSERVER_GAIN = 0.5  # fraction of a block's mean residual corrected per block during warm-up
 OBSERVER_FREEZE_RATIO = 0.5  # no observer correction while a statistic is above this fraction of its threshold
@@ -102,7 +104,28 @@ class Alarm:
 
 @dataclass
 class Event:
-    """A state change worth publishing: alarm raised, diagnosis, alarm cleared, input problem."""
+    """A state change worth publishing: alarm raised, diagnosis, alarm cleared, input problem.
+
+    Attributes
+    ----------
+    kind : {"alarm", "diagnosis", "cleared", "input"}
+    time_s : float
+        Time stamp of the sample that caused it (s).
+    index : int
+        That sample's index on the detector's grid.
+    level : {"OK", "WARN", "ERROR"}
+        Its diagnostic level (as on /diagnostics).
+    message : str
+        One line for a person.
+    alarm : dict or None
+        The alarm's summary (onset, detection, statistic, threshold, isolation) for alarm events.
+
+    Examples
+    --------
+    >>> from wavelet_fdi import Event
+    >>> Event("input", 12.0, 12, "WARN", "valve command missing").level
+    'WARN'
+    """
 
     kind: str  # "alarm" | "diagnosis" | "cleared" | "input"
     time_s: float
@@ -133,17 +156,48 @@ def change_time_glr(u: np.ndarray, min_after: int = 3) -> int:
 
 
 class StreamingDetector:
-    """Feed samples in time order; get events back. See the module docstring."""
+    """Feed samples in time order; get events back. See the module docstring.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+        The loop watched: its healthy reference model is built from the scenario's plant and valves.
+    calibration : Calibration
+        Noise levels and thresholds (:func:`~wavelet_fdi.config.load_default_calibration` or
+        ``phfdi calibrate``); must match ``settings``.
+    settings : DetectorSettings, optional
+    isolate : bool
+        Name the fault after an alarm (:mod:`wavelet_fdi.isolation`).
+    record_trace : bool
+        Keep every sample's residuals and statistics (:meth:`trace`; offline use only).
+
+    Examples
+    --------
+    >>> from phfdi.loop import simulate
+    >>> from phfdi.scenario import load_scenario
+    >>> from wavelet_fdi import DetectorSettings, StreamingDetector, load_default_calibration
+    >>> spec = load_scenario("paper", fault="friction", onset_s=800.0,
+    ...                      overrides=["duration_s=1500", "setpoints.ph.initial=8", "setpoints.ph.changes=[]"])
+    >>> run = simulate(spec)
+    >>> settings = DetectorSettings(warmup_s=300.0)
+    >>> detector = StreamingDetector(spec, load_default_calibration("paper", settings), settings, isolate=False)
+    >>> events = detector.process({name: run[name] for name in ("time_s", "ph_measured", "valve_command_pct")})
+    >>> [(e.kind, e.time_s > 800.0) for e in events], detector.state
+    ([('alarm', True)], 'alarm')
+    >>> detector.update(1500.0, 8.0, 30.0)  # one more sample: no new event
+    []
+    """
 
     def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings | None = None,
-                 isolate: bool = True, record_trace: bool = False) -> None:
+                 isolate: bool = True, record_trace: bool = False, known: KnownStart | None = None) -> None:
         """``record_trace`` keeps every sample's residuals, coefficients and statistics (offline
-        analysis, calibration and evaluation only: memory grows with the record)."""
+        analysis, calibration and evaluation only: memory grows with the record); ``known``: the
+        starting point and plant model already computed for ``spec`` (the detector node's part)."""
         self.settings = s = settings or DetectorSettings()
         calibration.check(s, spec.sample_time_s)
         self.calibration = calibration
         self.dt_s = spec.sample_time_s
-        self.reference = HealthyReference(spec)
+        self.reference = HealthyReference(spec, known)
         self.names = s.statistic_names()
         self.k = np.array([s.reference_value(n) for n in self.names])
         self.h = np.array([calibration.thresholds[n] for n in self.names])
@@ -168,7 +222,7 @@ class StreamingDetector:
         self.isolator = None
         if isolate:
 
-            self.isolator = FaultIsolator(spec, calibration, s)
+            self.isolator = FaultIsolator(spec, calibration, s, known)
         self.alarms: list[Alarm] = []
         self.state = "starting"
         self._initialized = False
@@ -199,7 +253,7 @@ class StreamingDetector:
                              "level_measured_cm": [level_measured_cm],
                              "level_controller_output_pct": [outlet_command_pct], "ph_setpoint": [ph_setpoint]})
 
-    def process(self, chunk: Mapping[str, np.ndarray]) -> list[Event]:
+    def process(self, chunk: Mapping[str, npt.ArrayLike | None]) -> list[Event]:
         """A chunk of samples given as arrays named like run signals (time_s, ph_measured,
         valve_command_pct; optional level_measured_cm, level_controller_output_pct, ph_setpoint,
         <feed>_flow_ml_s of feeds the valve does not drive). Missing optional signals are NaN."""
@@ -265,7 +319,7 @@ class StreamingDetector:
 
     def diagnostics(self) -> dict:
         """Input health and internals for /diagnostics (numbers and flags only)."""
-        d = dict(self.inputs.counts)
+        d: dict[str, Any] = dict(self.inputs.counts)
         d.update({
             "state": self.state,
             "command_stale": self.inputs.command_stale,
@@ -369,6 +423,7 @@ class StreamingDetector:
 
     def _record(self, idx, t, ph, pred, residual, mask, coefs, z) -> None:
         tr = self._trace
+        assert tr is not None, "called with record_trace=True only"
         for key, val in (("index", idx), ("time_s", t), ("ph_measured", ph), ("ph_predicted", pred.ph),
                          ("level_predicted_cm", pred.level_cm), ("ph_residual", residual["ph"]),
                          ("level_residual_cm", residual["level"]), ("ph_monitored", mask["ph"]),
@@ -421,7 +476,7 @@ class StreamingDetector:
         return events
 
     def _crossing(self, row: int, value: float, last_zero: int, gi: int, t_s: float) -> list[Event]:
-        events = []
+        events: list[Event] = []
         if self.state == "alarm":
             if gi - self._last_confirm <= self.clear_samples:
                 self._last_confirm = gi

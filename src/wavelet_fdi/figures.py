@@ -43,7 +43,7 @@ def _plot_rows(ax, t: np.ndarray, rows: np.ndarray, labels: Sequence[str], class
     rows = np.atleast_2d(rows)
     for lab in dict.fromkeys(labels):
         idx = [i for i, x in enumerate(labels) if x == lab]
-        segs = np.stack([np.column_stack([t, rows[i]]) for i in idx])
+        segs = [np.column_stack([t, rows[i]]) for i in idx]
         ax.add_collection(LineCollection(segs, colors=colour(lab, classes), linewidths=lw, alpha=alpha, label=lab))
     ax.autoscale_view()
     if legend:
@@ -182,13 +182,13 @@ def nonzero_bars(ms: Multisignal, raw: np.ndarray, centred: np.ndarray, retain: 
     return _save(fig, path)
 
 
-def clusters(ms: Multisignal, labels: Sequence[int], title: str, path: Path) -> Path:
+def clusters(ms: Multisignal, labels: Sequence[int] | np.ndarray, title: str, path: Path) -> Path:
     """Figure 35: the rows of each cluster."""
-    labels = np.asarray(labels)
-    k = int(labels.max()) + 1
+    codes = np.asarray(labels)
+    k = int(codes.max()) + 1
     fig, axes = plt.subplots(k, 1, figsize=(10, 2.4 * k + 0.6), sharex=True, sharey=True, squeeze=False)
     for c in range(k):
-        idx = np.nonzero(labels == c)[0]
+        idx = np.nonzero(codes == c)[0]
         ax = axes[c, 0]
         _plot_rows(ax, ms.time_s, ms.data[idx], [ms.labels[i] for i in idx], ms.classes)
         ax.set_title(f"cluster {c + 1}: {len(idx)} rows", fontsize=9)

@@ -184,6 +184,7 @@ class InputRegularizer:
                          np.ones(n, dtype=bool), false, false.copy(), false.copy())
 
     def _slow_path(self, cols: dict[str, np.ndarray]) -> GridBatch:
+        """Sample by sample: place each on the grid (or drop it), bridge short gaps, check the values."""
         t_arr = np.asarray(cols["time_s"], dtype=float)
         n = len(t_arr)
         ph, cmd, level, ocmd, sp, others = self._columns(cols, n)
@@ -193,71 +194,91 @@ class InputRegularizer:
         c = self.counts
         for i in range(n):
             t = float(t_arr[i])
-            if not math.isfinite(t):
-                c["bad_time"] += 1
+            placed = self._place(t)
+            if placed is None:
                 continue
-            reset = False
-            if self._anchor is None:
-                self._anchor, self._last_slot, reset = t, -1, True
-            position = (t - self._anchor) / self.dt_s
-            if not abs(position) < MAX_SLOT:  # beyond any real clock: as unusable as NaN
-                c["bad_time"] += 1
-                continue
-            if t > self._last_raw_t:  # the sender's own rate, dropped samples included
-                self._intervals.append(t - self._last_raw_t)
-            self._last_raw_t = t
-            slot = math.floor(position + 0.5)
-            if t <= self._last_t or slot <= self._last_slot:
-                if t < self._last_t and self._backwards_run >= self.max_gap_samples:
-                    # a new clock (a restarted recording, a bag looping): start over on it
-                    c["time_resets"] += 1
-                    self._anchor, self._last_slot, self._last_t, reset = t, -1, -math.inf, True
-                    slot = 0
-                elif t < self._last_t:
-                    self._backwards_run += 1
-                    c["out_of_order"] += 1
-                    continue
-                else:
-                    c["duplicate_stamps" if t == self._last_t else "extra_samples"] += 1
-                    continue
-            self._backwards_run = 0
+            slot, reset = placed
             gap = slot - self._last_slot - 1
             if not reset and gap > self.max_gap_samples:
                 c["gap_resets"] += 1
                 reset = True
             elif not reset and gap > 0:
-                c["gaps_bridged"] += 1
-                c["missing_samples"] += gap
                 now = (float(cmd[i]), float(ocmd[i]), {f: float(v[i]) for f, v in others.items()})
-                for g in range(1, gap + 1):
-                    w = g / (gap + 1)
-                    u, oc, fl = self._between(now, w)
-                    self._emit(out, out_other, self._anchor + (self._last_slot + g) * self.dt_s,
-                               math.nan, u, math.nan, oc, math.nan, fl, False, False)
+                self._bridge(out, out_other, gap, now)
             self._last_slot = slot
             self._last_t = t
             c["samples_used"] += 1
-            p = float(ph[i])
-            if not math.isfinite(p):
-                c["nonfinite_ph"] += 1
-                p = math.nan
-            elif not PH_RANGE[0] <= p <= PH_RANGE[1]:
-                c["out_of_range_ph"] += 1
-                p = math.nan
-            lv = float(level[i])
-            if not LEVEL_RANGE_CM[0] < lv < LEVEL_RANGE_CM[1]:
-                c["bad_level"] += 1 if not math.isnan(lv) else 0
-                lv = math.nan
-            oc = float(ocmd[i])
-            if not math.isfinite(oc):
-                c["nonfinite_outlet_command"] += 1 if not math.isnan(oc) else 0
-                oc = math.nan
-            u = float(cmd[i])
-            if not math.isfinite(u):
-                c["nonfinite_command"] += 1
-                u = math.nan
+            p, u, lv, oc = self._checked(float(ph[i]), float(cmd[i]), float(level[i]), float(ocmd[i]))
             self._emit(out, out_other, t, p, u, lv, oc, float(sp[i]),
                        {f: float(v[i]) for f, v in others.items()}, True, reset)
+        return self._batch(out, out_other)
+
+    def _place(self, t: float) -> tuple[int, bool] | None:
+        """Grid slot of a raw time stamp and whether the window restarts there; None: the sample is dropped."""
+        c = self.counts
+        if not math.isfinite(t):
+            c["bad_time"] += 1
+            return None
+        reset = False
+        if self._anchor is None:
+            self._anchor, self._last_slot, reset = t, -1, True
+        position = (t - self._anchor) / self.dt_s
+        if not abs(position) < MAX_SLOT:  # beyond any real clock: as unusable as NaN
+            c["bad_time"] += 1
+            return None
+        if t > self._last_raw_t:  # the sender's own rate, dropped samples included
+            self._intervals.append(t - self._last_raw_t)
+        self._last_raw_t = t
+        slot = math.floor(position + 0.5)
+        if t <= self._last_t or slot <= self._last_slot:
+            if t < self._last_t and self._backwards_run >= self.max_gap_samples:
+                # a new clock (a restarted recording, a bag looping): start over on it
+                c["time_resets"] += 1
+                self._anchor, self._last_slot, self._last_t, reset = t, -1, -math.inf, True
+                slot = 0
+            elif t < self._last_t:
+                self._backwards_run += 1
+                c["out_of_order"] += 1
+                return None
+            else:
+                c["duplicate_stamps" if t == self._last_t else "extra_samples"] += 1
+                return None
+        self._backwards_run = 0
+        return slot, reset
+
+    def _bridge(self, out: dict[str, list], out_other: dict[str, list], gap: int, now: tuple) -> None:
+        """The ``gap`` missing slots before a sample: commands interpolated, no measurement."""
+        assert self._anchor is not None  # a sample was placed before
+        self.counts["gaps_bridged"] += 1
+        self.counts["missing_samples"] += gap
+        for g in range(1, gap + 1):
+            w = g / (gap + 1)
+            u, oc, fl = self._between(now, w)
+            self._emit(out, out_other, self._anchor + (self._last_slot + g) * self.dt_s,
+                       math.nan, u, math.nan, oc, math.nan, fl, False, False)
+
+    def _checked(self, ph: float, cmd: float, level: float, ocmd: float) -> tuple[float, float, float, float]:
+        """pH, valve command, level and outlet command of a sample, NaN where unusable (counted)."""
+        c = self.counts
+        if not math.isfinite(ph):
+            c["nonfinite_ph"] += 1
+            ph = math.nan
+        elif not PH_RANGE[0] <= ph <= PH_RANGE[1]:
+            c["out_of_range_ph"] += 1
+            ph = math.nan
+        if not LEVEL_RANGE_CM[0] < level < LEVEL_RANGE_CM[1]:
+            c["bad_level"] += 1 if not math.isnan(level) else 0
+            level = math.nan
+        if not math.isfinite(ocmd):
+            c["nonfinite_outlet_command"] += 1 if not math.isnan(ocmd) else 0
+            ocmd = math.nan
+        if not math.isfinite(cmd):
+            c["nonfinite_command"] += 1
+            cmd = math.nan
+        return ph, cmd, level, ocmd
+
+    @staticmethod
+    def _batch(out: dict[str, list], out_other: dict[str, list]) -> GridBatch:
         m = len(out["index"])
         return GridBatch(np.asarray(out["index"], dtype=np.int64), np.asarray(out["t"], dtype=float),
                          np.asarray(out["ph"], dtype=float), np.asarray(out["cmd"], dtype=float),

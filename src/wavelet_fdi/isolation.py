@@ -2,6 +2,9 @@
 
 A bank of hypotheses, each the healthy reference with one fault from the
 cores injected at the estimated onset (:class:`phfdi_base.blocks.Injected`):
+one per fault of the catalogue (:mod:`phfdi_base.faults`) that acts on the
+valve stem or the pH probe, fitted over its main parameter's search range.
+Built in:
 
 =============  ==================================================  =====================
 class          model (core block)                                  main parameter
@@ -39,15 +42,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+import ph_plant_sim.sensors  # noqa: F401  (registers the probe's faults)
+import valve_actuator.blocks  # noqa: F401  (registers the valve's faults)
 from phfdi_base.blocks import Chain, Injected, make_block
-from phfdi_base.spec import ScenarioSpec
+from phfdi_base.faults import Fault, faults
 
 from .config import Calibration, DetectorSettings
 from .history import History
-from .reference import HealthyReference, ReferenceState
+from .reference import HealthyReference, KnownStart, ReferenceState
+
+if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
+    from phfdi_base.spec import ScenarioSpec
 
 GRID_POINTS = 7
 FINE_POINTS = 11
@@ -75,18 +84,43 @@ class Hypothesis:
     ratio_param: str = ""
 
 
-HYPOTHESES: tuple[Hypothesis, ...] = (
-    Hypothesis("backlash", "backlash", "width_pct", "% of span", 0.05, 20.0),
-    Hypothesis("friction", "coulomb_viscous_friction", "coulomb_pct", "% of span", 0.05, 10.0,
-               variants=(("mobility_per_s", 0.03), ("mobility_per_s", 0.1), ("mobility_per_s", 0.3))),
-    Hypothesis("deadzone", "deadzone", "width_pct", "% of span", 0.5, 199.0, fixed=(("center_pct", 0.0),)),
-    Hypothesis("saturation", "saturation", "high_pct", "% of span", 1.0, 99.0, log_scale=False,
-               fixed=(("low_pct", 0.0),)),
-    Hypothesis("stiction", "stiction", "s_pct", "% of span", 0.1, 20.0,
-               variants=(("j_ratio", 1.0 / 3.0), ("j_ratio", 2.0 / 3.0)), ratio_param="j_pct"),
-    Hypothesis("probe_delay", "sensor_delay", "delay_s", "s", 1.0, 120.0, site="ph_sensor"),
-)
-CLASSES = tuple(h.fault_class for h in HYPOTHESES) + ("unknown",)
+#: the search over a fault's second parameter (by its name; the bounds are the catalogue's): values tried as
+#: variants, each fitted and the best kept; or ratios to the main parameter (stiction's J = ratio x S)
+VARIANTS: dict[str, tuple[float, ...]] = {"mobility_per_s": (0.03, 0.1, 0.3)}
+RATIOS: dict[str, tuple[float, ...]] = {"j_pct": (1.0 / 3.0, 2.0 / 3.0)}
+#: where a hypothesis can act: the bank re-simulates the valve's stem or the pH probe
+SITES = ("valve", "ph_sensor")
+
+
+def hypothesis(fault: Fault) -> Hypothesis | None:
+    """The hypothesis of a catalogued fault: its main parameter over the catalogue's search range, a second
+    parameter by :data:`VARIANTS` or :data:`RATIOS`, the others at their preset values; None if the bank
+    cannot model it."""
+    main = fault.main
+    if not fault.isolate or main is None or fault.site not in SITES:
+        return None
+    r = main.fit_range("isolation")
+    variants: tuple[tuple[str, float], ...] = ()
+    ratio_param = ""
+    for p in fault.params[1:]:
+        if not variants and p.name in VARIANTS:
+            variants = tuple((p.name, v) for v in VARIANTS[p.name])
+        elif not variants and p.name in RATIOS:
+            variants, ratio_param = tuple(("j_ratio", v) for v in RATIOS[p.name]), p.name
+    varied = {name for name, _ in variants} | {ratio_param}
+    fixed = tuple((p.name, p.paper) for p in fault.params[1:] if p.paper is not None and p.name not in varied)
+    return Hypothesis(fault.name, fault.block, main.name, main.unit, r.low, r.high, r.log, fault.site, variants,
+                      fixed, ratio_param)
+
+
+def hypotheses() -> tuple[Hypothesis, ...]:
+    """One hypothesis per catalogued fault the bank can model, in the catalogue's order."""
+    return tuple(h for h in map(hypothesis, faults().values()) if h is not None)
+
+
+def classes() -> tuple[str, ...]:
+    """The answers isolation can give: each hypothesis's class, then ``unknown``."""
+    return tuple(h.fault_class for h in hypotheses()) + ("unknown",)
 
 
 @dataclass
@@ -195,15 +229,17 @@ class Candidate:
 
 
 class FaultIsolator:
-    """Fits every hypothesis of :data:`HYPOTHESES` to the data since the onset; see the module docstring."""
+    """Fits every hypothesis of :func:`hypotheses` to the data since the onset; see the module docstring."""
 
     #: onset candidates scanned for the best classes: this many samples before .. after the estimate
     ONSET_BEFORE = ZOOM[0][0][0]
     CONFIRMED = 3
     REFINED = 5
 
-    def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings) -> None:
-        self.reference = HealthyReference(spec)  # its own copy: re-simulations never touch the detector's
+    def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings,
+                 known: KnownStart | None = None) -> None:
+        self.reference = HealthyReference(spec, known)  # its own copy: re-simulations never touch the detector's
+        self.hypotheses = hypotheses()
         self.dt_s = spec.sample_time_s
         self.sigma_ph = calibration.sigma["ph"]["raw"]
         self.sigma_level = calibration.sigma["level"]["raw"]
@@ -366,7 +402,7 @@ class FaultIsolator:
         onset = w.onset
         n = len(w.t)
         start = max(0, onset - self.ONSET_BEFORE)  # costs compare from the earliest onset scanned
-        variants = [(h, v) for h in HYPOTHESES for v in (h.variants or (("", math.nan),))]
+        variants = [(h, v) for h in self.hypotheses for v in (h.variants or (("", math.nan),))]
         cands = [Candidate(h, v, float(th), onset) for h, v in variants
                  for th in _grid(h.low, h.high, h.log_scale, GRID_POINTS)]
         self._screen(w, bank, cands, start)

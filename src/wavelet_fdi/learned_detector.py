@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from phfdi_base.errors import UserError
 
@@ -53,6 +54,13 @@ class LearnedSettings:
 
     The defaults were chosen on SKAB's valve1 files and scored held out on its other files
     (benchmarks/skab_select.py; docs/detector.md): one configuration for every record.
+
+    Examples
+    --------
+    >>> from wavelet_fdi import LearnedSettings
+    >>> settings = LearnedSettings().check()  # the defaults are valid
+    >>> settings.wavelet, settings.level
+    ('sym4', 2)
     """
 
     wavelet: str = "sym4"
@@ -118,7 +126,19 @@ class LearnedSettings:
 
 @dataclass
 class LearnedModel:
-    """What ``phfdi calibrate --learn`` writes: the reference, the healthy band sigmas, the settings."""
+    """What ``phfdi calibrate --learn`` writes: the reference, the healthy band sigmas, the settings.
+
+    Made by :func:`learn`; saved and read as JSON.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import learn
+    >>> healthy = np.random.default_rng(1).normal(size=(4000, 2))
+    >>> model = learn(healthy, ["flow", "pressure"])
+    >>> model.channels, model.band_sigma.shape  # channels x (D1, D2, A2)
+    (('flow', 'pressure'), (2, 3))
+    """
 
     reference: LearnedReference
     settings: LearnedSettings
@@ -160,7 +180,35 @@ class LearnedModel:
 
 def learn(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSettings | None = None,
           source: dict | None = None) -> LearnedModel:
-    """Fit the reference on healthy rows and measure each band's healthy RMS on the same rows."""
+    """Fit the reference on healthy rows and measure each band's healthy RMS on the same rows.
+
+    Parameters
+    ----------
+    x_healthy : ndarray (n, m)
+        Rows of a healthy record, one column per channel, sampled every ``settings.sample_time_s``.
+    channels : sequence of str
+        The m channel names.
+    settings : LearnedSettings, optional
+    source : dict, optional
+        What the rows came from (kept in the model).
+
+    Returns
+    -------
+    LearnedModel
+
+    Raises
+    ------
+    UserError
+        Too few rows to calibrate the bands.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import learn
+    >>> model = learn(np.random.default_rng(1).normal(size=(4000, 2)), ["flow", "pressure"])
+    >>> model.source["healthy_rows"]
+    4000
+    """
     s = (settings or LearnedSettings()).check()
     ref = LearnedReference.fit(x_healthy, channels, s.lags, s.ridge_own, s.ridge_cross)
     provisional = LearnedModel(ref, s, np.ones((len(ref.channels), s.level + 1)), dict(source or {}))
@@ -192,7 +240,20 @@ class LearnedEvent:
 
 
 class LearnedDetector:
-    """Feed rows of a measured record in time order; get events (and per-row alarm states) back."""
+    """Feed rows of a measured record in time order; get events (and per-row alarm states) back.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import LearnedDetector, learn
+    >>> rows = np.random.default_rng(1).normal(size=(6000, 2))
+    >>> detector = LearnedDetector(learn(rows[:4000], ["flow", "pressure"]))
+    >>> faulty = rows[4000:].copy()
+    >>> faulty[1000:, 0] += 3.0  # the flow shifts by three standard deviations
+    >>> events, states = detector.process(np.arange(2000.0), faulty)
+    >>> [(e.kind, e.index > 1000) for e in events], int(states[-1])
+    ([('alarm', True)], 1)
+    """
 
     def __init__(self, model: LearnedModel, alarms: bool = True, record_trace: bool = False) -> None:
         self.model = model
@@ -211,13 +272,19 @@ class LearnedDetector:
         for c, ch in enumerate(self.channels):
             for kind in ("mean_up", "mean_down"):
                 names.append(f"{ch}.A{s.level}.{kind}")
-                k.append(s.mean_k), h.append(s.mean_h), chan.append(c), band.append(s.level)
+                k.append(s.mean_k)
+                h.append(s.mean_h)
+                chan.append(c)
+                band.append(s.level)
         if self.energy:
             ke = energy_reference(s.energy_variance_ratio)
             for c, ch in enumerate(self.channels):
                 for j in range(s.level):
                     names.append(f"{ch}.D{j + 1}.energy")
-                    k.append(ke), h.append(s.energy_h), chan.append(c), band.append(j)
+                    k.append(ke)
+                    h.append(s.energy_h)
+                    chan.append(c)
+                    band.append(j)
         self.stat_names = names
         self.k = np.array(k)
         self.h = np.array(h)
@@ -242,21 +309,21 @@ class LearnedDetector:
         self._trace: dict[str, list] | None = {"coef": [], "stat": [], "state": []} if record_trace else None
 
     # ---- public API ------------------------------------------------------------------
-    def process(self, t_s: Sequence[float], x: np.ndarray) -> tuple[list[LearnedEvent], np.ndarray]:
+    def process(self, t_s: npt.ArrayLike, x: npt.ArrayLike) -> tuple[list[LearnedEvent], np.ndarray]:
         """Rows x (n, m) at times t_s; returns the events and the alarm state (0/1) of each row."""
-        x = np.asarray(x, dtype=float)
+        rows = np.asarray(x, dtype=float)
         t = np.asarray(t_s, dtype=float)
-        if x.ndim != 2 or x.shape[1] != self.m:
-            raise UserError(f"expected rows x {self.m} channels ({', '.join(self.channels)}), got shape {x.shape}")
-        if len(t) != len(x):
-            raise UserError(f"{len(t)} time stamps for {len(x)} rows")
+        if rows.ndim != 2 or rows.shape[1] != self.m:
+            raise UserError(f"expected rows x {self.m} channels ({', '.join(self.channels)}), got shape {rows.shape}")
+        if len(t) != len(rows):
+            raise UserError(f"{len(t)} time stamps for {len(rows)} rows")
         events: list[LearnedEvent] = []
-        states = np.zeros(len(x), dtype=np.int8)
-        if not len(x):
+        states = np.zeros(len(rows), dtype=np.int8)
+        if not len(rows):
             return events, states
-        g = self.samples_processed + np.arange(len(x))
+        g = self.samples_processed + np.arange(len(rows))
         self._times[g % TIME_RING] = t
-        r = self.stream.residuals(x)
+        r = self.stream.residuals(rows)
         missing = ~np.isfinite(r)
         events += self._missing_events(missing, t)
         out = self.swt.process(np.where(missing, 0.0, r))
@@ -265,11 +332,11 @@ class LearnedDetector:
         d_norm = details / sig[:, :-1].T[:, None, :]  # (J, n, m)
         a_raw = approx / self.gain  # AJ in residual units (DC gain removed)
         b = self.settings.block_samples
-        n = len(x)
+        n = len(rows)
         pos = 0
         while pos < n:
-            g = self.samples_processed + pos
-            end = min(n, pos + (b - g % b))
+            done = self.samples_processed + pos  # rows processed so far: blocks are aligned to them
+            end = min(n, pos + (b - done % b))
             ev = self._block(t, pos, end, a_raw, d_norm, missing, states)
             events += ev
             pos = end
@@ -351,14 +418,14 @@ class LearnedDetector:
         rho = self.settings.clear_fraction
         above = ratio[:, j:] > 1.0
         if rho <= 0.0:
-            return above.any(axis=0)
+            return np.any(above, axis=0)
         a = absu[j:]  # (n, m)
         peak = np.maximum(np.maximum.accumulate(a, axis=0), self._peak)  # running peak per channel
         strong = (a >= rho * peak).T  # (m, n)
         nm = 2 * self.m
         ok = above.copy()
         ok[:nm] &= np.repeat(strong, 2, axis=0)
-        return ok.any(axis=0)
+        return np.any(ok, axis=0)
 
     def _alarm_logic(self, t, i0, i1, g0, ratio, cross, states, absu) -> list[LearnedEvent]:
         s = self.settings
@@ -434,11 +501,13 @@ class LearnedDetector:
 
     def _alarm_message(self) -> str:
         a = self._alarm
+        assert a is not None, "called in alarm only"
         top = ", ".join(f"{c} {v['share']:.0%}" for c, v in list(a["contributions"].items())[:3])
         return f"alarm {a['alarm_id']}: {a['statistic']} crossed its threshold; channels: {top}"
 
     def _clear(self, t_s: float, index: int) -> LearnedEvent:
         a = self._alarm
+        assert a is not None, "called in alarm only"
         a["cleared_time"] = float(t_s)
         a["cleared_index"] = int(index)
         a["episode_contributions"] = self._contributions(self._episode)
@@ -464,7 +533,26 @@ class LearnedDetector:
 def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096
                ) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
     """A whole record through a fresh detector, in chunks of ``chunk`` rows (None: at once; the
-    result is the same, chunks of a few thousand rows are fastest)."""
+    result is the same, chunks of a few thousand rows are fastest).
+
+    Returns
+    -------
+    events : list of LearnedEvent
+    states : ndarray of int8
+        Each row's alarm state (0/1).
+    detector : LearnedDetector
+        The detector after the record (its alarms, counters).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import learn, run_record
+    >>> rows = np.random.default_rng(1).normal(size=(6000, 2))
+    >>> model = learn(rows[:4000], ["flow", "pressure"])
+    >>> events, states, _ = run_record(model, np.arange(2000.0), rows[4000:])
+    >>> events, int(states.max())  # healthy rows: no alarm
+    ([], 0)
+    """
     det = LearnedDetector(model)
     n = len(x)
     step = n if not chunk else int(chunk)

@@ -52,6 +52,15 @@ class Multisignal:
     ``names[i]`` a unique name; ``truth`` (optional) the same rows without
     measurement noise when known (simulated ``ph_true``), used only to score
     denoising; ``info[i]`` what produced the row (severity, seed, file).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import Multisignal
+    >>> ms = Multisignal(np.zeros((3, 1440)), ["healthy", "backlash", "backlash"], ["h1", "b1", "b2"],
+    ...                  np.arange(1440.0))
+    >>> ms.shape, ms.classes, ms.rows("backlash").tolist()
+    ((3, 1440), ['healthy', 'backlash'], [1, 2])
     """
 
     data: np.ndarray
@@ -242,7 +251,31 @@ class Decomposition:
 
 def decompose(data: np.ndarray | Multisignal, wavelet: str = "sym4", level: int = 7,
               mode: str = "symmetric") -> Decomposition:
-    """Row decomposition of a multisignal at ``level`` (MATLAB's ``mdwtdec('r', X, level, wname)``)."""
+    """Row decomposition of a multisignal at ``level`` (MATLAB's ``mdwtdec('r', X, level, wname)``).
+
+    Parameters
+    ----------
+    data : ndarray (n_signals, n_samples) or Multisignal
+    wavelet : str
+        A PyWavelets wavelet name.
+    level : int
+        1 .. the largest level the row length allows (a ``ValueError`` says the range otherwise).
+    mode : str
+        Signal extension, PyWavelets' or MATLAB's name (``"sym"`` is ``"symmetric"``).
+
+    Returns
+    -------
+    Decomposition
+        ``ca`` (n_signals, len_a) and ``cd[j-1]`` the level-j details, finest first.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import decompose
+    >>> dec = decompose(np.sin(np.linspace(0.0, 20.0, 1440))[None, :].repeat(35, axis=0), "sym4", level=7)
+    >>> dec.ca.shape, len(dec.cd)
+    ((35, 18), 7)
+    """
     x = data.data if isinstance(data, Multisignal) else np.atleast_2d(np.asarray(data, dtype=float))
     mode = pywt_mode(mode)
     w = pywt.Wavelet(wavelet)

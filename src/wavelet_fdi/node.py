@@ -52,6 +52,7 @@ from phfdi_base.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, ME
 from .alarm_messages import severity_of
 from .config import Calibration, DetectorSettings, load_default_calibration
 from .detector import StreamingDetector
+from .reference import KnownStart
 
 PARAMS = (
     ParamSpec("calibration", "", "calibration file (.yaml/.json) from phfdi calibrate; '' takes the one shipped "
@@ -181,7 +182,7 @@ class LagStats:
     """Processing lag (s, wall) of the last samples: arrival of a measurement to the core's result."""
 
     def __init__(self) -> None:
-        self.lags = deque(maxlen=LAG_WINDOW)
+        self.lags: deque[float] = deque(maxlen=LAG_WINDOW)
         self.calls = 0
         self.samples = 0
         self.core_s = 0.0
@@ -250,7 +251,8 @@ class DetectorNode(GraphNode):
                 base = self.part.base_scenario or self.spec.name  # the scenario the shipped calibrations name
                 cal = load_default_calibration(base, settings)
                 source = f"shipped {base}_{settings.wavelet}_L{settings.level}"
-            core = StreamingDetector(self.spec, cal, settings, isolate=self.param("isolate"))
+            known = KnownStart(self.part.start, self.part.plant_model)  # solved once by the launcher
+            core = StreamingDetector(self.spec, cal, settings, isolate=self.param("isolate"), known=known)
         except UserError as exc:
             raise NodeStartError(str(exc)) from None
         return core, source

@@ -62,11 +62,26 @@ def _groups_text(run: dict) -> str:
 
 # ---- claims ----------------------------------------------------------------------------------------
 def section6_claims(ms: Multisignal, s6: dict, opts: Options) -> list[Claim]:
-    claims = []
-    d = s6["decomposition"]
+    """The paper's Section 6 claims (decomposition, denoising, compression, clustering, severity) beside ours."""
+    levels = sorted(s6["denoised"])
+    claims = [_decomposition_claim(ms, s6["decomposition"])]
+    claims += _edge_claims(ms, s6.get("edges"), opts, levels)
+    claims.append(_denoise_residual_claim(ms, s6["denoise_residual"][levels[0]]))
+    claims.append(_compression_claim(ms, s6["compression"], s6["decomposition"], opts.level))
+    clusters = _cluster_claim(s6, opts.level)
+    if clusters is not None:
+        claims.append(clusters)
+    severity = _severity_claim(s6.get("severity") or {})
+    if severity is not None:
+        claims.append(severity)
+    return claims
+
+
+def _decomposition_claim(ms: Multisignal, d: dict) -> Claim:
+    """Figure 29: the shapes of the row decomposition."""
     n, m = ms.shape
     same_shape = (n, m) == (35, 1440)
-    claims.append(Claim(
+    return Claim(
         "6, Fig. 29 (mdwtdec structure)",
         "Row decomposition of the 35 x 1440 multisignal with sym4 at level 7, 'sym' extension: "
         "ca 35x18, cd 7 sets",
@@ -74,67 +89,77 @@ def section6_claims(ms: Multisignal, s6: dict, opts: Options) -> list[Claim]:
         f"{len(d['cd_shapes'])} detail sets of lengths {', '.join(str(s[1]) for s in d['cd_shapes'])}; "
         f"perfect reconstruction to {_fmt(d['reconstruction_error'], 2)} {ms.unit}",
         "reproduced" if same_shape and d["ca_shape"][1] == 18 else
-        "not comparable: this set is not 35 x 1440 (the shapes follow the same rule)"))
+        "not comparable: this set is not 35 x 1440 (the shapes follow the same rule)")
 
-    edges = s6.get("edges")
+
+def _edge_claims(ms: Multisignal, edges: dict | None, opts: Options, levels: list[int]) -> list[Claim]:
+    """Figures 30 to 32: what the approximation and the denoising lose at the record's start and end."""
     lev = opts.level
-    levels = sorted(s6["denoised"])
-    if edges:
-        a = edges[f"approximation level {lev}"]
-        worst = max(ms.classes, key=lambda c: a[c]["rms_start"])
-        worst_end = max(ms.classes, key=lambda c: a[c]["rms_end"])
-        noise = edges["measured (no processing)"]["all"]["rms_all"]
-        start_lost = a[worst]["rms_start"] > 5 * noise
-        end_lost = a[worst_end]["rms_end"] > 5 * noise
-        claims.append(Claim(
-            "6, Fig. 30, 31",
-            f"Approximations at level {lev} capture the general shape but lose the bumps at the start and end",
-            f"RMS error of A{lev} against the noise-free pH: {_fmt(a['all']['rms_all'])} {ms.unit} over the record "
-            f"(mostly at the setpoint step); over the first {100 * opts.edge_fraction:g} %: "
-            f"{_fmt(a[worst]['rms_start'])} {ms.unit} for the {worst} rows (their start transient); over the last "
-            f"{100 * opts.edge_fraction:g} %: {_fmt(a[worst_end]['rms_end'])} {ms.unit} for the {worst_end} rows; "
-            f"the bin-averaged measurement itself is off by {_fmt(noise)} {ms.unit}",
-            f"{'reproduced' if start_lost and end_lost else 'partly' if start_lost or end_lost else 'differs'}: "
-            f"the start transient is {'lost' if start_lost else 'kept'}; at the end "
-            + (f"the {worst_end} rows' oscillation is averaged out (our runs end in steady states or limit "
-               "cycles, not bumps)" if end_lost else "nothing is lost (our runs end in steady states)")))
-        if len(levels) >= 2:
-            lo, hi = levels[0], levels[-1]
-            d_lo, d_hi = edges[f"denoised level {lo}"], edges[f"denoised level {hi}"]
-            ratio_start = d_hi[worst]["rms_start"] / max(d_lo[worst]["rms_start"], 1e-300)
-            end_lo, end_hi = d_lo["all"]["rms_end"], d_hi["all"]["rms_end"]
-            claims.append(Claim(
-                "6, Fig. 32",
-                f"Denoising at level {lo} instead of {hi} recovers the bumps at the start and end",
-                f"{opts.denoise_rule}/{opts.shrink} thresholds, per-level noise: start error of the {worst} rows "
-                f"{_fmt(d_lo[worst]['rms_start'])} {ms.unit} at level {lo} vs {_fmt(d_hi[worst]['rms_start'])} at level "
-                f"{hi} ({ratio_start:.1f}x); end error {_fmt(end_lo)} vs {_fmt(end_hi)} {ms.unit} (all rows)",
-                ("reproduced at the start" if ratio_start > 1.5 else "differs at the start") +
-                ("; no difference at the end (nothing there to recover)" if abs(end_hi - end_lo) < 0.2 * end_hi
-                 else "; also at the end" if end_lo < end_hi else "; worse at the end")))
-    else:
-        claims.append(Claim(
+    if not edges:
+        return [Claim(
             "6, Fig. 30 to 32",
             f"Approximations at level {lev} lose the bumps at the start and end; denoising at a lower level keeps them",
             "not measured: the runs carry no noise-free signal (ph_true) to measure the loss against",
-            "not checked"))
-    res = s6["denoise_residual"][levels[0]]
+            "not checked")]
+    a = edges[f"approximation level {lev}"]
+    worst = max(ms.classes, key=lambda c: a[c]["rms_start"])
+    worst_end = max(ms.classes, key=lambda c: a[c]["rms_end"])
+    noise = edges["measured (no processing)"]["all"]["rms_all"]
+    start_lost = a[worst]["rms_start"] > 5 * noise
+    end_lost = a[worst_end]["rms_end"] > 5 * noise
+    claims = [Claim(
+        "6, Fig. 30, 31",
+        f"Approximations at level {lev} capture the general shape but lose the bumps at the start and end",
+        f"RMS error of A{lev} against the noise-free pH: {_fmt(a['all']['rms_all'])} {ms.unit} over the record "
+        f"(mostly at the setpoint step); over the first {100 * opts.edge_fraction:g} %: "
+        f"{_fmt(a[worst]['rms_start'])} {ms.unit} for the {worst} rows (their start transient); over the last "
+        f"{100 * opts.edge_fraction:g} %: {_fmt(a[worst_end]['rms_end'])} {ms.unit} for the {worst_end} rows; "
+        f"the bin-averaged measurement itself is off by {_fmt(noise)} {ms.unit}",
+        f"{'reproduced' if start_lost and end_lost else 'partly' if start_lost or end_lost else 'differs'}: "
+        f"the start transient is {'lost' if start_lost else 'kept'}; at the end "
+        + (f"the {worst_end} rows' oscillation is averaged out (our runs end in steady states or limit "
+           "cycles, not bumps)" if end_lost else "nothing is lost (our runs end in steady states)"))]
+    if len(levels) >= 2:
+        claims.append(_denoise_level_claim(ms, edges, opts, levels[0], levels[-1], worst))
+    return claims
+
+
+def _denoise_level_claim(ms: Multisignal, edges: dict, opts: Options, lo: int, hi: int, worst: str) -> Claim:
+    """Figure 32: denoising at the lower level keeps more of the start and end."""
+    d_lo, d_hi = edges[f"denoised level {lo}"], edges[f"denoised level {hi}"]
+    ratio_start = d_hi[worst]["rms_start"] / max(d_lo[worst]["rms_start"], 1e-300)
+    end_lo, end_hi = d_lo["all"]["rms_end"], d_hi["all"]["rms_end"]
+    return Claim(
+        "6, Fig. 32",
+        f"Denoising at level {lo} instead of {hi} recovers the bumps at the start and end",
+        f"{opts.denoise_rule}/{opts.shrink} thresholds, per-level noise: start error of the {worst} rows "
+        f"{_fmt(d_lo[worst]['rms_start'])} {ms.unit} at level {lo} vs {_fmt(d_hi[worst]['rms_start'])} at level "
+        f"{hi} ({ratio_start:.1f}x); end error {_fmt(end_lo)} vs {_fmt(end_hi)} {ms.unit} (all rows)",
+        ("reproduced at the start" if ratio_start > 1.5 else "differs at the start") +
+        ("; no difference at the end (nothing there to recover)" if abs(end_hi - end_lo) < 0.2 * end_hi
+         else "; also at the end" if end_lo < end_hi else "; worse at the end"))
+
+
+def _denoise_residual_claim(ms: Multisignal, res: dict) -> Claim:
+    """Figure 32: the denoising residual of each class against white noise."""
     noisy = [c for c in ms.classes if res[c]["std_over_sigma"] < 1.5 and abs(res[c]["lag1_autocorrelation"]) < 0.4]
     not_noisy = [c for c in ms.classes if c not in noisy]
-    claims.append(Claim(
+    return Claim(
         "6, Fig. 32",
         "The denoising residuals look like noise, except a few small remaining bumps",
         "residual std / noise sigma and lag-1 autocorrelation (white noise: 1 and 0): " + "; ".join(
             f"{c} {res[c]['std_over_sigma']:.1f} / {res[c]['lag1_autocorrelation']:.2f}" for c in ms.classes),
         ("reproduced" if not not_noisy else
          f"partly: noise-like for {', '.join(noisy) or 'no class'}; for {', '.join(not_noisy)} the residual holds "
-         "the fault's own oscillation (limit cycle or start transient), which the threshold removes as if it were noise")))
+         "the fault's own oscillation (limit cycle or start transient), which the threshold removes as if it were noise"))
 
-    c = s6["compression"]
+
+def _compression_claim(ms: Multisignal, c: dict, d: dict, lev: int) -> Claim:
+    """Figures 33, 34: how many coefficients keep the energy, and why the paper's figure is uniform."""
     raw, cen = c["raw_nonzero_pct"], c["centred_nonzero_pct"]
     n_a = d["ca_shape"][1]
     approx_pct = 100.0 * n_a / c["n_coefficients"]
-    claims.append(Claim(
+    return Claim(
         "6, Fig. 33, 34",
         f"About {PAPER_NONZERO_PCT} % of the coefficients retain {100 * c['retain']:g} % of the energy, "
         "the same for every signal",
@@ -147,38 +172,45 @@ def section6_claims(ms: Multisignal, s6: dict, opts: Options) -> list[Claim]:
          f"approximation coefficients ({approx_pct:.2f} % of them) - the uniform figure says the rows are "
          f"offset, not how compressible the faults are; {PAPER_NONZERO_PCT} % of {c['n_coefficients']} would be "
          f"{PAPER_NONZERO_PCT / 100 * c['n_coefficients']:.0f} coefficients, fewer than the approximation itself"
-         if np.ptp(raw) < 0.1 and abs(float(np.median(raw)) - approx_pct) < 0.2 else "")))
+         if np.ptp(raw) < 0.1 and abs(float(np.median(raw)) - approx_pct) < 0.2 else ""))
 
+
+def _cluster_claim(s6: dict, lev: int) -> Claim | None:
+    """Figures 35, 36: the paper's three clusters from the compressed approximation or the band energies."""
     primary = _cluster_run(s6, f"ca{lev}")
+    if primary is None or primary["ari_paper"] is None:
+        return None
     energy = _cluster_run(s6, "detail energies")
     energy_auto = _cluster_run(s6, "detail energies", k_source="silhouette")
-    if primary is not None and primary["ari_paper"] is not None:
-        ours = (f"Ward on the compressed ca{lev} (like mdwtcluster), k = {primary['k']}: {_groups_text(primary)}, "
-                f"ARI {primary['ari_paper']:.2f} against the paper's grouping")
-        if energy is not None:
-            ours += (f"; Ward on the log energies of ca{lev}, D{lev}..D1, k = {energy['k']}: {_groups_text(energy)}, "
-                     f"ARI {energy['ari_paper']:.2f}")
-            if energy_auto is not None:
-                ours += f" (silhouette picks k = {energy_auto['k']})"
-        if primary["ari_paper"] > 0.99:
-            verdict = "reproduced"
-        elif energy is not None and energy["ari_paper"] > 0.99:
-            verdict = (f"reproduced from the band energies, not from the time-domain shape: the friction limit cycle "
-                       f"averages out at level {lev}, so friction joins the healthy and backlash rows, while "
-                       "dead-zone and saturation (same pH, the valve held below 50 %) split by severity")
-        else:
-            verdict = "differs"
-        claims.append(Claim("6, Fig. 35, 36", f"Three clusters: {PAPER_GROUPS_TEXT}", ours, verdict))
-    sev = s6.get("severity") or {}
-    if sev:
-        claims.append(Claim(
-            "7, Fig. 55 (applied to the Section 6 set)",
-            "The residuals give information about the fault severity",
-            "Spearman rank correlation of the RMS of Res3A (fault row - healthy row with the same noise) with the "
-            "severity factor: " + ", ".join(f"{k} {v['spearman']:.2f}" for k, v in sev.items()),
-            "reproduced" if all(v["spearman"] > 0.7 for v in sev.values()) else
-            "partly: " + ", ".join(f"{k}" for k, v in sev.items() if v["spearman"] <= 0.7) + " not monotone"))
-    return claims
+    ours = (f"Ward on the compressed ca{lev} (like mdwtcluster), k = {primary['k']}: {_groups_text(primary)}, "
+            f"ARI {primary['ari_paper']:.2f} against the paper's grouping")
+    if energy is not None:
+        ours += (f"; Ward on the log energies of ca{lev}, D{lev}..D1, k = {energy['k']}: {_groups_text(energy)}, "
+                 f"ARI {energy['ari_paper']:.2f}")
+        if energy_auto is not None:
+            ours += f" (silhouette picks k = {energy_auto['k']})"
+    if primary["ari_paper"] > 0.99:
+        verdict = "reproduced"
+    elif energy is not None and energy["ari_paper"] > 0.99:
+        verdict = (f"reproduced from the band energies, not from the time-domain shape: the friction limit cycle "
+                   f"averages out at level {lev}, so friction joins the healthy and backlash rows, while "
+                   "dead-zone and saturation (same pH, the valve held below 50 %) split by severity")
+    else:
+        verdict = "differs"
+    return Claim("6, Fig. 35, 36", f"Three clusters: {PAPER_GROUPS_TEXT}", ours, verdict)
+
+
+def _severity_claim(sev: dict) -> Claim | None:
+    """Section 7's severity claim, measured on the Section 6 set's severity variants."""
+    if not sev:
+        return None
+    return Claim(
+        "7, Fig. 55 (applied to the Section 6 set)",
+        "The residuals give information about the fault severity",
+        "Spearman rank correlation of the RMS of Res3A (fault row - healthy row with the same noise) with the "
+        "severity factor: " + ", ".join(f"{k} {v['spearman']:.2f}" for k, v in sev.items()),
+        "reproduced" if all(v["spearman"] > 0.7 for v in sev.values()) else
+        "partly: " + ", ".join(f"{k}" for k, v in sev.items() if v["spearman"] <= 0.7) + " not monotone")
 
 
 def section7_claims(pairs: Sequence[PairResult], opts: Options) -> list[Claim]:
@@ -225,8 +257,7 @@ def section7_claims(pairs: Sequence[PairResult], opts: Options) -> list[Claim]:
     a_band = f"A{opts.residual_level}"
     a_detects = real_txt and all(p.realistic_detection[wv][a_band].first_after_onset_s is not None
                                  for p in pairs for wv in p.realistic_detection)
-    d_quiet = real_txt and all(p.realistic_detection[wv][b].first_after_onset_s is None
-                               or p.realistic_detection[wv][b].first_after_onset_s > (onset or 0) + 1000
+    d_quiet = real_txt and all(_none_or_after(p.realistic_detection[wv][b].first_after_onset_s, (onset or 0) + 1000)
                                for p in pairs for wv in p.realistic_detection
                                for b in p.realistic_detection[wv] if b.startswith("D"))
     verdict = "reproduced with the paper's residual: every band is exactly 0 until the fault acts" if twin_ok \
@@ -241,11 +272,12 @@ def section7_claims(pairs: Sequence[PairResult], opts: Options) -> list[Claim]:
         f"(paper: 7000 s; here {_fmt(onset, 5)} s)",
         ours, verdict))
     cps = []
-    found = {}
+    found: dict[str, list[bool]] = {}
     for p in pairs:
         for cp in p.change_points:
             cps.append(f"{p.fault}, {cp.input}: " +
-                       (f"{cp.nearest_s:.0f} s (error {round(cp.error_s):+d} s)" if cp.nearest_s is not None
+                       (f"{cp.nearest_s:.0f} s (error {round(cp.error_s):+d} s)"
+                        if cp.nearest_s is not None and cp.error_s is not None
                         else f"none near the onset (found: {', '.join(f'{t:.0f}' for t in cp.faulty_s) or 'none'})") +
                        f"; healthy counterpart: {', '.join(f'{t:.0f}' for t in cp.healthy_s) or 'none'}")
             found.setdefault(cp.input, []).append(cp.nearest_s is not None)
@@ -260,6 +292,11 @@ def section7_claims(pairs: Sequence[PairResult], opts: Options) -> list[Claim]:
         "Changes in a signal's variance, found with 1-D wavelet analysis, locate the fault",
         " | ".join(cps), verdict))
     return claims
+
+
+def _none_or_after(t_s: float | None, limit_s: float) -> bool:
+    """No alarm, or one after ``limit_s``."""
+    return t_s is None or t_s > limit_s
 
 
 def beyond_the_paper(ms: Multisignal, s6: dict, pairs: Sequence[PairResult], opts: Options) -> list[str]:
@@ -308,6 +345,7 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
 
 def markdown(ms: Multisignal, s6: dict, pairs: Sequence[PairResult], opts: Options, context: dict,
              figure_files: Sequence[str]) -> str:
+    """REPORT.md: the data, the claims table, Sections 6 and 7 in detail, findings beyond the paper, notes."""
     claims = section6_claims(ms, s6, opts) + section7_claims(pairs, opts)
     lines = [
         "# Offline wavelet analysis: the paper's Sections 6 and 7, claim by claim",
@@ -326,31 +364,21 @@ def markdown(ms: Multisignal, s6: dict, pairs: Sequence[PairResult], opts: Optio
         _table(["Paper (section, figure)", "Paper's claim", "Ours (measured)", "Verdict"],
                [(c.where, c.paper, c.ours, c.verdict) for c in claims]),
         "",
-        "## Section 6 in detail",
-        "",
-        "### Approximations and denoising (Figures 30 to 32)",
-        "",
     ]
-    edges = s6.get("edges")
-    if edges:
-        lines += [
-            f"RMS error against the noise-free pH (`ph_true`, resampled the same way), {ms.unit}: over the record, "
-            f"over its first and last {100 * opts.edge_fraction:g} %, all rows (and the class with the largest "
-            "start error).",
-            "",
-            _table(["Reconstruction", "whole record", "start", "end", "start, worst class"],
-                   [(name, _fmt(e["all"]["rms_all"]), _fmt(e["all"]["rms_start"]), _fmt(e["all"]["rms_end"]),
-                     max(((c, e[c]["rms_start"]) for c in ms.classes), key=lambda kv: kv[1])[0] + " " +
-                     _fmt(max(e[c]["rms_start"] for c in ms.classes)))
-                    for name, e in edges.items()]),
-            "",
-            "Every threshold rule against the noise-free pH (mean RMS error over rows; per-level noise "
-            "estimate; the paper's MATLAB example uses the universal rule):",
-            "",
-            _table(["rule / shrinkage / level", f"RMS error ({ms.unit})"],
-                   [(k, _fmt(v)) for k, v in sorted(s6["denoise_rules_rms"].items(), key=lambda kv: kv[1])]),
-            "",
-        ]
+    lines += _section6_lines(ms, s6, opts)
+    lines += _section7_lines(ms, pairs, opts)
+    beyond = beyond_the_paper(ms, s6, pairs, opts)
+    if beyond:
+        lines += ["## Beyond the paper", ""] + [f"- {b}" for b in beyond] + [""]
+    lines += _notes_lines(context)
+    lines += [f"- [{f}]({f})" for f in figure_files]
+    return "\n".join(lines) + "\n"
+
+
+def _section6_lines(ms: Multisignal, s6: dict, opts: Options) -> list[str]:
+    """Section 6 in detail: approximations and denoising, compression, clustering, severity."""
+    lines = ["## Section 6 in detail", "", "### Approximations and denoising (Figures 30 to 32)", ""]
+    lines += _edge_lines(ms, s6, opts)
     res = s6["denoise_residual"]
     lines += [
         "Denoising residual (measured - denoised) per class: std over the estimated noise sigma, lag-1 "
@@ -391,48 +419,84 @@ def markdown(ms: Multisignal, s6: dict, pairs: Sequence[PairResult], opts: Optio
                      f"{v['spearman']:.2f}") for k, v in sev.items()]),
             "",
         ]
+    return lines
+
+
+def _edge_lines(ms: Multisignal, s6: dict, opts: Options) -> list[str]:
+    """The reconstructions' errors against the noise-free pH (none without ``ph_true``)."""
+    edges = s6.get("edges")
+    if not edges:
+        return []
+    return [
+        f"RMS error against the noise-free pH (`ph_true`, resampled the same way), {ms.unit}: over the record, "
+        f"over its first and last {100 * opts.edge_fraction:g} %, all rows (and the class with the largest "
+        "start error).",
+        "",
+        _table(["Reconstruction", "whole record", "start", "end", "start, worst class"],
+               [(name, _fmt(e["all"]["rms_all"]), _fmt(e["all"]["rms_start"]), _fmt(e["all"]["rms_end"]),
+                 max(((c, e[c]["rms_start"]) for c in ms.classes), key=lambda kv: kv[1])[0] + " " +
+                 _fmt(max(e[c]["rms_start"] for c in ms.classes)))
+                for name, e in edges.items()]),
+        "",
+        "Every threshold rule against the noise-free pH (mean RMS error over rows; per-level noise "
+        "estimate; the paper's MATLAB example uses the universal rule):",
+        "",
+        _table(["rule / shrinkage / level", f"RMS error ({ms.unit})"],
+               [(k, _fmt(v)) for k, v in sorted(s6["denoise_rules_rms"].items(), key=lambda kv: kv[1])]),
+        "",
+    ]
+
+
+def _section7_lines(ms: Multisignal, pairs: Sequence[PairResult], opts: Options) -> list[str]:
+    """Section 7 in detail: each residual's first alarm and the variance change points (or why not run)."""
     if not pairs:
-        lines += ["## Section 7", "", "Not run: it needs a faulty run whose metadata states the fault onset and a "
-                  "healthy run of the same length (simulated runs and runs saved by `--save-runs` carry both).", ""]
-    if pairs:
-        lines += ["## Section 7 in detail", ""]
-        rows = []
-        for p in pairs:
-            for wv in p.twin:
-                for b, dd in p.twin_detection[wv].items():
-                    rd = p.realistic_detection.get(wv, {}).get(b)
-                    rows.append((p.fault, wv, f"Res{b[1:]}{b[0]}", _fmt(dd.first_alarm_s, 5),
-                                 "-" if rd is None else _fmt(rd.first_after_onset_s, 5),
-                                 "-" if rd is None or rd.first_after_onset_s is None or p.onset_s is None
-                                 else f"{rd.first_after_onset_s - p.onset_s:.0f}",
-                                 "-" if rd is None else rd.false_alarms,
-                                 "-" if rd is None else f"{rd.threshold:.3g}"))
-        lines += [
-            f"Fault onset {_fmt(pairs[0].onset_s, 5)} s. An alarm is dated when its coefficient can first be "
-            "computed. Paper's residual: first non-zero coefficient of faulty - healthy twin (same noise). "
-            "Realistic residual: faulty - healthy reference with its own noise; alarm when the trailing RMS over "
-            f"{opts.detect_window} coefficients exceeds {opts.detect_margin} x the largest seen between two other "
-            "healthy runs.",
-            "",
-            _table(["fault", "wavelet", "residual", "paper's residual: first alarm (s)",
-                    "realistic: first alarm after onset (s)", "delay (s)", "false alarms before onset",
-                    f"threshold ({ms.unit})"], rows),
-            "",
-            "Variance change points (wvarchg, K_max = "
-            f"{opts.max_changes}, minimum distance {opts.min_distance} coefficients); a change within "
-            f"+/-{opts.onset_tolerance_s:g} s of the onset counts as finding it:",
-            "",
-            _table(["fault", "input", "change points, faulty run (s)", "healthy counterpart (s)",
-                    "error at onset (s)"],
-                   [(p.fault, cp.input, ", ".join(f"{t:.0f}" for t in cp.faulty_s) or "none",
-                     ", ".join(f"{t:.0f}" for t in cp.healthy_s) or "none",
-                     "-" if cp.error_s is None else f"{round(cp.error_s):+d}") for p in pairs for cp in p.change_points]),
-            "",
-        ]
-    beyond = beyond_the_paper(ms, s6, pairs, opts)
-    if beyond:
-        lines += ["## Beyond the paper", ""] + [f"- {b}" for b in beyond] + [""]
-    lines += [
+        return ["## Section 7", "", "Not run: it needs a faulty run whose metadata states the fault onset and a "
+                "healthy run of the same length (simulated runs and runs saved by `--save-runs` carry both).", ""]
+    return [
+        "## Section 7 in detail",
+        "",
+        f"Fault onset {_fmt(pairs[0].onset_s, 5)} s. An alarm is dated when its coefficient can first be "
+        "computed. Paper's residual: first non-zero coefficient of faulty - healthy twin (same noise). "
+        "Realistic residual: faulty - healthy reference with its own noise; alarm when the trailing RMS over "
+        f"{opts.detect_window} coefficients exceeds {opts.detect_margin} x the largest seen between two other "
+        "healthy runs.",
+        "",
+        _table(["fault", "wavelet", "residual", "paper's residual: first alarm (s)",
+                "realistic: first alarm after onset (s)", "delay (s)", "false alarms before onset",
+                f"threshold ({ms.unit})"], _detection_rows(pairs)),
+        "",
+        "Variance change points (wvarchg, K_max = "
+        f"{opts.max_changes}, minimum distance {opts.min_distance} coefficients); a change within "
+        f"+/-{opts.onset_tolerance_s:g} s of the onset counts as finding it:",
+        "",
+        _table(["fault", "input", "change points, faulty run (s)", "healthy counterpart (s)",
+                "error at onset (s)"],
+               [(p.fault, cp.input, ", ".join(f"{t:.0f}" for t in cp.faulty_s) or "none",
+                 ", ".join(f"{t:.0f}" for t in cp.healthy_s) or "none",
+                 "-" if cp.error_s is None else f"{round(cp.error_s):+d}") for p in pairs for cp in p.change_points]),
+        "",
+    ]
+
+
+def _detection_rows(pairs: Sequence[PairResult]) -> list[tuple]:
+    """One row per (fault, wavelet, band): the paper's residual's first alarm beside the realistic one's."""
+    rows = []
+    for p in pairs:
+        for wv in p.twin:
+            for b, dd in p.twin_detection[wv].items():
+                rd = p.realistic_detection.get(wv, {}).get(b)
+                rows.append((p.fault, wv, f"Res{b[1:]}{b[0]}", _fmt(dd.first_alarm_s, 5),
+                             "-" if rd is None else _fmt(rd.first_after_onset_s, 5),
+                             "-" if rd is None or rd.first_after_onset_s is None or p.onset_s is None
+                             else f"{rd.first_after_onset_s - p.onset_s:.0f}",
+                             "-" if rd is None else rd.false_alarms,
+                             "-" if rd is None else f"{rd.threshold:.3g}"))
+    return rows
+
+
+def _notes_lines(context: dict) -> list[str]:
+    """Notes on the paper's sources and our tools, the timings, and the figures heading."""
+    return [
         "## Notes",
         "",
         "- The paper's Section 6 follows MATLAB's documentation example *Multisignal 1-D Wavelet Analysis* "
@@ -446,8 +510,6 @@ def markdown(ms: Multisignal, s6: dict, pairs: Sequence[PairResult], opts: Optio
         "## Figures",
         "",
     ]
-    lines += [f"- [{f}]({f})" for f in figure_files]
-    return "\n".join(lines) + "\n"
 
 
 # ---- everything --------------------------------------------------------------------------------------

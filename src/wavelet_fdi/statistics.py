@@ -48,7 +48,23 @@ def increments(kind: str, u: np.ndarray, k: float) -> np.ndarray:
 
 
 class CusumBank:
-    """n one-sided CUSUMs with a global sample counter for change-time estimates."""
+    """n one-sided CUSUMs with a global sample counter for change-time estimates.
+
+    ``update`` takes the increments of a chunk of samples (already minus their reference value) and
+    returns each statistic S = max(0, S + z) per sample; ``last_zero`` is where each last was 0 (the
+    change-time estimate of an alarm).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavelet_fdi import CusumBank
+    >>> bank = CusumBank(2)
+    >>> bank.update(np.array([[0.5, 0.5, -2.0, 1.0], [-1.0, -1.0, -1.0, -1.0]]), first_index=0)
+    array([[0.5, 1. , 0. , 1. ],
+           [0. , 0. , 0. , 0. ]])
+    >>> bank.last_zero
+    array([2, 3])
+    """
 
     def __init__(self, n: int) -> None:
         self.n = n

@@ -43,7 +43,7 @@ def test_henson_seborg_charge_balance_matches_their_equation():
         assert ours == pytest.approx(-hs, abs=1e-15)
 
 
-def _random_chemistry(draw_conc):
+def _random_chemistry():
     comps = [COMPONENTS[n] for n in ("sodium", "nitrate", "carbonate", "sulfate", "phosphate", "ammonium", "acetate")]
     return ChargeBalance(comps), comps
 
@@ -53,7 +53,7 @@ def _random_chemistry(draw_conc):
        guess=st.floats(0.0, 14.0))
 def test_ph_solver_agrees_with_brentq_on_random_invariants(conc, guess):
     """Thousands of random physically valid invariants: finite, in range, equal to scipy's brentq."""
-    cb, _ = _random_chemistry(None)
+    cb, _ = _random_chemistry()
     ph = cb.ph(conc, guess=guess)
     assert math.isfinite(ph) and 0.0 <= ph <= 14.0
     f0, _ = cb.residual(0.0, conc)
@@ -69,7 +69,7 @@ def test_ph_solver_agrees_with_brentq_on_random_invariants(conc, guess):
 
 def test_vectorised_solver_equals_scalar():
     rng = np.random.default_rng(3)
-    cb, _ = _random_chemistry(None)
+    cb, _ = _random_chemistry()
     conc = rng.uniform(0, 0.1, size=(500, 7))
     vec = cb.ph_array(conc)
     scal = np.array([cb.ph(list(c)) for c in conc])

@@ -12,7 +12,7 @@ from wavelet_fdi.config import DetectorSettings
 from .detector_helpers import PAPER_FAULTS
 
 ONSET_S = 7000.0
-#: the library's paper severities (src/phfdi/scenarios/faults.yaml)
+#: the library's paper severities (the fault catalogue, phfdi_base.faults)
 TRUE_PARAMETER = {"backlash": 0.7, "friction": 1.0, "deadzone": 100.0, "saturation": 50.0, "stiction": 1.5,
                   "probe_delay": 10.0}
 

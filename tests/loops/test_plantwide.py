@@ -100,3 +100,29 @@ def test_each_stretch_is_a_row_with_its_lines(folder, tmp_path):
     assert [r["samples"] for r in fic9] == [150, len(run) - 170]
     assert all(r["lines"] for r in fic9) and fic9[0]["lines"] != fic9[1]["lines"]
     assert [r["loop_tag"] for r in rows].count("FIC1") == 1
+
+
+def test_loops_in_chunks_per_task_keep_their_order_and_progress(folder, tmp_path):
+    """Several loops per Dask task (what thousands of loops use): the same reports in job order as
+    one loop per task, and progress counted in loops."""
+    bad = tmp_path / "bad.csv"
+    bad.write_text("a,b\n1,2\n")
+    jobs = expand([str(folder)]) + [Job(str(bad))]
+    seen = []
+    one = diagnose_jobs(jobs, workers=1, processes=False, chunk=1)
+    chunked = diagnose_jobs(jobs, workers=1, processes=False, chunk=2, progress=lambda d, t: seen.append((d, t)))
+    assert [r["file"] for r in chunked] == [j.path for j in jobs]
+    assert [r.get("stiction", {}).get("probability") for r in chunked] == \
+        [r.get("stiction", {}).get("probability") for r in one]
+    assert "error" in chunked[-1]
+    assert sorted(seen) == [(2, 5), (4, 5), (5, 5)]
+
+
+def test_progress_every_5_percent_when_loops_arrive_in_chunks(capsys):
+    from phfdi.commands.loop_diagnose import _progress
+
+    show = _progress(1000)
+    for done in [*range(16, 1000, 16), 1000]:  # 16 loops per task, the last task shorter
+        show(done, 1000)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 20 and lines[0] == "loop-diagnose: 64/1000 loops" and lines[-1].endswith("1000/1000 loops")

@@ -18,9 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from phfdi_base.ros.env import ensure_localhost, graph_env, reserve_domain_id
+from phfdi_base.ros.env import ensure_localhost, graph_env, reserve_domain_id, use_discovery_profile
 
 ensure_localhost()  # this test process too (its own rclpy nodes)
+use_discovery_profile()  # and it discovers the graph's nodes as they discover each other
 
 pytestmark = pytest.mark.ros
 

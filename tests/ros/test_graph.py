@@ -51,6 +51,8 @@ def test_every_node_reports_its_start_up_steps_in_order(graph_run):
         assert [times[s] for s in steps] == sorted(times[s] for s in steps), (node, times)
         assert graph_run["t0"] < times["main"] < time.time()
         assert 0 < cpu["main"] <= cpu["connected"], (node, cpu)
+        # the scenario came validated in the node's part: no schema library, no root finder at start-up
+        assert not {"pydantic", "scipy"} & set(startup[0]["heavy_modules"]), (node, startup[0])
 
 
 def test_graph_run_equals_in_process_simulation(graph_run):

@@ -107,3 +107,23 @@ def test_a_killed_recorder_leaves_a_bag_the_launcher_recovers(tmp_path):
     info = bagio.bag_info(bag)
     assert info["finished"] and info["messages"] > 0
     assert stale_shm_files(*domain) == []
+
+
+def test_every_node_ends_when_the_launcher_is_killed(tmp_path):
+    """SIGKILL gives the launcher no chance to stop anything: each node asked the kernel for SIGTERM when it
+    dies (PR_SET_PDEATHSIG, set by the node itself since the launcher starts it without a pre-exec hook)."""
+    from phfdi.ros.launcher import remove_ownerless_ports
+
+    t0 = time.time()
+    proc, bag, logs, domain = _start_paced(tmp_path)
+    nodes = [pid for pid in processes_with(str(logs)) if pid != proc.pid]
+    assert len(nodes) == 4, nodes  # plant, valve, controllers, recorder
+    proc.kill()
+    proc.communicate(timeout=60)
+    try:
+        assert _wait_gone(logs) == []
+    finally:
+        for pid in processes_with(str(logs)):  # only this test's nodes (their command lines name its folder)
+            os.kill(pid, signal.SIGKILL)
+        time.sleep(1.0)
+        remove_ownerless_ports(domain[0], t0)

@@ -153,10 +153,6 @@ class FileResult:
     file: SkabFile
     prediction: np.ndarray  # 0/1 per test row
 
-    @property
-    def test_slice(self) -> slice:
-        return slice(TRAIN_ROWS, None)
-
     def labels(self) -> np.ndarray:
         return self.file.anomaly[TRAIN_ROWS:]
 

@@ -7,6 +7,7 @@ import json
 import shlex
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from .common import EPILOG_FORMAT, Progress
@@ -117,86 +118,33 @@ def section7_pairs(runs: list, labels: list[str], signal: str, opts):
     return pairs
 
 
-def run(args: argparse.Namespace) -> int:
-    import numpy as np
-    import pywt
+@dataclass
+class _RunSets:
+    """The Section 6 runs (with their classes and row names) and the Section 7 runs, and where they came from."""
 
-    from phfdi.study.paperset import PAPER_GROUPING, section6_variants, section7_variants, simulate_variants
-    from phfdi_base.errors import UserError
-    from wavelet_fdi.analysis import Options
-    from wavelet_fdi.multisignal import from_runs
+    runs6: list
+    labels6: list[str]
+    names6: list[str]
+    runs7: list
+    labels7: list[str]
+    data_text: str
+    t_sim: float = 0.0
+
+
+def run(args: argparse.Namespace) -> int:
+    from phfdi.study.paperset import PAPER_GROUPING
     from wavelet_fdi.report import section6_claims, section7_claims, write_all
 
     out = Path(args.out)
-    if args.samples < 16:
-        raise UserError(f"--samples {args.samples}: need at least 16")
-    try:
-        max_level = pywt.dwt_max_level(args.samples, pywt.Wavelet(args.wavelet).dec_len)
-    except ValueError as exc:
-        raise UserError(f"--wavelet {args.wavelet}: {exc}") from None
-    if not 1 <= args.level <= max_level:
-        raise UserError(f"--level {args.level}: must be 1..{max_level} for {args.samples} samples with {args.wavelet}")
-    if args.clusters != "auto" and not (args.clusters.isdigit() and int(args.clusters) >= 1):
-        raise UserError(f"--clusters {args.clusters}: give a positive integer or 'auto'")
-    opts = Options(wavelet=args.wavelet, level=args.level,
-                   denoise_levels=tuple(sorted({max(1, args.level - 2), args.level})),
-                   n_clusters=None if args.clusters == "auto" else int(args.clusters))
+    opts = _options(args)
     t_start = time.perf_counter()
-    t_sim = 0.0
-    if args.bags:
-        runs6 = load_runs(args.bags)
-        labels6 = args.labels.split(",") if args.labels else [run_label(r, p) for r, p in zip(runs6, args.bags)]
-        if len(labels6) != len(runs6):
-            raise UserError(f"--labels gives {len(labels6)} labels for {len(runs6)} files")
-        names6 = [Path(p).stem for p in args.bags]
-        runs7 = load_runs(args.section7_bags) if args.section7_bags else runs6
-        labels7 = [run_label(r, p) for r, p in zip(runs7, args.section7_bags)] if args.section7_bags else labels6
-        data_text = (f"{len(runs6)} run files: " + ", ".join(f"`{p}` ({lab})" for p, lab in zip(args.bags, labels6))
-                     + (f"; Section 7 from {len(runs7)} files" if args.section7_bags else ""))
-    else:
-        v6 = section6_variants(args.variants, args.onset)
-        v7 = section7_variants(args.section7_onset)
-        _say(f"simulating {len(v6)} Section 6 runs and {len(v7)} Section 7 runs ({args.scenario}, {args.jobs} job(s))")
-        t0 = time.perf_counter()
-        runs = simulate_variants(v6 + v7, args.scenario, args.overrides, args.jobs,
-                                 Progress("analyze: simulating", enabled=True))
-        t_sim = time.perf_counter() - t0
-        runs6, runs7 = runs[:len(v6)], runs[len(v6):]
-        labels6, names6 = [v.label for v in v6], [v.name for v in v6]
-        labels7 = [v.label for v in v7]
-        if args.save_runs:
-            for sub, vs, rs in (("section6", v6, runs6), ("section7", v7, runs7)):
-                for v, r in zip(vs, rs):
-                    r.save(out / "runs" / sub / f"{v.name}.parquet")
-            _say(f"runs written to {out / 'runs'}/")
-        factors = sorted({round(v.factor, 3) for v in v6 if v.label != "healthy"})
-        data_text = (f"Simulated with `phfdi.loop.simulate` on scenario `{args.scenario}`"
-                     + (f" (overrides: {', '.join(args.overrides)})" if args.overrides else "") +
-                     f". Section 6: {len(v6)} runs = {len(set(labels6))} classes x {args.variants} variants; "
-                     f"variant i has noise seed {v6[0].seed}+i and the fault's severity x{factors[0]:g}..{factors[-1]:g} "
-                     f"({', '.join(f'{f:g}' for f in factors)}); faults act from {args.onset:g} s "
-                     "(the paper's Section 5 responses that Section 6 analyses). Section 7: backlash and friction "
-                     f"from {args.section7_onset:g} s with seed {v7[0].seed}, their healthy twin (same seed), a "
-                     f"healthy reference (seed {v7[-2].seed}) and a healthy calibration run (seed {v7[-1].seed}). "
-                     f"Rows: `{args.signal}` averaged over {args.samples} equal bins of the run.")
-    for r, lab in zip(runs6, labels6):
-        if args.signal not in r:
-            raise UserError(f"run {lab!r} has no signal {args.signal!r}; it has: {', '.join(r.names)}")
-    info = [{"seed": r.metadata.get("seed"), "severity_factor": r.metadata.get("severity_factor")} for r in runs6]
-    info = [{k: v for k, v in d.items() if v is not None} for d in info]
-    try:
-        ms = from_runs(runs6, labels6, args.signal, args.samples, names6, info=info)
-    except ValueError as exc:
-        raise UserError(f"cannot build the multisignal: {exc}") from None
-    if not np.all(np.isfinite(ms.data)):
-        raise UserError(f"{args.signal} has no finite samples in some runs")
-    if ms.shape[0] < 2:
-        raise UserError("the analysis needs at least two runs")
+    sets = _read_runs(args) if args.bags else _simulate_runs(args, out)
+    ms = _multisignal(args, sets)
     command = "phfdi analyze " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv[1:2] == ["analyze"] \
         else "phfdi analyze --out " + str(out)
-    context = {"command": command, "data": data_text,
-               "timings": f"simulation {t_sim:.1f} s" if t_sim else ""}
-    result = write_all(ms, lambda: section7_pairs(runs7, labels7, args.signal, opts), out, opts, context,
+    context = {"command": command, "data": sets.data_text,
+               "timings": f"simulation {sets.t_sim:.1f} s" if sets.t_sim else ""}
+    result = write_all(ms, lambda: section7_pairs(sets.runs7, sets.labels7, args.signal, opts), out, opts, context,
                        PAPER_GROUPING, figures_on=not args.no_figures, say=_say)
     claims = section6_claims(ms, result["section6"], opts) + section7_claims(result["section7"], opts)
     if args.json:
@@ -208,3 +156,96 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {out / 'REPORT.md'}, results.json and {len(result['files'])} figures "
               f"({time.perf_counter() - t_start:.0f} s; {result['timings']})")
     return 0
+
+
+def _options(args: argparse.Namespace):
+    """The analysis options from the command line, each checked (UserError naming the option)."""
+    import pywt
+
+    from phfdi_base.errors import UserError
+    from wavelet_fdi.analysis import Options
+
+    if args.samples < 16:
+        raise UserError(f"--samples {args.samples}: need at least 16")
+    try:
+        max_level = pywt.dwt_max_level(args.samples, pywt.Wavelet(args.wavelet).dec_len)
+    except ValueError as exc:
+        raise UserError(f"--wavelet {args.wavelet}: {exc}") from None
+    if not 1 <= args.level <= max_level:
+        raise UserError(f"--level {args.level}: must be 1..{max_level} for {args.samples} samples with {args.wavelet}")
+    if args.clusters != "auto" and not (args.clusters.isdigit() and int(args.clusters) >= 1):
+        raise UserError(f"--clusters {args.clusters}: give a positive integer or 'auto'")
+    return Options(wavelet=args.wavelet, level=args.level,
+                   denoise_levels=tuple(sorted({max(1, args.level - 2), args.level})),
+                   n_clusters=None if args.clusters == "auto" else int(args.clusters))
+
+
+def _read_runs(args: argparse.Namespace) -> _RunSets:
+    """The runs of ``--bags`` (and ``--section7-bags``) with their classes."""
+    from phfdi_base.errors import UserError
+
+    runs6 = load_runs(args.bags)
+    labels6 = args.labels.split(",") if args.labels else [run_label(r, p) for r, p in zip(runs6, args.bags)]
+    if len(labels6) != len(runs6):
+        raise UserError(f"--labels gives {len(labels6)} labels for {len(runs6)} files")
+    names6 = [Path(p).stem for p in args.bags]
+    runs7 = load_runs(args.section7_bags) if args.section7_bags else runs6
+    labels7 = [run_label(r, p) for r, p in zip(runs7, args.section7_bags)] if args.section7_bags else labels6
+    data_text = (f"{len(runs6)} run files: " + ", ".join(f"`{p}` ({lab})" for p, lab in zip(args.bags, labels6))
+                 + (f"; Section 7 from {len(runs7)} files" if args.section7_bags else ""))
+    return _RunSets(runs6, labels6, names6, runs7, labels7, data_text)
+
+
+def _simulate_runs(args: argparse.Namespace, out: Path) -> _RunSets:
+    """The paper's Section 6 and 7 runs, simulated (and saved with ``--save-runs``)."""
+    from phfdi.study.paperset import section6_variants, section7_variants, simulate_variants
+
+    v6 = section6_variants(args.variants, args.onset)
+    v7 = section7_variants(args.section7_onset)
+    _say(f"simulating {len(v6)} Section 6 runs and {len(v7)} Section 7 runs ({args.scenario}, {args.jobs} job(s))")
+    t0 = time.perf_counter()
+    runs = simulate_variants(v6 + v7, args.scenario, args.overrides, args.jobs,
+                             Progress("analyze: simulating", enabled=True))
+    t_sim = time.perf_counter() - t0
+    runs6, runs7 = runs[:len(v6)], runs[len(v6):]
+    labels6, names6 = [v.label for v in v6], [v.name for v in v6]
+    labels7 = [v.label for v in v7]
+    if args.save_runs:
+        for sub, vs, rs in (("section6", v6, runs6), ("section7", v7, runs7)):
+            for v, r in zip(vs, rs):
+                r.save(out / "runs" / sub / f"{v.name}.parquet")
+        _say(f"runs written to {out / 'runs'}/")
+    factors = sorted({round(v.factor, 3) for v in v6 if v.label != "healthy"})
+    data_text = (f"Simulated with `phfdi.loop.simulate` on scenario `{args.scenario}`"
+                 + (f" (overrides: {', '.join(args.overrides)})" if args.overrides else "") +
+                 f". Section 6: {len(v6)} runs = {len(set(labels6))} classes x {args.variants} variants; "
+                 f"variant i has noise seed {v6[0].seed}+i and the fault's severity x{factors[0]:g}..{factors[-1]:g} "
+                 f"({', '.join(f'{f:g}' for f in factors)}); faults act from {args.onset:g} s "
+                 "(the paper's Section 5 responses that Section 6 analyses). Section 7: backlash and friction "
+                 f"from {args.section7_onset:g} s with seed {v7[0].seed}, their healthy twin (same seed), a "
+                 f"healthy reference (seed {v7[-2].seed}) and a healthy calibration run (seed {v7[-1].seed}). "
+                 f"Rows: `{args.signal}` averaged over {args.samples} equal bins of the run.")
+    return _RunSets(runs6, labels6, names6, runs7, labels7, data_text, t_sim)
+
+
+def _multisignal(args: argparse.Namespace, sets: _RunSets):
+    """The Section 6 runs as a multisignal of ``--samples`` bins of ``--signal`` per row."""
+    import numpy as np
+
+    from phfdi_base.errors import UserError
+    from wavelet_fdi.multisignal import from_runs
+
+    for r, lab in zip(sets.runs6, sets.labels6):
+        if args.signal not in r:
+            raise UserError(f"run {lab!r} has no signal {args.signal!r}; it has: {', '.join(r.names)}")
+    info = [{"seed": r.metadata.get("seed"), "severity_factor": r.metadata.get("severity_factor")} for r in sets.runs6]
+    info = [{k: v for k, v in d.items() if v is not None} for d in info]
+    try:
+        ms = from_runs(sets.runs6, sets.labels6, args.signal, args.samples, sets.names6, info=info)
+    except ValueError as exc:
+        raise UserError(f"cannot build the multisignal: {exc}") from None
+    if not np.all(np.isfinite(ms.data)):
+        raise UserError(f"{args.signal} has no finite samples in some runs")
+    if ms.shape[0] < 2:
+        raise UserError("the analysis needs at least two runs")
+    return ms

@@ -7,14 +7,39 @@ import sys
 import time
 from contextlib import contextmanager
 
-EPILOG_FORMAT = argparse.RawDescriptionHelpFormatter
+FAULT_PRESETS = "{fault_presets}"
+#: in an epilog: the diagnosis's candidates from catalogued faults of one's own blocks (a line, or nothing)
+OWN_CANDIDATES = "{own_candidates}\n"
+
+
+class EpilogFormat(argparse.RawDescriptionHelpFormatter):
+    """Examples kept as written; ``{fault_presets}`` in an option's help becomes the catalogue's presets,
+    read only when help is printed (importing the cores costs a third of a second)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = super()._get_help_string(action) or ""
+        if FAULT_PRESETS in text:
+            from phfdi.faults import preset_names
+
+            text = text.replace(FAULT_PRESETS, ", ".join(preset_names()))
+        return text
+
+    def _format_text(self, text: str) -> str:
+        if OWN_CANDIDATES in text:
+            from phfdi.diagnosis.report import CAUSES, causes
+
+            own = [f"{c} ({family})" for c, family in causes().items() if c not in CAUSES]
+            text = text.replace(OWN_CANDIDATES, f"  Your blocks' faults (fault catalogue): {' '.join(own)}.\n" if own else "")
+        return super()._format_text(text)
+
+
+EPILOG_FORMAT = EpilogFormat
 
 
 def add_scenario_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default="paper", help="scenario preset name or a .yaml file (default: paper)")
     p.add_argument("--fault", default=None,
-                   help="fault from the library replacing the scenario's faults (healthy, backlash, friction, "
-                        "deadzone, saturation, stiction, probe_delay, leakage, blocking)")
+                   help=f"fault from the library replacing the scenario's faults ({FAULT_PRESETS})")
     p.add_argument("--onset", type=float, default=None, metavar="S", help="fault onset time (s)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario key, e.g. --set duration_s=2000 --set sensors.ph.noise_std=0.02")

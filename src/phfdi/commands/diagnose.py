@@ -48,6 +48,7 @@ catalogue: stiction backlash deadzone saturation coulomb_viscous_friction leakag
   none, not_identifiable. Structural candidates (--structure, or by name with --candidates): mixing_zone
   tanks_in_series feed_delay carbonate co2_absorption (process), pump_curve pump_lag (actuator),
   probe_asymmetric_lag sensor_second_order two_point_calibration (sensor).
+{own_candidates}
   Bad input exits with status 2 and one line naming the problem.
 """
 

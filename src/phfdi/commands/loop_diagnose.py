@@ -136,9 +136,11 @@ def _progress(total: int):
     if total < 2:
         return None
     step = max(1, total // 20)
+    shown = [0]  # the last 5 % mark printed: loops arrive in chunks, so done need not hit a mark
 
     def show(done: int, n: int) -> None:
-        if done == n or done % step == 0:
+        if done == n or done // step > shown[0]:
+            shown[0] = done // step
             print(f"loop-diagnose: {done}/{n} loops", file=sys.stderr, flush=True)
 
     return show

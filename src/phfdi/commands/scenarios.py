@@ -24,7 +24,8 @@ def run(args: argparse.Namespace) -> int:
     import yaml
 
     from ph_plant_sim.build import PLANT_DIR
-    from phfdi.scenario import SCENARIO_DIR, fault_library, load_scenario
+    from phfdi.faults import fault_library
+    from phfdi.scenario import SCENARIO_DIR, load_scenario
     from phfdi_base.yamlfile import list_presets
 
     if args.show:

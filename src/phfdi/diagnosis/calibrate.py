@@ -18,7 +18,7 @@ from phfdi_base.errors import UserError
 from phfdi_base.spec import apply_override
 
 from .catalogue import Candidate, Param
-from .fit import Fitter, Problem
+from .fit import Fitter, Problem, one_blas_thread
 from .pipeline import Options, context_for, split
 from .residual import noise_floor
 
@@ -88,8 +88,9 @@ def calibrate(records_fit, records_val, nominal: dict, keys: list[str], opts: Op
     fitter = Fitter(Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, ["sensor_bias"]))
     if opts.progress:
         opts.progress(f"calibrating {', '.join(keys)} on {len(records)} record(s)")
-    nom = fitter.nominal()
-    res = fitter.fit([cand])
+    with one_blas_thread():  # tiny matrices: BLAS threads only wait (fit.one_blas_thread)
+        nom = fitter.nominal()
+        res = fitter.fit([cand])
     for k, v in res.params.items():
         if not math.isfinite(v):
             raise UserError(f"--calibrate: {k} did not converge")

@@ -32,9 +32,12 @@ from typing import Callable
 
 import numpy as np
 
+from phfdi.faults import block_name
+from phfdi.faults import catalogue as fault_catalogue
 from phfdi_base.errors import UserError
+from phfdi_base.faults import Fault
 
-from .report import CAUSES
+from .report import causes
 
 BUFFER_COMPONENT = "unmodelled_buffer"
 BUFFER_COMPOUND = "UNMODELLED_BUFFER"
@@ -110,7 +113,7 @@ class Candidate:
 
     @property
     def family(self) -> str:
-        return CAUSES[self.cause]
+        return causes()[self.cause]
 
     @property
     def label(self) -> str:
@@ -137,6 +140,24 @@ def _add_sensor_block(raw: dict, kind: str, params: dict) -> None:
     ph.setdefault("extra", []).append({"type": kind, "params": params})
 
 
+def _fault(block: str) -> Fault:
+    return next(f for f in fault_catalogue().values() if f.block == block)
+
+
+def _param(block: str, name: str, low: float = -math.inf, high: float = math.inf) -> Param:
+    """A catalogued fault parameter over the diagnosis's range of the fault catalogue (:mod:`phfdi_base.faults`),
+    narrowed by the data to [low, high]."""
+    p = _fault(block).param(name)
+    r = p.fit_range("diagnosis")
+    return Param(name, max(r.low, low), min(r.high, high), p.unit, r.log)
+
+
+def _preset(block: str, name: str) -> float:
+    value = _fault(block).param(name).paper
+    assert value is not None, f"{block}.{name} has no preset value"
+    return value
+
+
 def _spaced(low: float, high: float, n: int, log: bool = False) -> list[float]:
     if log:
         return [float(v) for v in np.geomspace(low, high, n + 2)[1:-1]]
@@ -145,39 +166,43 @@ def _spaced(low: float, high: float, n: int, log: bool = False) -> list[float]:
 
 def actuator_candidates(ctx: Context) -> list[Candidate]:
     cmd = ctx.command_pct
-    sat_low = min(max(float(np.min(cmd)), 1.0), 90.0)  # a stop below every command cannot be told from none
+    high = _param("saturation", "high_pct")
+    sat_low = min(max(float(np.min(cmd)), high.low), 90.0)  # a stop below every command cannot be told from none
     med_cmd = float(np.median(cmd))
     lo_cmd, hi_cmd = float(np.min(cmd)), max(float(np.max(cmd)), float(np.min(cmd)) + 1.0)
     qmax = ctx.valve_max_flow_ml_s
+    sat_fixed = {"low_pct": _preset("saturation", "low_pct")}
     out = [
-        Candidate("stiction", [Param("s_pct", 0.05, 20.0, "%", log=True), Param("j_pct", 0.0, 20.0, "%")],
+        Candidate("stiction", [_param("stiction", "s_pct"), _param("stiction", "j_pct")],
                   [{"s_pct": s, "j_pct": s * f} for s in _spaced(0.3, 15.0, 6, log=True) for f in (0.1, 0.4, 0.7, 1.0)],
                   lambda raw, p: _add_fault(raw, "stiction", {"s_pct": p["s_pct"], "j_pct": p["j_pct"]}),
                   "s_pct", nonsmooth=True, band=lambda p: 0.5 * p["s_pct"]),
-        Candidate("backlash", [Param("width_pct", 0.02, 20.0, "%", log=True)],
+        Candidate("backlash", [_param("backlash", "width_pct")],
                   [{"width_pct": w} for w in _spaced(0.15, 15.0, 8, log=True)],
                   lambda raw, p: _add_fault(raw, "backlash", {"width_pct": p["width_pct"]}),
                   "width_pct", nonsmooth=True, band=lambda p: 0.5 * p["width_pct"]),
-        Candidate("deadzone", [Param("width_pct", 0.0, 100.0, "%"), Param("center_pct", lo_cmd, hi_cmd, "%")],
+        Candidate("deadzone", [_param("deadzone", "width_pct"), _param("deadzone", "center_pct", lo_cmd, hi_cmd)],
                   [{"width_pct": w, "center_pct": c} for w in _spaced(0.5, 60.0, 5, log=True)
                    for c in (float(np.quantile(cmd, 0.25)), med_cmd, float(np.quantile(cmd, 0.75)))],
                   lambda raw, p: _add_fault(raw, "deadzone", {"width_pct": p["width_pct"],
                                                               "center_pct": p["center_pct"]}),
                   "width_pct", nonsmooth=True),
-        Candidate("saturation", [Param("high_pct", sat_low, 100.0, "%")],
+        Candidate("saturation", [_param("saturation", "high_pct", low=sat_low)],
                   # where the commands are: a stop only shows when the data ask for more
                   [{"high_pct": float(np.quantile(cmd, q))} for q in (0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.995)]
-                  + [{"high_pct": 100.0}],
-                  lambda raw, p: _add_fault(raw, "saturation", {"low_pct": 0.0, "high_pct": p["high_pct"]}),
-                  "high_pct", nonsmooth=True, fixed={"low_pct": 0.0}),
+                  + [{"high_pct": high.high}],
+                  lambda raw, p: _add_fault(raw, "saturation", {**sat_fixed, "high_pct": p["high_pct"]}),
+                  "high_pct", nonsmooth=True, fixed=dict(sat_fixed)),
         Candidate("coulomb_viscous_friction",
-                  [Param("coulomb_pct", 0.0, 20.0, "%"), Param("mobility_per_s", 1e-3, 10.0, "1/s", log=True)],
+                  [_param("coulomb_viscous_friction", "coulomb_pct"),
+                   _param("coulomb_viscous_friction", "mobility_per_s")],
                   [{"coulomb_pct": c, "mobility_per_s": m} for c in _spaced(0.15, 8.0, 5, log=True)
                    for m in (0.02, 0.1, 1.0)],
                   lambda raw, p: _add_fault(raw, "coulomb_viscous_friction",
                                             {"coulomb_pct": p["coulomb_pct"], "mobility_per_s": p["mobility_per_s"]}),
                   "coulomb_pct", nonsmooth=True, band=lambda p: p["coulomb_pct"]),
-        Candidate("leakage", [Param("flow_ml_s", 0.0, 0.5 * qmax, "mL/s")],
+        # at most half the valve's rated flow
+        Candidate("leakage", [_param("leakage", "flow_ml_s", high=0.5 * qmax)],
                   [{"flow_ml_s": f * qmax} for f in (0.0, 0.005, 0.02, 0.08)],
                   lambda raw, p: _add_fault(raw, "leakage", {"flow_ml_s": p["flow_ml_s"]}, "valve_flow"),
                   "flow_ml_s"),
@@ -195,22 +220,25 @@ def _scale_valve(raw: dict, gain: float) -> None:
 
 def sensor_candidates(ctx: Context) -> list[Candidate]:
     span = ctx.duration_s
-    longest = max(5.0 * ctx.dt_s, min(600.0, span / 5.0))
+    longest = max(5.0 * ctx.dt_s, min(_param("sensor_delay", "delay_s").high, span / 5.0))
     starts_s = sorted({min(longest * 0.9, max(ctx.dt_s, s)) for s in (1.0, 5.0, 20.0, 80.0)})
+    gain_fixed = {"reference": _preset("sensor_gain", "reference")}
     return [
-        Candidate("sensor_delay", [Param("delay_s", 0.0, longest, "s")], [{"delay_s": s} for s in starts_s],
+        Candidate("sensor_delay", [_param("sensor_delay", "delay_s", high=longest)], [{"delay_s": s} for s in starts_s],
                   lambda raw, p: _add_sensor_block(raw, "sensor_delay", {"delay_s": p["delay_s"]}), "delay_s"),
-        Candidate("sensor_lag", [Param("tau_s", 0.0, longest, "s")], [{"tau_s": s} for s in starts_s],
+        Candidate("sensor_lag", [_param("sensor_lag", "tau_s", high=longest)], [{"tau_s": s} for s in starts_s],
                   lambda raw, p: _add_sensor_block(raw, "sensor_lag", {"tau_s": p["tau_s"]}), "tau_s"),
-        Candidate("sensor_bias", [Param("bias", -3.0, 3.0, "pH")], [{"bias": 0.0}],
+        Candidate("sensor_bias", [_param("sensor_bias", "bias")], [{"bias": 0.0}],
                   lambda raw, p: _add_sensor_block(raw, "sensor_bias", {"bias": p["bias"]}), "bias",
                   per_group=("bias",)),
-        Candidate("sensor_drift", [Param("rate_per_s", -3.0 / span, 3.0 / span, "pH/s")], [{"rate_per_s": 0.0}],
+        # up to 3 pH over the record, either sign
+        Candidate("sensor_drift", [_param("sensor_drift", "rate_per_s", -3.0 / span, 3.0 / span)],
+                  [{"rate_per_s": 0.0}],
                   lambda raw, p: _add_sensor_block(raw, "sensor_drift", {"rate_per_s": p["rate_per_s"]}),
                   "rate_per_s"),
-        Candidate("sensor_gain", [Param("gain", 0.4, 2.5, "1", log=True)], [{"gain": 1.0}],
-                  lambda raw, p: _add_sensor_block(raw, "sensor_gain", {"gain": p["gain"], "reference": 7.0}),
-                  "gain", fixed={"reference": 7.0}),
+        Candidate("sensor_gain", [_param("sensor_gain", "gain")], [{"gain": 1.0}],
+                  lambda raw, p: _add_sensor_block(raw, "sensor_gain", {"gain": p["gain"], **gain_fixed}),
+                  "gain", fixed=dict(gain_fixed)),
     ]
 
 
@@ -401,6 +429,39 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
     return out
 
 
+#: the faults of the fault catalogue tried with a search of their own (above)
+TAILORED = ("stiction", "backlash", "deadzone", "saturation", "coulomb_viscous_friction", "leakage", "sensor_delay",
+            "sensor_lag", "sensor_bias", "sensor_drift", "sensor_gain")
+
+
+def _others(sites: tuple[str, ...]) -> tuple[str, ...]:
+    """Blocks of catalogued faults at ``sites`` with no tailored candidate (a block of one's own)."""
+    return tuple(f.block for f in fault_catalogue().values()
+                 if f.site in sites and f.params and f.block not in TAILORED)
+
+
+def catalogued_candidates(ctx: Context, sites: tuple[str, ...]) -> list[Candidate]:
+    """A candidate for each catalogued fault at ``sites`` without a tailored one: every parameter over its
+    diagnosis range (an unbounded one up to ten times its preset value), started from its preset value and
+    the main parameter spread over its range."""
+    out = []
+    for block in _others(sites):
+        f = _fault(block)
+        params, base = [], {}
+        for p in f.params:
+            r = p.fit_range("diagnosis")
+            high = r.high if math.isfinite(r.high) else 10.0 * (p.paper or 1.0)
+            params.append(Param(p.name, r.low, high, p.unit, r.log))
+            base[p.name] = params[-1].clip(p.paper) if p.paper is not None else params[-1].from_unit(0.5)
+        main = params[0]
+        starts = [dict(base, **{main.name: main.from_unit(u)}) for u in (0.2, 0.5, 0.8)] + [base]
+        where = f.site if f.site != "ph_sensor" else ""
+        apply = (lambda raw, p, block=block: _add_sensor_block(raw, block, dict(p))) if not where else \
+            (lambda raw, p, block=block, where=where: _add_fault(raw, block, dict(p), where))
+        out.append(Candidate(block, params, starts, apply, main.name, nonsmooth=f.site != "ph_sensor"))
+    return out
+
+
 def catalogue(ctx: Context, only: list[str] | None = None,
               structure: bool = False) -> tuple[list[Candidate], dict[str, str]]:
     """Candidates that apply to this model and data, and why the others do not.
@@ -408,18 +469,20 @@ def catalogue(ctx: Context, only: list[str] | None = None,
     ``structure``: add the structural candidates (:func:`structural_candidates`); they are also added when
     ``only`` names one of them.
     """
+    if only:
+        only = [block_name(c) for c in only]  # a fault's preset name (friction) names its block's cause
     skipped: dict[str, str] = {}
     cands: list[Candidate] = []
     if ctx.has_command:
-        cands += actuator_candidates(ctx)
+        cands += actuator_candidates(ctx) + catalogued_candidates(ctx, ("valve", "valve_flow"))
     else:
         for c in ("stiction", "backlash", "deadzone", "saturation", "coulomb_viscous_friction", "leakage",
-                  "valve_gain"):
+                  "valve_gain") + _others(("valve", "valve_flow")):
             skipped[c] = f"the data has the {ctx.valve_feed} flow, not the valve command: the valve is not modelled"
     if "ph_measured" in ctx.outputs:
-        cands += sensor_candidates(ctx)
+        cands += sensor_candidates(ctx) + catalogued_candidates(ctx, ("ph_sensor",))
     else:
-        for c in ("sensor_delay", "sensor_lag", "sensor_bias", "sensor_drift", "sensor_gain"):
+        for c in ("sensor_delay", "sensor_lag", "sensor_bias", "sensor_drift", "sensor_gain") + _others(("ph_sensor",)):
             skipped[c] = "no pH measurement in the data"
     cands += process_candidates(ctx)
     structural = structural_candidates(ctx)
@@ -429,11 +492,12 @@ def catalogue(ctx: Context, only: list[str] | None = None,
         for c in dict.fromkeys(c.cause for c in structural):
             skipped.setdefault(c, "structural: tried by --structure (or name it with --candidates)")
     if only:
-        unknown = [c for c in only if c not in CAUSES or c == "none"]
+        known = causes()
+        unknown = [c for c in only if c not in known or c == "none"]
         if unknown:
 
             raise UserError(f"unknown candidate {unknown[0]!r}; catalogue: "
-                            f"{', '.join(c for c in CAUSES if c != 'none')}")
+                            f"{', '.join(c for c in known if c != 'none')}")
         for c in {c.cause for c in cands} - set(only):
             skipped.setdefault(c, "not requested (--candidates)")
         cands = [c for c in cands if c.cause in only]

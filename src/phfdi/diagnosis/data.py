@@ -26,6 +26,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -105,7 +106,7 @@ class ColumnMap(records.ColumnMap):
         return cls.from_mapping(data, source).checked()
 
     @classmethod
-    def from_args(cls, items: list[str], units: list[str] = (), source: str = "--column") -> "ColumnMap":
+    def from_args(cls, items: Sequence[str], units: Sequence[str] = (), source: str = "--column") -> "ColumnMap":
         return super().from_args(items, units, source).checked()
 
     def checked(self) -> "ColumnMap":
@@ -219,7 +220,22 @@ def _check_time_gaps(t: np.ndarray, dts: np.ndarray, median_s: float, dt_s: floa
 
 def make_record(signals: dict[str, np.ndarray], label: str, dt_s: float | None = None,
                 notes: list[str] | None = None) -> Record:
-    """Check and resample raw signals (project names, project units) into a :class:`Record`."""
+    """Check and resample raw signals (project names, project units) into a :class:`Record`.
+
+    Raises
+    ------
+    UserError
+        Fewer than 20 samples, missing or decreasing time (naming the row), and the like.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.diagnosis import make_record
+    >>> record = make_record({"time_s": np.arange(100.0), "acid_flow_ml_s": np.full(100, 9.8),
+    ...                       "ph_measured": np.full(100, 12.0)}, "at_rest")
+    >>> list(record.inputs), list(record.outputs)
+    (['acid_flow_ml_s'], ['ph_measured'])
+    """
     notes = list(notes or [])
     t = np.asarray(signals["time_s"], dtype=float)
     if len(t) < 20:
@@ -260,7 +276,20 @@ def make_record(signals: dict[str, np.ndarray], label: str, dt_s: float | None =
 
 def load_record(path: str | Path, cmap: records.ColumnMap | None = None, dt_s: float | None = None,
                 encoding: str | None = None) -> Record:
-    """Read one file into a :class:`Record` (see the module docstring for what is read)."""
+    """Read one file into a :class:`Record` (see the module docstring for what is read).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi.diagnosis import load_record
+    >>> path = Path(tempfile.mkdtemp()) / "run.csv"
+    >>> rows = "".join(f"{t},9.8,12.0\\n" for t in range(30))
+    >>> _ = path.write_text("time_s,acid_flow_ml_s,ph_measured\\n" + rows)
+    >>> record = load_record(path)
+    >>> record.name, list(record.outputs)
+    ('run.csv', ['ph_measured'])
+    """
     path = Path(path)
     if cmap is not None:
         signals, notes = read_mapped(path, cmap, encoding)

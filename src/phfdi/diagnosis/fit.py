@@ -111,6 +111,35 @@ class Fitter:
         self._nominal: FitResult | None = None
         self._n_resid = sum(int(problem.train[i].sum()) * sum(o in problem.records[i].outputs
                                                               for o in problem.outputs) for i in self.train_records)
+        self._prime()
+
+    def _prime(self) -> None:
+        """Simulate the nominal model once on every record, as the nominal fit does first.
+
+        An evaluator starts its pH solves (and a gravity tank's volume solve) from the first trajectory it
+        simulated; the roots do not depend on it, their last bits do. Priming every process with the nominal
+        makes a fit's result independent of which worker ran it after which other fit (a fit in a valley
+        can end elsewhere on a last-bit difference), so a diagnosis repeats exactly, with any --workers.
+        """
+        for i in range(len(self.p.records)):
+            try:
+                self.predict(i, self.p.nominal, Start(self.first_ph(i) if self.fit_init else None))
+            except (UserError, ValueError, FloatingPointError):
+                pass  # the fits report it (their residual is then 1e3)
+
+    def budget(self, cands: list[Candidate], starts: list[dict] | None = None) -> float:
+        """Evaluations a fit of ``cands`` may use (start grid, zoom and least-squares budgets, as in
+        :meth:`fit`): a weight for scheduling long fits first and for the progress's time estimate."""
+        n_groups = len({self.groups[i] for i in self.train_records}) if self.grouped else 1
+        n_par = sum(n_groups if self.grouped and q.name in c.per_group else 1 for c in cands for q in c.params)
+        n_x = n_par + len(self.train_records) * (int(self.fit_init) + int(any(c.band is not None for c in cands)))
+        grid = len(starts) if starts is not None else len(cands[0].starts)
+        if n_x == 0:
+            return float(max(grid, 1))
+        if any(c.nonsmooth for c in cands) and 0 < n_par <= 2:
+            return float(grid + 6 * (5 ** n_par - 1) + 6 * (n_x + 1) * (n_x + 1))
+        polish = max(c.polish_evals for c in cands)
+        return float(grid + polish * (n_x + 1) * (1 + n_x / 2))
 
     # ---- residuals --------------------------------------------------------------
     def predict(self, i: int, raw: dict, start: Start) -> Prediction:
@@ -142,90 +171,20 @@ class Fitter:
         at the first command.
         """
         t0 = time.perf_counter()
-        train_groups = sorted({self.groups[i] for i in self.train_records})
-        # (candidate, parameter, group): group None for a shared parameter, else one entry per fitted group
-        params = [(c, q, g) for c in cands for q in c.params
-                  for g in (train_groups if self.grouped and q.name in c.per_group else [None])]
-        n_par = len(params)
-        dup = {c.cause for c in cands if sum(d.cause == c.cause for d in cands) > 1}
-        banded = [c for c in cands if c.band is not None]
-        # nuisances per training record: start pH (initial: fit), valve rest offset (valve with memory)
-        nuis: list[tuple[int, str]] = []
-        for i in self.train_records:
-            if self.fit_init:
-                nuis.append((i, "ph"))
-            if banded:
-                nuis.append((i, "offset"))
+        space = _FitSpace(self, cands)
+        x_best, r_best, jac, message, nfev = self._optimise(space, starts)
+        return self._result(space, x_best, r_best, jac, message, nfev, t0)
 
-        def values(x: np.ndarray, group: str | None = None) -> list[dict]:
-            """Parameter values of one group (a group the fit has not seen: the fitted groups' mean)."""
-            vals = [dict() for _ in cands]
-            pooled: dict[tuple, list[float]] = {}
-            for j, (c, q, g) in enumerate(params):
-                if g is None or g == group:
-                    vals[cands.index(c)][q.name] = q.from_unit(float(x[j]))
-                else:
-                    pooled.setdefault((cands.index(c), q.name, id(q)), []).append(float(x[j]))
-            for (ci, name, _), us in pooled.items():
-                if name not in vals[ci]:
-                    q = next(q for c, q, g in params if cands.index(c) == ci and q.name == name)
-                    vals[ci][name] = q.from_unit(float(np.mean(us)))
-            return vals
-
-        def group_of(i: int) -> str | None:
-            return self.groups[i] if self.grouped else None
-
-        def half_band(vals: list[dict]) -> float:
-            return max((c.band(vals[cands.index(c)]) for c in banded), default=0.0)
-
-        def starts_of(x: np.ndarray, vals: list[dict]) -> list[Start]:
-            out = [Start(self.first_ph(i) if self.fit_init else None) for i in range(len(self.p.records))]
-            band = half_band(vals)
-            for j, (i, kind) in enumerate(nuis):
-                v = float(x[n_par + j])
-                if kind == "ph":
-                    out[i] = Start(v, out[i].valve_offset_pct)
-                else:
-                    out[i] = Start(out[i].ph, v * band)
-            return out
-
-        def model(vals: list[dict]) -> dict:
-            raw = copy.deepcopy(self.p.nominal)
-            for c, v in zip(cands, vals):
-                c.apply(raw, v)
-            return raw
-
-        def raws_of(x: np.ndarray) -> list[dict]:
-            if not self.grouped or n_par == 0 or not any(g is not None for _, _, g in params):
-                one = model(values(x))
-                return [one] * len(self.p.records)
-            by_group = {g: model(values(x, g)) for g in set(self.groups)}
-            return [by_group[self.groups[i]] for i in range(len(self.p.records))]
-
-        def resid(x: np.ndarray) -> np.ndarray:
-            vals = values(x, train_groups[0] if self.grouped else None)
-            try:
-                r = self.train_residual(raws_of(x), starts_of(x, vals))
-            except (UserError, ValueError, FloatingPointError):
-                return np.full(self._n_resid, 1e3)
-            return np.where(np.isfinite(r), r, 1e3)
-
-        nuis0 = [self.first_ph(i) if kind == "ph" else 0.0 for i, kind in nuis]
+    def _optimise(self, space: "_FitSpace", starts: list[dict] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                                str, int]:
+        """The best parameters: every start point scored, the best refined (zoomed in first for a valve's
+        rough cost). Returns (x, residual, Jacobian, optimiser message, evaluations)."""
+        cands, n_par, resid = space.cands, space.n_par, space.resid
         grid = starts if starts is not None else list(cands[0].starts)
-
-        def start_unit(s: dict, c: Candidate, q, g: str | None) -> float:
-            for key in (f"{c.label}.{q.name}", f"{c.cause}.{q.name}", q.name):
-                for k in ((f"{key}[{g}]", key) if g is not None else (key,)):
-                    if k in s:
-                        return q.to_unit(q.clip(s[k]))
-            return q.to_unit(q.clip(c.starts[0][q.name])) if c.starts and q.name in c.starts[0] else 0.5
-
-        x_starts = [np.array([start_unit(s, c, q, g) for c, q, g in params] + nuis0, dtype=float) for s in grid]
-        lower = np.r_[np.zeros(n_par), [0.0 if k == "ph" else -1.0 for _, k in nuis]]
-        upper = np.r_[np.ones(n_par), [14.0 if k == "ph" else 1.0 for _, k in nuis]]
+        lower, upper = space.bounds()
         nfev = 0
         scored = []
-        for x in x_starts:
+        for x in space.start_points(grid):
             r = resid(x)
             scored.append((float(np.sum(r ** 2)), x, r))
             nfev += 1
@@ -241,7 +200,7 @@ class Fitter:
                 # moves one slip): zoom in on the best grid point by pattern search, then polish
                 x_best, best_cost, r_best, used = _zoom(resid, x_best, best_cost, r_best, n_par, lower, upper)
                 nfev += used
-                stages = ((0.002, 6),)
+                stages: tuple[tuple[float, int], ...] = ((0.002, 6),)
                 refine = [(best_cost, x_best, r_best)]
             else:
                 # refine the best start point (and the runner-up when nearly as good)
@@ -249,7 +208,7 @@ class Fitter:
                 stages = ((0.02, 10), (0.002, 8)) if nonsmooth else ((1e-4, polish),)
                 # the best start, and the next ones when nearly as good (a narrow valley: more of them)
                 refine = [scored[0]] + [t for t in scored[1:2 if polish <= 20 else 3] if t[0] < 1.5 * scored[0][0]]
-            for i_start, (cost0, x0, _) in enumerate(refine):
+            for i_start, (_, x0, _) in enumerate(refine):
                 for step, evals in (stages if i_start == 0 else stages[:1]):
                     res = least_squares(resid, np.clip(x0, lower, upper), bounds=(lower, upper), method="trf",
                                         diff_step=step, max_nfev=evals * (n_x + 1), x_scale=1.0)
@@ -261,39 +220,40 @@ class Fitter:
             if not np.any(jac):
                 jac = _jacobian(resid, x_best, r_best, lower, upper, 0.02 if nonsmooth else 1e-4)
                 nfev += len(x_best)
-        vals = values(x_best, train_groups[0] if self.grouped else None)
-        start_list = starts_of(x_best, vals)
-        raw = model(vals)
+        return x_best, r_best, jac, message, nfev
+
+    def _result(self, space: "_FitSpace", x_best: np.ndarray, r_best: np.ndarray, jac: np.ndarray, message: str,
+                nfev: int, t0: float) -> FitResult:
+        """The fit's result: parameters with intervals, information criteria, the held-out score."""
+        cands, params, n_par = space.cands, space.params, space.n_par
+        vals = space.values(x_best, space.train_groups[0] if self.grouped else None)
+        start_list = space.starts_of(x_best, vals)
+        raw = space.model(vals)
         sse = float(np.sum(r_best ** 2))
         n = len(r_best)
-        k = n_par + len(nuis)
-        intervals, identified = self._intervals(params, x_best[:n_par], jac[:, :n_par], r_best, n, k, dup)
+        k = n_par + len(space.nuis)
+        intervals, identified = self._intervals(params, x_best[:n_par], jac[:, :n_par], r_best, n, k, space.dup)
         flat = {}
         for j, (c, q, g) in enumerate(params):
-            flat[_pname(c, q, g, len(cands) > 1, dup)] = q.from_unit(float(x_best[j]))
-        record_raws = raws_of(x_best)
+            flat[_pname(c, q, g, len(cands) > 1, space.dup)] = q.from_unit(float(x_best[j]))
+        record_raws = space.raws_of(x_best)
         adapt = None
         if self.grouped and any(g is not None for _, _, g in params):
-            adapt = (params, x_best[:n_par], model, values)
-        res_val = self.validate(record_raws, start_list, banded_half=half_band(vals), adapt=adapt)
+            adapt = (params, x_best[:n_par], space.model, space.values)
+        res_val = self.validate(record_raws, start_list, banded_half=space.half_band(vals), adapt=adapt)
         fitted_where = {}
         if self.grouped:
-            fitted_where = {"groups_fitted": train_groups,
-                            "per_group": sorted({_pname(c, q, None, len(cands) > 1, dup) for c, q, g in params
+            fitted_where = {"groups_fitted": space.train_groups,
+                            "per_group": sorted({_pname(c, q, None, len(cands) > 1, space.dup) for c, q, g in params
                                                  if g is not None}),
                             "adapted": res_val.get("adapted", {})}
-        fixed = {}
-        for c in cands:
-            fixed.update({(k_ if len(cands) == 1 else f"{c.cause}.{k_}"): v for k_, v in c.fixed.items()})
-            if c.variant:
-                fixed["feed" if len(cands) == 1 else f"{c.cause}.feed"] = c.variant
         aic = n * math.log(max(sse, 1e-300) / n) + 2 * k
         bic = n * math.log(max(sse, 1e-300) / n) + k * math.log(n)
         return FitResult(
             label="+".join(c.label for c in cands), cause="+".join(c.cause for c in cands),
             family="+".join(dict.fromkeys(c.family for c in cands)),
             variant="+".join(c.variant for c in cands if c.variant), params=flat,
-            intervals=intervals, fixed=fixed, main=cands[0].main if len(cands) == 1 else "",
+            intervals=intervals, fixed=_fixed(cands), main=cands[0].main if len(cands) == 1 else "",
             n_params=n_par, train_sse=sse, n_train=n, aic=aic, bic=bic, val_rmse=res_val["rmse"],
             val_nrmse=res_val["nrmse"], val_cost=res_val["cost"], val_sq=res_val["sq"], val_lag1=res_val["lag1"],
             val_whiteness_p=res_val["whiteness_p"],
@@ -453,6 +413,114 @@ class Fitter:
         return self._nominal
 
 
+def _fixed(cands: list[Candidate]) -> dict:
+    """The candidates' fixed (not fitted) settings, and the feed of a candidate with a variant."""
+    fixed = {}
+    for c in cands:
+        fixed.update({(k_ if len(cands) == 1 else f"{c.cause}.{k_}"): v for k_, v in c.fixed.items()})
+        if c.variant:
+            fixed["feed" if len(cands) == 1 else f"{c.cause}.feed"] = c.variant
+    return fixed
+
+
+class _FitSpace:
+    """What one fit searches over: the candidates' parameters (in unit scale, per group where declared) then
+    the training records' nuisances (start pH with ``initial: fit``, the valve's rest offset for a valve with
+    memory), and the map from a point of it to models, starts and training errors."""
+
+    def __init__(self, fitter: Fitter, cands: list[Candidate]) -> None:
+        self.fitter = fitter
+        self.cands = cands
+        self.train_groups = sorted({fitter.groups[i] for i in fitter.train_records})
+        # (candidate, parameter, group): group None for a shared parameter, else one entry per fitted group
+        self.params = [(c, q, g) for c in cands for q in c.params
+                       for g in (self.train_groups if fitter.grouped and q.name in c.per_group else [None])]
+        self.n_par = len(self.params)
+        self.dup = {c.cause for c in cands if sum(d.cause == c.cause for d in cands) > 1}
+        self.banded = [c for c in cands if c.band is not None]
+        # nuisances per training record: start pH (initial: fit), valve rest offset (valve with memory)
+        self.nuis: list[tuple[int, str]] = []
+        for i in fitter.train_records:
+            if fitter.fit_init:
+                self.nuis.append((i, "ph"))
+            if self.banded:
+                self.nuis.append((i, "offset"))
+
+    def values(self, x: np.ndarray, group: str | None = None) -> list[dict]:
+        """Parameter values of one group (a group the fit has not seen: the fitted groups' mean)."""
+        cands = self.cands
+        vals: list[dict] = [dict() for _ in cands]
+        pooled: dict[tuple, list[float]] = {}
+        for j, (c, q, g) in enumerate(self.params):
+            if g is None or g == group:
+                vals[cands.index(c)][q.name] = q.from_unit(float(x[j]))
+            else:
+                pooled.setdefault((cands.index(c), q.name, id(q)), []).append(float(x[j]))
+        for (ci, name, _), us in pooled.items():
+            if name not in vals[ci]:
+                q = next(q for c, q, g in self.params if cands.index(c) == ci and q.name == name)
+                vals[ci][name] = q.from_unit(float(np.mean(us)))
+        return vals
+
+    def half_band(self, vals: list[dict]) -> float:
+        return max((c.band(vals[self.cands.index(c)]) for c in self.banded), default=0.0)
+
+    def starts_of(self, x: np.ndarray, vals: list[dict]) -> list[Start]:
+        f = self.fitter
+        out = [Start(f.first_ph(i) if f.fit_init else None) for i in range(len(f.p.records))]
+        band = self.half_band(vals)
+        for j, (i, kind) in enumerate(self.nuis):
+            v = float(x[self.n_par + j])
+            if kind == "ph":
+                out[i] = Start(v, out[i].valve_offset_pct)
+            else:
+                out[i] = Start(out[i].ph, v * band)
+        return out
+
+    def model(self, vals: list[dict]) -> dict:
+        raw = copy.deepcopy(self.fitter.p.nominal)
+        for c, v in zip(self.cands, vals):
+            c.apply(raw, v)
+        return raw
+
+    def raws_of(self, x: np.ndarray) -> list[dict]:
+        f = self.fitter
+        if not f.grouped or self.n_par == 0 or not any(g is not None for _, _, g in self.params):
+            one = self.model(self.values(x))
+            return [one] * len(f.p.records)
+        by_group = {g: self.model(self.values(x, g)) for g in set(f.groups)}
+        return [by_group[f.groups[i]] for i in range(len(f.p.records))]
+
+    def resid(self, x: np.ndarray) -> np.ndarray:
+        f = self.fitter
+        vals = self.values(x, self.train_groups[0] if f.grouped else None)
+        try:
+            r = f.train_residual(self.raws_of(x), self.starts_of(x, vals))
+        except (UserError, ValueError, FloatingPointError):
+            return np.full(f._n_resid, 1e3)
+        return np.where(np.isfinite(r), r, 1e3)
+
+    def start_points(self, grid: list[dict]) -> list[np.ndarray]:
+        """One point per start of the grid (parameters clipped to their range, in unit scale), nuisances at
+        the first measured pH and a valve resting at its command."""
+        nuis0 = [self.fitter.first_ph(i) if kind == "ph" else 0.0 for i, kind in self.nuis]
+
+        def start_unit(s: dict, c: Candidate, q, g: str | None) -> float:
+            for key in (f"{c.label}.{q.name}", f"{c.cause}.{q.name}", q.name):
+                for k in ((f"{key}[{g}]", key) if g is not None else (key,)):
+                    if k in s:
+                        return q.to_unit(q.clip(s[k]))
+            return q.to_unit(q.clip(c.starts[0][q.name])) if c.starts and q.name in c.starts[0] else 0.5
+
+        return [np.array([start_unit(s, c, q, g) for c, q, g in self.params] + nuis0, dtype=float) for s in grid]
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Parameters in [0, 1] (unit scale), start pH in [0, 14], valve offsets in [-1, 1] half-bands."""
+        lower = np.r_[np.zeros(self.n_par), [0.0 if k == "ph" else -1.0 for _, k in self.nuis]]
+        upper = np.r_[np.ones(self.n_par), [14.0 if k == "ph" else 1.0 for _, k in self.nuis]]
+        return lower, upper
+
+
 def _zoom(resid, x, cost, r, n_par, lower, upper, half: float = 0.12, shrink: float = 2.5, stages: int = 6):
     """Pattern search on the first ``n_par`` coordinates: a 5 (x 5) grid about the best point, shrinking.
 
@@ -513,13 +581,33 @@ def lag1(r: np.ndarray) -> float:
 
 # ---- worker processes -----------------------------------------------------------------
 _WORKER: Fitter | None = None
+_BLAS_LIMIT = None
+
+
+def one_blas_thread():
+    """Limit BLAS/LAPACK (OpenBLAS of numpy and scipy) to one thread; returns the limiter (a context manager).
+
+    A fit does thousands of operations on tiny matrices (4 x 4 matrix exponentials of the mixing zone, the
+    least-squares SVDs): a BLAS thread pool gains nothing there, and on a busy machine its threads wait for
+    each other: one 4 x 4 ``scipy.linalg.expm`` took 24 ms instead of 18 us at load average 28 on 2 cores
+    (benchmarks in docs/diagnosis.md). Setting OMP_NUM_THREADS after numpy is loaded has no effect; threadpoolctl
+    changes the running libraries.
+    """
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def limit_worker_blas() -> None:
+    """One BLAS thread for the rest of this (worker) process's life."""
+    global _BLAS_LIMIT
+    if _BLAS_LIMIT is None:
+        _BLAS_LIMIT = one_blas_thread()
 
 
 def init_worker(problem: Problem) -> None:
     global _WORKER
-    import os
-
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    limit_worker_blas()
     _WORKER = Fitter(problem)
 
 

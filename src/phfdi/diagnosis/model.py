@@ -49,7 +49,15 @@ from .data import Record
 
 
 def nominal_raw(model: str, overrides: list[str] = ()) -> dict:
-    """Scenario mapping of ``model`` (name or .yaml) with its plant model inline and ``--set`` overrides applied."""
+    """Scenario mapping of ``model`` (name or .yaml) with its plant model inline and ``--set`` overrides applied.
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import nominal_raw
+    >>> model = nominal_raw("paper", ["sensors.ph.noise_std=0.02"])
+    >>> model["sensors"]["ph"]["noise_std"], isinstance(model["plant"], dict)
+    (0.02, True)
+    """
     raw = raw_scenario(model)
     raw = inline_plant(raw)
     raw.pop("extends", None)
@@ -382,32 +390,53 @@ def _sensor_faults(spec: ScenarioSpec, site: str, dt_s: float) -> list:
 
 
 def _run_chain(chain: Chain, x: np.ndarray, t: list[float]) -> np.ndarray:
+    """The chain stepped over a record, block by block (a chain of causal single-input blocks gives the same
+    outputs stepped sample by sample); blocks with ``step_many`` (the vectorised ``step``) run in one call."""
     if not chain.blocks:
         return np.array(x, dtype=float)
-    values = x.tolist()
-    chain.reset(values[0])
-    steps = [b.step for b in chain.blocks]
-    out = []
-    for v, tk in zip(values, t):
-        for s in steps:
-            v = s(v, tk)
-        out.append(v)
-    return np.array(out)
+    values = np.asarray(x, dtype=float)
+    chain.reset(float(values[0]))
+    t_arr = None
+    for b in chain.blocks:
+        many = getattr(b, "step_many", None)
+        if many is not None:
+            if t_arr is None:
+                t_arr = np.asarray(t, dtype=float)
+            values = many(values, t_arr)
+        else:
+            step = b.step
+            values = np.array([step(v, tk) for v, tk in zip(values.tolist(), t)])
+    return values
 
 
 def mix_for_ph(plant: CstrPlant, ph: float) -> list[float]:
     """Composition (mol/L) of a mix of the most acidic and the most basic feed with the given pH."""
-    conc = [np.asarray(c, dtype=float) for c in plant.feed_conc]
-    phs = [plant.balance.ph(c.tolist()) for c in conc]
-    acid, base = conc[int(np.argmin(phs))], conc[int(np.argmax(phs))]
-
-    def ph_of(x: float) -> float:
-        return plant.balance.ph(((1.0 - x) * acid + x * base).tolist())
-
-    lo, hi = ph_of(0.0), ph_of(1.0)
+    acid, base, lo, hi = _mix_ends(plant)
     if ph <= lo:
         return acid.tolist()
     if ph >= hi:
         return base.tolist()
+
+    def ph_of(x: float) -> float:
+        return plant.balance.ph(((1.0 - x) * acid + x * base).tolist())
+
     x = brentq(lambda x: ph_of(x) - ph, 0.0, 1.0, xtol=1e-14)
     return ((1.0 - x) * acid + x * base).tolist()
+
+
+_MIX_ENDS: dict[int, tuple] = {}
+
+
+def _mix_ends(plant: CstrPlant) -> tuple:
+    """(most acidic feed, most basic feed, their pH) of a plant, cached per plant object."""
+    hit = _MIX_ENDS.get(id(plant))
+    if hit is not None and hit[0] is plant:
+        return hit[1]
+    conc = [np.asarray(c, dtype=float) for c in plant.feed_conc]
+    phs = [plant.balance.ph(c.tolist()) for c in conc]
+    acid, base = conc[int(np.argmin(phs))], conc[int(np.argmax(phs))]
+    ends = (acid, base, min(phs), max(phs))
+    if len(_MIX_ENDS) > 256:
+        _MIX_ENDS.clear()
+    _MIX_ENDS[id(plant)] = (plant, ends)
+    return ends

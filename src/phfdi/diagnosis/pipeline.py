@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -46,7 +46,7 @@ from phfdi_base.spec import PlantModelSpec
 
 from .catalogue import Context
 from .data import Record
-from .fit import FitResult, Fitter, Problem, fit_task, init_worker
+from .fit import FitResult, Fitter, Problem, fit_task, init_worker, one_blas_thread
 from .model import Evaluator, Prediction
 from .report import check_report, family_of
 from .residual import analyse, noise_floor, significance, significance_f
@@ -56,6 +56,16 @@ UNITS = {"ph_measured": "pH", "level_measured_cm": "cm"}
 
 @dataclass
 class Options:
+    """The diagnosis's choices and the decision rules' thresholds (see the module docstring).
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import Options
+    >>> options = Options(candidates=["backlash", "sensor_delay"], workers=1)
+    >>> options.blocks, options.alpha, options.min_gain  # held-out blocks, significance, least gain
+    (8, 0.01, 0.05)
+    """
+
     initial: str = "steady"
     candidates: list[str] | None = None
     pairs: bool = True
@@ -82,7 +92,14 @@ class Options:
 
 @dataclass
 class Diagnosis:
-    """The report (JSON-ready) and what the figures need."""
+    """The report (JSON-ready) and what the figures need.
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import Diagnosis
+    >>> Diagnosis({"verdict": "none"}).records
+    []
+    """
 
     report: dict
     records: list[Record] = field(default_factory=list)
@@ -174,6 +191,42 @@ def _identifiable(records: list[Record], initial: str, noise: dict) -> str | Non
 
 def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict, model_name: str,
              options: Options | None = None) -> Diagnosis:
+    """Diagnose the nominal model on measured records (the steps and rules of the module docstring).
+
+    Parameters
+    ----------
+    records_fit : list of Record
+        Records the candidates are fitted on (held-out blocks of them score the fits when
+        ``records_val`` is empty).
+    records_val : list of Record
+        Records that only score the fits.
+    nominal : dict
+        The nominal model, a scenario mapping with its plant inline (:func:`nominal_raw`).
+    model_name : str
+        Its name, for the report.
+    options : Options, optional
+
+    Returns
+    -------
+    Diagnosis
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.diagnosis import diagnose, make_record, nominal_raw
+    >>> noise = np.random.default_rng(0).normal(0.0, 0.01, 600)
+    >>> at_rest = make_record({"time_s": np.arange(600.0), "acid_flow_ml_s": np.full(600, 9.82),
+    ...                        "ph_measured": 12.0 + noise}, "at_rest")
+    >>> report = diagnose([at_rest], [], nominal_raw("paper"), "paper").report
+    >>> report["verdict"], report["cause"]  # no input moves: no record can tell models apart
+    ('not_identifiable', 'none')
+    """
+    with one_blas_thread():  # tiny matrices, thousands of times: BLAS threads only wait (fit.one_blas_thread)
+        return _diagnose(records_fit, records_val, nominal, model_name, options)
+
+
+def _diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict, model_name: str,
+              options: Options | None = None) -> Diagnosis:
     opts = options or Options()
     t_start = time.perf_counter()
     for rec in records_fit + records_val:
@@ -186,10 +239,7 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     notes = [f"{r.name}: {n}" for r in records for n in r.notes] + [split_note]
     why = _identifiable(records, opts.initial, noise)
     if why is not None:
-        report = _base_report(model_name, records, outputs, noise, notes)
-        report.update({"verdict": "not_identifiable", "cause": "none", "family": "none", "parameters": {},
-                       "confidence": None, "nrmse_nominal": None, "nrmse_extended": None, "gain_percent": None,
-                       "ranking": [], "reason": why})
+        report = _not_identifiable(_base_report(model_name, records, outputs, noise, notes), why)
         return Diagnosis(check_report(report), records, train, val, noise=noise)
     ctx = context_for(nominal, records, outputs)
     problem = Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, opts.candidates,
@@ -211,29 +261,8 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     base = _base_report(model_name, records, outputs, noise, notes)
     base.update(report)
     base["misfit"] = misfit
-    base["nominal"] = {"validation": _val_summary(nom, noise), "train_sse": nom.train_sse,
-                       "combined_rmse_over_noise": math.sqrt(nom.val_cost),
-                       "initial_ph": [s.ph for s in nom.starts] if opts.initial == "fit" else None}
-    base["initial"] = opts.initial
-    base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio,
-                          "floor_ratio": opts.floor_ratio,
-                          "floor_max_structure": opts.floor_max_structure, "whiteness_alpha": opts.whiteness_alpha}
-    if winner is not None and extended_preds is not None:
-        base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
-                                      "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
-                                      if nom.val_nrmse[o] else None} for o in outputs}
-    base["skipped"] = local.skipped
-    if opts.groups is not None:
-        base["groups"] = {r.name: g for r, g in zip(records, opts.groups)}
-        base["adapt"] = opts.adapt
-    structure_final = None
-    structure_preds = None
-    if search is not None:
-        base["structure_search"] = _search_report(search, nom, main=outputs[0], opts=opts)
-        structure_final = search["final"]
-        if structure_final is not None:
-            structure_preds = [local.predict(i, _raw_of(structure_final, i), structure_final.starts[i])
-                               for i in range(len(records))]
+    _describe_fit(base, nom, winner if extended_preds is not None else None, outputs, noise, opts, local, records)
+    structure_final, structure_preds = _structure_result(base, search, nom, outputs, opts, local, len(records))
     base["seconds"] = time.perf_counter() - t_start
     base["candidates_fitted"] = len(results) + len(pairs) + (search["fits"] if search else 0)
     d = Diagnosis(check_report(base), records, train, val, nominal_preds, extended_preds,
@@ -245,6 +274,47 @@ def diagnose(records_fit: list[Record], records_val: list[Record], nominal: dict
     d.singles = list(results)
     d.search_fits = [s["fit"] for s in search["path"]] if search is not None else []
     return d
+
+
+def _not_identifiable(report: dict, why: str) -> dict:
+    """The report when no record can tell one model from another (``why`` says so)."""
+    report.update({"verdict": "not_identifiable", "cause": "none", "family": "none", "parameters": {},
+                   "confidence": None, "nrmse_nominal": None, "nrmse_extended": None, "gain_percent": None,
+                   "ranking": [], "reason": why})
+    return report
+
+
+def _describe_fit(base: dict, nom: FitResult, winner: FitResult | None, outputs: list[str], noise: dict,
+                  opts: Options, local: Fitter, records: list[Record]) -> None:
+    """Add to the report the nominal fit, the thresholds, the winner's gain per output (``winner``: None when no
+    extended model is written), what was skipped and the record groups."""
+    base["nominal"] = {"validation": _val_summary(nom, noise), "train_sse": nom.train_sse,
+                       "combined_rmse_over_noise": math.sqrt(nom.val_cost),
+                       "initial_ph": [s.ph for s in nom.starts] if opts.initial == "fit" else None}
+    base["initial"] = opts.initial
+    base["thresholds"] = {"alpha": opts.alpha, "min_gain": opts.min_gain, "explained_ratio": opts.explained_ratio,
+                          "floor_ratio": opts.floor_ratio,
+                          "floor_max_structure": opts.floor_max_structure, "whiteness_alpha": opts.whiteness_alpha}
+    if winner is not None:
+        base["gain_by_output"] = {o: {"nominal": nom.val_nrmse[o], "extended": winner.val_nrmse[o],
+                                      "gain_percent": 100.0 * (1.0 - winner.val_nrmse[o] / nom.val_nrmse[o])
+                                      if nom.val_nrmse[o] else None} for o in outputs}
+    base["skipped"] = local.skipped
+    if opts.groups is not None:
+        base["groups"] = {r.name: g for r, g in zip(records, opts.groups)}
+        base["adapt"] = opts.adapt
+
+
+def _structure_result(base: dict, search: dict | None, nom: FitResult, outputs: list[str], opts: Options,
+                      local: Fitter, n_records: int) -> tuple[FitResult | None, list[Prediction] | None]:
+    """The structure search's report entry, its final model and that model's predictions (None without one)."""
+    if search is None:
+        return None, None
+    base["structure_search"] = _search_report(search, nom, main=outputs[0], opts=opts)
+    final = search["final"]
+    if final is None:
+        return None, None
+    return final, [local.predict(i, _raw_of(final, i), final.starts[i]) for i in range(n_records)]
 
 
 def _raw_of(r: FitResult, i: int) -> dict:
@@ -305,24 +375,30 @@ def _workers(opts: Options, tasks: int) -> int:
 def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options, local: Fitter):
     """Fit every candidate; when the best leaves structure, try pairs of the best ones."""
     workers = _workers(opts, len(labels))
-    t0 = time.perf_counter()
-
-    def note(i: int, total: int, r: FitResult) -> None:
-        _say(opts, f"  {i}/{total} {r.label}: held-out error {math.sqrt(r.val_cost):.3g} x noise "
-                   f"({r.seconds:.1f} s, {time.perf_counter() - t0:.0f} s elapsed)")
 
     def run_all(pool, jobs: list[tuple]) -> list[FitResult]:
-        out = []
+        weights = [local.budget([local.candidates[x] for x in args[0]], *args[1:]) for _, args in jobs]
+        progress = _Progress(opts, [" + ".join(args[0]) for _, args in jobs], weights, workers if pool else 1)
+        out: list[FitResult | None] = [None] * len(jobs)
         if pool is None:
-            for i, (fn, args) in enumerate(jobs, 1):
-                out.append(_local_call(local, fn, args))
-                note(i, len(jobs), out[-1])
+            for j, (fn, args) in enumerate(jobs):
+                progress.started(j)
+                out[j] = _local_call(local, fn, args)
+                progress.done(j, out[j])
             return out
-        futures = [pool.submit(fn, *args) for fn, args in jobs]
-        for i, fut in enumerate(as_completed(futures), 1):
-            out.append(fut.result())
-            note(i, len(jobs), out[-1])
-        return out
+        # longest first (the fits differ 100-fold in cost): two workers finish together
+        order = sorted(range(len(jobs)), key=lambda j: -weights[j])
+        futures = {pool.submit(jobs[j][0], *jobs[j][1]): j for j in order}
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, timeout=_HEARTBEAT_S, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                j = futures[fut]
+                out[j] = fut.result()
+                progress.done(j, out[j])
+            if not finished:
+                progress.heartbeat([futures[f] for f in pending if f.running()])
+        return out  # in the order of the jobs, whatever the order they finished in
 
     pool = None if workers == 1 else ProcessPoolExecutor(max_workers=workers, initializer=init_worker,
                                                          initargs=(problem,))
@@ -342,6 +418,55 @@ def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options
         if pool is not None:
             pool.shutdown()
     return singles, pairs, search
+
+
+_HEARTBEAT_S = 20.0  # a line at least this often while fits run (some take minutes)
+
+
+class _Progress:
+    """Progress of a batch of fits on stderr: each fit as it finishes (fit i of n, its time, elapsed), the
+    estimated time left, and while none finishes, which fits are running.
+
+    The estimate weighs each fit by its evaluation budget (:meth:`Fitter.budget`; fits differ 100-fold):
+    time so far x budget left / budget done. It is an estimate: a fit usually stops before its budget.
+    """
+
+    def __init__(self, opts: Options, labels: list[str], weights: list[float], workers: int) -> None:
+        self.opts, self.labels, self.weights, self.workers = opts, labels, weights, workers
+        self.t0 = time.perf_counter()
+        self.n_done = 0
+        self.w_done = 0.0
+        self.started_at: dict[int, float] = {}
+
+    def started(self, j: int) -> None:
+        self.started_at[j] = time.perf_counter()
+
+    def _eta(self) -> str:
+        left = sum(self.weights) - self.w_done
+        if self.w_done <= 0 or left <= 0:
+            return ""
+        return f", about {_duration(self.elapsed() * left / self.w_done)} left"
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def done(self, j: int, r: FitResult) -> None:
+        self.n_done += 1
+        self.w_done += self.weights[j]
+        _say(self.opts, f"  {self.n_done}/{len(self.labels)} {r.label}: held-out error {math.sqrt(r.val_cost):.3g} "
+                        f"x noise ({r.seconds:.1f} s; {_duration(self.elapsed())} elapsed{self._eta()})")
+
+    def heartbeat(self, running: list[int]) -> None:
+        names = ", ".join(self.labels[j] for j in running) or "waiting for a worker"
+        _say(self.opts, f"  ... {self.n_done}/{len(self.labels)} done, running: {names} "
+                        f"({_duration(self.elapsed())} elapsed{self._eta()})")
+
+
+def _duration(seconds: float) -> str:
+    seconds = max(0.0, seconds)
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
 
 
 #: causes that set one thing of the model (a second variant would overwrite the first)

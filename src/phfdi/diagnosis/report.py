@@ -38,6 +38,8 @@ import json
 import math
 from typing import Any
 
+from phfdi.faults import catalogue
+
 #: verdicts, in the order a reader meets them
 VERDICTS = ("explained", "not_explained", "none", "not_identifiable")
 
@@ -75,6 +77,18 @@ CAUSES: dict[str, str] = {
 }
 
 FAMILIES = ("actuator", "sensor", "process", "none")
+#: the family of a catalogued fault (:mod:`phfdi_base.faults`) by where it acts
+SITE_FAMILY = {"valve": "actuator", "valve_flow": "actuator", "ph_sensor": "sensor"}
+
+
+def causes() -> dict[str, str]:
+    """:data:`CAUSES` and, before ``none``, each catalogued fault's block not in it (a block of one's own)."""
+    out = {k: v for k, v in CAUSES.items() if k != "none"}
+    for f in catalogue().values():
+        if f.params:  # a fault without parameters (a seized stem) is not fitted
+            out.setdefault(f.block, SITE_FAMILY[f.site])
+    out["none"] = CAUSES["none"]
+    return out
 
 #: keys every report carries (commands may add more)
 REPORT_KEYS = ("verdict", "cause", "family", "parameters", "confidence", "nrmse_nominal", "nrmse_extended",
@@ -87,12 +101,13 @@ RANKING_KEYS = ("cause", "family", "parameters", "confidence_intervals", "nrmse_
 def family_of(cause: str) -> str:
     """Family of a cause or of a pair ``a+b`` (``actuator+sensor``; one name when both agree)."""
     parts = cause.split("+")
+    known = causes()
     fams = []
     for p in parts:
-        if p not in CAUSES:
-            raise ValueError(f"unknown cause {p!r}; catalogue: {', '.join(CAUSES)}")
-        if CAUSES[p] not in fams:
-            fams.append(CAUSES[p])
+        if p not in known:
+            raise ValueError(f"unknown cause {p!r}; catalogue: {', '.join(known)}")
+        if known[p] not in fams:
+            fams.append(known[p])
     return "+".join(fams)
 
 
@@ -126,6 +141,19 @@ def clean(o: Any) -> Any:
 
 
 def to_json(report: dict) -> str:
+    """The report as JSON text (numpy values as plain numbers, non-finite numbers as null).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.diagnosis import to_json
+    >>> print(to_json({"verdict": "none", "gain_percent": np.float64("nan"), "samples": np.int64(600)}))
+    {
+      "verdict": "none",
+      "gain_percent": null,
+      "samples": 600
+    }
+    """
     return json.dumps(clean(report), indent=2, allow_nan=False)
 
 
@@ -146,7 +174,16 @@ def fmt_params(params: dict, intervals: dict | None = None) -> str:
 
 
 def verdict_line(report: dict) -> str:
-    """One line: verdict, cause (family) [parameters], confidence, gain."""
+    """One line: verdict, cause (family) [parameters], confidence, gain.
+
+    Examples
+    --------
+    >>> from phfdi.diagnosis import verdict_line
+    >>> verdict_line({"verdict": "explained", "cause": "backlash", "family": "actuator",
+    ...               "parameters": {"width_pct": 1.02}, "confidence": 0.97, "gain_percent": 61.0,
+    ...               "nrmse_nominal": 0.42, "nrmse_extended": 0.164})
+    'verdict: explained; cause backlash (actuator) [width_pct = 1.02]; confidence 0.97; held-out NRMSE 0.420 -> 0.164 (+61 %)'
+    """
     v = report["verdict"]
     text = f"verdict: {v.replace('_', ' ')}"
     if report["cause"] != "none":

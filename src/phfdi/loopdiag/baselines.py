@@ -99,29 +99,29 @@ def horch_ccf(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt_s: float
 
 # ---- He et al. (2007) ---------------------------------------------------------------------
 def _triangle_mse(y: np.ndarray) -> float:
-    """Best continuous two-segment line (free knot inside the half cycle)."""
+    """Best continuous two-segment line (free knot inside the half cycle): every knot's least-squares
+    fit at once (stacked QR factorisations, as accurate as one lstsq per knot)."""
     n = len(y)
+    if n < 3:
+        return math.inf
     t = np.arange(n, dtype=float)
-    best = math.inf
-    for m in range(1, n - 1):
-        design = np.column_stack([np.ones(n), t, np.maximum(t - m, 0.0)])
-        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-        best = min(best, float(np.mean((y - design @ coef) ** 2)))
-    return best
+    knots = np.arange(1, n - 1, dtype=float)
+    design = np.empty((len(knots), n, 3))
+    design[:, :, 0] = 1.0
+    design[:, :, 1] = t
+    design[:, :, 2] = np.maximum(t[None, :] - knots[:, None], 0.0)
+    q, r = np.linalg.qr(design)
+    coef = np.linalg.solve(r, np.einsum("kni,n->ki", q, y)[:, :, None])
+    resid = y[None, :] - (design @ coef)[:, :, 0]
+    return float(np.min(np.mean(resid * resid, axis=1)))
 
 
 def _sine_mse(y: np.ndarray) -> float:
-    """Best half sine A sin(pi (t - t0) / L) + c with t0, L on a small grid, A and c by least squares."""
-    n = len(y)
-    t = np.arange(n, dtype=float)
-    best = math.inf
-    for length in np.linspace(0.7 * (n + 1), 1.3 * (n + 1), 9):
-        for t0 in np.linspace(-0.3 * n, 0.3 * n, 9) - 0.5:
-            s = np.sin(np.pi * (t - t0) / length)
-            design = np.column_stack([s, np.ones(n)])
-            coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-            best = min(best, float(np.mean((y - design @ coef) ** 2)))
-    return best
+    """Best half sine A sin(pi (t - t0) / L) + c with t0, L on a small grid, A and c by least squares
+    (the same fit as Rossi & Scali's sine, :func:`.indicators._fit_sine`)."""
+    from .indicators import _fit_sine
+
+    return _fit_sine(y)
 
 
 def he_curve_fit(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt_s: float,

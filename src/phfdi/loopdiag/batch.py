@@ -16,7 +16,17 @@ def diagnose_files(paths: Iterable[str], columns: ColumnMap | None = None, setti
                    figure_dir: str | None = None, each_segment: bool = False,
                    scheduler: str | None = None) -> list[dict]:
     """Reports in the order of ``paths`` (with ``each_segment``, one per usable stretch), on Dask
-    (:mod:`.plantwide`; a single file runs in this process)."""
+    (:mod:`.plantwide`; a single file runs in this process).
+
+    A file that cannot be diagnosed gives ``{"file": ..., "error": message}`` in its place; the batch goes on.
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import diagnose_files
+    >>> reports = diagnose_files(["no_such_file.csv"])
+    >>> [r["error"] for r in reports]
+    ['no_such_file.csv: no such file']
+    """
     from .plantwide import Job, diagnose_jobs
 
     paths = [str(p) for p in paths]

@@ -56,5 +56,7 @@ def synthetic_row(loop: DrawnLoop) -> dict:
     row = row_for_run(run, loop.stiction, loop.group, "synthetic", loop.group,
                       Settings(causes=FRICTION_CAUSES, baselines=False))
     row["conditions"] = list(loop.conditions)
+    if loop.loop_class:
+        row["loop_class"] = loop.loop_class
     row["valve"] = loop.spec.valve
     return row

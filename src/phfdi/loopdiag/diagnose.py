@@ -47,12 +47,20 @@ MIN_SP_R2 = 0.3
 #: OP must move by more than this share of its mean level (or 0.05 % of span) to identify anything
 MIN_OP_MOVEMENT = 1e-3
 
-FAMILY = {**{c: "actuator" for c in ACTUATOR_CAUSES}, "external_disturbance": "loop",
-          "aggressive_tuning": "loop", "none": "none"}
-
 
 @dataclass
 class Settings:
+    """What the loop diagnosis considers: the held-out gain a valve model needs (%), the causes it tries,
+    the process type (None: from the loop tag, LIC -> integrating) and whether the baselines run.
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import Settings
+    >>> settings = Settings(baselines=False)
+    >>> settings.process_type is None, "stiction" in settings.causes
+    (True, True)
+    """
+
     gain_threshold_percent: float = GAIN_THRESHOLD_PERCENT
     causes: tuple[str, ...] = ACTUATOR_CAUSES
     process_type: str | None = None  # None: from the loop tag (LIC -> integrating)

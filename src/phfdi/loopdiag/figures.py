@@ -39,11 +39,9 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
     """Write ``<out_dir>/<file stem>[_<loop tag>].png`` and return its path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    t_min = run.time_s / 60.0
-    op, pv = run["op_pct"], run["pv"]
+    op = run["op_pct"]
     unit = (run.metadata.get("units") or {}).get("pv", "") or "PV units"
     op_unit = "% of span" if np.min(op) >= 0 and np.max(op) <= 100 else "OP units"
-    split = Split.of(len(run))
     fig = plt.figure(figsize=(13, 9))
     gs = fig.add_gridspec(3, 3, height_ratios=[2.2, 1.4, 2.4])
     ax_pv = fig.add_subplot(gs[0, :])
@@ -51,11 +49,26 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
     ax_xy = fig.add_subplot(gs[2, 0])
     ax_dpv = fig.add_subplot(gs[2, 1])
     ax_stem = fig.add_subplot(gs[2, 2])
-    ax_pv.plot(t_min, pv, color="k", lw=0.7, label="PV measured")
+    kano = next((c for c in ev.causes if c.cause == "stiction"), None) if ev.identifiable else None
+    _plot_trends(ax_pv, ax_op, run, ev, kano, unit, op_unit)
+    _plot_pv_against_op(ax_xy, run, rep, kano, unit, op_unit)
+    _plot_dpv_against_op(ax_dpv, run, kano, unit, op_unit)
+    _plot_stem(ax_stem, op, kano, op_unit)
+    fig.suptitle(_title(rep), fontsize=10)
+    fig.tight_layout()
+    path = out_dir / f"{_file_stem(rep)}.png"
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
+def _plot_trends(ax_pv, ax_op, run: Run, ev: Evidence, kano, unit: str, op_unit: str) -> None:
+    """PV and SP with the linear and valve models (top), OP with the models' stem positions (middle)."""
+    t_min = run.time_s / 60.0
+    ax_pv.plot(t_min, run["pv"], color="k", lw=0.7, label="PV measured")
     if "sp" in run:
         ax_pv.plot(t_min, run["sp"], color="0.5", ls="--", lw=0.8, label="SP")
-    ax_op.plot(t_min, op, color="tab:green", lw=0.8, label="OP (controller output)")
-    kano = next((c for c in ev.causes if c.cause == "stiction"), None) if ev.identifiable else None
+    ax_op.plot(t_min, run["op_pct"], color="tab:green", lw=0.8, label="OP (controller output)")
     if ev.identifiable:
         nom = ev.nominal
         ax_pv.plot(t_min, nom.y_model, color="tab:blue", lw=0.8,
@@ -70,6 +83,7 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
         ax_pv.plot(t_min, kano.model.y_model, color="tab:red", lw=0.9,
                    label=f"with Kano stiction S {s:.2g}, J {j:.2g} (held-out NRMSE {kano.model.nrmse_validation:.2f})")
         ax_op.plot(t_min, kano.position, color="tab:red", lw=0.9, label="stem, Kano stiction model")
+    split = Split.of(len(run))
     for ax in (ax_pv, ax_op):
         ax.axvline(t_min[split.n_train], color="tab:green", ls=":", lw=1)
     ax_pv.text(t_min[split.n_train], ax_pv.get_ylim()[1], " held-out part", va="top", fontsize=8, color="tab:green")
@@ -79,54 +93,64 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
     ax_pv.legend(fontsize=7, loc="best")
     ax_op.legend(fontsize=7, loc="best")
 
-    # PV-OP
-    ax_xy.plot(op, pv, color="0.35", lw=0.5, label="measured")
+
+def _plot_pv_against_op(ax, run: Run, rep: dict, kano, unit: str, op_unit: str) -> None:
+    """PV against OP with Choudhury's fitted ellipse and the Kano model's PV."""
+    op = run["op_pct"]
+    ax.plot(op, run["pv"], color="0.35", lw=0.5, label="measured")
     coef = _conic(rep)
     if coef is not None:
         ex, ey = ellipse_points(coef)
         d = rep["indicators"]["ellipse_apparent_stiction"]["detail"]
-        ax_xy.plot(ex + d["op_mean"], ey + d["pv_mean"], color="tab:orange", lw=1.2,
-                   label=f"ellipse, apparent stiction {d['apparent_stiction_op']:.2g}")
+        ax.plot(ex + d["op_mean"], ey + d["pv_mean"], color="tab:orange", lw=1.2,
+                label=f"ellipse, apparent stiction {d['apparent_stiction_op']:.2g}")
     if kano is not None:
-        ax_xy.plot(op, kano.model.y_model, color="tab:red", lw=0.8, alpha=0.8, label="Kano model")
-    ax_xy.set_xlabel(f"OP ({op_unit})")
-    ax_xy.set_ylabel(f"PV ({unit})")
-    ax_xy.set_title("PV against OP", fontsize=9)
-    ax_xy.legend(fontsize=7, loc="best")
+        ax.plot(op, kano.model.y_model, color="tab:red", lw=0.8, alpha=0.8, label="Kano model")
+    ax.set_xlabel(f"OP ({op_unit})")
+    ax.set_ylabel(f"PV ({unit})")
+    ax.set_title("PV against OP", fontsize=9)
+    ax.legend(fontsize=7, loc="best")
 
-    # OP-dPV
-    dpv = np.diff(pv)
-    ax_dpv.plot(op[1:], dpv, ".", color="0.35", ms=2, label="measured")
-    if kano is not None:
-        ax_dpv.plot(op[1:], np.diff(kano.model.y_model), ".", color="tab:red", ms=2, label="Kano model")
-    ax_dpv.set_xlabel(f"OP ({op_unit})")
-    ax_dpv.set_ylabel(f"PV change per sample ({unit})")
-    ax_dpv.set_title("PV change against OP", fontsize=9)
-    ax_dpv.legend(fontsize=7, loc="best")
 
-    # OP -> stem
+def _plot_dpv_against_op(ax, run: Run, kano, unit: str, op_unit: str) -> None:
+    """PV's change per sample against OP, measured and from the Kano model."""
+    op = run["op_pct"]
+    ax.plot(op[1:], np.diff(run["pv"]), ".", color="0.35", ms=2, label="measured")
     if kano is not None:
-        ax_stem.plot(op, kano.position, color="tab:red", lw=0.8)
-        ax_stem.set_title(f"Kano model: stem against OP (S {s:.2g}, J {j:.2g})", fontsize=9)
+        ax.plot(op[1:], np.diff(kano.model.y_model), ".", color="tab:red", ms=2, label="Kano model")
+    ax.set_xlabel(f"OP ({op_unit})")
+    ax.set_ylabel(f"PV change per sample ({unit})")
+    ax.set_title("PV change against OP", fontsize=9)
+    ax.legend(fontsize=7, loc="best")
+
+
+def _plot_stem(ax, op: np.ndarray, kano, op_unit: str) -> None:
+    """The Kano block's stem position against OP (its stick-slip characteristic)."""
+    if kano is not None:
+        s, j = kano.parameters["s_pct"], kano.parameters["j_pct"]
+        ax.plot(op, kano.position, color="tab:red", lw=0.8)
+        ax.set_title(f"Kano model: stem against OP (S {s:.2g}, J {j:.2g})", fontsize=9)
     else:
-        ax_stem.text(0.5, 0.5, "no valve model (OP hardly moves)", ha="center", va="center",
-                     transform=ax_stem.transAxes, fontsize=9)
-        ax_stem.set_title("Kano model: stem against OP", fontsize=9)
-    ax_stem.set_xlabel(f"OP ({op_unit})")
-    ax_stem.set_ylabel(f"stem position ({op_unit})")
+        ax.text(0.5, 0.5, "no valve model (OP hardly moves)", ha="center", va="center",
+                transform=ax.transAxes, fontsize=9)
+        ax.set_title("Kano model: stem against OP", fontsize=9)
+    ax.set_xlabel(f"OP ({op_unit})")
+    ax.set_ylabel(f"stem position ({op_unit})")
 
+
+def _title(rep: dict) -> str:
+    """The stiction classifier's and the Hammerstein diagnosis's verdicts."""
     title = f"{rep.get('loop_tag')}: "
     st = rep.get("stiction")
     if st:
         title += f"stiction classifier {st['verdict'].replace('_', ' ')} (p = {st['probability']:.2f}); "
-    title += f"Hammerstein: {rep['verdict']}" + (f", {rep['cause']}" if rep["cause"] != "none" else "")
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    return title + f"Hammerstein: {rep['verdict']}" + (f", {rep['cause']}" if rep["cause"] != "none" else "")
+
+
+def _file_stem(rep: dict) -> str:
+    """The loop's file stem, with its tag unless the stem holds it already (safe characters only)."""
     stem_name = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(str(rep.get("file") or "loop")).stem)
     tag = rep.get("loop_tag")
     if tag and tag not in stem_name:
         stem_name += "_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", str(tag))
-    path = out_dir / f"{stem_name}.png"
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return path
+    return stem_name

@@ -9,6 +9,14 @@ for each grid point the linear part by separable least squares
 (2008) and Choudhury et al. (2008) for the Kano stiction model. Parameters are
 fitted on the training part; causes are ranked on the held-out part.
 
+Each grid is evaluated as one batch (:meth:`Problem.sse_many`): every block of the
+grid runs over OP together (:func:`valve_actuator.batch.positions`) and the linear
+part is searched for all of them at once (:func:`phfdi.loopdiag.identify.lag_criteria`),
+with the PV side computed once per loop. Row by row this is the same arithmetic as
+one grid point at a time, so the criterion values, the grid's choice and every
+answer are the same bit for bit (tests/loops/test_fast_paths.py); it is several
+times faster because the Python work is per grid, not per point and sample.
+
 Parameters are in OP units, i.e. % of span when OP is in % (stiction ``S``
 and ``J`` as in Kano et al. 2004: S = dead-band + stick-band, J = slip jump).
 """
@@ -22,9 +30,23 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import brute
 
+from valve_actuator.batch import positions
 from valve_actuator.blocks import Backlash, DeadZone, Quantization, Saturation, Stiction
 
-from .identify import DELAYS, TAU_FACTORS, LinearModel, Split, fit_lag_model, information_criteria, score
+from .identify import (
+    DELAYS,
+    TAU_FACTORS,
+    LagTargets,
+    LinearModel,
+    Split,
+    fit_lag_model,
+    information_criteria,
+    lag_criteria,
+    score,
+)
+
+#: grid points whose linear part is searched in one batch (bounds the (points, tau, samples) arrays)
+BATCH_ROWS = 32
 
 #: causes of the actuator family, in catalogue order (simplest first breaks ties)
 ACTUATOR_CAUSES = ("backlash", "deadzone", "saturation", "quantization", "stiction")
@@ -111,11 +133,30 @@ class Problem:
 
     def sse(self, block) -> float:
         """Training criterion of the block with the linear part searched on the scan grid."""
-        v = through_block(block, self.op)
-        if np.ptp(v[self.split.train]) <= 1e-12 * max(1.0, abs(float(v[0]))):
-            return _no_motion(self, v).sse_train
-        return fit_lag_model(v, self.pv, self.dt_s, self.split, self.integrating, self.gain_sign,
-                             self.delays, self.tau_factors, sse_only=True)
+        return float(self.sse_many([block])[0])
+
+    def sse_many(self, blocks: list) -> np.ndarray:
+        """:meth:`sse` of each block, as one batch (equal to calling it on each, bit for bit)."""
+        v = positions(blocks, self.op)
+        n_tr = self.split.n_train
+        still = np.ptp(v[:, :n_tr], axis=1) <= 1e-12 * np.maximum(1.0, np.abs(v[:, 0]))
+        out = np.empty(len(blocks))
+        if still.any():
+            out[still] = _no_motion(self, v[np.argmax(still)]).sse_train  # the same for every still stem
+        moving = np.flatnonzero(~still)
+        targets = self._scan_targets()
+        for k in range(0, len(moving), BATCH_ROWS):
+            rows = moving[k:k + BATCH_ROWS]
+            out[rows] = lag_criteria(v[rows], targets, self.gain_sign, self.tau_factors)
+        return out
+
+    def _scan_targets(self) -> LagTargets:
+        key = tuple(int(d) for d in self.delays)
+        cached = getattr(self, "_targets", None)
+        if cached is None or cached[0] != key:
+            cached = (key, LagTargets.of(self.pv, self.dt_s, self.split, self.integrating, self.delays))
+            self._targets = cached
+        return cached[1]
 
 
 def _no_motion(p: Problem, v: np.ndarray) -> LinearModel:
@@ -135,13 +176,27 @@ def _widths(p: Problem, n: int = 12) -> np.ndarray:
     return np.linspace(math.log10(0.01 * p.span), math.log10(0.8 * p.span), n)
 
 
+def _grid(p: Problem, block_at: Callable[[np.ndarray], object], ranges: tuple, full_output: bool = False):
+    """:func:`scipy.optimize.brute` (no finishing step) over ``ranges`` of the block's parameters,
+    its grid evaluated as one batch: brute hands the whole grid to its ``workers`` map at once,
+    and this map runs :meth:`Problem.sse_many` on it (the values brute's point-by-point calls of
+    ``p.sse(block_at(z))`` would give, bit for bit). ``block_at`` takes the point as a 1-D array."""
+    def one(z):
+        return p.sse(block_at(np.atleast_1d(z)))
+
+    def batch(_one, points):
+        return p.sse_many([block_at(np.atleast_1d(z)) for z in points]).tolist()
+
+    return brute(one, ranges, finish=None, full_output=full_output, workers=batch)
+
+
 def _grid_1d(p: Problem, make: Callable[[float], object], log_widths: np.ndarray) -> float:
     """Best log10 width on a grid, then on a finer grid around it."""
-    f = lambda z: p.sse(make(10.0 ** float(np.atleast_1d(z)[0])))  # noqa: E731
+    at = lambda z: make(10.0 ** float(z[0]))  # noqa: E731
     step = float(log_widths[1] - log_widths[0])
-    best = brute(f, (slice(log_widths[0], log_widths[-1] + 0.5 * step, step),), finish=None)
+    best = _grid(p, at, (slice(log_widths[0], log_widths[-1] + 0.5 * step, step),))
     best = float(np.atleast_1d(best)[0])
-    fine = brute(f, (slice(best - step, best + step * 1.01, step / 4),), finish=None)
+    fine = _grid(p, at, (slice(best - step, best + step * 1.01, step / 4),))
     return float(np.atleast_1d(fine)[0])
 
 
@@ -162,19 +217,19 @@ def fit_stiction(p: Problem, backlash: CauseFit | None = None) -> CauseFit:
     block starts centred and needs half its width. The backlash optimum, when given, is a
     starting point of the refinement too.
     """
-    f = lambda z: p.sse(Stiction(s_pct=10.0 ** z[0], j_pct=10.0 ** z[0] * z[1]))  # noqa: E731
+    at = lambda z: Stiction(s_pct=10.0 ** z[0], j_pct=10.0 ** z[0] * z[1])  # noqa: E731
     lw = _widths(p, 16)
     step = float(lw[1] - lw[0])
-    _, _, grid, values = brute(f, (slice(lw[0], lw[-1] + 0.5 * step, step), slice(0.0, 1.21, 0.2)),
-                               finish=None, full_output=True)
+    _, _, grid, values = _grid(p, at, (slice(lw[0], lw[-1] + 0.5 * step, step), slice(0.0, 1.21, 0.2)),
+                               full_output=True)
     flat = np.argsort(values, axis=None)[:2]
     starts = [grid[:, *np.unravel_index(i, values.shape)] for i in flat]
     if backlash is not None:
         starts.append(np.array([math.log10(backlash.parameters["width_pct"]), 0.0]))
     best_z, best_f = starts[0], math.inf
     for z0 in starts:
-        z, fz, *_ = brute(f, (slice(z0[0] - step / 2, z0[0] + step * 0.51, step / 4),
-                              slice(max(0.0, z0[1] - 0.1), z0[1] + 0.101, 0.05)), finish=None, full_output=True)
+        z, fz, *_ = _grid(p, at, (slice(z0[0] - step / 2, z0[0] + step * 0.51, step / 4),
+                                  slice(max(0.0, z0[1] - 0.1), z0[1] + 0.101, 0.05)), full_output=True)
         if fz < best_f:
             best_z, best_f = z, fz
     s = 10.0 ** float(best_z[0])
@@ -218,16 +273,17 @@ def fit_saturation(p: Problem) -> CauseFit | None:
     if not (0.0 <= lo_op and hi_op <= 100.0):
         return None
     best: tuple[float, str, float] | None = None
-    for q in np.linspace(0.3, 0.97, 12):
-        for side, limit in (("high", float(np.quantile(p.op_train, q))), ("low", float(np.quantile(p.op_train, 1 - q)))):
-            sse = p.sse(_saturation(side, limit))
-            if best is None or sse < best[0]:
-                best = (sse, side, limit)
+    tried = [(side, limit) for q in np.linspace(0.3, 0.97, 12)
+             for side, limit in (("high", float(np.quantile(p.op_train, q))),
+                                 ("low", float(np.quantile(p.op_train, 1 - q))))]
+    for sse, (side, limit) in zip(p.sse_many([_saturation(s, lim) for s, lim in tried]).tolist(), tried):
+        if best is None or sse < best[0]:
+            best = (sse, side, limit)
     assert best is not None
     _, side, limit = best
     step = (hi_op - lo_op) / 24.0
-    f = lambda z: p.sse(_saturation(side, float(np.atleast_1d(z)[0])))  # noqa: E731
-    limit = float(np.atleast_1d(brute(f, (slice(limit - step, limit + step * 1.01, step / 4),), finish=None))[0])
+    at = lambda z: _saturation(side, float(z[0]))  # noqa: E731
+    limit = float(np.atleast_1d(_grid(p, at, (slice(limit - step, limit + step * 1.01, step / 4),)))[0])
     block = _saturation(side, limit)
     params = {"low_pct": block.low_pct, "high_pct": block.high_pct}
     model, v = p.fit(block)
@@ -251,12 +307,13 @@ def fit_quantization(p: Problem) -> CauseFit:
     step = float(qs[1] - qs[0])
     bs = np.quantile(p.op_train, np.linspace(0.05, 0.95, 13))
     b_step = float(np.median(np.diff(bs))) if len(bs) > 1 else 0.1
-    f = lambda z: p.sse(_quantizer(z[0], z[1]))  # noqa: E731
-    scores = [(f((lq, b)), lq, b) for lq in qs for b in bs]
+    at = lambda z: _quantizer(z[0], z[1])  # noqa: E731
+    points = [(lq, b) for lq in qs for b in bs]
+    scores = [(v, lq, b) for v, (lq, b) in zip(p.sse_many([at(z) for z in points]).tolist(), points)]
     best = min(scores)
     for _, lq0, b0 in sorted(scores)[:2]:
-        z, fz, *_ = brute(f, (slice(lq0 - step / 2, lq0 + step * 0.51, step / 4),
-                              slice(b0 - b_step / 2, b0 + b_step * 0.51, b_step / 4)), finish=None, full_output=True)
+        z, fz, *_ = _grid(p, at, (slice(lq0 - step / 2, lq0 + step * 0.51, step / 4),
+                                  slice(b0 - b_step / 2, b0 + b_step * 0.51, b_step / 4)), full_output=True)
         if fz < best[0]:
             best = (fz, float(z[0]), float(z[1]))
     block = _quantizer(best[1], best[2])

@@ -177,13 +177,15 @@ def _lag_spectra(poles: tuple[float, ...], n: int, nfft: int) -> np.ndarray:
 
 
 def _responses(du: np.ndarray, taus_s: np.ndarray, dt_s: float, integrating: bool) -> np.ndarray:
-    """:func:`_response` for many time constants at once (one FFT convolution, exact for the record)."""
-    n = len(du)
+    """:func:`_response` of each row of ``du`` (m, n) for many time constants at once: (m, n_tau, n)
+    (one FFT convolution, exact for the record)."""
+    n = du.shape[-1]
     nfft = 1 << (2 * n - 1).bit_length()
     poles = tuple(math.exp(-dt_s / t) if t > 0 else 0.0 for t in taus_s)
-    x = np.fft.irfft(np.fft.rfft(du - du[0], nfft)[None, :] * _lag_spectra(poles, n, nfft), nfft, axis=1)[:, :n]
-    x += du[0]
-    return np.cumsum(x, axis=1) * dt_s if integrating else x
+    spectra = np.fft.rfft(du - du[:, :1], nfft, axis=-1)[:, None, :] * _lag_spectra(poles, n, nfft)
+    x = np.fft.irfft(spectra, nfft, axis=-1)[..., :n]
+    x += du[:, :1, None]
+    return np.cumsum(x, axis=-1) * dt_s if integrating else x
 
 
 def _shift(x: np.ndarray, d: int) -> np.ndarray:
@@ -191,66 +193,125 @@ def _shift(x: np.ndarray, d: int) -> np.ndarray:
     return x[idx]
 
 
+@dataclass(frozen=True)
+class LagTargets:
+    """The PV side of the lag-model search (:func:`fit_lag_model`): the h-step increments of the
+    training part and what depends on them alone, computed once for every input tried against
+    the same PV (the valve-model search tries hundreds)."""
+
+    y: np.ndarray
+    dt_s: float
+    split: Split
+    integrating: bool
+    delays: np.ndarray
+    starts: np.ndarray
+    n_off: int
+    dys: tuple
+    weights: tuple
+    shifted: tuple
+    syy: float
+
+    @classmethod
+    def of(cls, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
+           delays: np.ndarray = DELAYS) -> "LagTargets":
+        n_tr = split.n_train
+        hs = split.horizons
+        delays = np.asarray(delays)[np.asarray(delays) < n_tr // 4]
+        d_max = max(int(delays.max()), 0)
+        starts = d_max - delays  # where delay d's window starts in the response's increments
+        # targets: dy_h[k] for k in [h + d_max, n_tr)
+        dys = [y[h + d_max:n_tr] - y[d_max:n_tr - h] for h in hs]
+        w = [0.0] * len(hs)
+        if integrating:
+            # project the drift column (h dt in horizon h's block) out of targets and regressors
+            norm = math.sqrt(sum(len(d) * (h * dt_s) ** 2 for d, h in zip(dys, hs)))
+            w = [h * dt_s / norm for h in hs]
+            c_y = sum(wi * float(d.sum()) for wi, d in zip(w, dys))
+            dys = [d - c_y * wi for d, wi in zip(dys, w)]
+        syy = float(sum(d @ d for d in dys))
+        n_off = int(starts.max()) + 1
+        # contiguous copies: the same products bit for bit as the strided views (tested), faster
+        return cls(y, dt_s, split, integrating, delays, starts, n_off, tuple(dys), tuple(w),
+                   tuple(np.ascontiguousarray(_shifted(dy, n_off).T) for dy in dys), syy)
+
+    @property
+    def n_residuals(self) -> int:
+        return sum(len(d) for d in self.dys)
+
+
+def _lag_grid(u: np.ndarray, t: LagTargets, gain_sign: int, tau_factors: np.ndarray):
+    """Criterion and gain on the (tau, delay) grid for each input row of ``u`` (m, n): arrays
+    (m, n_tau, n_delay), and the time constants and centred inputs. Row by row the same arithmetic
+    as for one input, so a batch gives bit for bit the values of its rows one at a time."""
+    n_tr = t.split.n_train
+    du = u - np.mean(u[:, :n_tr], axis=1, keepdims=True)
+    taus = np.asarray(tau_factors, float) * t.dt_s
+    resp = _responses(du, taus, t.dt_s, t.integrating)  # (m, n_tau, n)
+    starts, n_off = t.starts, t.n_off
+    shape = (len(u), len(taus), len(t.delays))
+    sxx = np.zeros(shape)
+    sxy = np.zeros(shape)
+    sdr = np.zeros(shape)
+    # window [s, s + n_dy) of a cumulative sum c: c[s + n_dy - 1] - c[s - 1], with c[-1] = 0
+    first = starts == 0
+    before = np.where(first, 0, starts - 1)
+    for h, dy, wi, shifted in zip(t.split.horizons, t.dys, t.weights, t.shifted):
+        # target i (sample k = i + h + d_max) meets, for delay d, the response increment
+        # D[i + s_d] with D[j] = r[j + h] - r[j] and s_d = d_max - d
+        n_dy = len(dy)
+        span = n_dy + n_off - 1
+        inc = resp[..., h:h + span] - resp[..., :span]
+        sxy += (inc @ shifted)[..., starts]  # stacked matmul: one BLAS call per row, as for one input
+        if t.integrating:
+            c1 = np.cumsum(inc, axis=-1)
+            sdr += wi * (c1[..., starts + n_dy - 1] - np.where(first, 0.0, c1[..., before]))
+        np.multiply(inc, inc, out=inc)
+        c2 = np.cumsum(inc, axis=-1, out=inc)
+        sxx += c2[..., starts + n_dy - 1] - np.where(first, 0.0, c2[..., before])
+    if t.integrating:
+        sxx = sxx - sdr ** 2
+    ok = sxx > 1e-12 * np.maximum(1e-300, sxx.max(axis=(1, 2), keepdims=True))
+    gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
+    if gain_sign:
+        gain = np.where(gain * gain_sign > 0, gain, 0.0)
+    sse = t.syy - 2 * gain * sxy + gain ** 2 * sxx
+    return sse, gain, taus, du
+
+
+def lag_criteria(u: np.ndarray, targets: LagTargets, gain_sign: int = 0,
+                 tau_factors: np.ndarray = TAU_FACTORS) -> np.ndarray:
+    """The training criterion of :func:`fit_lag_model` (``sse_only``) for each row of ``u`` (m, n)
+    at once, equal bit for bit to calling it on each row."""
+    sse, *_ = _lag_grid(np.atleast_2d(u), targets, gain_sign, tau_factors)
+    best = sse.reshape(len(sse), -1).min(axis=1)
+    return np.where(best > targets.syy, targets.syy, best)
+
+
 def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
                   gain_sign: int = 0, delays: np.ndarray = DELAYS,
-                  tau_factors: np.ndarray = TAU_FACTORS, sse_only: bool = False) -> LinearModel | float:
+                  tau_factors: np.ndarray = TAU_FACTORS, sse_only: bool = False,
+                  targets: LagTargets | None = None) -> LinearModel | float:
     """FOPTD (or integrating with lag) from u to y, minimising the pooled h-step prediction error.
 
     Self-regulating: dy_h = K dx_h.  Integrating: dy_h = K dz_h + b h dt (z = dt cumsum x).
     ``gain_sign`` +1 / -1 admits only gains of that sign (0: either). ``sse_only``: return the
-    training criterion alone (the nonlinearity search calls this thousands of times).
+    training criterion alone. ``targets``: the PV side computed beforehand (:class:`LagTargets`
+    of this y, split and delays); many inputs at once: :func:`lag_criteria`.
 
     The increments of the training part from sample ``max(delays)`` on are the residuals for
     every delay alike; for each horizon the cross products with all delays come from one
     correlation and one cumulative sum.
     """
-    n_tr = split.n_train
-    du = u - float(np.mean(u[split.train]))
-    hs = split.horizons
-    delays = np.asarray(delays)[np.asarray(delays) < n_tr // 4]
-    d_max = max(int(delays.max()), 0)
-    starts = d_max - delays  # where delay d's window starts in the response's increments
-    # targets: dy_h[k] for k in [h + d_max, n_tr)
-    dys = [y[h + d_max:n_tr] - y[d_max:n_tr - h] for h in hs]
-    if integrating:
-        # project the drift column (h dt in horizon h's block) out of targets and regressors
-        norm = math.sqrt(sum(len(d) * (h * dt_s) ** 2 for d, h in zip(dys, hs)))
-        w = [h * dt_s / norm for h in hs]
-        c_y = sum(wi * float(d.sum()) for wi, d in zip(w, dys))
-        dys = [d - c_y * wi for d, wi in zip(dys, w)]
-    syy = float(sum(d @ d for d in dys))
-    taus = np.asarray(tau_factors, float) * dt_s
-    resp = _responses(du, taus, dt_s, integrating)  # (n_tau, n)
-    n_off = int(starts.max()) + 1
-    sxx = np.zeros((len(taus), len(delays)))
-    sxy = np.zeros_like(sxx)
-    sdr = np.zeros_like(sxx)
-    for h, dy, wi in zip(hs, dys, w if integrating else [0.0] * len(hs)):
-        # target i (sample k = i + h + d_max) meets, for delay d, the response increment
-        # D[i + s_d] with D[j] = r[j + h] - r[j] and s_d = d_max - d
-        n_dy = len(dy)
-        span = n_dy + n_off - 1
-        inc = resp[:, h:h + span] - resp[:, :span]
-        sxy += (inc @ _shifted(dy, n_off).T)[:, starts]
-        c2 = np.concatenate((np.zeros((len(taus), 1)), np.cumsum(inc * inc, axis=1)), axis=1)
-        sxx += c2[:, starts + n_dy] - c2[:, starts]
-        if integrating:
-            c1 = np.concatenate((np.zeros((len(taus), 1)), np.cumsum(inc, axis=1)), axis=1)
-            sdr += wi * (c1[:, starts + n_dy] - c1[:, starts])
-    if integrating:
-        sxx = sxx - sdr ** 2
-    ok = sxx > 1e-12 * max(1e-300, float(sxx.max()))
-    gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
-    if gain_sign:
-        gain = np.where(gain * gain_sign > 0, gain, 0.0)
-    sse = syy - 2 * gain * sxy + gain ** 2 * sxx
+    t = targets or LagTargets.of(y, dt_s, split, integrating, delays)
+    sse, gain, taus, du = _lag_grid(u[None, :], t, gain_sign, tau_factors)
+    sse, gain, du = sse[0], gain[0], du[0]
     it, idl = np.unravel_index(int(np.argmin(sse)), sse.shape)
-    best = (float(sse[it, idl]), float(taus[it]), int(delays[idl]), float(gain[it, idl]))
-    if best[0] > syy:
-        best = (syy, 0.0, 0, 0.0)
+    best = (float(sse[it, idl]), float(taus[it]), int(t.delays[idl]), float(gain[it, idl]))
+    if best[0] > t.syy:
+        best = (t.syy, 0.0, 0, 0.0)
     if sse_only:
         return best[0]
-    return _finish_lag_model(du, y, dt_s, split, integrating, best, sum(len(d) for d in dys))
+    return _finish_lag_model(du, y, dt_s, split, integrating, best, t.n_residuals)
 
 
 def _shifted(dy: np.ndarray, n_off: int) -> np.ndarray:

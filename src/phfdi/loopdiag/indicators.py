@@ -31,7 +31,6 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.signal import savgol_filter
-from scipy.stats import norm
 
 from .oscillation import detect_oscillation, detrend, zero_crossings
 
@@ -60,6 +59,11 @@ def _r(v):
         v = float(v)
         return float(f"{v:.4g}") if math.isfinite(v) else None
     return v
+
+
+#: why a test of a limit cycle's shape says nothing about a loop that does not oscillate
+NOT_OSCILLATING = ("the loop does not oscillate (Thornhill et al. 2003 regularity test): the method reads the "
+                   "shape of a limit cycle")
 
 
 def not_applicable(name: str, reason: str, reference: str) -> Indicator:
@@ -113,11 +117,21 @@ HORCH_HIST_REF = ("Horch (2002), 'Patents and publications about detection of st
 HORCH_HIST_THRESHOLD = 0.5
 
 
+#: sqrt(2 pi), the normal density's constant (as scipy.stats.norm has it)
+_SQRT_2PI = math.sqrt(2 * math.pi)
+
+
 def _sine_noise_loglik(x: np.ndarray, amp: float, phases: np.ndarray) -> float:
     """Log-likelihood of unit-variance x under a sinusoid of amplitude amp plus Gaussian noise
-    (variance 1 - amp^2 / 2), averaged over uniformly distributed phases."""
+    (variance 1 - amp^2 / 2), averaged over uniformly distributed phases.
+
+    The normal density written out in the same operations as ``scipy.stats.norm.pdf`` (the same
+    values bit for bit, tested) without its per-call argument handling: the likelihood is
+    maximised over amp with some twenty calls per loop."""
     sig2 = max(1.0 - 0.5 * amp * amp, 1e-6)
-    dens = norm.pdf(x[:, None], loc=amp * np.sin(phases)[None, :], scale=math.sqrt(sig2)).mean(axis=1)
+    scale = math.sqrt(sig2)
+    z = (x[:, None] - amp * np.sin(phases)[None, :]) / scale
+    dens = (np.exp(-z ** 2 / 2.0) / _SQRT_2PI / scale).mean(axis=1)
     return float(np.sum(np.log(np.maximum(dens, 1e-300))))
 
 
@@ -266,24 +280,30 @@ RELAY_THRESHOLD = 0.21
 
 
 def _fit_sine(y: np.ndarray) -> float:
+    """Least mean squared error of y ~ c + A sin(pi (t - t0) / length) over a grid of length and t0
+    (every grid point's least-squares fit at once; residuals computed, not subtracted sums)."""
     n = len(y)
     t = np.arange(n, dtype=float)
-    best = math.inf
-    for length in np.linspace(0.7 * (n + 1), 1.3 * (n + 1), 9):
-        for t0 in np.linspace(-0.3 * n, 0.3 * n, 9) - 0.5:
-            design = np.column_stack([np.sin(np.pi * (t - t0) / length), np.ones(n)])
-            coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-            best = min(best, float(np.mean((y - design @ coef) ** 2)))
-    return best
-
-
-def _lsq_two(y: np.ndarray, g: np.ndarray) -> float:
-    """Mean squared error of y ~ c + A g (closed form)."""
-    gc = g - np.mean(g)
+    lengths = np.linspace(0.7 * (n + 1), 1.3 * (n + 1), 9)
+    t0s = np.linspace(-0.3 * n, 0.3 * n, 9) - 0.5
+    g = np.sin(np.pi * (t[None, None, :] - t0s[None, :, None]) / lengths[:, None, None]).reshape(-1, n)
+    gc = g - np.mean(g, axis=1, keepdims=True)
     yc = y - np.mean(y)
-    sgg = float(gc @ gc)
-    sse = float(yc @ yc) - (float(gc @ yc) ** 2 / sgg if sgg > 0 else 0.0)
-    return max(sse, 0.0) / len(y)
+    sgg = np.einsum("ij,ij->i", gc, gc)
+    amp = np.where(sgg > 0, gc @ yc / np.where(sgg > 0, sgg, 1.0), 0.0)
+    resid = yc[None, :] - amp[:, None] * gc
+    return float(np.min(np.mean(resid * resid, axis=1)))
+
+
+def _lsq_two(y: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Mean squared error of y ~ c + A g (closed form), for each row of g."""
+    g = np.atleast_2d(g)
+    gc = g - np.mean(g, axis=1, keepdims=True)
+    yc = y - np.mean(y)
+    sgg = np.einsum("ij,ij->i", gc, gc)
+    sgy = gc @ yc
+    sse = float(yc @ yc) - np.where(sgg > 0, sgy ** 2 / np.where(sgg > 0, sgg, 1.0), 0.0)
+    return np.maximum(sse, 0.0) / len(y)
 
 
 def _fit_relay(y: np.ndarray, integrating: bool) -> float:
@@ -302,13 +322,14 @@ def _fit_relay(y: np.ndarray, integrating: bool) -> float:
         return best
     t0s = np.linspace(-0.1 * n, 0.25 * n, 4)
     t1s = np.linspace(0.5 * n, 1.05 * n, 6)
-    for tau in np.geomspace(0.3, max(0.6, n / 2), 8):
-        for t0 in t0s:
-            s0 = np.where(t > t0, 1.0 - np.exp(-np.maximum(t - t0, 0.0) / tau), 0.0)
-            for t1 in t1s:
-                g = s0 - np.where(t > t1, 1.0 - np.exp(-np.maximum(t - t1, 0.0) / tau), 0.0)
-                best = min(best, _lsq_two(y, g))
-    return best
+    taus = np.geomspace(0.3, max(0.6, n / 2), 8)[:, None, None]
+
+    def step(ts):  # (tau, switch time, t): the first-order response to a unit step at each switch
+        lag = t[None, None, :] - ts[None, :, None]
+        return np.where(lag > 0, 1.0 - np.exp(-np.maximum(lag, 0.0) / taus), 0.0)
+
+    g = step(t0s)[:, :, None, :] - step(t1s)[:, None, :, :]  # (tau, t0, t1, t)
+    return float(np.min(_lsq_two(y, g.reshape(-1, n))))
 
 
 def relay_shape(pv: np.ndarray, sp: np.ndarray | None, dt_s: float, process_type: str,

@@ -30,7 +30,16 @@ MIN_CYCLES = 3.0
 
 @dataclass
 class Oscillation:
-    """What the oscillation test found (``period_s`` None when there are too few crossings)."""
+    """What the oscillation test found (``period_s`` None when there are too few crossings).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.loopdiag import detect_oscillation
+    >>> osc = detect_oscillation(np.sin(np.arange(0.0, 3000.0, 4.0) * 2 * np.pi / 200.0), None, 4.0)
+    >>> osc.oscillating, round(osc.period_s), osc.signal
+    (True, 200, 'pv')
+    """
 
     oscillating: bool
     period_s: float | None
@@ -90,7 +99,27 @@ def period_regularity(x: np.ndarray, dt_s: float, max_crossings: int = MAX_CROSS
 
 
 def detect_oscillation(pv: np.ndarray, sp: np.ndarray | None, dt_s: float) -> Oscillation:
-    """Oscillation of the control error (or of PV when there is no setpoint)."""
+    """Oscillation of the control error (or of PV when there is no setpoint).
+
+    Parameters
+    ----------
+    pv, sp : ndarray
+        Process value and setpoint (``sp`` None: the PV itself is tested).
+    dt_s : float
+        Sample time (s).
+
+    Returns
+    -------
+    Oscillation
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.loopdiag import detect_oscillation
+    >>> rng = np.random.default_rng(0)
+    >>> detect_oscillation(rng.normal(size=750), np.zeros(750), 4.0).oscillating  # noise does not oscillate
+    False
+    """
     if sp is not None:
         e, name = np.asarray(sp, float) - np.asarray(pv, float), "control_error"
     else:

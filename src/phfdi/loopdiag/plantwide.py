@@ -124,9 +124,10 @@ def _job_args(args: tuple) -> list[dict]:
 def diagnose_jobs(jobs: list[Job], settings: Settings | None = None, figure_dir: str | None = None,
                   scheduler: str | None = None, workers: int | None = None,
                   progress: Callable[[int, int], None] | None = None, processes: bool = True,
-                  each_segment: bool = False) -> list[dict]:
-    """Every job on Dask (one job in this process: no cluster for a single loop); reports in job order."""
-    from .dask_run import dask_client, map_ordered
+                  each_segment: bool = False, chunk: int | None = None) -> list[dict]:
+    """Every job on Dask (one job in this process: no cluster for a single loop); reports in job order.
+    ``chunk`` jobs per Dask task (None: :func:`.dask_run.chunk_size`, up to 16 for thousands of loops)."""
+    from .dask_run import chunk_size, dask_client, map_ordered
 
     args = [(j, settings, figure_dir, each_segment) for j in jobs]
     if len(jobs) == 1 and not scheduler:
@@ -135,7 +136,8 @@ def diagnose_jobs(jobs: list[Job], settings: Settings | None = None, figure_dir:
             progress(1, 1)
     else:
         with dask_client(scheduler, workers, processes) as client:
-            nested = map_ordered(client, _job_args, args, progress)
+            size = chunk_size(len(args), client) if chunk is None else chunk
+            nested = map_ordered(client, _job_args, args, progress, chunk=size)
     return [r for reps in nested for r in reps]
 
 

@@ -45,9 +45,6 @@ MAX_FILLED_GAP = 3
 #: relative spread below which a signal counts as constant
 CONSTANT_RTOL = 1e-9
 
-#: process types the identification knows (level loops integrate)
-PROCESS_TYPES = ("self_regulating", "integrating")
-
 
 class LoopDataError(UserError):
     """A loop file that cannot be diagnosed; the message names file and problem."""
@@ -158,7 +155,27 @@ def guess_columns(header: list[str]) -> ColumnMap | None:
 
 # ---- reading -------------------------------------------------------------------------------
 def read_loop(path: str | Path, columns: ColumnMap | None = None) -> Run:
-    """The longest usable stretch of one loop file (plant_loops export or CSV), checked for diagnosis."""
+    """The longest usable stretch of one loop file (plant_loops export or CSV), checked for diagnosis.
+
+    Raises
+    ------
+    LoopDataError
+        A :class:`~phfdi_base.errors.UserError` naming the file and what makes it unusable.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from phfdi.loopdiag import SyntheticLoop, read_loop, simulate_loop
+    >>> run = simulate_loop(SyntheticLoop())
+    >>> path = Path(tempfile.mkdtemp()) / "FIC101.csv"
+    >>> np.savetxt(path, np.column_stack([run.time_s, run["op_pct"], run["pv"]]), delimiter=",",
+    ...            header="time,OP,PV", comments="", fmt="%.4f")
+    >>> loop = read_loop(path)
+    >>> loop.names, loop.metadata["loop_tag"], len(loop)
+    (['time_s', 'op_pct', 'pv'], 'FIC101', 750)
+    """
     runs, why, pieces, cuts = _stretches(Path(path), columns)
     if not runs:
         raise LoopDataError(why)

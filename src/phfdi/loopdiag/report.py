@@ -30,7 +30,14 @@ def _params(p: dict) -> str:
 
 
 def format_report(rep: dict) -> str:
-    """A few lines per loop: oscillation, linear model, what it misses, the ranking, the verdict."""
+    """A few lines per loop: oscillation, linear model, what it misses, the ranking, the verdict.
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import format_report
+    >>> format_report({"file": "FIC101.csv", "error": "no OP column"})
+    'FIC101.csv: cannot diagnose: no OP column'
+    """
     if "error" in rep:
         return f"{rep['file']}: cannot diagnose: {rep['error']}"
     osc = rep["oscillation"]

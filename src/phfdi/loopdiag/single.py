@@ -11,7 +11,35 @@ from .readers import ColumnMap, check_loop_run, read_loop, read_loop_segments
 
 def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Settings | None = None,
                   figure_dir: str | None = None) -> dict:
-    """The report of one file (its longest usable stretch), or ``{"file": ..., "error": message}``."""
+    """The report of one file (its longest usable stretch), or ``{"file": ..., "error": message}``.
+
+    Parameters
+    ----------
+    path : str
+        A plant_loops export or a CSV with time, OP, PV (and SP) columns.
+    columns : ColumnMap, optional
+        Which column is which (default: guessed from the header).
+    settings : Settings, optional
+    figure_dir : str, optional
+        Also draw the loop's figure there.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from phfdi.loopdiag import Settings, SyntheticLoop, diagnose_file, simulate_loop
+    >>> run = simulate_loop(SyntheticLoop(valve=("stiction", {"s_pct": 3.0, "j_pct": 1.0}), ti_s=30,
+    ...                                   setpoint_steps=[(100, 52), (1500, 49)]))
+    >>> path = Path(tempfile.mkdtemp()) / "FIC101.csv"
+    >>> np.savetxt(path, np.column_stack([run.time_s, run["op_pct"], run["pv"], run["sp"]]), delimiter=",",
+    ...            header="time,OP,PV,SP", comments="", fmt="%.4f")
+    >>> report = diagnose_file(str(path), settings=Settings(baselines=False))
+    >>> report["loop_tag"], report["cause"]
+    ('FIC101', 'stiction')
+    >>> diagnose_file("no_such_file.csv")["error"]
+    'no_such_file.csv: no such file'
+    """
     try:
         run = read_loop(path, columns)
     except UserError as exc:
@@ -22,7 +50,27 @@ def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Setting
 def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None = None) -> dict:
     """The report of one loop run: the Hammerstein diagnosis (cause, S and J) and the stiction
     classifier's verdict with its evidence (``report["stiction"]``), or ``{"file": ..., "error": message}``
-    when it cannot be diagnosed."""
+    when it cannot be diagnosed.
+
+    Parameters
+    ----------
+    run : Run
+        ``time_s``, ``op_pct``, ``pv`` and optionally ``sp`` (e.g. from :func:`read_loop`).
+    settings : Settings, optional
+    figure_dir : str, optional
+        Also draw the loop's figure there (``report["figure"]``).
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import Settings, SyntheticLoop, diagnose_run, simulate_loop
+    >>> run = simulate_loop(SyntheticLoop(valve=("stiction", {"s_pct": 3.0, "j_pct": 1.0}), ti_s=30,
+    ...                                   setpoint_steps=[(100, 52), (1500, 49)]))
+    >>> report = diagnose_run(run, Settings(baselines=False))
+    >>> report["verdict"], report["cause"], report["stiction"]["verdict"]
+    ('explained', 'stiction', 'stiction')
+    >>> {name: round(value) for name, value in report["parameters"].items()}  # simulated: S 3 %, J 1 %
+    {'s_pct': 3, 'j_pct': 1}
+    """
     try:
         settings = settings or Settings()
         le = loop_evidence(run, settings)

@@ -11,7 +11,9 @@ simulated exactly for a piecewise-constant stem position (zero-order hold):
 
 with d the dead time in samples and v0 the stem position at the start (the loop starts at rest).
 Loads enter at the process input (in % of stem travel): a random walk, a first-order filtered
-noise and steps; the recorded PV may be rounded to the historian's resolution.
+noise, steps and ramps; the recorded PV may be rounded to the historian's resolution, and the
+historian may compress PV and OP (step-hold: a value is stored only when it has moved more than a
+dead-band from the last stored one; the controller sees the uncompressed PV).
 """
 
 from __future__ import annotations
@@ -29,7 +31,15 @@ from pi_controllers.pi import PIController
 
 @dataclass
 class SyntheticLoop:
-    """One closed loop; ``valve`` is ``(block name, params)`` of :mod:`valve_actuator.blocks` or None."""
+    """One closed loop; ``valve`` is ``(block name, params)`` of :mod:`valve_actuator.blocks` or None.
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import SyntheticLoop, simulate_loop
+    >>> loop = SyntheticLoop(valve=("backlash", {"width_pct": 2.0}), duration_s=1200.0)
+    >>> simulate_loop(loop).names
+    ['time_s', 'op_pct', 'pv', 'sp', 'stem_pct']
+    """
 
     process: str = "foptd"  # or "integrating"
     gain: float = 1.5  # PV units per % of stem travel (per % per s when integrating)
@@ -49,14 +59,25 @@ class SyntheticLoop:
     load_ar_std: float = 0.0  # first-order filtered (AR(1)) load at the process input (% stationary std)
     load_ar_pole: float = 0.95  # its pole (per sample)
     load_steps: list[tuple[float, float]] = field(default_factory=list)  # (time s, load step %) at the input
+    load_ramps: list[tuple[float, float, float]] = field(default_factory=list)  # (start s, duration s, change %)
     pv_quantum: float = 0.0  # PV as the historian stores it: rounded to this step (0: not rounded)
+    pv_compression: float = 0.0  # historian compression dead-band of PV (PV units; 0: none)
+    op_compression: float = 0.0  # historian compression dead-band of OP (%; 0: none)
     noise_std: float = 0.05
     seed: int = 1
     loop_tag: str = "SYN"
 
 
 def simulate_loop(spec: SyntheticLoop) -> Run:
-    """The closed loop's historian record: time_s, op_pct, pv, sp, and the truth stem_pct."""
+    """The closed loop's historian record: time_s, op_pct, pv, sp, and the truth stem_pct.
+
+    Examples
+    --------
+    >>> from phfdi.loopdiag import SyntheticLoop, simulate_loop
+    >>> run = simulate_loop(SyntheticLoop(duration_s=1200.0, dt_s=4.0))
+    >>> len(run), run.metadata["loop_tag"]
+    (300, 'SYN')
+    """
     rng = np.random.default_rng(spec.seed)
     n = int(round(spec.duration_s / spec.dt_s))
     d = int(round(spec.dead_time_s / spec.dt_s))
@@ -90,7 +111,8 @@ def simulate_loop(spec: SyntheticLoop) -> Run:
         op = pi.step(sp_now, pv)
         v = valve.step(op, t) if valve is not None else op
         v_hist.append(v)
-        v_in = v_hist[-1 - d] + load + ar + step_load
+        ramp_load = sum(dv * min(max((t - t0) / dur, 0.0), 1.0) for t0, dur, dv in spec.load_ramps)
+        v_in = v_hist[-1 - d] + load + ar + step_load + ramp_load
         load += spec.load_walk_std * rng.standard_normal()
         if ar_gain > 0:
             ar = spec.load_ar_pole * ar + ar_gain * rng.standard_normal()
@@ -100,11 +122,27 @@ def simulate_loop(spec: SyntheticLoop) -> Run:
             x = a * x + spec.gain * (1 - a) * (v_in - spec.op0_pct)
         for key, val in (("time_s", t), ("op_pct", op), ("pv", pv), ("sp", sp_now), ("stem_pct", v)):
             out[key][k] = val
+    if spec.pv_compression > 0:
+        out["pv"] = compress(out["pv"], spec.pv_compression)
+    if spec.op_compression > 0:
+        out["op_pct"] = compress(out["op_pct"], spec.op_compression)
     meta = {"loop_tag": spec.loop_tag, "file": f"synthetic:{spec.loop_tag}", "sample_time_s": spec.dt_s,
             "units": {"op_pct": "%", "pv": "PV units", "sp": "PV units"},
             "process_type": "integrating" if spec.process == "integrating" else "self_regulating",
             "synthetic": {"valve": spec.valve, "kp": spec.kp, "ti_s": spec.ti_s}, "notes": []}
     return Run(out, meta)
+
+
+def compress(x: np.ndarray, deadband: float) -> np.ndarray:
+    """A historian's dead-band compression as the record shows it, step-hold: each sample repeats the
+    last stored value until the signal has moved more than ``deadband`` from it."""
+    out = np.empty_like(x)
+    last = x[0]
+    for i, v in enumerate(x):
+        if abs(v - last) > deadband:
+            last = v
+        out[i] = last
+    return out
 
 
 def steps_every(period_s: float, duration_s: float, center: float, size: float) -> list[tuple[float, float]]:

@@ -6,6 +6,12 @@ samples in the project's names and units, NaN where missing, and a note for ever
 file, line and column). What cannot be repaired raises :class:`ReadError`, a
 :class:`~phfdi_base.errors.UserError` with one line ``FILE: line N, column 'X': problem``. The policy
 table is in :mod:`phfdi.records.policy` and docs/records.md.
+
+Examples
+--------
+>>> from phfdi.records import POLICIES
+>>> POLICIES  # read_record's policy: a run refuses a clock reset, a historian export starts a new segment
+('run', 'historian')
 """
 
 from .columns import ColumnMap, ColumnSpec, ModeSpec, QualitySpec

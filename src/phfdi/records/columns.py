@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Self, Sequence
 
 from phfdi_base.errors import UserError
 from phfdi_base.yamlfile import read_mapping
@@ -72,7 +73,14 @@ def normal_cell(value: object) -> str:
 
 @dataclass(frozen=True)
 class ColumnSpec:
-    """One mapped column: its name in the file, its unit there and the factor to the project's unit."""
+    """One mapped column: its name in the file, its unit there and the factor to the project's unit.
+
+    Examples
+    --------
+    >>> from phfdi.records import ColumnMap
+    >>> ColumnMap.from_mapping({"op_pct": {"column": "OP", "unit": "fraction"}}).signals["op_pct"]
+    ColumnSpec(column='OP', unit='fraction', factor=100.0)
+    """
 
     column: str
     unit: str | None = None
@@ -81,7 +89,15 @@ class ColumnSpec:
 
 @dataclass(frozen=True)
 class ModeSpec:
-    """The controller-mode column; ``automatic`` None: the default words (auto, cascade, numbers != 0)."""
+    """The controller-mode column; ``automatic`` None: the default words (auto, cascade, numbers != 0).
+
+    Examples
+    --------
+    >>> from phfdi.records import ModeSpec
+    >>> mode = ModeSpec("FIC101.MODE")
+    >>> mode.is_automatic("CAS"), mode.is_automatic("MAN")
+    (True, False)
+    """
 
     column: str
     automatic: frozenset[str] | None = None
@@ -100,7 +116,15 @@ class ModeSpec:
 
 @dataclass(frozen=True)
 class QualitySpec:
-    """A quality-flag column; rows whose flag is not in ``good`` mark ``signals`` (None: all) missing."""
+    """A quality-flag column; rows whose flag is not in ``good`` mark ``signals`` (None: all) missing.
+
+    Examples
+    --------
+    >>> from phfdi.records import ColumnMap
+    >>> cmap = ColumnMap.from_mapping({"pv": "FIC101.PV", "quality": {"column": "FIC101.Q", "good": [192]}})
+    >>> cmap.quality[0].column, sorted(cmap.quality[0].good)
+    ('FIC101.Q', ['192'])
+    """
 
     column: str
     good: frozenset[str] = GOOD_WORDS
@@ -109,7 +133,21 @@ class QualitySpec:
 
 @dataclass
 class ColumnMap:
-    """Signal -> column (with unit), plus the time options and the mode/quality columns."""
+    """Signal -> column (with unit), plus the time options and the mode/quality columns.
+
+    Made from a dict or YAML file (:meth:`from_mapping`, :meth:`load`, the module docstring's format) or
+    from the command line's ``--column``/``--unit`` (:meth:`from_args`, :meth:`parse`).
+
+    Examples
+    --------
+    >>> from phfdi.records import ColumnMap
+    >>> cmap = ColumnMap.from_mapping({"time_s": "Stamp", "op_pct": {"column": "OP", "unit": "fraction"},
+    ...                                "mode": {"column": "MODE", "automatic": ["AUTO"]}})
+    >>> cmap.channels(), cmap.columns_used()
+    (['op_pct'], ['Stamp', 'OP', 'MODE'])
+    >>> ColumnMap.parse("op=FIC1.OP,pv=FIC1.PV,time=Stamp").channels()
+    ['op_pct', 'pv']
+    """
 
     signals: dict[str, ColumnSpec]
     sample_time_s: float | None = None
@@ -135,13 +173,13 @@ class ColumnMap:
 
     # ---- constructors --------------------------------------------------------------
     @classmethod
-    def load(cls, path: str | Path) -> "ColumnMap":
+    def load(cls, path: str | Path) -> Self:
         """From a YAML file."""
         data = read_mapping(path, "column map", "a mapping 'signal: column' or 'signal: {column:, unit:}'")
         return cls.from_mapping(data, str(path))
 
     @classmethod
-    def from_mapping(cls, data: dict, source: str = "column map") -> "ColumnMap":
+    def from_mapping(cls, data: dict, source: str = "column map") -> Self:
         """From a dict in either form (see the module docstring)."""
         if not isinstance(data, dict):
             raise UserError(f"{source}: expected a mapping 'signal: column'")
@@ -161,7 +199,7 @@ class ColumnMap:
                    source=source)
 
     @classmethod
-    def from_args(cls, columns: list[str], units: list[str] = (), source: str = "--column") -> "ColumnMap":
+    def from_args(cls, columns: Sequence[str], units: Sequence[str] = (), source: str = "--column") -> Self:
         """From ``--column SIGNAL=COLUMN`` items (``mode=COL``, ``quality=COL`` too) and ``--unit SIGNAL=UNIT``."""
         data: dict = {}
         for item in columns:
@@ -176,7 +214,7 @@ class ColumnMap:
         return cls.from_mapping(data, source)
 
     @classmethod
-    def parse(cls, text: str) -> "ColumnMap":
+    def parse(cls, text: str) -> Self:
         """From ``op=FIC1.OP,pv=FIC1.PV,time=Stamp`` (one argument) or a YAML file name."""
         if text.endswith((".yaml", ".yml")):
             return cls.load(text)
@@ -195,7 +233,7 @@ def _opt_str(value: object) -> str | None:
     return None if value is None or value == "" else str(value)
 
 
-def _positive(value: object, key: str, source: str) -> float | None:
+def _positive(value: Any, key: str, source: str) -> float | None:  # value: a YAML scalar
     if value is None:
         return None
     try:
@@ -258,7 +296,7 @@ def _quality_specs(spec: object, source: str) -> list[QualitySpec]:
             if sigs is not None and not (isinstance(sigs, list) and all(isinstance(s, str) for s in sigs)):
                 raise UserError(f"{source}: quality.signals: expected a list of signal names")
             out.append(QualitySpec(item["column"], GOOD_WORDS if good is None else _cells(good, "quality.good", source),
-                                   None if sigs is None else tuple(ALIASES.get(s, s) for s in sigs)))
+                                   None if sigs is None else tuple(ALIASES.get(str(s), str(s)) for s in sigs)))
         else:
             raise UserError(f"{source}: quality: expected a column name or {{column: NAME, good: [VALUES]}}")
     return out

@@ -6,7 +6,19 @@ from phfdi_base.errors import UserError
 
 
 class ReadError(UserError):
-    """A record that cannot be read or used; the message is one line ``FILE: line N, column 'X': problem``."""
+    """A record that cannot be read or used; the message is one line ``FILE: line N, column 'X': problem``.
+
+    A :class:`~phfdi_base.errors.UserError`: the command line prints it and exits 2.
+
+    Examples
+    --------
+    >>> from phfdi.records import ReadError
+    >>> error = ReadError("loop.csv", "not a number", line=3, column="PV")
+    >>> print(error)
+    loop.csv: line 3, column 'PV': not a number
+    >>> error.line, error.column
+    (3, 'PV')
+    """
 
     def __init__(self, path: object, problem: str, line: int | None = None, column: str | None = None,
                  where: str = "line") -> None:

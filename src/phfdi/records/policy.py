@@ -128,10 +128,10 @@ def split_backwards(rows: Rows, policy: str) -> None:
     if policy == "run":
         raise ReadError(rows.path, f"time goes back from {rows.stamp(i - 1)} to {rows.stamp(i)} ({why}); "
                                    f"split the file", line=int(rows.lines[i]), where=rows.where)
-    for i in back:
-        rows.note(f"{rows.where} {rows.lines[i]}: time goes back from {rows.stamp(i - 1)} to {rows.stamp(i)}; "
+    for j in back.tolist():
+        rows.note(f"{rows.where} {rows.lines[j]}: time goes back from {rows.stamp(j - 1)} to {rows.stamp(j)}; "
                   f"a new segment starts here")
-    rows.boundaries = sorted(set(rows.boundaries) | {int(i) for i in back})
+    rows.boundaries = sorted(set(rows.boundaries) | {int(j) for j in back})
 
 
 def respace_repeats(rows: Rows) -> None:
@@ -145,10 +145,10 @@ def respace_repeats(rows: Rows) -> None:
                 continue  # already moved by an earlier repair
             if i + 1 < len(t) and abs(t[i + 1] - t[i] - 2 * dt) <= 0.25 * dt:
                 t[i] += dt
-                fixed.append(a + i)
+                fixed.append(a + int(i))
             elif i >= 2 and abs(t[i - 1] - t[i - 2] - 2 * dt) <= 0.25 * dt:
                 t[i - 1] -= dt
-                fixed.append(a + i)
+                fixed.append(a + int(i))
     if fixed:
         pairs = [(int(rows.lines[i - 1]), int(rows.lines[i])) for i in fixed]
         rows.note(f"{places(rows.where, pairs)}: repeated stamp {rows.stamp(fixed[0] - 1)} next to a skipped one "
@@ -200,18 +200,18 @@ def split_jumps(rows: Rows, policy: str) -> None:
     jumps = [f for f in found if f[1] > CLOCK_JUMP_SAMPLES * f[2]]
     if policy == "historian" and jumps:
         rows.boundaries = sorted(set(rows.boundaries) | {i for i, _, _ in jumps})
-        for i, gap, _ in jumps[:3]:
-            rows.note(f"{rows.where} {rows.lines[i]}: time jumps {gap:g} s ahead (from {rows.stamp(i - 1)}); "
+        for k, gap, _ in jumps[:3]:
+            rows.note(f"{rows.where} {rows.lines[k]}: time jumps {gap:g} s ahead (from {rows.stamp(k - 1)}); "
                       f"a new segment starts here")
         if len(jumps) > 3:
             rows.note(f"{len(jumps) - 3} more time jumps start new segments")
         found = [f for f in found if f not in jumps]
     if found:
         missing = sum(int(round(g / dt)) - 1 for _, g, dt in found)
-        i, gap, _ = max(found, key=lambda f: f[1])
+        k, gap, _ = max(found, key=lambda f: f[1])
         rows.note(f"{places(rows.where, [(int(rows.lines[j - 1]), int(rows.lines[j])) for j, _, _ in found])}: "
                   f"{len(found)} {'gap' if len(found) == 1 else 'gaps'} in time, about {missing} samples missing "
-                  f"(longest {gap:g} s after {rows.stamp(i - 1)})")
+                  f"(longest {gap:g} s after {rows.stamp(k - 1)})")
 
 
 def note_holds_and_steps(rows: Rows, units: dict[str, str], columns: dict[str, str]) -> None:

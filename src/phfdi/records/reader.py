@@ -18,6 +18,9 @@ from .notes import counted, places
 from .record import Record
 from .sources import Table, read_table
 
+#: what names a column map: the map, its dict form, a YAML file, or None (every column under its own name)
+MapLike = ColumnMap | dict | str | Path | None
+
 #: column names taken as time when no column map says which (case-insensitive)
 TIME_NAMES = ("time_s", "timestamp", "time", "datetime", "date")
 DEFAULT_SOURCE = "the file's header"
@@ -34,6 +37,20 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
     even when ``channels`` is None. ``policy``: "run" (a clock reset is refused) or "historian" (it starts a
     new segment). ``min_samples``: fewer usable samples are refused.
     Raises :class:`ReadError` (one line naming file, line and column) for what cannot be used.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi.records import read_record
+    >>> path = Path(tempfile.mkdtemp()) / "loop.csv"
+    >>> _ = path.write_text("Time (s),PV,OP\\n0,7.0,0.50\\n1,7.1,0.51\\n2,,0.52\\n3,7.3,0.53\\n")
+    >>> record = read_record(path, {"time_s": "Time (s)", "ph_measured": "PV",
+    ...                             "valve_command_pct": {"column": "OP", "unit": "fraction"}})
+    >>> record.signals["ph_measured"], record.signals["valve_command_pct"]
+    (array([7. , 7.1, nan, 7.3]), array([50., 51., 52., 53.]))
+    >>> print(record.notes[0].split(": ", 1)[1])
+    column 'PV': 1 cell not a number (empty 1), first at line 4: marked missing
     """
     if policy not in P.POLICIES:
         raise ValueError(f"policy must be one of {P.POLICIES}, got {policy!r}")
@@ -63,15 +80,16 @@ def _apply_policy(rows: P.Rows, policy: str) -> None:
 
 
 # ---- which columns -----------------------------------------------------------------------
-def _resolve_map(cmap: ColumnMap | dict | str | Path | None, table: Table, channels, required=()) -> ColumnMap:
-    if callable(cmap):  # a resolver that chooses the columns from the header and the file's metadata
-        cmap = cmap(list(table.columns), dict(table.metadata))
-    if isinstance(cmap, (str, Path)):
-        cmap = ColumnMap.load(cmap)
-    elif isinstance(cmap, dict):
-        cmap = ColumnMap.from_mapping(cmap)
-    if cmap is None:
-        cmap = _default_map(table)
+def _resolve_map(given: MapLike | Callable[[list[str], dict], MapLike], table: Table, channels,
+                 required=()) -> ColumnMap:
+    if callable(given):  # a resolver that chooses the columns from the header and the file's metadata
+        given = given(list(table.columns), dict(table.metadata))
+    if isinstance(given, (str, Path)):
+        cmap = ColumnMap.load(given)
+    elif isinstance(given, dict):
+        cmap = ColumnMap.from_mapping(given)
+    else:
+        cmap = _default_map(table) if given is None else given
     wanted = [*(channels or ()), *(c for c in required if c not in (channels or ()))]
     if wanted:
         absent = [c for c in wanted if c not in cmap.signals]
@@ -138,6 +156,7 @@ def _rows(table: Table, cmap: ColumnMap) -> P.Rows:
     readable = ~np.isnan(rows.time_s)
     if not readable.all():
         bad = np.flatnonzero(~readable)
+        assert cmap.time is not None  # without a time column every stamp is made from sample_time_s
         rows.note(f"{places(table.where, spans_of(table, bad))}, column {cmap.time.column!r}: {len(bad)} "
                   f"{'row' if len(bad) == 1 else 'rows'} without a readable time stamp, dropped")
         rows.keep(readable)

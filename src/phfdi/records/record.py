@@ -22,6 +22,21 @@ class Record:
     of each sample, ``where`` which of the three; ``columns`` signal -> the file's column name;
     ``automatic`` True where the controller was in automatic (None: no MODE column);
     ``boundaries`` indices where a new segment starts (historian policy: clock resets and jumps).
+
+    Made by :func:`~phfdi.records.read_record`; :meth:`to_run` gives the project's run.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi.records import read_record
+    >>> path = Path(tempfile.mkdtemp()) / "run.csv"
+    >>> _ = path.write_text("time_s,ph_measured\\n0,7.0\\n1,7.1\\n2,7.2\\n")
+    >>> record = read_record(path)
+    >>> len(record), record.names, record.units
+    (3, ['ph_measured'], {'ph_measured': 'pH'})
+    >>> record.to_run().names
+    ['time_s', 'ph_measured']
     """
 
     path: str

@@ -71,7 +71,7 @@ def read_text(path: Path, data: bytes, encoding: str | None = None) -> Table:
 
 
 def _text_columns(path: Path, table: TextTable, header: list[str], metadata: dict | None = None) -> Table:
-    columns: dict[str, list] = {}
+    columns: dict[str, list | np.ndarray] = {}
     notes = list(table.notes)
     for i, name in enumerate(header):
         if not name:

@@ -12,14 +12,14 @@ their reliable readers before exiting), then the observers (the detector
 processes what it holds and publishes its last alarms), then the recorder
 (takes what its readers hold and finishes the bag). A node that does not stop within
 ``stop_timeout_s`` is killed. Afterwards: no process of the graph is left
-(children also get SIGTERM if the launcher itself dies), a killed node's
+(each node asks the kernel for SIGTERM when the launcher dies: ``PHFDI_LAUNCHER_PID``,
+:func:`phfdi_base.ros.run.main`), a killed node's
 Fast DDS shared-memory files are removed (``fastdds shm clean``), and a bag
 whose recorder could not finish it is recovered in place.
 """
 
 from __future__ import annotations
 
-import ctypes
 import json
 import os
 import shutil
@@ -37,7 +37,7 @@ import yaml
 from phfdi import bagio
 from phfdi_base.errors import UserError
 from phfdi_base.parts import NodePart, write_part
-from phfdi_base.ros.env import graph_env, reserve_domain_id
+from phfdi_base.ros.env import LAUNCHER_PID_VAR, graph_env, reserve_domain_id
 from phfdi_base.topics import CONTROLLERS, DETECTOR, PLANT, PLANT_STATE, RECORDER, VALVE
 
 from .parts import make_part
@@ -72,8 +72,11 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
         common["overrides"] = list(overrides)
     nodes = [NodeSpec(CONTROLLERS, "pi_controllers.node"), NodeSpec(VALVE, "valve_actuator.node"),
              NodeSpec(PLANT, "ph_plant_sim.node", {"pace": float(pace)})]
+    part = make_part(scenario, fault or None, list(overrides), onset_s)  # resolved and validated once for every node
     if record is not None:
-        rec = {"path": str(Path(record).resolve())}
+        from .recorder import graph_run_metadata
+
+        rec = {"path": str(Path(record).resolve()), "run_metadata": graph_run_metadata(part.scenario)}
         if split_after_s > 0:
             rec["split_after_s"] = float(split_after_s)
         nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", rec, OBSERVER))
@@ -83,7 +86,6 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
     names = [n.name for n in nodes]
     for n in nodes:
         n.params = {**common, "graph_nodes": names, **n.params}
-    part = make_part(scenario, fault or None, list(overrides), onset_s)  # resolved and validated once for every node
     for n in nodes:
         n.part = part
     return nodes
@@ -125,11 +127,6 @@ class LaunchResult:
     @property
     def real_time_factor(self) -> float:
         return self.simulated_s / self.run_wall_s if self.run_wall_s > 0 else float("nan")
-
-
-def _die_with_parent() -> None:  # runs in the child between fork and exec
-    libc = ctypes.CDLL(None, use_errno=True)
-    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG: SIGTERM when the launcher dies
 
 
 class _Proc:
@@ -198,6 +195,7 @@ class Launcher:
         self.status = status or (lambda text: None)
         self.stop_timeout_s = stop_timeout_s
         self.procs: dict[str, _Proc] = {}
+        self._parts_written: dict[int, str] = {}  # one file per distinct part (loop_graph: one for the graph)
         self._signals: list[int] = []
         self.t_connected: float | None = None
 
@@ -222,28 +220,36 @@ class Launcher:
     # ---- processes ---------------------------------------------------------------------------
     def _spawn_all(self, domain_id: int) -> None:
         env = graph_env(domain_id)
+        env[LAUNCHER_PID_VAR] = str(os.getpid())  # each node asks for SIGTERM when this process dies
         self.t0 = time.monotonic()
         self.t0_wall = time.time()  # start-up trace: nodes report wall clock times
         self.wall_t0 = self.t0_wall - 1.0  # for file times (coarse clocks)
-        written: dict[int, str] = {}  # one file per distinct part (loop_graph: one for the graph)
-        for spec in self.nodes:
-            params = dict(spec.params)
-            if spec.part is not None:
-                if id(spec.part) not in written:
-                    path = self.log_dir / f"part{len(written)}.json"
-                    written[id(spec.part)] = str(write_part(path, spec.part))
-                params["part"] = written[id(spec.part)]
-            params_file = self.log_dir / f"{spec.name}.params.yaml"
-            params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": params}}, sort_keys=False))
-            cmd = [sys.executable, "-m", spec.module, "--ros-args", "--params-file", str(params_file)]
+        cmds = {spec.name: self._write_params(spec) for spec in self.nodes}
+        # the observers first: the detector has the most to import, so it is the last to connect
+        for spec in sorted(self.nodes, key=lambda s: s.role != OBSERVER):
             with open(self.log_dir / f"{spec.name}.stdout", "wb") as out, \
                  open(self.log_dir / f"{spec.name}.stderr", "wb") as err:
-                popen = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=env,
-                                         start_new_session=True, preexec_fn=_die_with_parent)
+                # no preexec_fn: the child is started by vfork, about 10 ms sooner per node than a fork of
+                # this large process
+                popen = subprocess.Popen(cmds[spec.name], stdin=subprocess.DEVNULL, stdout=out, stderr=err,
+                                         env=env, start_new_session=True)
             self.procs[spec.name] = _Proc(spec, popen, self.log_dir)
             self.procs[spec.name].spawned = time.monotonic() - self.t0
+        self.procs = {spec.name: self.procs[spec.name] for spec in self.nodes}  # graph order for what follows
         self.status(f"started {len(self.nodes)} nodes on ROS domain {domain_id}: "
                     + ", ".join(f"{p.name} (pid {p.popen.pid})" for p in self.procs.values()))
+
+    def _write_params(self, spec: NodeSpec) -> list[str]:
+        """Write the node's parameter file (and its part, once per distinct part); its command line."""
+        params = dict(spec.params)
+        if spec.part is not None:
+            if id(spec.part) not in self._parts_written:
+                path = self.log_dir / f"part{len(self._parts_written)}.json"
+                self._parts_written[id(spec.part)] = str(write_part(path, spec.part))
+            params["part"] = self._parts_written[id(spec.part)]
+        params_file = self.log_dir / f"{spec.name}.params.yaml"
+        params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": params}}, sort_keys=False))
+        return [sys.executable, "-m", spec.module, "--ros-args", "--params-file", str(params_file)]
 
     def _watch(self, result: LaunchResult) -> None:
         plant = self.procs[self.clock_node]

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 from dataclasses import asdict
 
+from ph_plant_sim.build import load_plant_model
+from phfdi.faults import fault_library
 from phfdi.loop import build_parts
-from phfdi.scenario import fault_library, raw_scenario
+from phfdi.scenario import raw_scenario
 from phfdi_base.parts import LoopStart, NodePart
 from phfdi_base.spec import ScenarioSpec, resolve_scenario
 
@@ -40,7 +42,7 @@ def part_for(spec: ScenarioSpec, raw: dict, library: dict, base_scenario: str) -
     parts = build_parts(spec)
     plant = parts.process.plant
     start = LoopStart(**asdict(parts.start), ph=plant.ph, level_cm=plant.level_cm)
-    return NodePart(spec, start, raw, library, base_scenario)
+    return NodePart(spec, start, raw, library, base_scenario, load_plant_model(spec.plant))
 
 
 def recorded_part(spec: ScenarioSpec) -> NodePart:

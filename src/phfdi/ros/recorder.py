@@ -30,7 +30,6 @@ import time
 from pathlib import Path
 
 from phfdi import bagio
-from phfdi.loop import run_metadata
 from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main
 from phfdi_base.stamps import seconds_to_ns
 from phfdi_base.topics import BY_NAME, RECORDED, RECORDER
@@ -43,9 +42,18 @@ PARAMS = (
     ParamSpec("compression", "zstd", "chunk compression", choices=("zstd", "lz4", "none")),
     ParamSpec("flush_period_s", 1.0, "close the chunk in progress at least this often (s, wall)",
               range=(0.05, 3600.0)),
+    ParamSpec("run_metadata", "", "the run's metadata (JSON) written into the bag; phfdi launch passes it, '' "
+                                   "computes it from the scenario"),
     ParamSpec("split_after_s", 0.0, "start a new file (<name>.1.mcap, <name>.2.mcap, ...) every this many s of "
                                     "simulated time; 0: one file", range=(0.0, 1e12)),
 )
+
+
+def graph_run_metadata(spec) -> str:
+    """The bag metadata of a graph run of ``spec`` (JSON), as the launcher passes it to the recorder."""
+    from phfdi.loop import run_metadata  # the whole in-process loop: only for a recorder started by hand
+
+    return json.dumps(run_metadata(spec, "graph"), default=str)
 
 
 def _message_class(msgtype: str):
@@ -71,7 +79,7 @@ class RecorderNode(GraphNode):
         if self._split_ns and stale.exists():  # the parts of an earlier split bag would be read as this run's
             raise NodeStartError(f"parameter path: {stale} exists (a part of an earlier split bag); remove "
                                  f"{Path(path).stem}.*.mcap or pick another name")
-        self._meta = {"json": json.dumps(run_metadata(self.spec, "graph"), default=str)}
+        self._meta = {"json": self.param("run_metadata") or graph_run_metadata(self.spec)}
         self._part_end_ns: int | None = None  # stamp that starts the next file (set by the first message)
         self.parts: list[str] = []
         self.counts: dict[str, int] = {}  # all files

@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 
 from wavelet_fdi.config import DetectorSettings
 from wavelet_fdi.filterbank import coefficient_residuals
-from wavelet_fdi.isolation import CLASSES
+from wavelet_fdi.isolation import classes
 from wavelet_fdi.peers import DETECTORS, LABELS
 from wavelet_fdi.statistics import CusumBank
 
@@ -73,7 +73,7 @@ def plot_false_alarms(summary: dict, path: Path) -> Path:
 def plot_isolation(summary: dict, path: Path) -> Path:
 
     faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
-    cols = list(CLASSES) + ["pending"]
+    cols = list(classes()) + ["pending"]
     m = np.zeros((len(faults), len(cols)))
     for r in summary["rows"]:
         for c in r["classes"]:

@@ -24,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from phfdi.calibration import healthy_traces, scenario_for_seed
+from phfdi.faults import catalogue
 from phfdi.loop import build_parts, simulate
 from phfdi.replay import run_chunks
 from phfdi.scenario import load_scenario
@@ -43,18 +44,22 @@ from wavelet_fdi.peers import (
 )
 from wavelet_fdi.statistics import CusumBank
 
-#: fault -> (main parameter, three severities: mild, the paper's, strong); other params scale along
-SEVERITIES: dict[str, tuple[str, list[dict]]] = {
-    "backlash": ("width_pct", [{"width_pct": 0.35}, {"width_pct": 0.7}, {"width_pct": 1.4}]),
-    "friction": ("coulomb_pct", [{"coulomb_pct": 0.5}, {"coulomb_pct": 1.0}, {"coulomb_pct": 2.0}]),
-    "deadzone": ("width_pct", [{"width_pct": 50.0}, {"width_pct": 100.0}, {"width_pct": 150.0}]),
-    "saturation": ("high_pct", [{"high_pct": 60.0}, {"high_pct": 50.0}, {"high_pct": 40.0}]),
-    "stiction": ("s_pct", [{"s_pct": 0.75, "j_pct": 0.25}, {"s_pct": 1.5, "j_pct": 0.5},
-                           {"s_pct": 3.0, "j_pct": 1.0}]),
-    "probe_delay": ("delay_s", [{"delay_s": 5.0}, {"delay_s": 10.0}, {"delay_s": 20.0}]),
+#: faults outside the fault library, as scenario fault entries, with their severities (main parameter, levels)
+CUSTOM_SEVERITIES: dict[str, tuple[str, list[dict]]] = {
     # not in the paper: a degrading probe adds noise (extra standard deviation, pH); no mean change
     "probe_noise": ("std", [{"std": 0.005}, {"std": 0.01}, {"std": 0.02}]),
 }
+
+
+def severities() -> dict[str, tuple[str, list[dict]]]:
+    """fault -> (main parameter, three severities: mild, the preset's, strong), from the fault catalogue
+    (:mod:`phfdi_base.faults`; other parameters scale along where the catalogue says so), then the faults
+    outside the library."""
+    out = {name: (f.main.name, f.severity_params()) for name, f in catalogue().items()
+           if f.preset and f.severities is not None and f.main is not None}
+    return {**out, **CUSTOM_SEVERITIES}
+
+
 #: faults outside the fault library, as scenario fault entries
 CUSTOM_FAULTS = {"probe_noise": {"type": "sensor_noise", "where": "ph_sensor", "params": {"seed": 4242}}}
 #: what isolation should answer: probe_noise is in no hypothesis, so "unknown"
@@ -70,7 +75,7 @@ class EvalConfig:
     healthy_seeds: tuple[int, ...] = tuple(range(1, 9))
     calibration_seeds: tuple[int, ...] = tuple(range(1001, 1017))
     severity_indices: tuple[int, ...] = (0, 1, 2)
-    faults: tuple[str, ...] = tuple(SEVERITIES)
+    faults: tuple[str, ...] = field(default_factory=lambda: tuple(severities()))
     #: scenario key=value overrides for every run (calibration included)
     overrides: tuple[str, ...] = ()
     #: calibration window (samples): much shorter than ARL0, long against the statistics' memory
@@ -91,9 +96,10 @@ class EvalConfig:
         overlap = used & set(self.calibration_seeds)
         if overlap:
             raise UserError(f"evaluation seeds {sorted(overlap)} are also calibration seeds: keep them disjoint")
+        known = severities()
         for f in self.faults:
-            if f not in SEVERITIES:
-                raise UserError(f"no severities defined for fault {f!r}; known: {', '.join(SEVERITIES)}")
+            if f not in known:
+                raise UserError(f"no severities defined for fault {f!r}; known: {', '.join(known)}")
 
 
 # ---- one run ---------------------------------------------------------------------------------
@@ -301,7 +307,7 @@ def tasks(cfg: EvalConfig, cal: Calibration, peers: dict) -> list[RunTask]:
     out = [RunTask(cfg.scenario, "healthy", {}, s, cfg.onset_s, cfg.settings, cal, thresholds, bands, cfg.overrides)
            for s in cfg.healthy_seeds]
     for fault in cfg.faults:
-        _, levels = SEVERITIES[fault]
+        _, levels = severities()[fault]
         for i in cfg.severity_indices:
             for s in cfg.eval_seeds:
                 keep = i == PAPER_SEVERITY and s == cfg.eval_seeds[0] and fault == "backlash"
@@ -373,7 +379,7 @@ def summarise(records: list[dict], cfg: EvalConfig, cal: Calibration, peers: dic
             false[d] += sum(1 for a in r["alarms"][d] if a["detection_time"] < limit)
     rows = []
     for fault in cfg.faults:
-        pname, levels = SEVERITIES[fault]
+        pname, levels = severities()[fault]
         for i in cfg.severity_indices:
             runs = [r for r in records if r["fault"] == fault and r["params"] == levels[i]]
             row = {"fault": fault, "param": pname, "value": levels[i][pname],

@@ -28,21 +28,16 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from phfdi.faults import catalogue, fault_library
 from phfdi.loop import simulate
-from phfdi.scenario import fault_library, load_scenario
+from phfdi.scenario import load_scenario
 
 #: the classes of the paper's Section 6, in its order
 PAPER_CLASSES = ("healthy", "backlash", "friction", "deadzone", "saturation")
 #: the paper's grouping of them into three clusters (Figure 35)
 PAPER_GROUPING = {"friction": 0, "healthy": 1, "backlash": 1, "deadzone": 2, "saturation": 2}
-#: fault parameters scaled by a variant's severity factor; saturation moves its upper limit
-#: from 100 % (factor 0) towards the library's value (factor 1) and beyond
-SEVERITY_PARAMS = {
-    "backlash": ("width_pct",),
-    "friction": ("coulomb_pct",),
-    "deadzone": ("width_pct",),
-    "saturation": ("high_pct",),
-}
+#: a variant's severity factor scales the fault's main parameter (from the fault catalogue); saturation moves
+#: its upper limit from 100 % (factor 0) towards the library's value (factor 1) and beyond
 SEVERITY_FACTORS = tuple(float(f) for f in np.linspace(0.8, 1.2, 7))
 
 
@@ -59,21 +54,18 @@ class Variant:
 
 
 def severity_overrides(fault: str, factor: float) -> list[str]:
-    """``--set`` overrides scaling the library fault's severity by ``factor``."""
-    if fault == "healthy":
+    """``--set`` overrides scaling the library fault's main parameter (its severity) by ``factor``."""
+    main = catalogue()[fault].main if fault != "healthy" else None
+    if main is None:
         return []
-
     params = fault_library()[fault].get("params", {})
-    out = []
-    for key in SEVERITY_PARAMS.get(fault, ()):
-        value = float(params[key])
-        if fault == "saturation" and key == "high_pct":
-            scaled = 100.0 - factor * (100.0 - value)
-            scaled = min(max(scaled, float(params.get("low_pct", 0.0)) + 1.0), 100.0)
-        else:
-            scaled = factor * value
-        out.append(f"faults.0.params.{key}={scaled:.6g}")
-    return out
+    value = float(params[main.name])
+    if fault == "saturation" and main.name == "high_pct":
+        scaled = 100.0 - factor * (100.0 - value)
+        scaled = min(max(scaled, float(params.get("low_pct", 0.0)) + 1.0), 100.0)
+    else:
+        scaled = factor * value
+    return [f"faults.0.params.{main.name}={scaled:.6g}"]
 
 
 def section6_variants(n_variants: int = 7, onset_s: float = 0.0, base_seed: int = 1,

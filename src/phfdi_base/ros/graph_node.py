@@ -73,7 +73,7 @@ class GraphNode(ParametersMixin, StartBarrierMixin, Node):
         onset = self.param("fault_onset_s")
         try:
             if self.param("part"):
-                return read_part(self.param("part"))
+                return read_part(self.param("part"), validate=False)  # the launcher validated it
             return resolve_part(self.param("scenario"), fault, list(self.param("overrides")),
                                 None if onset < 0 else onset)
         except UserError as exc:

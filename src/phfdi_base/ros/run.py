@@ -19,7 +19,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from phfdi_base.errors import UserError
 
-from .env import ensure_localhost
+from .env import die_with_launcher, ensure_localhost, use_discovery_profile
 from .params import NodeStartError, ParamSpec, common_params, print_parameter_help
 
 __all__ = ["main"]
@@ -43,8 +43,12 @@ def main(factory: Callable[[], Node], prog: str, summary: str, specs: Sequence[P
     if "-h" in own or "--help" in own:
         print_parameter_help(prog, summary, common_params(getattr(factory, "RUNTIME_COMMON", ())) + tuple(specs))
         return 0
+    if not die_with_launcher():
+        print(f"{prog}: the launcher that started this node has ended; not starting", file=sys.stderr)
+        return 1
     try:
         ensure_localhost()  # before rclpy creates any DDS participant
+        use_discovery_profile()  # a node started by hand discovers its peers as a launched one does
     except UserError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

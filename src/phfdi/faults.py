@@ -1,0 +1,57 @@
+"""The fault catalogue as the application sees it (:mod:`phfdi_base.faults`, filled by the cores).
+
+Importing this module imports the cores' block modules, so every built-in fault is registered; a
+plugin a scenario names registers its own when the scenario is loaded. The presets (``--fault NAME``),
+``phfdi scenarios``, the isolation, the diagnosis, the evaluation and ``--help`` all read it.
+"""
+
+from __future__ import annotations
+
+import ph_plant_sim.sensors  # noqa: F401  (registers the probe's faults)
+import valve_actuator.blocks  # noqa: F401  (registers the valve's faults)
+from phfdi_base.faults import Fault, faults
+
+__all__ = ["block_name", "catalogue", "fault_library", "preset_name", "preset_names"]
+
+
+def catalogue() -> dict[str, Fault]:
+    """Every registered fault, valve faults first (see :func:`phfdi_base.faults.faults`).
+
+    >>> catalogue()["backlash"].main.name
+    'width_pct'
+    """
+    return faults()
+
+
+def fault_library() -> dict[str, dict]:
+    """Named fault presets (the paper's severities): a scenario ``faults:`` entry per catalogued fault.
+
+    >>> fault_library()["backlash"]["params"]
+    {'width_pct': 0.7}
+    """
+    return {name: f.preset_entry() for name, f in faults().items() if f.preset}
+
+
+def preset_names() -> list[str]:
+    """``--fault`` choices: healthy and each preset."""
+    return ["healthy"] + [name for name, f in faults().items() if f.preset]
+
+
+def preset_name(name: str) -> str:
+    """The preset named by a fault's name or its block's (``coulomb_viscous_friction`` -> ``friction``).
+
+    >>> preset_name("sensor_delay"), preset_name("backlash"), preset_name("healthy")
+    ('probe_delay', 'backlash', 'healthy')
+    """
+    return next((n for n, f in faults().items() if f.preset and f.block == name and n != name), name)
+
+
+def block_name(name: str) -> str:
+    """The block of a fault named by its preset name (``friction`` -> ``coulomb_viscous_friction``), as the
+    diagnosis names causes; other names unchanged.
+
+    >>> block_name("friction"), block_name("sensor_lag")
+    ('coulomb_viscous_friction', 'sensor_lag')
+    """
+    f = faults().get(name)
+    return f.block if f is not None else name
