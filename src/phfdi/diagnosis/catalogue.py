@@ -343,6 +343,43 @@ def _set_mixing(raw: dict, feeds: list[str], volume: float, exchange: float) -> 
     raw["plant"]["mixing"] = {"zone_volume_ml": volume, "exchange_ml_s": exchange, "feeds": list(feeds)}
 
 
+def _vessel_candidates(ctx: Context, vol: float, q_total: float) -> list[Candidate]:
+    """Tanks in series (an overflow vessel) and CO2 absorbed from the air."""
+    out: list[Candidate] = []
+    if ctx.overflow:
+        # a plug-flow-like vessel: integer compartments, fitted by pattern search (the cost is a staircase)
+        out.append(Candidate(
+            "tanks_in_series", [Param("n_tanks", 1.0, 12.0, "1")],
+            [{"n_tanks": float(n)} for n in (2, 3, 5, 8)],
+            lambda raw, p: _set_series(raw, p["n_tanks"]), "n_tanks", nonsmooth=True, structural=True))
+    # CO2 from the air above the vessel: first-order uptake toward an equilibrium carbonate level
+    strength = max(ctx.feed_strength_mol_l.values(), default=1e-2) or 1e-2
+    turnover = q_total / vol  # 1/s
+    out.append(Candidate(
+        "co2_absorption", [Param("kla_per_s", 0.01 * turnover, 100.0 * turnover, "1/s", log=True),
+                           Param("equilibrium_mol_l", strength * 1e-3, strength, "mol/L", log=True)],
+        # at a fast kla the level is a constant buffer and kla's gradient vanishes: a denser grid, a longer polish
+        [{"kla_per_s": k * turnover, "equilibrium_mol_l": c * strength} for k in (0.1, 0.4, 1.5, 6.0)
+         for c in (0.01, 0.03, 0.08, 0.2, 0.5)],
+        lambda raw, p: _set_air_exchange(raw, p["kla_per_s"], p["equilibrium_mol_l"]), "equilibrium_mol_l",
+        fixed={"pka": list(CARBONATE_PKA)}, structural=True, polish_evals=60))
+    return out
+
+
+def _pump_lag_candidates(ctx: Context) -> list[Candidate]:
+    """Start-up and stop dynamics of each feed's pump (on/off dosing)."""
+    out: list[Candidate] = []
+    slowest = max(5.0 * ctx.dt_s, min(60.0, ctx.duration_s / 5.0))
+    for feed in ctx.feeds:
+        out.append(Candidate(
+            "pump_lag", [Param("tau_start_s", 0.0, slowest, "s"), Param("tau_stop_s", 0.0, slowest, "s")],
+            [{"tau_start_s": a * slowest, "tau_stop_s": b * slowest} for a in (0.05, 0.3) for b in (0.05, 0.3)],
+            lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_lag", {
+                "tau_start_s": p["tau_start_s"], "tau_stop_s": p["tau_stop_s"]}),
+            "tau_start_s", variant=feed, structural=True))
+    return out
+
+
 def structural_candidates(ctx: Context) -> list[Candidate]:
     """Structure a stirred-tank model of a real plant often lacks: imperfect mixing, feed lines, reagent
     carbonate, probe dynamics and calibration."""
@@ -376,31 +413,7 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
             lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_curve", {
                 "gain": p["gain"], "threshold_ml_s": p["threshold_ml_s"]}),
             "threshold_ml_s", variant=feed, structural=True, polish_evals=100))
-    if ctx.overflow:
-        # a plug-flow-like vessel: integer compartments, fitted by pattern search (the cost is a staircase)
-        out.append(Candidate(
-            "tanks_in_series", [Param("n_tanks", 1.0, 12.0, "1")],
-            [{"n_tanks": float(n)} for n in (2, 3, 5, 8)],
-            lambda raw, p: _set_series(raw, p["n_tanks"]), "n_tanks", nonsmooth=True, structural=True))
-    # CO2 from the air above the vessel: first-order uptake toward an equilibrium carbonate level
-    strength = max(ctx.feed_strength_mol_l.values(), default=1e-2) or 1e-2
-    turnover = q_total / vol  # 1/s
-    out.append(Candidate(
-        "co2_absorption", [Param("kla_per_s", 0.01 * turnover, 100.0 * turnover, "1/s", log=True),
-                           Param("equilibrium_mol_l", strength * 1e-3, strength, "mol/L", log=True)],
-        # at a fast kla the level is a constant buffer and kla's gradient vanishes: a denser grid, a longer polish
-        [{"kla_per_s": k * turnover, "equilibrium_mol_l": c * strength} for k in (0.1, 0.4, 1.5, 6.0)
-         for c in (0.01, 0.03, 0.08, 0.2, 0.5)],
-        lambda raw, p: _set_air_exchange(raw, p["kla_per_s"], p["equilibrium_mol_l"]), "equilibrium_mol_l",
-        fixed={"pka": list(CARBONATE_PKA)}, structural=True, polish_evals=60))
-    slowest = max(5.0 * ctx.dt_s, min(60.0, ctx.duration_s / 5.0))
-    for feed in ctx.feeds:
-        out.append(Candidate(
-            "pump_lag", [Param("tau_start_s", 0.0, slowest, "s"), Param("tau_stop_s", 0.0, slowest, "s")],
-            [{"tau_start_s": a * slowest, "tau_stop_s": b * slowest} for a in (0.05, 0.3) for b in (0.05, 0.3)],
-            lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_lag", {
-                "tau_start_s": p["tau_start_s"], "tau_stop_s": p["tau_stop_s"]}),
-            "tau_start_s", variant=feed, structural=True))
+    out += _vessel_candidates(ctx, vol, q_total) + _pump_lag_candidates(ctx)
     for feed in ctx.basic_feeds:
         strength = ctx.feed_strength_mol_l.get(feed, 0.0) or 1e-2
         out.append(Candidate(
