@@ -149,6 +149,7 @@ class Evaluator:
         self._stage: dict[str, _LRU] = {s: _LRU(6) for s in ("spec", "plant", "flows", "maps", "states")}
         self._nominal_volume: np.ndarray | None = None
         self._ph_guess: np.ndarray | None = None
+        self._derived: dict[int, tuple[ScenarioSpec, dict]] = {}
         spec = self.spec(nominal)
         self.nominal_spec = spec
         self._check_inputs(spec)
@@ -171,13 +172,27 @@ class Evaluator:
         spec = validate_scenario(data, source="model")
         return self._stage["spec"].put(key, spec)
 
-    def plant(self, spec: ScenarioSpec) -> CstrPlant:
+    def _of_spec(self, spec: ScenarioSpec) -> dict:
+        """What a prediction derives from a (validated, never modified) spec: its plant model, the plant, the
+        cache keys; worked out once per spec object instead of at every stage of every prediction."""
+        hit = self._derived.get(id(spec))
+        if hit is not None and hit[0] is spec:
+            return hit[1]
         model = load_plant_model(spec.plant)
-        key = _key(model.model_dump())
-        hit = self._stage["plant"].take(key)
-        if hit is not None:
-            return hit
-        return self._stage["plant"].put(key, build_plant(model))
+        model_dump = model.model_dump()
+        key = _key(model_dump)
+        plant = self._stage["plant"].take(key)
+        if plant is None:
+            plant = self._stage["plant"].put(key, build_plant(model))
+        out = {"model": model, "model_dump": model_dump, "plant": plant}
+        out["flows_key"] = self._flows_key(spec, plant, model)
+        if len(self._derived) > 32:
+            self._derived.clear()
+        self._derived[id(spec)] = (spec, out)  # the spec is held here, so its id is not reused meanwhile
+        return out
+
+    def plant(self, spec: ScenarioSpec) -> CstrPlant:
+        return self._of_spec(spec)["plant"]
 
     def _check_inputs(self, spec: ScenarioSpec) -> None:
         rec = self.record
@@ -201,8 +216,9 @@ class Evaluator:
     # ---- stages -----------------------------------------------------------------
     def flows(self, spec: ScenarioSpec, start: Start = Start()) -> tuple[np.ndarray, np.ndarray]:
         """Feed flows (N, n_feeds) in mL/s and outlet openings (N,)."""
-        plant = self.plant(spec)
-        key = _key(self._flows_key(spec, plant), start.valve_offset_pct)
+        derived = self._of_spec(spec)
+        plant = derived["plant"]
+        key = _key(derived["flows_key"], start.valve_offset_pct)
         hit = self._stage["flows"].take(key)
         if hit is not None:
             return hit
@@ -222,7 +238,7 @@ class Evaluator:
                 flows[:, j] = [prof.value(t) for t in self.t_rel.tolist()]
             else:
                 flows[:, j] = f.flow_ml_s
-        lines = feed_lines(load_plant_model(spec.plant), self.dt_s)
+        lines = feed_lines(derived["model"], self.dt_s)
         for j, f in enumerate(plant.feeds):  # commanded flow -> flow entering the vessel
             if f.name in lines:
                 flows[:, j] = np.maximum(_run_chain(lines[f.name], flows[:, j], self.t_rel.tolist()), 0.0)
@@ -232,8 +248,7 @@ class Evaluator:
         return self._stage["flows"].put(key, (flows, openings))
 
     @staticmethod
-    def _flows_key(spec: ScenarioSpec, plant: CstrPlant) -> str:
-        model = load_plant_model(spec.plant)
+    def _flows_key(spec: ScenarioSpec, plant: CstrPlant, model) -> str:
         return _key(spec.valves.model_dump(), [f.model_dump() for f in spec.faults if not f.where.endswith("sensor")],
                     {k: v.model_dump() for k, v in spec.feeds.items()}, [(f.name, f.flow_ml_s) for f in plant.feeds],
                     {k: [b.model_dump() for b in v.line] for k, v in model.feeds.items()})
@@ -282,12 +297,13 @@ class Evaluator:
 
     def states(self, spec: ScenarioSpec, start: Start = Start()) -> dict:
         """True pH (N + 1,), volume (N + 1,) and level (N + 1,) of the tank."""
-        plant = self.plant(spec)
+        derived = self._of_spec(spec)
+        plant = derived["plant"]
         flows, openings = self.flows(spec, start)
-        fkey = _key(self._flows_key(spec, plant), start.valve_offset_pct)
-        model = load_plant_model(spec.plant)
+        fkey = _key(derived["flows_key"], start.valve_offset_pct)
+        model = derived["model"]
         initial_ph = start.ph if self.initial == "fit" else None
-        key = _key(fkey, model.model_dump(), initial_ph)
+        key = _key(fkey, derived["model_dump"], initial_ph)
         hit = self._stage["states"].take(key)
         if hit is not None:
             return hit

@@ -396,8 +396,8 @@ def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options
                 j = futures[fut]
                 out[j] = fut.result()
                 progress.done(j, out[j])
-            if not finished:
-                progress.heartbeat([futures[f] for f in pending if f.running()])
+            if not finished:  # the pool takes jobs in submission order: the oldest unfinished ones run
+                progress.heartbeat(sorted((futures[f] for f in pending), key=order.index)[:workers])
         return out  # in the order of the jobs, whatever the order they finished in
 
     pool = None if workers == 1 else ProcessPoolExecutor(max_workers=workers, initializer=init_worker,
