@@ -75,9 +75,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--predictions", type=Path, default=None,
                     help="write each fold's predictions of its held-out run (every model) to DIR/<run>.json, "
                          "for --evidence")
-    ap.add_argument("--evidence", type=Path, default=None,
+    ap.add_argument("--evidence", type=Path, nargs="+", default=None, metavar="DIR",
                     help="no fitting: read the folds saved in DIR by --predictions and print, per held-out run, what "
-                         "no fitted model reproduces (pH bands, timing, titration-curve shape, span, offset)")
+                         "no fitted model reproduces (pH bands, timing, titration-curve shape, span, offset); with "
+                         "several DIRs (runs with other --candidates), a run's models are pooled, its table row and "
+                         "structure from the first DIR")
     ap.add_argument("--figure", type=Path, default=None, help="with --evidence: write the figure here (PNG)")
     args = ap.parse_args(argv)
     if args.evidence:
@@ -143,15 +145,35 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def show_evidence(folder: Path, figure_path: Path | None) -> int:
+def show_evidence(folders: list[Path], figure_path: Path | None) -> int:
     """Per held-out run, what the best of all fitted models still misses (phfdi.diagnosis.evidence)."""
-    paths = sorted(folder.glob("*.json")) if folder.is_dir() else []
-    folds = [json.loads(p.read_text()) for p in paths]
-    folds = [f for f in folds if "predictions" in f]
+    by_run: dict[str, dict] = {}
+    for folder in folders:
+        paths = sorted(folder.glob("*.json")) if folder.is_dir() else []
+        for p in paths:
+            fold = json.loads(p.read_text())
+            if "predictions" not in fold:
+                continue
+            if fold["run"] not in by_run:
+                by_run[fold["run"]] = fold
+                continue
+            pooled = by_run[fold["run"]]["predictions"]
+            for k, v in fold["predictions"].items():
+                if k not in pooled and k not in ("structure", "best_single"):
+                    pooled[k] = v
+    folds = [by_run[r] for r in sorted(by_run)]
     if not folds:
-        print(f"rig_holdout: no folds in {folder} (write them with --predictions {folder})", file=sys.stderr)
+        print(f"rig_holdout: no folds in {' '.join(map(str, folders))} (write them with --predictions DIR)",
+              file=sys.stderr)
         return 2
     evs = [evidence(f) for f in folds]
+    in_sample: dict[str, list[float]] = {}
+    for f in folds:  # the final structure's in-sample NRMSE of each run it was fitted on
+        for r in f["fitted_in_sample"]:
+            y, p = np.asarray(r["measured"]), np.asarray(r["structure"])
+            in_sample.setdefault(r["run"], []).append(float(np.sqrt(np.mean((p - y) ** 2)) / np.std(y)))
+    print(table([f["row"] for f in folds], in_sample))
+    print()
     print(evidence_table(evs))
     for f, ev in zip(folds, evs):
         ins = [rmse_in_bands(r) for r in f["fitted_in_sample"]]

@@ -1,13 +1,11 @@
 """The stiction classifier's data set: features of the 59 labelled refinery records and of synthetic loops.
 
     .venv/bin/python benchmarks/stiction_dataset.py                  # writes benchmarks/results/stiction_dataset.json
-    .venv/bin/python benchmarks/stiction_dataset.py --synthetic 400 --fresh 25 --scheduler tcp://host:8786
+    .venv/bin/python benchmarks/stiction_dataset.py --synthetic 200 --fresh 100 --scheduler tcp://host:8786
 
 Rows (see phfdi.loopdiag.dataset): the real records (``source`` real, grouped by loop tag), the
-training loops of the simulator (``synthetic``, seed 11, the classes of
-``phfdi.loopdiag.training.TRAINING_MIX``) and fresh loops never used in training (``fresh``, seed 12,
-``--fresh`` loops of every class: the development check; the test set of
-benchmarks/stiction_fresh_test.py uses seed 1013), each with the feature vector, the label and the decisions of Horch, He et al.
+training loops of the simulator (``synthetic``, seed 1) and fresh loops never used in training
+(``fresh``, seed 2), each with the feature vector, the label and the decisions of Horch, He et al.
 and the Hammerstein diagnosis. Runs on Dask (a local cluster of 2 workers unless --scheduler).
 benchmarks/train_stiction_classifier.py trains and evaluates from this file in seconds.
 """
@@ -25,12 +23,12 @@ from phfdi.loopdiag.dask_run import dask_client, map_ordered
 from phfdi.loopdiag.dataset import real_row, synthetic_row
 from phfdi.loopdiag.evaluate import read_labels
 from phfdi.loopdiag.features import FEATURE_NAMES
-from phfdi.loopdiag.training import class_round_robin, draw_class_loops, draw_training_loops
+from phfdi.loopdiag.training import draw_loops
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("PHFDI_SHARED_DATA", ROOT.parent / "shared" / "data")) / "plant_loops"
 OUT = ROOT / "benchmarks" / "results" / "stiction_dataset.json"
-TRAIN_SEED, FRESH_SEED = 11, 12
+TRAIN_SEED, FRESH_SEED = 1, 2
 
 
 def _real(args):
@@ -41,8 +39,8 @@ def _real(args):
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--labels", type=Path, default=DATA / "labels.csv")
-    p.add_argument("--synthetic", type=int, default=400, help="training loops from the simulator")
-    p.add_argument("--fresh", type=int, default=25, help="fresh loops per class for the check (never trained on)")
+    p.add_argument("--synthetic", type=int, default=200, help="training loops from the simulator")
+    p.add_argument("--fresh", type=int, default=100, help="fresh loops for the check (never trained on)")
     p.add_argument("--out", type=Path, default=OUT)
     p.add_argument("--scheduler", default=None, help="address of a running Dask scheduler")
     p.add_argument("--workers", type=int, default=None)
@@ -53,8 +51,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no labels at {args.labels} (set PHFDI_SHARED_DATA)", file=sys.stderr)
         return 2
     items = read_labels(args.labels)
-    train = [d for d, _ in draw_training_loops(args.synthetic, TRAIN_SEED, "SYN")]
-    fresh = [d for d, _ in draw_class_loops(class_round_robin(args.fresh), FRESH_SEED, "DEV")]
+    train = [d for d, _ in draw_loops(args.synthetic, TRAIN_SEED, "SYN")]
+    fresh = [d for d, _ in draw_loops(args.fresh, FRESH_SEED, "FRESH")]
     t0 = time.perf_counter()
 
     def show(done, total):

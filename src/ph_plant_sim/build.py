@@ -21,9 +21,11 @@ from phfdi_base.yamlfile import read_mapping, resolve_preset
 
 from . import feedlines, sensors  # noqa: F401  (register the feed-line and sensor blocks)
 from .chemistry import Chemistry, Component
+from .exchange import AirExchange, ExchangePlant
 from .mixing import MixingZone, ZonedPlant
 from .plant import CstrPlant, Feed, GravityOutlet, Tank
 from .process import PlantProcess
+from .series import SeriesPlant, TanksInSeries
 
 if TYPE_CHECKING:  # the schema (pydantic) only where a plant model file is read: a node gets its model validated
     from phfdi_base.spec import PlantModelSpec, ScenarioSpec, SensorSpec
@@ -94,10 +96,16 @@ def build_plant(model: PlantModelSpec) -> CstrPlant:
     """
     chem_spec = model.chemistry
     try:
+        streams = [dict(f.recipe) for f in model.feeds.values()]
+        compounds = dict(chem_spec.compounds)
+        if model.air_exchange is not None:  # the exchanged component is in the vessel even if no feed carries it
+            air = f"air exchange of {model.air_exchange.component}"
+            compounds[air] = {model.air_exchange.component: 1.0}
+            streams.append({air: 0.0})
         chemistry = Chemistry.for_streams(
-            [f.recipe for f in model.feeds.values()],
+            streams,
             extra_components=[Component(c.name, c.charge, tuple(c.pka)) for c in chem_spec.components],
-            extra_compounds=chem_spec.compounds,
+            extra_compounds=compounds,
             pkw=chem_spec.pkw,
         )
     except ValueError as exc:
@@ -110,6 +118,14 @@ def build_plant(model: PlantModelSpec) -> CstrPlant:
         m = model.mixing
         # a ZonedPlant stands in for the CstrPlant it wraps (the same interface, delegating)
         return cast(CstrPlant, ZonedPlant(plant, MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds))))
+    if model.series is not None:  # compartments in series, the probe at the last
+        return cast(CstrPlant, SeriesPlant(plant, TanksInSeries(model.series.n_tanks)))
+    if model.air_exchange is not None:  # a component exchanging with the air (CO2)
+        x = model.air_exchange
+        try:
+            return cast(CstrPlant, ExchangePlant(plant, AirExchange(x.component, x.kla_per_s, x.equilibrium_mol_l)))
+        except ValueError as exc:
+            raise UserError(f"plant model {model.name!r}: {exc}") from None
     return plant
 
 

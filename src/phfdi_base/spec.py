@@ -23,8 +23,9 @@ from .errors import UserError
 from .spec_tools import checked_block, injected_faults, load_plugins, profile
 
 __all__ = [
-    "BlockSpec", "ChangeSpec", "ChemistrySpec", "ComponentSpec", "ControllersSpec", "FaultSite", "FaultSpec",
-    "FeedSpec", "MixingSpec", "OutletSpec", "PISpec", "PlantModelSpec", "ProfileSpec", "ScenarioSpec", "SensorSpec",
+    "AirExchangeSpec", "BlockSpec", "ChangeSpec", "ChemistrySpec", "ComponentSpec", "ControllersSpec", "FaultSite",
+    "FaultSpec", "FeedSpec", "MixingSpec", "OutletSpec", "PISpec", "PlantModelSpec", "ProfileSpec", "ScenarioSpec",
+    "SensorSpec", "SeriesSpec",
     "SensorsSpec", "SetpointsSpec", "TankSpec", "ValveSpec", "ValvesSpec", "deep_merge", "format_validation",
     "apply_override", "checked_block", "injected_faults", "load_plugins", "parse_override", "profile",
     "resolve_scenario", "validate_scenario",
@@ -98,6 +99,20 @@ class MixingSpec(Strict):
     feeds: list[str] = Field(description="feeds dosed into the zone; the others enter the bulk")
 
 
+class SeriesSpec(Strict):
+    """The vessel as equal, perfectly mixed compartments in series, probe at the last (ph_plant_sim.series)."""
+
+    n_tanks: int = Field(ge=1, le=50)
+
+
+class AirExchangeSpec(Strict):
+    """First-order exchange of one component with the air, e.g. CO2 absorbed (ph_plant_sim.exchange)."""
+
+    component: str = Field(description="a chemistry component, e.g. a carbonate with pKa 6.35 and 10.33")
+    kla_per_s: float = Field(ge=0.0, allow_inf_nan=False, description="mass-transfer coefficient (1/s)")
+    equilibrium_mol_l: float = Field(ge=0.0, allow_inf_nan=False, description="level it relaxes to (mol/L)")
+
+
 class PlantModelSpec(Strict):
     name: str
     description: str = ""
@@ -105,12 +120,19 @@ class PlantModelSpec(Strict):
     feeds: dict[str, FeedSpec]
     tank: TankSpec
     mixing: MixingSpec | None = None
+    series: SeriesSpec | None = None
+    air_exchange: AirExchangeSpec | None = None
 
     @model_validator(mode="after")
     def _zone_feeds(self) -> "PlantModelSpec":
         for f in (self.mixing.feeds if self.mixing else []):
             if f not in self.feeds:
                 raise ValueError(f"mixing.feeds: no feed {f!r} (feeds: {', '.join(self.feeds)})")
+        structures = [k for k in ("mixing", "series", "air_exchange") if getattr(self, k) is not None]
+        if len(structures) > 1:
+            raise ValueError(f"{' and '.join(structures)} together are not modelled (one of them per vessel)")
+        if self.series is not None and not self.tank.overflow:
+            raise ValueError("series: tanks in series are modelled for an overflow vessel (constant volume) only")
         return self
 
 
@@ -253,8 +275,11 @@ def deep_merge(base: dict, over: dict) -> dict:
 
 def format_validation(exc: ValidationError, source: str) -> str:
     """One line naming the source, the key and the problem of a pydantic validation error."""
-    err = exc.errors()[0]
-    loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
+    errors = exc.errors()
+    # a mapping given where a key accepts a name or a mapping (plant: preset | inline): the mapping's problem, not
+    # "should be a valid string"
+    err = next((e for e in errors if not e["type"].endswith("_type")), errors[0])
+    loc = ".".join(str(x) for x in err["loc"] if "[" not in str(x)) or "(top level)"  # not pydantic's union tags
     msg = err["msg"]
     if err["type"] == "extra_forbidden":
         msg = "unknown key"

@@ -64,6 +64,23 @@ def draw(rng, cause: str) -> tuple[dict, str, float, float]:
     if cause == "carbonate":
         c = float(rng.uniform(0.002, 0.006))  # mol/L carbonate in 20 mM caustic
         return {"carbonate": c}, "conc_mol_l", c, 0.2 * c
+    if cause == "pump_lag":
+        up = float(rng.uniform(6.0, 15.0))  # s: a diaphragm pump's slow start against the line's compliance
+        down = float(rng.uniform(1.0, 4.0))
+        return ({"line": [{"type": "pump_lag", "params": {"tau_start_s": up, "tau_stop_s": down}}]},
+                "tau_start_s", up, max(1.0, 0.2 * up))
+    if cause == "sensor_second_order":
+        t1 = float(rng.uniform(8.0, 20.0))  # s: a fouled junction (slow) behind the glass membrane (fast)
+        t2 = float(rng.uniform(0.4, 1.0)) * t1
+        return ({"sensor": [{"type": "sensor_second_order", "params": {"tau1_s": t1, "tau2_s": t2}}]},
+                "tau1_s", max(t1, t2), 0.25 * max(t1, t2))
+    if cause == "tanks_in_series":
+        n = int(rng.integers(2, 6))  # 2..5 compartments: between a stirred flask and a long tube
+        return {"series": n}, "n_tanks", float(n), 0.5
+    if cause == "co2_absorption":
+        kla = float(rng.uniform(0.004, 0.012))  # 1/s: faster than the flask's turnover (about 0.004 1/s)
+        ceq = float(rng.uniform(0.002, 0.005))  # mol/L
+        return {"air": (kla, ceq)}, "equilibrium_mol_l", ceq, 0.3 * ceq
     raise ValueError(cause)
 
 
@@ -75,6 +92,16 @@ def make_case(rng, cause: str, folder):
         raw["plant"]["mixing"] = edit["mixing"]
     if "line" in edit:
         raw["plant"]["feeds"]["base"]["line"] = edit["line"]
+    if "series" in edit:
+        from phfdi.diagnosis.catalogue import _set_series
+
+        _set_series(raw, edit["series"])
+    if "air" in edit:
+        from phfdi.diagnosis.catalogue import _set_air_exchange
+
+        _set_air_exchange(raw, *edit["air"])
+    if "sensor" in edit:
+        raw["sensors"]["ph"]["extra"] = edit["sensor"]
     if "carbonate" in edit:
         from phfdi.diagnosis.catalogue import _add_carbonate
 
@@ -82,7 +109,9 @@ def make_case(rng, cause: str, folder):
     inp = inputs(rng)
     raw["duration_s"] = DURATION_S
     run = simulate_open_loop(validate_scenario(raw), inp)
-    ph = run["ph_true"] + rng.normal(0.0, NOISE_PH, len(run["ph_true"]))
+    # what the probe reads (noise-free) when the probe's dynamics are the hidden effect, else the flask's pH
+    clean = run["ph_measured"] if "sensor" in edit else run["ph_true"]
+    ph = clean + rng.normal(0.0, NOISE_PH, len(clean))
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "record.csv"
     cols = {"time_s": inp["time_s"], "acid_flow_ml_s": inp["acid_flow_ml_s"], "base_flow_ml_s": inp["base_flow_ml_s"],
@@ -92,9 +121,17 @@ def make_case(rng, cause: str, folder):
     return path, main, value, tol
 
 
-def _diagnose(diagnose_json, path, tmp_path) -> dict:
+#: a vessel's structure competes with the other ways its response can be slow, late or buffered
+VESSEL = ["tanks_in_series", "co2_absorption", "mixing_zone", "feed_delay", "sensor_lag", "sensor_delay", "holdup",
+          "reagent_concentration", "carbonate", "buffer"]
+#: the dynamics candidates compete with each other and with the usual suspects of a slow or late response
+DYNAMICS = ["pump_lag", "feed_delay", "sensor_second_order", "sensor_lag", "sensor_delay", "probe_asymmetric_lag",
+            "holdup", "reagent_concentration"]
+
+
+def _diagnose(diagnose_json, path, tmp_path, candidates=CANDIDATES) -> dict:
     return diagnose_json("--data", path, "--model", "rig_flask", "--set", NOMINAL[0],
-                         "--candidates", *CANDIDATES, "--no-pairs", "--out", tmp_path / "report")
+                         "--candidates", *candidates, "--no-pairs", "--out", tmp_path / "report")
 
 
 PUMP_CURVE_VALLEY = pytest.mark.xfail(strict=False, reason=(
@@ -134,3 +171,34 @@ def test_no_structural_effect_comes_back_none(hidden_rng, diagnose_json, tmp_pat
     rep = _diagnose(diagnose_json, path, tmp_path)
     assert rep["verdict"] == "none", rep["reason"]
     assert rep["cause"] == "none"
+
+
+@pytest.mark.parametrize("cause", ["pump_lag", "sensor_second_order"])
+def test_dynamics_of_pump_or_probe_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
+    """A pump's slow start (on/off dosing) and a probe with two lags: each among the other ways a response comes
+    late or slow (a line dead time, one probe lag or delay, an asymmetric probe, the holdup, the reagent strength)."""
+    path, main, value, tol = make_case(hidden_rng, cause, tmp_path / "data")
+    rep = _diagnose(diagnose_json, path, tmp_path, DYNAMICS)
+    what = f"hidden {cause} {main} = {value:.4g}"
+    assert rep["nominal"]["combined_rmse_over_noise"] > 3.0, f"{what}: the effect is too small to test"
+    assert rep["cause"] == cause, f"{what}: named {rep['cause']} ({rep['reason']})"
+    assert rep["verdict"] == "explained" or rep["validation_rmse_over_noise"] < 5.0, f"{what}: {rep['reason']}"
+    fitted = rep["parameters"][main]
+    assert abs(fitted - value) <= tol, f"{what}: fitted {fitted:.4g} +- {tol:.3g}"
+    if cause == "pump_lag":
+        assert rep["fixed"]["feed"] == "base", f"{what}: found on the {rep['fixed']['feed']} feed"
+
+
+@pytest.mark.parametrize("cause", ["tanks_in_series", "co2_absorption"])
+def test_vessel_structure_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
+    """A plug-flow-like flask (compartments in series) and CO2 taken up from the air, among the other ways the
+    flask's response is late, slow or buffered (mixing zone, dead time, probe lag, volume, reagent strength,
+    carbonate in the caustic, a weak acid in a feed)."""
+    path, main, value, tol = make_case(hidden_rng, cause, tmp_path / "data")
+    rep = _diagnose(diagnose_json, path, tmp_path, VESSEL)
+    what = f"hidden {cause} {main} = {value:.4g}"
+    assert rep["nominal"]["combined_rmse_over_noise"] > 3.0, f"{what}: the effect is too small to test"
+    assert rep["cause"] == cause, f"{what}: named {rep['cause']} ({rep['reason']})"
+    assert rep["verdict"] == "explained" or rep["validation_rmse_over_noise"] < 5.0, f"{what}: {rep['reason']}"
+    fitted = rep["parameters"][main]
+    assert abs(fitted - value) <= tol, f"{what}: fitted {fitted:.4g} +- {tol:.3g}"

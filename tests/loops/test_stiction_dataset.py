@@ -19,7 +19,7 @@ from phfdi.loopdiag.classifier import Data, load_model, train
 from phfdi.loopdiag.dataset import real_row, synthetic_row
 from phfdi.loopdiag.evaluate import read_labels
 from phfdi.loopdiag.features import FEATURE_NAMES, FEATURE_SIGNS
-from phfdi.loopdiag.training import draw_training_loops
+from phfdi.loopdiag.training import draw_loops
 
 ROOT = Path(__file__).resolve().parents[2]
 DATASET = ROOT / "benchmarks" / "results" / "stiction_dataset.json"
@@ -44,7 +44,7 @@ def test_real_rows_are_current(shared_data, dataset, rel):
 
 
 def test_synthetic_rows_are_current(dataset):
-    loop, _ = draw_training_loops(1, dataset["train_seed"], "SYN")[0]
+    loop, _ = draw_loops(1, dataset["train_seed"], "SYN")[0]
     fresh = synthetic_row(loop)
     cached = next(r for r in dataset["rows"] if r["name"] == loop.group)
     assert fresh["stiction"] == cached["stiction"]

@@ -23,7 +23,8 @@ EXAMPLES = """examples:
       --calibrate plant.feeds.acid.recipe.H2SO4 plant.feeds.base.recipe.NaOH plant.tank.volume_ml
   phfdi diagnose --model out/diagnose/calibrated_model.yaml --map ph_rig --initial fit \\
       --fit add_base.csv add_acid.csv --validate control.csv
-  # structure search (mixing zone, feed dead times, pump curves, carbonate, probe dynamics and calibration
+  # structure search (mixing zone, tanks in series, feed dead times, pump curves and lags, carbonate, CO2 from
+  # the air, probe dynamics and calibration
   # added one at a time while the held-out gain is significant); reagent strengths and probe offsets per day
   # (the date in the file name); a day absent from the fit gets those from the first 20 % of its record
   phfdi diagnose --model rig_flask --map ph_rig --initial fit --structure --group '^([0-9.]{10})' \\
@@ -45,7 +46,8 @@ catalogue: stiction backlash deadzone saturation coulomb_viscous_friction leakag
   sensor_delay sensor_lag sensor_bias sensor_drift sensor_gain (sensor),
   buffer reagent_concentration holdup disturbance_flow (process); verdicts: explained, not_explained,
   none, not_identifiable. Structural candidates (--structure, or by name with --candidates): mixing_zone
-  feed_delay carbonate (process), pump_curve (actuator), probe_asymmetric_lag two_point_calibration (sensor).
+  tanks_in_series feed_delay carbonate co2_absorption (process), pump_curve pump_lag (actuator),
+  probe_asymmetric_lag sensor_second_order two_point_calibration (sensor).
 {own_candidates}
   Bad input exits with status 2 and one line naming the problem.
 """

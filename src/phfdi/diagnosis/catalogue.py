@@ -124,7 +124,8 @@ class Candidate:
         """Which simulation stages the candidate changes (for cost ordering)."""
         if self.family == "sensor":
             return "sensor"
-        if self.cause in ("buffer", "reagent_concentration", "carbonate", "mixing_zone"):
+        if self.cause in ("buffer", "reagent_concentration", "carbonate", "mixing_zone", "tanks_in_series",
+                          "co2_absorption"):
             return "chemistry"
         return "flows"
 
@@ -312,12 +313,26 @@ CARBONATE_PKA = (6.35, 10.33)  # H2CO3*/HCO3-, HCO3-/CO3-- at 25 C
 
 def _add_carbonate(raw: dict, feed: str, conc: float) -> None:
     """CO2 taken up by a caustic feed: carbonate added, its sodium unchanged (2 NaOH + CO2 -> Na2CO3 + H2O)."""
-    chem = raw["plant"].setdefault("chemistry", {})
-    comps = chem.setdefault("components", [])
+    _carbonate_component(raw)
+    raw["plant"]["chemistry"].setdefault("compounds", {})[CARBONATE_COMPOUND] = {CARBONATE_COMPONENT: 1.0}
+    raw["plant"]["feeds"][feed]["recipe"][CARBONATE_COMPOUND] = conc
+
+
+def _carbonate_component(raw: dict) -> None:
+    comps = raw["plant"].setdefault("chemistry", {}).setdefault("components", [])
     if not any(c["name"] == CARBONATE_COMPONENT for c in comps):
         comps.append({"name": CARBONATE_COMPONENT, "charge": 0, "pka": list(CARBONATE_PKA)})
-    chem.setdefault("compounds", {})[CARBONATE_COMPOUND] = {CARBONATE_COMPONENT: 1.0}
-    raw["plant"]["feeds"][feed]["recipe"][CARBONATE_COMPOUND] = conc
+
+
+def _set_air_exchange(raw: dict, kla: float, equilibrium: float) -> None:
+    """CO2 absorbed from the air: the carbonate component relaxes toward an equilibrium level (ph_plant_sim.exchange)."""
+    _carbonate_component(raw)
+    raw["plant"]["air_exchange"] = {"component": CARBONATE_COMPONENT, "kla_per_s": kla,
+                                    "equilibrium_mol_l": equilibrium}
+
+
+def _set_series(raw: dict, n_tanks: float) -> None:
+    raw["plant"]["series"] = {"n_tanks": int(round(n_tanks))}
 
 
 def _add_line_block(raw: dict, feed: str, kind: str, params: dict) -> None:
@@ -326,6 +341,43 @@ def _add_line_block(raw: dict, feed: str, kind: str, params: dict) -> None:
 
 def _set_mixing(raw: dict, feeds: list[str], volume: float, exchange: float) -> None:
     raw["plant"]["mixing"] = {"zone_volume_ml": volume, "exchange_ml_s": exchange, "feeds": list(feeds)}
+
+
+def _vessel_candidates(ctx: Context, vol: float, q_total: float) -> list[Candidate]:
+    """Tanks in series (an overflow vessel) and CO2 absorbed from the air."""
+    out: list[Candidate] = []
+    if ctx.overflow:
+        # a plug-flow-like vessel: integer compartments, fitted by pattern search (the cost is a staircase)
+        out.append(Candidate(
+            "tanks_in_series", [Param("n_tanks", 1.0, 12.0, "1")],
+            [{"n_tanks": float(n)} for n in (2, 3, 5, 8)],
+            lambda raw, p: _set_series(raw, p["n_tanks"]), "n_tanks", nonsmooth=True, structural=True))
+    # CO2 from the air above the vessel: first-order uptake toward an equilibrium carbonate level
+    strength = max(ctx.feed_strength_mol_l.values(), default=1e-2) or 1e-2
+    turnover = q_total / vol  # 1/s
+    out.append(Candidate(
+        "co2_absorption", [Param("kla_per_s", 0.01 * turnover, 100.0 * turnover, "1/s", log=True),
+                           Param("equilibrium_mol_l", strength * 1e-3, strength, "mol/L", log=True)],
+        # at a fast kla the level is a constant buffer and kla's gradient vanishes: a denser grid, a longer polish
+        [{"kla_per_s": k * turnover, "equilibrium_mol_l": c * strength} for k in (0.1, 0.4, 1.5, 6.0)
+         for c in (0.01, 0.03, 0.08, 0.2, 0.5)],
+        lambda raw, p: _set_air_exchange(raw, p["kla_per_s"], p["equilibrium_mol_l"]), "equilibrium_mol_l",
+        fixed={"pka": list(CARBONATE_PKA)}, structural=True, polish_evals=60))
+    return out
+
+
+def _pump_lag_candidates(ctx: Context) -> list[Candidate]:
+    """Start-up and stop dynamics of each feed's pump (on/off dosing)."""
+    out: list[Candidate] = []
+    slowest = max(5.0 * ctx.dt_s, min(60.0, ctx.duration_s / 5.0))
+    for feed in ctx.feeds:
+        out.append(Candidate(
+            "pump_lag", [Param("tau_start_s", 0.0, slowest, "s"), Param("tau_stop_s", 0.0, slowest, "s")],
+            [{"tau_start_s": a * slowest, "tau_stop_s": b * slowest} for a in (0.05, 0.3) for b in (0.05, 0.3)],
+            lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_lag", {
+                "tau_start_s": p["tau_start_s"], "tau_stop_s": p["tau_stop_s"]}),
+            "tau_start_s", variant=feed, structural=True))
+    return out
 
 
 def structural_candidates(ctx: Context) -> list[Candidate]:
@@ -361,6 +413,7 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
             lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_curve", {
                 "gain": p["gain"], "threshold_ml_s": p["threshold_ml_s"]}),
             "threshold_ml_s", variant=feed, structural=True, polish_evals=100))
+    out += _vessel_candidates(ctx, vol, q_total) + _pump_lag_candidates(ctx)
     for feed in ctx.basic_feeds:
         strength = ctx.feed_strength_mol_l.get(feed, 0.0) or 1e-2
         out.append(Candidate(
@@ -375,6 +428,12 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
             [{"tau_up_s": a, "tau_down_s": b} for a in (1.0, 10.0, 40.0) for b in (1.0, 10.0, 40.0) if a != b],
             lambda raw, p: _add_sensor_block(raw, "sensor_asymmetric_lag", {
                 "tau_up_s": p["tau_up_s"], "tau_down_s": p["tau_down_s"]}), "tau_up_s", structural=True))
+        # two lags in series, the slower first (tau2 = ratio tau1 <= tau1: the two are interchangeable otherwise)
+        out.append(Candidate(
+            "sensor_second_order", [Param("tau1_s", 0.0, longest, "s"), Param("tau2_ratio", 0.05, 1.0, "1", log=True)],
+            [{"tau1_s": a, "tau2_ratio": r} for a in (3.0, 15.0, 50.0) for r in (0.1, 0.5, 1.0)],
+            lambda raw, p: _add_sensor_block(raw, "sensor_second_order", {
+                "tau1_s": p["tau1_s"], "tau2_s": p["tau1_s"] * p["tau2_ratio"]}), "tau1_s", structural=True))
         out.append(Candidate(
             "two_point_calibration", [Param("slope", 0.6, 1.5, "1", log=True), Param("offset", -1.5, 1.5, "pH")],
             [{"slope": s_, "offset": o} for s_ in (0.9, 1.1) for o in (-0.2, 0.2)],

@@ -235,7 +235,7 @@ def figure(folds: list[dict], evs: list[RunEvidence], path, models=("nominal", "
             ax.plot(t, fold["predictions"][ev.best_model], "g--", lw=1, label=f"best: {ev.best_model}")
         ax.axvspan(t[0], t[np.argmax(mask)], color="0.9", label="not scored (sets the start)")
         ax.set_ylabel("pH")
-        ax.set_xlabel("time (s)")
+        ax.set_xlabel("time since the record's start (s)")
         ax.set_title(f"held out: {ev.run}", fontsize=9)
         ax.set_ylim(1.5, 13)
         ax.legend(fontsize=7, ncol=3, loc="best")

@@ -35,8 +35,10 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ph_plant_sim.build import build_plant, feed_lines, load_plant_model, plant_start, sensor_chain
+from ph_plant_sim.exchange import AirExchange, exchange_recurrence
 from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from ph_plant_sim.plant import CstrPlant, affine_recurrence, record_sample_maps
+from ph_plant_sim.series import TanksInSeries, series_trajectory
 from phfdi.scenario import raw_scenario
 from phfdi_base.blocks import Chain, Injected
 from phfdi_base.errors import UserError
@@ -332,8 +334,20 @@ class Evaluator:
         conc0 = self._initial_conc(plant, q0, initial_ph)
         feed_conc = np.asarray(plant.feed_conc, dtype=float)
         inflow = flows @ feed_conc  # mmol/s per component
+        if model.air_exchange is not None:  # the exchanging component at its own steady level (inflow and air)
+            x = model.air_exchange
+            exch = AirExchange(x.component, x.kla_per_s, x.equilibrium_mol_l)
+            j = [c.name for c in plant.chemistry.components].index(x.component)
+            conc0 = list(conc0)
+            conc0[j] = exch.steady_conc(float(inflow[0, j]), float(sum(q0)), v0)
         amounts = affine_recurrence(coef[:, 0], coef[:, 1:2] * inflow, np.asarray(conc0) * v0)
+        if model.air_exchange is not None:  # ph_plant_sim.exchange: the flow map, then the relaxation
+            gain, drive = exchange_recurrence(exch, coef, inflow[:, j], volume, self.dt_s)
+            amounts[:, j] = affine_recurrence(gain, drive, conc0[j] * v0)
         conc = amounts / volume[:, None]
+        if model.series is not None:  # the probe reads the last compartment (ph_plant_sim.series)
+            conc = series_trajectory(TanksInSeries(model.series.n_tanks), feed_conc, flows, float(volume[0]),
+                                     self.dt_s, np.asarray(conc0, dtype=float))
         if model.mixing is not None:  # the probe reads the zone (ph_plant_sim.mixing)
             m = model.mixing
             conc, _ = zone_trajectory(MixingZone(m.zone_volume_ml, m.exchange_ml_s, tuple(m.feeds)),

@@ -470,8 +470,10 @@ def _duration(seconds: float) -> str:
 
 
 #: causes that set one thing of the model (a second variant would overwrite the first)
-_EXCLUSIVE = {"mixing_zone", "holdup", "valve_gain", "sensor_gain", "sensor_bias", "two_point_calibration",
-              "sensor_lag", "sensor_delay", "probe_asymmetric_lag", "sensor_drift"}
+_VESSEL = {"mixing_zone", "tanks_in_series", "co2_absorption"}
+_EXCLUSIVE = {"tanks_in_series", "co2_absorption", "mixing_zone", "holdup", "valve_gain", "sensor_gain", "sensor_bias",
+              "two_point_calibration",
+              "sensor_lag", "sensor_delay", "probe_asymmetric_lag", "sensor_drift", "sensor_second_order"}
 
 
 def _compatible(label: str, chosen: list[str], local: Fitter) -> bool:
@@ -480,6 +482,8 @@ def _compatible(label: str, chosen: list[str], local: Fitter) -> bool:
         o = local.candidates[other]
         if other == label or (o.cause == c.cause and (c.cause in _EXCLUSIVE or not c.variant)):
             return False
+        if len({o.cause, c.cause} & _VESSEL) > 1:
+            return False  # one vessel structure at a time (phfdi_base.spec: mixing, series, air exchange)
         if {o.cause, c.cause} <= {"sensor_bias", "two_point_calibration"} or \
                 {o.cause, c.cause} <= {"sensor_gain", "two_point_calibration"}:
             return False  # the same probe calibration twice

@@ -69,6 +69,10 @@ CAUSES: dict[str, str] = {
     "carbonate": "process",
     "probe_asymmetric_lag": "sensor",
     "two_point_calibration": "sensor",
+    "pump_lag": "actuator",
+    "tanks_in_series": "process",
+    "co2_absorption": "process",
+    "sensor_second_order": "sensor",
     "none": "none",
 }
 

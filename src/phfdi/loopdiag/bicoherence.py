@@ -25,13 +25,6 @@
   squares, Fitzgibbon, Pilu & Fisher 1999), and its width along the OP axis through its centre is
   the apparent stiction in OP units. Meaningful only for a nonlinear loop (NLI > 0): a linear
   oscillation also draws an ellipse, of width 2 |sin(phase)| times OP's amplitude.
-  Only for a loop that oscillates (Thornhill et al. 2003 regularity test): Choudhury et al.
-  quantify the apparent stiction of a limit cycle, the filter band centred on its frequency. In a
-  loop that does not oscillate the band would sit on the periodogram peak of whatever moved it,
-  and with a constant setpoint OP = -C(PV) whatever the valve does, so the ellipse's width there
-  is the controller's phase, 2 |sin arg C(jw)| = 2 / sqrt(1 + (w Ti)^2) of OP's amplitude for a
-  PI: near the full width at the low frequencies of a load step's response (OP settles at a new
-  level while PV returns), the false alarm on healthy loops answering loads.
 """
 
 from __future__ import annotations
@@ -41,7 +34,7 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from .indicators import NOT_OSCILLATING, Indicator, loop_period_s, not_applicable
+from .indicators import Indicator, loop_period_s, not_applicable
 from .oscillation import detrend
 
 BIC_REF = ("Choudhury, Shah & Thornhill (2004), Automatica 40, 1719-1728: NGI > 0.001 non-Gaussian, "
@@ -168,14 +161,11 @@ def ellipse_points(coef: np.ndarray, n: int = 200) -> tuple[np.ndarray, np.ndarr
 
 def apparent_stiction(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt_s: float) -> Indicator:
     """Width of the fitted PV-OP ellipse along OP (OP units) and its share of the filtered OP's
-    peak-to-peak (``value``, 0..1); not applicable when the loop does not oscillate (module
-    docstring). ``detail`` keeps the conic (in the original units) for figures."""
+    peak-to-peak (``value``, 0..1). ``detail`` keeps the conic (in the original units) for figures."""
     name = "ellipse_apparent_stiction"
     period_s, oscillating = loop_period_s(pv, sp, dt_s)
     if not math.isfinite(period_s):
         return not_applicable(name, "no dominant period", ELLIPSE_REF)
-    if not oscillating:
-        return not_applicable(name, NOT_OSCILLATING, ELLIPSE_REF)
     fp = dt_s / period_s
     opf = band_pass(op, 0.5 * fp, min(4 * fp, 0.5))
     pvf = band_pass(pv, 0.5 * fp, min(4 * fp, 0.5))

@@ -61,11 +61,6 @@ def _r(v):
     return v
 
 
-#: why a test of a limit cycle's shape says nothing about a loop that does not oscillate
-NOT_OSCILLATING = ("the loop does not oscillate (Thornhill et al. 2003 regularity test): the method reads the "
-                   "shape of a limit cycle")
-
-
 def not_applicable(name: str, reason: str, reference: str) -> Indicator:
     return Indicator(name, None, "not_applicable", {"reason": reason}, reference)
 

@@ -310,16 +310,3 @@ def draw_class_loops(classes: list[str], seed: int, prefix: str) -> list[tuple[D
 def class_round_robin(per_class: int) -> list[str]:
     """Every class of :data:`LOOP_CLASSES` ``per_class`` times, round robin (the fresh test set)."""
     return [c for _ in range(per_class) for c in LOOP_CLASSES]
-
-
-#: the training set's mix, per 10 loops: half sticky valves (as before); of the healthy half, loops
-#: answering load steps and ramps, loops tuned to oscillate, loops under the other disturbances, and
-#: other valve nonlinearities (not stiction). Backlash is left out: Kano's model with J = 0 is the
-#: same dead-band, so either label would be noise.
-TRAINING_MIX = ("stiction", "healthy_load_steps", "stiction", "healthy_oscillatory_tuning", "stiction",
-                "healthy_other", "stiction", "healthy_other", "stiction", "other_nonlinearity")
-
-
-def draw_training_loops(n: int, seed: int, prefix: str = "SYN") -> list[tuple[DrawnLoop, Run]]:
-    """n loops of :func:`draw_class_spec` in the classes of :data:`TRAINING_MIX`, cycled."""
-    return draw_class_loops([TRAINING_MIX[k % len(TRAINING_MIX)] for k in range(n)], seed, prefix)
