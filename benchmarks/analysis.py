@@ -25,14 +25,14 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=5, help="warm repetitions")
     args = ap.parse_args()
 
-    from phfdi.run import Run
+    from phfdi.records import read_run
     from phfdi.study.paperset import PAPER_GROUPING, section6_variants, simulate_variants
     from wavelet_fdi.multisignal import from_runs
 
     t0 = time.perf_counter()
     if args.runs:
         files = sorted(Path(args.runs).glob("*.parquet"))
-        runs = [Run.load(f) for f in files]
+        runs = [read_run(f) for f in files]
         labels = [r.metadata["label"] for r in runs]
         names = [f.stem for f in files]
     else:

@@ -33,13 +33,12 @@ import numpy as np
 from phfdi.run import Run
 from phfdi_base import topics as T
 from phfdi_base.errors import UserError
-from phfdi_base.signals import SIGNALS
 from phfdi_base.stamps import join_ns, seconds_to_ns, split_ns
 from wavelet_fdi.alarm_messages import to_dict as alarm_message_dict
 
 from . import __version__
+from .bagread import RUN_METADATA, _feed_names, _one_line, load_bag, read_metadata, run_signal_names
 
-RUN_METADATA = "phfdi_run"
 INTERFACES_PACKAGE = "phfdi_interfaces"
 DEFAULT_CHUNK_BYTES = 16 * 1024
 
@@ -201,134 +200,20 @@ def stamp_of_cdr(cdr: bytes) -> int:
     return join_ns(sec, nsec)
 
 
-# ---- run <-> bag --------------------------------------------------------------------
-def _feed_names(names) -> list[str]:
-    return [n[: -len("_flow_ml_s")] for n in names if n.endswith("_flow_ml_s") and n != "outlet_flow_ml_s"]
-
-
-def run_signal_names(feeds: list[str]) -> list[str]:
-    """Signal order of a closed-loop run (as phfdi.loop.signal_names)."""
-    names = [s.name for s in SIGNALS]
-    i = names.index("outlet_valve_position_pct")
-    return names[:i] + [f"{f}_flow_ml_s" for f in feeds] + names[i:]
-
-
-def _extract(topic: str, msg, row: dict) -> None:
-    """The run signals one message carries."""
-    if topic == T.MEASUREMENT.name:
-        row["ph_measured"], row["level_measured_cm"] = msg.ph, msg.level_cm
-    elif topic == T.CONTROLLER.name:
-        row["ph_setpoint"], row["ph_controller_output_pct"] = msg.ph_setpoint, msg.ph_output_pct
-        row["level_setpoint_cm"], row["level_controller_output_pct"] = msg.level_setpoint_cm, msg.level_output_pct
-    elif topic == T.VALVE_STATE.name:
-        row["valve_command_pct"], row["valve_position_pct"] = msg.ph_command_pct, msg.ph_position_pct
-        row["outlet_valve_position_pct"] = msg.outlet_position_pct
-        row["_valve_fault_severity"] = msg.ph_fault_severity
-    elif topic == T.PLANT_STATE.name:
-        row["ph_true"], row["level_true_cm"] = msg.ph, msg.level_cm
-        for name, q in zip(msg.feed_names, msg.feed_flows_ml_s):
-            row[f"{name}_flow_ml_s"] = float(q)
-        row["outlet_flow_ml_s"] = msg.outlet_flow_ml_s
-        row["_sensor_fault_severity"] = msg.sensor_fault_severity
-
-
-#: topics that carry run signals (the rest: /clock, /diagnostics, /fault_alarm)
-_RUN_TOPICS = (T.MEASUREMENT, T.CONTROLLER, T.VALVE_STATE, T.PLANT_STATE)
-
-
-def read_metadata(path: Path) -> dict[str, dict[str, str]]:
-    """MCAP metadata records by name (empty for a file without a summary)."""
-    from mcap.reader import make_reader
-
-    out = {}
-    try:
-        with open(path, "rb") as f:
-            for rec in make_reader(f).iter_metadata():
-                out[rec.name] = dict(rec.metadata)
-    except Exception:  # noqa: BLE001 - unfinished file: no metadata index
-        pass
-    return out
-
-
 def load_run(path: str | Path) -> Run:
-    """A run from a bag of the graph (.mcap) or a run file (.csv, .parquet).
+    """A run from a bag of the graph (.mcap; :func:`phfdi.bagread.load_bag`) or a run file (.csv, .parquet;
+    :func:`phfdi.records.read_run`).
 
     Bag topics map onto the run's signals (``/plant/measurement.ph`` ->
     ``ph_measured``, ...; the table is in docs/ros_graph.md); the time base is
-    the stamps of /plant/measurement. ``fault_severity`` is the larger of the
-    pH valve's and the sensors' severity, as in :func:`phfdi.loop.tick`.
-    Samples a topic lacks (a recovered bag's last sample) are NaN.
+    the stamps of /plant/measurement.
     """
     path = Path(path)
     if path.suffix.lower() in (".csv", ".parquet", ".pq"):
-        return Run.load(path)
-    if not path.exists():
-        raise UserError(f"no such file: {path}")
-    if path.suffix.lower() != ".mcap" and not (path / "metadata.yaml").exists():
-        raise UserError(f"cannot read a run from {path}: expected .mcap, .csv or .parquet")
-    from rosbags.highlevel import AnyReader
+        from .records import read_run
 
-    rows: dict[int, dict] = defaultdict(dict)
-    measured: set[int] = set()
-    feeds: list[str] | None = None
-    try:
-        with AnyReader([path]) as reader:
-            conns = [c for c in reader.connections if c.topic in {t.name for t in _RUN_TOPICS}]
-            if not any(c.topic == T.MEASUREMENT.name for c in conns):
-                raise UserError(f"{path}: no {T.MEASUREMENT.name} topic: not a bag of the phfdi graph")
-            for conn, _t, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
-                ns = join_ns(msg.stamp.sec, msg.stamp.nanosec)
-                _extract(conn.topic, msg, rows[ns])
-                if conn.topic == T.MEASUREMENT.name:
-                    measured.add(ns)
-                elif feeds is None and conn.topic == T.PLANT_STATE.name:
-                    feeds = list(msg.feed_names)  # the plant's feed order
-    except UserError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - rosbags, mcap and zstd raise many types (even MemoryError) on damage
-        raise UserError(f"{path}: cannot read the bag ({type(exc).__name__}: {_one_line(exc)}); if its recorder "
-                        f"was killed, run: phfdi bag recover {path} FIXED.mcap") from None
-    metadata = _run_metadata(path)
-    stamps = sorted(measured)
-    dt = metadata.get("sample_time_s")
-    try:
-        dt_ns = T.sample_period_ns(float(dt)) if dt else None
-    except (TypeError, ValueError, OverflowError):
-        dt_ns = None
-    if dt_ns and all(ns % dt_ns == 0 for ns in stamps):
-        time_s = [(ns // dt_ns) * dt for ns in stamps]  # k * dt exactly as the simulation
-    else:
-        time_s = [ns * 1e-9 for ns in stamps]
-    names = run_signal_names(feeds or [])
-    signals = {n: np.full(len(stamps), np.nan) for n in names}
-    signals["time_s"] = np.asarray(time_s, dtype=float)
-    for i, ns in enumerate(stamps):
-        row = rows[ns]
-        for n, v in row.items():
-            if n in signals:
-                signals[n][i] = v
-        sev = [row[k] for k in ("_valve_fault_severity", "_sensor_fault_severity") if k in row]
-        signals["fault_severity"][i] = max(sev) if sev else math.nan
-    return Run(signals, metadata)
-
-
-def _one_line(exc: BaseException, limit: int = 160) -> str:
-    text = " ".join(str(exc).split())
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _run_metadata(path: Path) -> dict:
-    """The run's metadata record (scenario, seed, sample time); a damaged one is a UserError, not a guess."""
-    text = read_metadata(path).get(RUN_METADATA, {}).get("json", "{}")
-    try:
-        metadata = json.loads(text)
-    except ValueError as exc:
-        raise UserError(f"{path}: the bag's run metadata ({RUN_METADATA}) is damaged ({exc})") from None
-    if not isinstance(metadata, dict):
-        raise UserError(f"{path}: the bag's run metadata ({RUN_METADATA}) is not a mapping")
-    metadata.update({"source": str(path), "mode": "graph"})
-    return metadata
+        return read_run(path)
+    return load_bag(path)
 
 
 def read_messages(path: str | Path, topic: str) -> list:

@@ -107,21 +107,6 @@ class Run:
             return self.to_parquet(path)
         raise UserError(f"cannot write a run to {path}: use a .csv or .parquet file name")
 
-    @classmethod
-    def load(cls, path: str | Path) -> "Run":
-        """A run file (.csv or .parquet) read by :func:`phfdi.records.read_record` under the run policy.
-
-        Repairs (duplicate rows, repeated stamps, cells that are not numbers: NaN) are listed in
-        ``metadata["notes"]``; what cannot be repaired is a one-line :class:`UserError`.
-        """
-        path = Path(path)
-        if path.suffix.lower() not in (".csv", ".parquet", ".pq"):
-            raise UserError(f"cannot read a run from {path}: expected .csv or .parquet")
-        from .records import read_record
-
-        return read_record(path, policy="run").to_run()
-
-
 
 class RunRecorder:
     """Rows collected one sample at a time, turned into columns at the end."""

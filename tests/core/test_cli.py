@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from phfdi.cli import main
-from phfdi.run import Run
+from phfdi.records import read_run
 
 SHORT = ["--set", "duration_s=1200", "--set", "setpoints.ph.changes.0.at_s=600"]
 
@@ -68,7 +68,7 @@ def test_simulate_writes_csv_and_parquet_with_the_same_signals(tmp_path, capsys)
     code, out, _ = run_cli(["simulate", "--fault", "backlash", "--onset", "800", *SHORT, "--out", str(csv)], capsys)
     assert code == 0 and "fault: backlash" in out
     run_cli(["simulate", "--fault", "backlash", "--onset", "800", *SHORT, "--out", str(pq)], capsys)
-    a, b = Run.load(csv), Run.load(pq)
+    a, b = read_run(csv), read_run(pq)
     assert a.names == b.names
     for n in a.names:
         assert np.allclose(a[n], b[n], equal_nan=True, rtol=0, atol=0), n
@@ -119,7 +119,7 @@ def test_simulate_open_loop_from_recorded_inputs(tmp_path, capsys):
     run_cli(["simulate", *SHORT, "--out", str(closed)], capsys)
     code, _, _ = run_cli(["simulate", *SHORT, "--inputs", str(closed), "--out", str(opened)], capsys)
     assert code == 0
-    a, b = Run.load(closed), Run.load(opened)
+    a, b = read_run(closed), read_run(opened)
     # the same valve commands drive the same plant; it starts at the first inputs' steady state, not the
     # closed loop's, and that small difference fades (compare away from the steep setpoint transition)
     t = a.time_s

@@ -38,9 +38,9 @@ def test_replay_of_a_bag_gives_the_alarms_of_the_run_it_holds(backlash_file, tmp
     """phfdi replay BAG.mcap reads the bag through phfdi.bagio.load_run (no ROS process needed):
     the run written as a bag of the graph's topics replays to the same alarms as the run file."""
     from phfdi.bagio import write_run
-    from phfdi.run import Run
+    from phfdi.records import read_run
 
-    bag = write_run(Run.load(backlash_file), tmp_path / "run.mcap")
+    bag = write_run(read_run(backlash_file), tmp_path / "run.mcap")
     assert main(["replay", str(backlash_file), "--json"]) == 0
     from_file = json.loads(capsys.readouterr().out)
     assert main(["replay", str(bag), "--json"]) == 0
@@ -50,9 +50,9 @@ def test_replay_of_a_bag_gives_the_alarms_of_the_run_it_holds(backlash_file, tmp
 
 
 def test_replay_of_a_csv_without_metadata_uses_the_scenario_option(backlash_file, tmp_path, capsys):
-    from phfdi.run import Run
+    from phfdi.records import read_run
 
-    csv = Run.load(backlash_file).to_csv(tmp_path / "run.csv")
+    csv = read_run(backlash_file).to_csv(tmp_path / "run.csv")
     # a CSV carries no scenario: the paper preset is assumed (its 5000 s setpoint change
     # never comes in this 1500 s run, whose own setpoint moved at 200 s); detection only
     assert main(["replay", str(csv), "--no-isolation"]) == 0

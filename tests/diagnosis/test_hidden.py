@@ -19,6 +19,7 @@ import pytest
 from phfdi.diagnosis.extend import load_model_file
 from phfdi.diagnosis.report import CAUSES, check_report
 from phfdi.loop import simulate_open_loop
+from phfdi.records import read_run
 from phfdi.run import Run
 from phfdi.scenario import load_scenario
 from phfdi_base.spec import validate_scenario
@@ -97,7 +98,7 @@ def test_effect_outside_the_catalogue_is_not_explained(hidden_rng, diagnose_json
     if closer:
         assert rep["gain_percent"] == pytest.approx(100 * (1 - rep["nrmse_extended"] / rep["nrmse_nominal"]),
                                                     rel=1e-9)
-    data = Run.load(case.path)
+    data = read_run(case.path)
     inputs = Run({k: data[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
     spec = load_scenario("paper", overrides=["sensors.ph.noise_std=0", "sensors.level.noise_std=0"])
     sim = simulate_open_loop(spec, inputs)
@@ -123,7 +124,7 @@ def test_the_answer_cannot_reach_the_diagnosis(hidden_rng, tmp_path):
     case = make_case(hidden_rng, str(hidden_rng.choice(CATALOGUE_CAUSES)), "closed", tmp_path / "d", 600.0)
     header = case.path.read_text().splitlines()[0].split(",")
     assert header == COLUMNS and case.path.name == "record.csv"
-    meta = Run.load(case.path).metadata
+    meta = read_run(case.path).metadata
     assert meta["source"] == str(case.path) and set(meta) <= {"source", "notes", "units", "encoding", "delimiter"}
     for src in PACKAGE.glob("*.py"):
         tree = ast.parse(src.read_text())

@@ -172,15 +172,15 @@ def test_read_record_never_raises_but_read_error_and_says_every_repair(seeds, da
 @FUZZ
 @given(data=st.data())
 def test_project_readers_raise_only_user_errors(seeds, data):
-    """Run.load, bagio.load_run/bag_info, diagnosis.load_record, loopdiag.read_loop on the same inputs."""
+    """records.read_run, bagio.load_run/bag_info, diagnosis.load_record, loopdiag.read_loop on the same inputs."""
     from phfdi import bagio
     from phfdi.diagnosis.data import load_record
     from phfdi.loopdiag.readers import read_loop
-    from phfdi.run import Run
+    from phfdi.records import read_run
 
     path = _variant(data.draw, seeds, READERS_FILES)
     reader = data.draw(st.sampled_from(["run", "bag", "info", "diagnosis", "loop"]))
-    call = {"run": Run.load, "bag": bagio.load_run, "info": bagio.bag_info, "diagnosis": load_record,
+    call = {"run": read_run, "bag": bagio.load_run, "info": bagio.bag_info, "diagnosis": load_record,
             "loop": read_loop}[reader]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

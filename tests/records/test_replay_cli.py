@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from phfdi.records import read_run
 from phfdi.run import Run
 
 
@@ -134,7 +135,7 @@ def test_bag_to_run_names_its_repairs(short_run, tmp_path, run_cli):
     bag = write_run(run, tmp_path / "r.mcap")
     status, out, err = run_cli("bag", "to-run", bag, tmp_path / "out.csv")
     assert status == 0 and "sample 11" in err and "'ph_measured'" in err
-    assert Run.load(tmp_path / "out.csv")["ph_measured"][10] != Run.load(tmp_path / "out.csv")["ph_measured"][10]
+    assert read_run(tmp_path / "out.csv")["ph_measured"][10] != read_run(tmp_path / "out.csv")["ph_measured"][10]
     bad = tmp_path / "m.mcap"
     bad.write_bytes(b"\x89MCAP0\r\n")
     assert "cannot read the bag" in one_error_line(*run_cli("bag", "to-run", bad, tmp_path / "o.csv")[::2])

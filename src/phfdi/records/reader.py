@@ -8,6 +8,8 @@ from typing import Callable
 
 import numpy as np
 
+from phfdi.run import Run
+from phfdi_base.errors import UserError
 from phfdi_base.signals import unit_of
 
 from . import policy as P
@@ -69,6 +71,31 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
         meta["loop_tag"] = cmap.loop_tag
     return Record(str(path), rows.time_s, rows.values, units, columns, rows.lines, table.where, policy,
                   [*table.notes, *rows.notes], rows.automatic, rows.boundaries, meta)
+
+
+
+def read_run(path: str | Path) -> Run:
+    """A run file (.csv or .parquet) read by :func:`read_record` under the run policy.
+
+    Repairs (duplicate rows, repeated stamps, cells that are not numbers: NaN) are listed in
+    ``metadata["notes"]``; what cannot be repaired is a one-line :class:`~phfdi_base.errors.UserError`.
+    A bag of the graph is read by :func:`phfdi.bagio.load_run`.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi.records import read_run
+    >>> path = Path(tempfile.mkdtemp()) / "run.csv"
+    >>> _ = path.write_text("time_s,ph_measured\\n0,7.0\\n1,7.1\\n1,7.1\\n2,7.2\\n")
+    >>> run = read_run(path)
+    >>> run["ph_measured"], len(run.metadata["notes"])
+    (array([7. , 7.1, 7.2]), 1)
+    """
+    path = Path(path)
+    if path.suffix.lower() not in (".csv", ".parquet", ".pq"):
+        raise UserError(f"cannot read a run from {path}: expected .csv or .parquet")
+    return read_record(path, policy="run").to_run()
 
 
 def _apply_policy(rows: P.Rows, policy: str) -> None:

@@ -1,7 +1,7 @@
 """File formats -> a raw :class:`Table` of columns (cells as found), with the source line of each row.
 
 CSV/TSV text (any delimiter, see :mod:`.text`), the plant_loops historian export (``PROCESSDATA``
-title line), Parquet (pyarrow) and MCAP bags of the node graph (:func:`phfdi.bagio.load_run`).
+title line), Parquet (pyarrow) and MCAP bags of the node graph (:func:`phfdi.bagread.load_bag`).
 Damaged files give a :class:`ReadError`, never the parser's own exception.
 """
 
@@ -166,10 +166,10 @@ def _short(exc: BaseException, limit: int = 160) -> str:
 # ---- bags ---------------------------------------------------------------------------------
 def read_bag(path: Path) -> Table:
     """The run signals of a bag of the node graph (time from /plant/measurement's stamps)."""
-    from phfdi.bagio import load_run
+    from phfdi.bagread import load_bag
 
     try:
-        run = load_run(path)
+        run = load_bag(path)
     except ReadError:
         raise
     except UserError as exc:
