@@ -443,16 +443,8 @@ class DetectorNode(GraphNode):
     # ---- the end ---------------------------------------------------------------------------
     def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
         """Take what the readers already hold (acknowledged to the writers)."""
-        t_end = time.monotonic() + limit_s
         counts = self.pairing.counts
-        last, idle_since = counts["measurements"] + counts["controller_outputs"], time.monotonic()
-        while time.monotonic() < t_end:
-            executor.spin_once(timeout_sec=0.05)
-            now = counts["measurements"] + counts["controller_outputs"]
-            if now != last:
-                last, idle_since = now, time.monotonic()
-            elif time.monotonic() - idle_since >= idle_s:
-                break
+        self.spin_until_idle(executor, lambda: counts["measurements"] + counts["controller_outputs"], idle_s, limit_s)
 
     def close(self) -> None:
         """Process everything queued, run pending isolations, publish, then deliver and report."""

@@ -138,14 +138,7 @@ class RecorderNode(GraphNode):
 
     def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
         """Take what the readers already hold (acknowledged to the writers) before closing."""
-        t_end = time.monotonic() + limit_s
-        last, idle_since = self.received, time.monotonic()
-        while time.monotonic() < t_end:
-            executor.spin_once(timeout_sec=0.05)
-            if self.received != last:
-                last, idle_since = self.received, time.monotonic()
-            elif time.monotonic() - idle_since >= idle_s:
-                break
+        self.spin_until_idle(executor, lambda: self.received, idle_s, limit_s)
 
     def close(self) -> None:
         self._close_part()

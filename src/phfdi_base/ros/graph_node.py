@@ -12,6 +12,8 @@ endpoints (:mod:`phfdi_base.ros.barrier`), simulated-time stamps
 from __future__ import annotations
 
 import json
+import time
+from collections.abc import Callable
 
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
@@ -107,6 +109,20 @@ class GraphNode(ParametersMixin, StartBarrierMixin, Node):
 
     def drain(self, executor) -> None:
         """On the way out, before :meth:`close`: take messages still queued (the recorder does)."""
+
+    @staticmethod
+    def spin_until_idle(executor, received: Callable[[], int], idle_s: float = 0.3, limit_s: float = 10.0) -> None:
+        """Spin until ``received()`` (a message count) has not moved for ``idle_s`` s, at most ``limit_s`` s:
+        the :meth:`drain` of a node that takes what its readers already hold (acknowledged to the writers)."""
+        t_end = time.monotonic() + limit_s
+        last, idle_since = received(), time.monotonic()
+        while time.monotonic() < t_end:
+            executor.spin_once(timeout_sec=0.05)
+            now = received()
+            if now != last:
+                last, idle_since = now, time.monotonic()
+            elif time.monotonic() - idle_since >= idle_s:
+                break
 
     def close(self) -> None:
         """Called once on the way out, before the node is destroyed: deliver what was published."""
