@@ -471,8 +471,8 @@ def _duration(seconds: float) -> str:
 
 #: causes that set one thing of the model (a second variant would overwrite the first)
 _VESSEL = {"mixing_zone", "tanks_in_series", "co2_absorption"}
-_EXCLUSIVE = {"tanks_in_series", "co2_absorption", "mixing_zone", "holdup", "valve_gain", "sensor_gain", "sensor_bias",
-              "two_point_calibration",
+_EXCLUSIVE = {"tanks_in_series", "co2_absorption", "flask_contents", "mixing_zone", "holdup", "valve_gain",
+              "sensor_gain", "sensor_bias", "two_point_calibration",
               "sensor_lag", "sensor_delay", "probe_asymmetric_lag", "sensor_drift", "sensor_second_order"}
 
 
