@@ -50,9 +50,12 @@ MAP = ROOT / "src" / "phfdi" / "diagnosis" / "maps" / "ph_rig.yaml"
 GROUP = r"^([0-9]{4}\.[0-9]{2}\.[0-9]{2})"
 #: The rig's pumps run at one or two speeds (0/60/100 % in February, 20->50 % and 50 % in the titrations): a pump
 #: curve's threshold is not identifiable there and its gain is the reagent strength (left out); probe: one lag and
-#: the two-point calibration; the process: flask volume, reagent strengths, carbonate, mixing zone, feed dead time.
+#: the two-point calibration; the process: flask volume, reagent strengths, carbonate, mixing zone, feed dead time,
+#: and what the flask holds at the start (a weak acid of its own water, its amount per run).
 DEFAULT_CANDIDATES = ["reagent_concentration", "holdup", "carbonate", "mixing_zone", "feed_delay", "sensor_lag",
-                      "two_point_calibration"]
+                      "two_point_calibration", "flask_contents"]
+#: the cause whose best variant gets a column of its own in the table
+NEW_CAUSE = "flask_contents"
 
 
 def shared_data() -> Path:
@@ -124,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
                "structure_parameters": final["parameters"], "structure_intervals": final["confidence_intervals"],
                "adapted": final.get("fitted_where", {}).get("adapted", {}),
                "black_box": wf.nrmse_by_record.get(name), "seconds": time.perf_counter() - t0,
+               "singles": {r.label: r.val_by_record.get(name) for r in d.singles},
                "verdict": rep["verdict"], "cause": rep["cause"]}
         if d.structure is not None:  # in-sample NRMSE of the fitted runs under the final structure
             for i, rec in enumerate(d.records[:-1]):
@@ -250,16 +254,16 @@ def save_fold(folder: Path, d, wf, row: dict, adapt: float, seen: bool) -> Path:
 
 def table(rows: list[dict], in_sample: dict) -> str:
     out = ["| held-out run | its day in the fit? | nominal | best single cause | structure search | black box (Wiener) "
-           "| structure, in-sample when fitted (median) |",
-           "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
+           f"| {NEW_CAUSE} (best variant) | structure, in-sample when fitted (median) |",
+           "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for r in rows:
         ins = in_sample.get(r["run"]) or []
+        new = {k: v for k, v in (r.get("singles") or {}).items() if k.split("[")[0] == NEW_CAUSE and v is not None}
+        best_new = min(new, key=new.get) if new else None
         out.append(f"| {r['run']} | {'yes' if r['group_in_fit'] else 'no (--adapt)'} | {r['nominal']:.3f} | "
                    f"{r['best_single']:.3f} ({r['best_single_cause']}) | {r['structure']:.3f} | "
-                   f"{r['black_box']:.3f} | {np.median(ins):.3f} |" if ins else
-                   f"| {r['run']} | {'yes' if r['group_in_fit'] else 'no (--adapt)'} | {r['nominal']:.3f} | "
-                   f"{r['best_single']:.3f} ({r['best_single_cause']}) | {r['structure']:.3f} | "
-                   f"{r['black_box']:.3f} | - |")
+                   f"{r['black_box']:.3f} | {f'{new[best_new]:.3f} ({best_new})' if best_new else '-'} | "
+                   f"{f'{np.median(ins):.3f}' if ins else '-'} |")
     return "\n".join(out)
 
 

@@ -355,10 +355,11 @@ class Fitter:
                 "lag1": float(np.mean([lag1(e) for e in main_parts])) if main_parts else 0.0,
                 **_whiteness(main_parts)}
 
-    def _adapt(self, i: int, adapt, n_fit: int, half_band: float, groups_too: bool = True) -> tuple[dict, Start, dict]:
+    def _adapt(self, i: int, adapt, n_fit: int, half_band: float,
+               groups_too: bool = True) -> tuple[dict, Start, dict]:
         """Start, per-record parameters and (``groups_too``) the declared per-group parameters of record i's
         (unseen) group, fitted on its first n_fit samples; every shared parameter stays as fitted. Each starts from
-        the fitted records' (groups') mean."""
+        the fitted records' (groups') mean; a per-record one is pulled toward it (:func:`_record_prior`)."""
         params, x_fit, model, values, record_params = adapt
         window = np.zeros(len(self.p.records[i]), bool)
         window[:n_fit] = True
@@ -383,16 +384,18 @@ class Fitter:
         lo, hi = [0.0] * len(own), [1.0] * len(own)
         if self.fit_init:
             x0.append(self.first_ph(i)), lo.append(0.0), hi.append(14.0)
+        prior = _record_prior(own, params, x_fit, record_params)
 
         def start(x) -> Start:
             return Start(float(x[len(own)]) if self.fit_init else None, 0.0)
 
         def r(x):
+            pull = [(x[j] - m) / sd for j, m, sd in prior]
             try:
                 err = self._errors(i, self.predict(i, model(vals_of(x)), start(x)))
             except (UserError, ValueError, FloatingPointError):
-                return np.full(int(window.sum()) * len(self.p.outputs), 1e3)
-            return np.concatenate([np.where(np.isfinite(e[window]), e[window], 1e3) for e in err.values()])
+                return np.full(int(window.sum()) * len(self.p.outputs) + len(pull), 1e3)
+            return np.concatenate([np.where(np.isfinite(e[window]), e[window], 1e3) for e in err.values()] + [pull])
 
         sol = least_squares(r, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=60 * (len(x0) + 1))
         vals = vals_of(sol.x)
@@ -584,6 +587,26 @@ def _jacobian(fun, x, f0, lower, upper, step) -> np.ndarray:
         xj[j] = x[j] + h if x[j] + h <= upper[j] else x[j] - h
         jac[:, j] = (fun(xj) - f0) / (xj[j] - x[j])
     return jac
+
+
+#: least spread (search coordinates, 0..1 over a parameter's range) of the fitted records' values of a per-record
+#: parameter, as the width of the pull toward their mean (one fitted record has no spread of its own)
+RECORD_PRIOR_FLOOR = 0.1
+
+
+def _record_prior(own: list, params: list, x_fit: np.ndarray, record_params) -> list[tuple[int, float, float]]:
+    """For each per-record parameter among ``own``: (its index, the fitted records' mean, their spread), all in
+    search coordinates. A new record's value is drawn from the fitted records' population: its start window
+    moves it only as far as the window's samples say (a pull of one unit per spread away from the mean, against
+    the window's errors in noise units); a window that does not see the parameter leaves it at the mean instead of
+    wherever a vanishing gradient ends."""
+    out = []
+    for jo, (c, q) in enumerate(own):
+        us = [float(x_fit[j]) for j, (c2, q2, _) in enumerate(params)
+              if j in record_params and c2 is c and q2.name == q.name]
+        if us:
+            out.append((jo, float(np.mean(us)), max(float(np.std(us)), RECORD_PRIOR_FLOOR)))
+    return out
 
 
 def _unique_names(names: list[str]) -> list[str]:
