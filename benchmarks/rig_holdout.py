@@ -128,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
                "adapted": final.get("fitted_where", {}).get("adapted", {}),
                "black_box": wf.nrmse_by_record.get(name), "seconds": time.perf_counter() - t0,
                "singles": {r.label: r.val_by_record.get(name) for r in d.singles},
+               "singles_parameters": {r.label: r.params for r in d.singles},
+               "singles_adapted": {r.label: (r.fitted_where.get("adapted") or {}).get(name) for r in d.singles},
                "verdict": rep["verdict"], "cause": rep["cause"]}
         if d.structure is not None:  # in-sample NRMSE of the fitted runs under the final structure
             for i, rec in enumerate(d.records[:-1]):
