@@ -7,7 +7,8 @@ samples that set its start). Four models, all fitted on the same data:
 * nominal: the calibrated ``rig_flask`` preset, only each run's starting pH fitted;
 * best single cause: the catalogue candidate with the lowest held-out error of `phfdi diagnose`;
 * structure search: `phfdi diagnose --structure` (forward selection over the catalogue and the structural
-  candidates: mixing zone, feed dead times, pump curves, carbonate in the caustic, probe dynamics and calibration);
+  candidates: mixing zone, feed dead times, pump curves, carbonate in the caustic, the flask's starting contents,
+  probe dynamics and calibration);
 * black box: a Wiener model (linear dynamics on the acid/base imbalance, fitted titration curve;
   phfdi.diagnosis.blackbox).
 
