@@ -127,3 +127,19 @@ def test_median_steps_find_a_jump_where_it_is():
     step = median_steps(x)
     # medians of three see the jump in the three windows that straddle it, and nothing elsewhere
     assert np.flatnonzero(step).tolist() == [19, 20, 21] and np.all(step[19:22] == 5.0)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(30, 400), st.integers(0, 2 ** 31 - 1), st.sampled_from(["self_regulating", "integrating"]),
+       st.one_of(st.just(0.0), st.floats(0.01, 3.0)), st.booleans())
+def test_any_record_gives_an_index_in_range_or_not_applicable(n, seed, process_type, quantum, flat_op):
+    rng = np.random.default_rng(seed)
+    op = np.full(n, 40.0) if flat_op else 40 + np.cumsum(rng.normal(0, 0.2, n))
+    pv = 100 + np.cumsum(rng.normal(0, 0.5, n)) + rng.normal(0, 0.3, n) * (rng.random(n) < 0.1) * 20
+    if quantum > 0:
+        pv = np.round(pv / quantum) * quantum
+    ind = stick_slip_index(op, pv, 10.0, process_type)
+    assert ind.value is None or 0.0 <= ind.value <= 1.0
+    assert ind.decision in ("stiction", "no_stiction", "not_applicable")
+    if flat_op:
+        assert ind.decision == "not_applicable"
