@@ -39,6 +39,7 @@ from typing import Callable
 
 import numpy as np
 
+from .calibrate import Calibration, calibrate
 from .data import Record
 from .fit import FitResult
 from .pipeline import Diagnosis, Options, _compatible, _counts, diagnose
@@ -217,3 +218,40 @@ def predict(train: list[Record], held: Record, groups: list[str] | None, nominal
         assert dk.structure is not None
         chain.append(dk.structure)
     return Prediction(d, best, chain[-1] if chain else None, chain)
+
+
+@dataclass
+class Fold:
+    """One outer fold: the nominal model the fold starts from, the choice and the prediction."""
+
+    nominal: dict  # the fold's nominal model (calibrated on the training records, or the one given)
+    calibration: Calibration | None  # None: the nominal model as given
+    selection: Selection
+    prediction: Prediction
+
+
+def outer_fold(train: list[Record], held: Record, groups: list[str] | None, nominal: dict, model_name: str,
+               opts: Options, calibrate_keys: list[str] | None = None,
+               calibrate_on: list[Record] | None = None) -> Fold:
+    """One fold of a leave-one-record-out prediction: everything fitted or chosen on ``train`` only.
+
+    With ``calibrate_keys`` (``KEY[=LOW:HIGH]`` as ``phfdi diagnose --calibrate``), the nominal model's keys are
+    first estimated on ``train`` by :func:`phfdi.diagnosis.calibrate.calibrate`, the code ``--calibrate`` runs
+    (interleaved blocks of the training records, from the values in ``nominal``; one value per key for all
+    records: calibration has no groups), and the selection and the prediction start from that calibrated model.
+    ``calibrate_on``: the training records as the calibration reads them (e.g. at their own sampling where the
+    fits use a resampled copy); default ``train``.
+    Then :func:`select` on ``train`` and :func:`predict` of ``held``. With ``opts.setup_from_fit`` the fits'
+    search bounds and noise unit also come from the training records only (:class:`Options`); without it, the
+    prediction's bounds see ``held`` (the benchmark's behaviour before 2026-11-27).
+    """
+    cal = None
+    if calibrate_keys:
+        _note(opts, f"calibrating the nominal model on the {len(train)} training records")
+        cal = calibrate(list(train if calibrate_on is None else calibrate_on), [], nominal, calibrate_keys, opts)
+        nominal = cal.raw
+        _note(opts, "calibrated: " + ", ".join(f"{k} {v:.4g} [{cal.intervals[k][0]:.4g}, {cal.intervals[k][1]:.4g}]"
+                                               if k in cal.intervals else f"{k} {v:.4g}" for k, v in cal.params.items()))
+    sel = select(train, None if groups is None else groups[:-1], nominal, model_name, opts)
+    pred = predict(train, held, groups, nominal, model_name, opts, sel)
+    return Fold(nominal, cal, sel, pred)

@@ -93,6 +93,12 @@ class Options:
     #: its held-out score. Implies the structural candidates; ``effects_start``: its start point (default: grid)
     effects: list[str] | None = None
     effects_start: dict | None = None
+    #: set the fit up from the fit records only: the candidates' search context (bounds and start points: the
+    #: pH quantiles, the longest duration, the largest feed flows) and the noise unit. The validation records then
+    #: enter only through the samples that set their own start (and adapt an unseen group) and the score: what a
+    #: prediction benchmark needs of its held-out records (benchmarks/rig_holdout.py). Default False: from every
+    #: record, as ``phfdi diagnose --validate`` does, whose validation records are a selection set by design
+    setup_from_fit: bool = False
 
 
 @dataclass
@@ -120,6 +126,7 @@ class Diagnosis:
     structure_preds: list[Prediction] | None = None
     singles: list[FitResult] = field(default_factory=list)  # every single candidate's fit (its held-out starts)
     search_fits: list[FitResult] = field(default_factory=list)  # every model the structure search scored
+    context: Context | None = None  # the candidates' search context (bounds, start points) the fits used
 
 
 def _say(opts: Options, text: str) -> None:
@@ -238,7 +245,8 @@ def _diagnose(records_fit: list[Record], records_val: list[Record], nominal: dic
         _drop_unknown_feeds(rec, nominal)
     records, train, val, split_note = split(records_fit, records_val, opts.blocks)
     outputs = [o for o in ("ph_measured", "level_measured_cm") if any(o in r.outputs for r in records)]
-    noise = {o: float(np.median([noise_floor(r.outputs[o]) for r in records if o in r.outputs])) for o in outputs}
+    setup = list(records_fit) if opts.setup_from_fit and records_fit else records  # Options.setup_from_fit
+    noise = {o: float(np.median([noise_floor(r.outputs[o]) for r in setup if o in r.outputs])) for o in outputs}
     scale = {o: float(np.std(np.concatenate([r.outputs[o] for r in records if o in r.outputs]))) or 1.0
              for o in outputs}
     notes = [f"{r.name}: {n}" for r in records for n in r.notes] + [split_note]
@@ -246,7 +254,7 @@ def _diagnose(records_fit: list[Record], records_val: list[Record], nominal: dic
     if why is not None:
         report = _not_identifiable(_base_report(model_name, records, outputs, noise, notes), why)
         return Diagnosis(check_report(report), records, train, val, noise=noise)
-    ctx = context_for(nominal, records, outputs)
+    ctx = context_for(nominal, setup, outputs)
     problem = Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, opts.candidates,
                       structure=opts.structure or opts.effects is not None, groups=opts.groups, adapt=opts.adapt)
     local = Fitter(problem)
@@ -283,6 +291,7 @@ def _diagnose(records_fit: list[Record], records_val: list[Record], nominal: dic
     d.structure_preds = structure_preds
     d.singles = list(results)
     d.search_fits = [s["fit"] for s in search["path"]] if search is not None else []
+    d.context = ctx
     return d
 
 
