@@ -221,6 +221,10 @@ class Fitter:
             if not nonsmooth and 2 <= n_x <= 4:  # a narrow valley (two effects' parameters trading off)
                 best, used = _valley(resid, best, lower, upper, 1e-4)
                 nfev += used
+            lattice = space.lattice()
+            if np.any(lattice):  # a dead time: a kink at every sample
+                best, used = _hop(resid, best, lattice, lower, upper, 0.02 if nonsmooth else 1e-4)
+                nfev += used
             best_cost, x_best, r_best, jac, message = best
             if not np.any(jac):
                 jac = _jacobian(resid, x_best, r_best, lower, upper, 0.02 if nonsmooth else 1e-4)
@@ -519,6 +523,16 @@ class _FitSpace:
 
         return [np.array([start_unit(s, c, q, g) for c, q, g in self.params] + nuis0, dtype=float) for s in grid]
 
+    def lattice(self) -> np.ndarray:
+        """Per search coordinate, the step of the lattice its cost has kinks on (a dead time's sample time, in
+        unit scale; kinks at the parameter's low bound plus multiples of it), 0 for a parameter without one and for
+        the nuisances."""
+        out = np.zeros(self.n_par + len(self.nuis))
+        for j, (c, q, _) in enumerate(self.params):
+            if q.name in c.lattice and not q.log:
+                out[j] = c.lattice[q.name] / (q.high - q.low)
+        return out
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Parameters in [0, 1] (unit scale), start pH in [0, 14], valve offsets in [-1, 1] half-bands."""
         lower = np.r_[np.zeros(self.n_par), [0.0 if k == "ph" else -1.0 for _, k in self.nuis]]
@@ -559,6 +573,40 @@ def _valley(resid, best: tuple, lower, upper, step: float):
         return best, used
     res, n = _polish(resid, m.x, lower, upper, step, 5 * (n_x + 1))
     return (float(np.sum(res.fun ** 2)), res.x, res.fun, res.jac, res.message), used + n
+
+
+def _hop(resid, best: tuple, lattice: np.ndarray, lower, upper, step: float, most: int = 30):
+    """Leave the basin of a dead time's cost: polish within each neighbouring sample interval, and move there
+    while that lowers the cost.
+
+    ``best`` is (cost, x, residual, Jacobian, message); ``lattice`` the sample time in the search coordinates
+    of each parameter that is a dead time from 0 (0 elsewhere). A dead time between samples interpolates the
+    delayed signal linearly, so the cost is smooth within each sample interval and has a kink at every multiple
+    of the sample time. After a pulse edge a kink can be a ridge, and a polish that starts beyond it stays in
+    that interval's basin (feed dead-time test, seed 1346682198: 15.1 s for 13.1 s, training error 1133 against
+    239 at the truth, behind the ridge at the start grid's 15 s; seed 1339305888: 8.97 s for 9.16 s, 546
+    against 291, behind the ridge at 9 s). Within an interval a bounded polish from its middle finds its basin.
+    Returns (best, evaluations).
+    """
+    used = 0
+    for _ in range(most):
+        for j, side in itertools.product(np.flatnonzero(lattice), (-1, 1)):
+            k = math.floor((best[1][j] - lower[j]) / lattice[j]) + side  # the neighbouring interval
+            lo, hi = lower.copy(), upper.copy()
+            lo[j], hi[j] = max(lower[j], lower[j] + k * lattice[j]), min(upper[j], lower[j] + (k + 1) * lattice[j])
+            if lo[j] >= hi[j]:
+                continue
+            x0 = best[1].copy()
+            x0[j] = 0.5 * (lo[j] + hi[j])
+            res, n = _polish(resid, x0, lo, hi, step, 20 * (len(x0) + 1))
+            used += n
+            cost = float(np.sum(res.fun ** 2))
+            if cost < best[0]:
+                best = (cost, res.x, res.fun, res.jac, res.message)
+                break
+        else:
+            break
+    return best, used
 
 
 def _zoom(resid, x, cost, r, n_par, lower, upper, half: float = 0.12, shrink: float = 2.5, stages: int = 6):
