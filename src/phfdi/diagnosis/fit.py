@@ -23,7 +23,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares, minimize
+from scipy.optimize import direct, least_squares, minimize
 
 from phfdi_base.errors import UserError
 
@@ -137,7 +137,7 @@ class Fitter:
         if n_x == 0:
             return float(max(grid, 1))
         if any(c.nonsmooth for c in cands) and 0 < n_par <= 2:
-            return float(grid + 6 * (5 ** n_par - 1) + 6 * (n_x + 1) * (n_x + 1))
+            return float(grid + (6 * 4 if n_par == 1 else BOX_EVALS) + 6 * (n_x + 1) * (n_x + 1))
         polish = max(c.polish_evals for c in cands)
         valley = VALLEY_EVALS * n_x if 2 <= n_x <= 4 else 0  # the simplex search of _optimise
         return float(grid + polish * (n_x + 1) * (1 + n_x / 2) + valley)
@@ -198,8 +198,10 @@ class Fitter:
             n_x = len(x_best)
             if nonsmooth and 0 < n_par <= 2:
                 # a valve block's cost is rough at the scale of the command's increments (a threshold 1 % off
-                # moves one slip): zoom in on the best grid point by pattern search, then polish
-                x_best, best_cost, r_best, used = _zoom(resid, x_best, best_cost, r_best, n_par, lower, upper)
+                # moves one slip): zoom in on the best grid point by pattern search (two parameters: a global
+                # search of the box about it), then polish
+                search = _zoom if n_par == 1 else _box_search
+                x_best, best_cost, r_best, used = search(resid, x_best, best_cost, r_best, n_par, lower, upper)
                 nfev += used
                 stages: tuple[tuple[float, int], ...] = ((0.002, 6),)
                 refine = [(best_cost, x_best, r_best)]
@@ -607,6 +609,41 @@ def _hop(resid, best: tuple, lattice: np.ndarray, lower, upper, step: float, mos
         else:
             break
     return best, used
+
+
+#: evaluations of the box search of a two-parameter valve block (DIRECT may exceed it by a few): about the
+#: pattern search's 6 stages x 24 points it replaced
+BOX_EVALS = 150
+
+
+def _box_search(resid, x, cost, r, n_par, lower, upper, half: float = 0.12):
+    """The best point of the box +-``half`` (of the [0, 1] coordinates) about x on the first ``n_par`` coordinates,
+    by ``scipy.optimize.direct`` (locally biased DIRECT: a deterministic global search of a box, no gradients).
+
+    Returns (x, cost, residual, evaluations). A valve with stiction slips once the force built up since it
+    stuck exceeds S, and jumps by J: the training cost in (S, J) is a staircase of basins, one per slip the data
+    show, a few per cent of S wide, and the rest point within the stick band shifts them. A pattern search
+    from the best start point keeps the best of 25 points per stage: at the first stage's spacing (a factor
+    1.4 in S) the truth's basin is missed and the later stages shrink about another one (test_hidden stiction
+    draws, seed 1316640442: S 3.77 %, J 0.85 % fitted for 4.60 %, 1.80 %, training error 4622 against 1653;
+    6 of 8 failing draws in 60 ended so). DIRECT divides the box where it is low or unexplored and reaches the
+    truth's basin in all six with the pattern search's number of evaluations.
+    """
+    lo = np.clip(x[:n_par] - half, lower[:n_par], upper[:n_par])
+    hi = np.clip(x[:n_par] + half, lower[:n_par], upper[:n_par])
+    best = [(cost, x, r)]
+
+    def fun(p: np.ndarray) -> float:
+        xt = x.copy()
+        xt[:n_par] = p
+        rt = resid(xt)
+        c = float(np.sum(rt ** 2))
+        best.append((c, xt, rt))
+        return c
+
+    direct(fun, list(zip(lo, hi)), maxfun=BOX_EVALS, locally_biased=True, len_tol=1e-4, vol_tol=1e-12)
+    cost, x, r = min(best, key=lambda t: t[0])
+    return x, cost, r, len(best) - 1
 
 
 def _zoom(resid, x, cost, r, n_par, lower, upper, half: float = 0.12, shrink: float = 2.5, stages: int = 6):
