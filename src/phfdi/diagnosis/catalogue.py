@@ -399,7 +399,7 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
             [{"zone_volume_ml": v * vol, "exchange_ml_s": x * q_total} for v in (0.005, 0.015, 0.04, 0.1, 0.25)
              for x in (0.3, 1.0, 3.0, 10.0, 40.0)],
             lambda raw, p, feeds=feeds: _set_mixing(raw, feeds, p["zone_volume_ml"], p["exchange_ml_s"]),
-            # ill-conditioned (volume and exchange trade off along a valley): pattern-search zoom, then polish
+            # ill-conditioned (volume and exchange trade off along a valley): polish, then the simplex along it
             "zone_volume_ml", variant="+".join(feeds), structural=True, polish_evals=100))
     longest = max(5.0 * ctx.dt_s, min(120.0, ctx.duration_s / 5.0))
     for feed in ctx.feeds:

@@ -5,9 +5,14 @@ units of that output's noise floor (so a perfect model leaves unit-variance
 white noise, and outputs weigh by how precisely they are measured). Each
 candidate is started from the points of its catalogue grid; the best start
 is refined by ``scipy.optimize.least_squares`` (trust-region reflective, in
-[0, 1] coordinates of each parameter's bounds). Valve blocks, whose cost is
-rough at the scale of the command's increments, are first zoomed in on by a
-pattern search. Confidence intervals come from the Jacobian at the optimum,
+[0, 1] coordinates of each parameter's bounds), then, where two to four
+coordinates can trade off along a narrow valley, by a simplex search along it
+(``scipy.optimize.minimize``, Nelder-Mead). A dead time's cost has a kink at
+every sample: the fit also tries the neighbouring sample intervals. Valve
+blocks, whose cost is rough at the scale of the command's increments, are
+first zoomed in on: one parameter by a pattern search, two by a global search
+of a box about the best start (``scipy.optimize.direct``). Confidence
+intervals come from the Jacobian at the optimum,
 widened for the residual's lag-one autocorrelation (an AR(1) effective
 sample size), since a model error is never white. Nuisance parameters per
 record: the tank pH at the first sample (``initial: fit``, records that
