@@ -1,10 +1,11 @@
 """Pass rates of the tests that draw a fresh random seed per run (the hidden-effect tests), over many seeds.
 
-Each test that takes the ``hidden_rng`` fixture draws its case from a seed (``PHFDI_HIDDEN_SEED``, else a fresh
-one per run). This runs the chosen tests once per seed of a reproducible list (drawn from ``--master-seed``), each
-seed in its own pytest process (``-n 0 --runxfail``: an expected failure is run and counted like any other test),
-and prints per test the passes, the failing seeds with their message, a 95 % interval of the failure rate and the
-chance that one CI run of the whole suite fails from these tests (the catalogue test runs twice per suite run).
+Each test that takes the ``hidden_rng`` fixture (or the stick-slip tests' ``seed``) draws its case from a seed
+(``PHFDI_HIDDEN_SEED``, else a fresh one per run). This runs the chosen tests once per seed of a reproducible list
+(drawn from ``--master-seed``), each seed in its own pytest process (``-n 0 --runxfail``: an expected failure is run
+and counted like any other test), and prints per test the passes, the failing seeds with their message, a 95 %
+interval of the failure rate and the chance that one CI run of the whole suite fails from these tests (the
+catalogue test runs twice per suite run).
 
     .venv/bin/python benchmarks/hidden_flake_rates.py --seeds 40 --master-seed 1
     .venv/bin/python benchmarks/hidden_flake_rates.py --tests structure --seeds 60 --master-seed 2
@@ -36,6 +37,7 @@ from hidden_cases import CATALOGUE_CAUSES  # noqa: E402
 H = "tests/diagnosis/test_hidden.py::"
 S = "tests/diagnosis/test_hidden_structure.py::"
 R = "tests/diagnosis/test_reference_model.py::"
+L = "tests/loops/test_stickslip.py::"
 #: every test whose data depend on the per-run seed -> times it runs in one suite run
 SEEDED = {
     H + "test_catalogue_effect_is_named_with_its_parameter[0]": 2,  # [1] draws the same way: one id, run twice
@@ -50,10 +52,16 @@ SEEDED = {
        for c in ("pump_lag", "sensor_second_order")},
     **{S + f"test_vessel_structure_is_named_with_its_parameter[{c}]": 1
        for c in ("tanks_in_series", "co2_absorption")},
+    S + "test_flask_contents_are_named_with_their_pka_and_amount": 1,
+    S + "test_no_flask_contents_with_a_fitted_start_comes_back_none": 1,
+    L + "test_sticky_valves_of_hidden_size_read_as_stiction": 1,
+    **{L + f"test_healthy_valves_and_a_dead_band_do_not[{c}]": 1
+       for c in ("setpoint_kicks", "load_steps", "load_walk", "sine", "backlash")},
 }
 GROUPS = {"all": list(SEEDED), "hidden": [t for t in SEEDED if t.startswith(H)],
           "catalogue": [H + "test_catalogue_effect_is_named_with_its_parameter[0]"],
-          "structure": [t for t in SEEDED if t.startswith(S)], "reference": [t for t in SEEDED if t.startswith(R)]}
+          "structure": [t for t in SEEDED if t.startswith(S)], "reference": [t for t in SEEDED if t.startswith(R)],
+          "stickslip": [t for t in SEEDED if t.startswith(L)]}
 
 
 def seeds(master: int, n: int, draws: list[str] | None) -> list[int]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -33,11 +34,23 @@ from pathlib import Path
 import numpy as np
 
 from phfdi.loopdiag.classifier import CRITERIA, Data, nested_lolo, train
+from phfdi.loopdiag.evaluate import repeated_records
 from phfdi.loopdiag.features import FEATURE_SIGNS, FEATURES
+from phfdi.loopdiag.readers import read_loop
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT / "benchmarks" / "results" / "stiction_dataset.json"
 MODEL = ROOT / "src" / "phfdi" / "loopdiag" / "models" / "stiction_classifier.json"
+DATA = Path(os.environ.get("PHFDI_SHARED_DATA", ROOT.parent / "shared" / "data")) / "plant_loops"
+
+
+def repeats(real: list[dict]) -> dict[str, tuple[str, float]]:
+    """Real records that repeat another's samples (phfdi.loopdiag.evaluate.repeated_records); {} without the data."""
+    if not all((DATA / r["name"]).is_file() for r in real):
+        print(f"(no records under {DATA}: the table of distinct records is skipped)")
+        return {}
+    runs = {r["name"]: read_loop(str(DATA / r["name"])) for r in real}
+    return repeated_records({k: (v["op_pct"], v["pv"]) for k, v in runs.items()})
 
 
 def metrics(y: np.ndarray, pred: np.ndarray, groups: list[str]) -> dict:
@@ -88,6 +101,14 @@ def nested_tables(d: Data, real: list[dict], rows: list[dict], fresh: list[dict]
     results["He et al. 2007 (SI >= 0.6)"] = metrics(y_real, [r["he_decision"] == "stiction" for r in real], g_real)
     results["previous: Hammerstein valve model, gain >= 10 %"] = metrics(
         y_real, [(r["hammerstein_gain_percent"] or 0.0) >= 10.0 for r in real], g_real)
+    rep = repeats(real)
+    if rep:
+        keep = [k for k, r in enumerate(real) if r["name"] not in rep]
+        yk, gk = y_real[keep], [g_real[k] for k in keep]
+        distinct = {f"classifier (nested LOLO, chosen on {criterion})": metrics(yk, pred[ri][keep], gk),
+                    "Horch 1999 (CCF, psi > 0.5)": metrics(yk, [real[k]["horch_decision"] == "stiction" for k in keep], gk),
+                    "He et al. 2007 (SI >= 0.6)": metrics(yk, [real[k]["he_decision"] == "stiction" for k in keep], gk)}
+        results.update({f"{k} [distinct records]": v for k, v in distinct.items()})
     n_loops = len(set(g_real))
     print(f"{len(real)} real records ({int(y_real.sum())} stiction) from {n_loops} loops; "
           f"{sum(r['source'] == 'synthetic' for r in rows)} synthetic training loops; {len(fresh)} fresh loops; "
@@ -95,7 +116,16 @@ def nested_tables(d: Data, real: list[dict], rows: list[dict], fresh: list[dict]
     for r in failed:
         print(f"  {r['name']}: {r['error']}")
     print(f"\nleave-one-loop-out on the real records (nested for the classifier, {t_nested:.1f} s):\n")
-    print(table(results))
+    print(table({k: v for k, v in results.items() if not k.endswith("[distinct records]")}))
+    if rep:
+        shares = [100 * v[1] for v in rep.values()]
+        print(f"\nthe same, each stretch of data once: {len(rep)} files repeat {min(shares):.0f}-{max(shares):.0f} % "
+              f"of another file's samples under other time stamps, left out:")
+        for n, (orig, share) in sorted(rep.items()):
+            print(f"  {Path(n).name} repeats {Path(orig).name} ({100 * share:.0f} %)")
+        print()
+        print(table({k.removesuffix(" [distinct records]"): v for k, v in results.items()
+                     if k.endswith("[distinct records]")}))
     print("\nper loop (files called stiction / files): classifier | Horch | He | previous; fold's choices")
     for g in sorted(set(g_real), key=lambda g: (not y_real[g_real.index(g)], g)):
         idx = [k for k, gg in enumerate(g_real) if gg == g]

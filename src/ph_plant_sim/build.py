@@ -21,6 +21,7 @@ from phfdi_base.yamlfile import read_mapping, resolve_preset
 
 from . import feedlines, sensors  # noqa: F401  (register the feed-line and sensor blocks)
 from .chemistry import Chemistry, Component
+from .contents import InitialContents
 from .exchange import AirExchange, ExchangePlant
 from .mixing import MixingZone, ZonedPlant
 from .plant import CstrPlant, Feed, GravityOutlet, Tank
@@ -30,8 +31,8 @@ from .series import SeriesPlant, TanksInSeries
 if TYPE_CHECKING:  # the schema (pydantic) only where a plant model file is read: a node gets its model validated
     from phfdi_base.spec import PlantModelSpec, ScenarioSpec, SensorSpec
 
-__all__ = ["PLANT_DIR", "PlantStart", "build_plant", "build_process", "feed_lines", "load_plant_model",
-           "plant_start", "sensor_chain"]
+__all__ = ["PLANT_DIR", "PlantStart", "build_plant", "build_process", "feed_lines", "initial_contents",
+           "load_plant_model", "plant_start", "sensor_chain"]
 
 #: the plant-model presets (``plant: <name>`` in a scenario)
 PLANT_DIR = Path(str(resources.files("ph_plant_sim"))) / "presets"
@@ -102,6 +103,10 @@ def build_plant(model: PlantModelSpec) -> CstrPlant:
             air = f"air exchange of {model.air_exchange.component}"
             compounds[air] = {model.air_exchange.component: 1.0}
             streams.append({air: 0.0})
+        if model.initial_contents is not None:  # the vessel's own weak acid, carried by no feed
+            own = f"initial contents of {model.initial_contents.component}"
+            compounds[own] = {model.initial_contents.component: 1.0}
+            streams.append({own: 0.0})
         chemistry = Chemistry.for_streams(
             streams,
             extra_components=[Component(c.name, c.charge, tuple(c.pka)) for c in chem_spec.components],
@@ -127,6 +132,12 @@ def build_plant(model: PlantModelSpec) -> CstrPlant:
         except ValueError as exc:
             raise UserError(f"plant model {model.name!r}: {exc}") from None
     return plant
+
+
+def initial_contents(model: PlantModelSpec) -> InitialContents | None:
+    """The vessel's own contents at the start (``plant.initial_contents``; :mod:`ph_plant_sim.contents`), or None."""
+    c = model.initial_contents
+    return InitialContents(c.component, c.conc_mol_l) if c is not None else None
 
 
 def feed_lines(model: PlantModelSpec, dt_s: float) -> dict[str, Chain]:
@@ -242,7 +253,8 @@ def plant_start(spec: ScenarioSpec, plant: CstrPlant, ph_target: float | None = 
 
 def build_process(spec: ScenarioSpec, plant: CstrPlant, model: PlantModelSpec, flows_ml_s: list[float],
                   outlet_opening: float) -> PlantProcess:
-    """The plant with its sensors, schedules and feed lines, at rest at these flows and outlet opening.
+    """The plant with its sensors, schedules and feed lines, at rest at these flows and outlet opening (plus the
+    vessel's own initial contents, if the model has them: :meth:`PlantProcess.rest`).
 
     Parameters
     ----------
@@ -273,7 +285,6 @@ def build_process(spec: ScenarioSpec, plant: CstrPlant, model: PlantModelSpec, f
     >>> round(process.measure(0.0).ph_true, 2), round(plant.level_cm, 2)
     (12.0, 14.0)
     """
-    plant.set_steady_state(flows_ml_s, outlet_opening)
     dt = spec.sample_time_s
     # independent noise streams per sensor, derived from the scenario seed
     process = PlantProcess(
@@ -283,9 +294,7 @@ def build_process(spec: ScenarioSpec, plant: CstrPlant, model: PlantModelSpec, f
         {name: profile(p) for name, p in spec.feeds.items()},
         dt,
         feed_lines(model, dt),
+        initial_contents(model),
     )
-    if process.feed_lines:  # at rest the vessel receives what the lines deliver
-        plant.set_steady_state(process.steady_delivery(flows_ml_s), outlet_opening)
-    process.reset_sensors()
-    process.reset_lines(flows_ml_s)
+    process.rest(flows_ml_s, outlet_opening)
     return process

@@ -14,6 +14,7 @@ from typing import Mapping
 from phfdi_base.blocks import Chain, Injected
 from phfdi_base.profiles import Profile
 
+from .contents import InitialContents, add_contents
 from .plant import CstrPlant
 
 
@@ -53,6 +54,17 @@ class PlantProcess:
     dt_s: float = 1.0
     #: per feed, the blocks between the commanded flow and the vessel (dead time, pump curve, pump lag)
     feed_lines: dict[str, Chain] = field(default_factory=dict)
+    #: what the vessel holds at the start besides the steady mix of its feeds (ph_plant_sim.contents)
+    contents: InitialContents | None = None
+
+    def rest(self, flows_ml_s: list[float], outlet_opening: float = 1.0) -> None:
+        """Put the process at rest at these commanded flows: the vessel at the steady state of what the lines
+        deliver, plus its own initial contents; then the sensors and the feed lines at rest."""
+        self.plant.set_steady_state(self.steady_delivery(flows_ml_s), outlet_opening)
+        if self.contents is not None:
+            add_contents(self.plant, self.contents)
+        self.reset_sensors()
+        self.reset_lines(flows_ml_s)
 
     def feed_flows(self, t_s: float, valve_flows: Mapping[str, float]) -> list[float]:
         flows = []

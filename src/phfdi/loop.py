@@ -171,9 +171,7 @@ def _rest_at_first_inputs(parts: LoopParts, valve_cmd: float | None, outlet_cmd:
     o0 = parts.outlet_valve.reset(o_cmd0) if parts.outlet_valve is not None else None
     opening0 = o0.opening if o0 is not None else parts.start.outlet_opening
     q0 = flows_at(0, v0.flow_ml_s if v0 else 0.0)
-    parts.process.plant.set_steady_state(parts.process.steady_delivery(q0), opening0)
-    parts.process.reset_sensors()
-    parts.process.reset_lines(q0)
+    parts.process.rest(q0, opening0)
 
 
 def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inputs") -> Run:

@@ -24,7 +24,8 @@ from .spec_tools import checked_block, injected_faults, load_plugins, profile
 
 __all__ = [
     "AirExchangeSpec", "BlockSpec", "ChangeSpec", "ChemistrySpec", "ComponentSpec", "ControllersSpec", "FaultSite",
-    "FaultSpec", "FeedSpec", "MixingSpec", "OutletSpec", "PISpec", "PlantModelSpec", "ProfileSpec", "ScenarioSpec",
+    "FaultSpec", "FeedSpec", "InitialContentsSpec", "MixingSpec", "OutletSpec", "PISpec", "PlantModelSpec",
+    "ProfileSpec", "ScenarioSpec",
     "SensorSpec", "SeriesSpec",
     "SensorsSpec", "SetpointsSpec", "TankSpec", "ValveSpec", "ValvesSpec", "deep_merge", "format_validation",
     "apply_override", "checked_block", "injected_faults", "load_plugins", "parse_override", "profile",
@@ -113,6 +114,16 @@ class AirExchangeSpec(Strict):
     equilibrium_mol_l: float = Field(ge=0.0, allow_inf_nan=False, description="level it relaxes to (mol/L)")
 
 
+class InitialContentsSpec(Strict):
+    """A weak acid the vessel's own water holds at the start, washing out with the outflow (ph_plant_sim.contents)."""
+
+    component: str = Field(description=(
+        "a chemistry component: a library one (carbonate, phosphate, acetate, ...) or one declared in "
+        "chemistry.components"))
+    conc_mol_l: float = Field(ge=0.0, allow_inf_nan=False, description=(
+        "its total concentration at t = 0 (mol/L), on top of the start composition"))
+
+
 class PlantModelSpec(Strict):
     name: str
     description: str = ""
@@ -122,6 +133,7 @@ class PlantModelSpec(Strict):
     mixing: MixingSpec | None = None
     series: SeriesSpec | None = None
     air_exchange: AirExchangeSpec | None = None
+    initial_contents: InitialContentsSpec | None = None
 
     @model_validator(mode="after")
     def _zone_feeds(self) -> "PlantModelSpec":

@@ -16,7 +16,7 @@ def test_catalogue_identifiers():
                            # structural (--structure, or named with --candidates)
                            "mixing_zone", "feed_delay", "pump_curve", "carbonate", "probe_asymmetric_lag",
                            "two_point_calibration", "pump_lag", "sensor_second_order", "tanks_in_series",
-                           "co2_absorption"}
+                           "co2_absorption", "flask_contents"}
     assert VERDICTS == ("explained", "not_explained", "none", "not_identifiable")
     assert family_of("backlash+sensor_lag") == "actuator+sensor"
     assert family_of("buffer+holdup") == "process"

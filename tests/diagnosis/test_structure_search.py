@@ -60,3 +60,39 @@ def test_search_adds_the_dead_time_with_per_day_reagent_strength_and_adapts_an_u
     wf = fit_wiener(d.records, d.train, d.val, ["acid", "base"], "base", groups, 0.2)
     assert 0.0 < wf.nrmse_by_record["dayC-1"] < 2.0
     assert wf.adapted["dayC-1"]["samples"] == round(0.2 * len(val[0]))
+
+
+def contents_record(rng, name: str, conc_mol_l: float, pka: float):
+    """A rig-like run (an on/off loop's duty cycle) whose flask starts holding a weak acid of its own."""
+    from phfdi.diagnosis.catalogue import _set_contents
+
+    raw = nominal_raw("rig_flask", NOMINAL)
+    raw["sensors"]["ph"]["noise_std"] = 0.0
+    _set_contents(raw, "weak_acid", conc_mol_l, pka)
+    inp = rig.balanced_inputs(rng)
+    raw["duration_s"] = rig.DURATION_S
+    run = simulate_open_loop(validate_scenario(raw), inp)
+    cols = {k: inp[k] for k in ("time_s", "acid_flow_ml_s", "base_flow_ml_s")}
+    cols["ph_measured"] = run["ph_true"] + rng.normal(0.0, rig.NOISE_PH, len(inp["time_s"]))
+    return make_record(cols, name)
+
+
+def test_the_flasks_contents_are_fitted_per_record_with_one_pka_and_a_held_out_record_sets_its_own():
+    """Two runs whose flask held different amounts of one weak acid: one amount per run, one shared pKa; a third
+    run, validation only, gets its amount (and start pH) from the samples that set its start."""
+    rng = np.random.default_rng(23)
+    fit = [contents_record(rng, "run-a", 0.6e-3, 7.6), contents_record(rng, "run-b", 1.8e-3, 7.6)]
+    val = [contents_record(rng, "run-c", 1.0e-3, 7.6)]
+    d = diagnose(fit, val, nominal_raw("rig_flask", NOMINAL), "rig_flask",
+                 Options(initial="fit", candidates=["flask_contents"], pairs=False, workers=1))
+    best = next(r for r in d.singles if r.label == "flask_contents[weak_acid]")
+    assert abs(best.params["pka"] - 7.6) < 0.1, best.params
+    assert abs(best.params["conc_mol_l[run-a]"] / 0.6e-3 - 1.0) < 0.1, best.params
+    assert abs(best.params["conc_mol_l[run-b]"] / 1.8e-3 - 1.0) < 0.1, best.params
+    assert best.fitted_where["per_record"] == ["conc_mol_l"]
+    adapted = best.fitted_where["adapted"]["run-c"]
+    assert adapted["samples"] == 20 and list(adapted["parameters"]) == ["flask_contents[weak_acid].conc_mol_l"]
+    # the written model holds the first fitted run's amount; run-c's scored samples are all but its first 20
+    assert best.raw["plant"]["initial_contents"]["conc_mol_l"] == best.params["conc_mol_l[run-a]"]
+    assert best.record_raws[2]["plant"]["initial_contents"]["conc_mol_l"] == \
+        adapted["parameters"]["flask_contents[weak_acid].conc_mol_l"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from phfdi.loopdiag.evaluate import Method, leave_one_loop_out, metrics, tune_threshold
@@ -39,3 +40,18 @@ def test_unscorable_files_count_as_no_stiction():
     records = rec("A", True, None, 2) + rec("B", False, 5.0)
     preds, _ = leave_one_loop_out(records, Method("g", lambda r: r["gain_percent"], 10.0, False, ""))
     assert preds == [False, False, False]
+
+
+def test_a_record_repeating_another_is_found_and_a_partial_overlap_is_not():
+    from phfdi.loopdiag.evaluate import repeated_records
+
+    rng = np.random.default_rng(3)
+    op, pv = 50 + np.cumsum(rng.normal(0, 0.1, 751)), 100 + rng.normal(0, 0.3, 751)
+    other = (50 + np.cumsum(rng.normal(0, 0.1, 751)), 100 + rng.normal(0, 0.3, 751))
+    # a later export of the same loop: 90 % of the first one's samples, then new ones
+    later = (np.r_[op[75:], other[0][:75]], np.r_[pv[75:], other[1][:75]])
+    # 60 % shared: a neighbouring window, not a repeat
+    half = (np.r_[op[300:], other[0][:300]], np.r_[pv[300:], other[1][:300]])
+    found = repeated_records({"a.txt": (op, pv), "b.txt": later, "c.txt": other, "d.txt": half})
+    assert set(found) == {"b.txt"} and found["b.txt"][0] == "a.txt"
+    assert 0.85 < found["b.txt"][1] < 0.95

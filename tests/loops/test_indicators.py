@@ -121,7 +121,7 @@ def test_indicator_set_names_every_method_with_its_reference(loops):
     op, pv, sp, dt = loops["stiction"]
     ind = compute_indicators(op, pv, sp, dt, SELF)
     assert set(ind) == {"horch_ccf", "horch_histogram", "he_curve_fit", "kano_stuck", "area_peak_ratio",
-                        "relay_shape", "bicoherence_ngi", "bicoherence_nli", "ellipse_apparent_stiction"}
+                        "relay_shape", "bicoherence_ngi", "bicoherence_nli", "ellipse_apparent_stiction", "stick_slip"}
     assert all(i.reference for i in ind.values())
     assert ind["horch_ccf"].decision == "stiction"  # an odd CCF for a self-regulating stiction loop
     level = compute_indicators(*loops["stiction_level"], INTEG)

@@ -24,7 +24,7 @@ EXAMPLES = """examples:
   phfdi diagnose --model out/diagnose/calibrated_model.yaml --map ph_rig --initial fit \\
       --fit add_base.csv add_acid.csv --validate control.csv
   # structure search (mixing zone, tanks in series, feed dead times, pump curves and lags, carbonate, CO2 from
-  # the air, probe dynamics and calibration
+  # the air, the flask's own starting contents, probe dynamics and calibration
   # added one at a time while the held-out gain is significant); reagent strengths and probe offsets per day
   # (the date in the file name); a day absent from the fit gets those from the first 20 % of its record
   phfdi diagnose --model rig_flask --map ph_rig --initial fit --structure --group '^([0-9.]{10})' \\
@@ -46,8 +46,9 @@ catalogue: stiction backlash deadzone saturation coulomb_viscous_friction leakag
   sensor_delay sensor_lag sensor_bias sensor_drift sensor_gain (sensor),
   buffer reagent_concentration holdup disturbance_flow (process); verdicts: explained, not_explained,
   none, not_identifiable. Structural candidates (--structure, or by name with --candidates): mixing_zone
-  tanks_in_series feed_delay carbonate co2_absorption (process), pump_curve pump_lag (actuator),
-  probe_asymmetric_lag sensor_second_order two_point_calibration (sensor).
+  tanks_in_series feed_delay carbonate co2_absorption flask_contents (process), pump_curve pump_lag
+  (actuator), probe_asymmetric_lag sensor_second_order two_point_calibration (sensor). flask_contents: a
+  weak acid the vessel holds at the start (carbonate, or one of fitted pKa), its amount fitted per record.
 {own_candidates}
   Bad input exits with status 2 and one line naming the problem.
 """

@@ -108,6 +108,12 @@ class Candidate:
     #: parameters that may differ per group of records (a reagent batch, a day, a probe calibration): with
     #: ``--group`` one value per group, and for a group the fit has not seen, the only ones fitted (``--adapt``)
     per_group: tuple[str, ...] = ()
+    #: parameters that belong to each record (a property of its start, such as what the vessel held): one value
+    #: per record, fitted with its start (a training record on its training samples; a validation record on the
+    #: samples that set its start, or on its first --adapt fraction when its group is unseen)
+    per_record: tuple[str, ...] = ()
+    #: what the variant names in the report's ``fixed`` (a feed, or the species of the vessel's own contents)
+    variant_of: str = "feed"
     structural: bool = False  # tried by the structure search (or when named), not by the single-cause catalogue
     polish_evals: int = 20  # least-squares evaluations per parameter when refining the best start
     #: parameter (linear) -> the step of the lattice its cost has kinks on, from its low bound: a dead time
@@ -129,7 +135,7 @@ class Candidate:
         if self.family == "sensor":
             return "sensor"
         if self.cause in ("buffer", "reagent_concentration", "carbonate", "mixing_zone", "tanks_in_series",
-                          "co2_absorption"):
+                          "co2_absorption", "flask_contents"):
             return "chemistry"
         return "flows"
 
@@ -336,6 +342,53 @@ def _set_air_exchange(raw: dict, kla: float, equilibrium: float) -> None:
                                     "equilibrium_mol_l": equilibrium}
 
 
+#: the monoprotic weak acid of a vessel's own water (flask_contents[weak_acid]); its pKa is fitted
+FLASK_ACID_COMPONENT = "flask_weak_acid"
+
+
+def _set_contents(raw: dict, species: str, conc: float, pka: float | None = None) -> None:
+    """The vessel starts holding ``conc`` mol/L of a weak acid of its own (ph_plant_sim.contents): carbonate
+    (the component of ``carbonate``, so it adds to any carbonate a feed carries) or a monoprotic weak acid."""
+    if species == "carbonate":
+        _carbonate_component(raw)
+        component = CARBONATE_COMPONENT
+    else:
+        comps = raw["plant"].setdefault("chemistry", {}).setdefault("components", [])
+        comps[:] = [c for c in comps if c["name"] != FLASK_ACID_COMPONENT]
+        comps.append({"name": FLASK_ACID_COMPONENT, "charge": 0, "pka": [pka]})
+        component = FLASK_ACID_COMPONENT
+    raw["plant"]["initial_contents"] = {"component": component, "conc_mol_l": conc}
+
+
+def _contents_candidates(ctx: Context) -> list[Candidate]:
+    """A weak acid in the vessel's own water at the start (tap-water alkalinity, a phosphate-like buffer),
+    washing out with the outflow: carbonate (pKa 6.35, 10.33) and a monoprotic weak acid of fitted pKa.
+
+    Which parameters are whose, by physics: the amount the flask holds at the start is a property of each run's
+    history (refilled from the tap, rinsed, or left from the run before), so ``conc_mol_l`` is per record, fitted
+    with each record's start like its start pH; the species, and so its pKa, is that of the water supply or of the
+    contaminant and is shared by every record.
+    """
+    strength = max(ctx.feed_strength_mol_l.values(), default=1e-2) or 1e-2
+    conc = Param("conc_mol_l", strength * 1e-4, strength, "mol/L", log=True)
+    lo_ph, hi_ph = ctx.ph_range
+    pka_lo, pka_hi = max(0.5, lo_ph - 1.0), min(13.5, hi_ph + 1.0)
+    fractions = (0.003, 0.015, 0.06)
+    # the cost is multimodal in pKa (each pKa buffers another stretch of the record): a start every half pH unit
+    pkas = _spaced(pka_lo, pka_hi, max(4, int(round(2.0 * (pka_hi - pka_lo)))))
+    return [
+        Candidate("flask_contents", [conc], [{"conc_mol_l": strength * f} for f in fractions],
+                  lambda raw, p: _set_contents(raw, "carbonate", p["conc_mol_l"]), "conc_mol_l",
+                  variant="carbonate", variant_of="species", fixed={"pka": list(CARBONATE_PKA)},
+                  per_record=("conc_mol_l",), structural=True),
+        Candidate("flask_contents", [conc, Param("pka", pka_lo, pka_hi, "pH")],
+                  [{"conc_mol_l": strength * f, "pka": p} for p in pkas for f in fractions],
+                  lambda raw, p: _set_contents(raw, "weak_acid", p["conc_mol_l"], p["pka"]), "pka",
+                  variant="weak_acid", variant_of="species", per_record=("conc_mol_l",), structural=True,
+                  polish_evals=40),
+    ]
+
+
 def _set_series(raw: dict, n_tanks: float) -> None:
     raw["plant"]["series"] = {"n_tanks": int(round(n_tanks))}
 
@@ -421,7 +474,7 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
             lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_curve", {
                 "gain": p["gain"], "threshold_ml_s": p["threshold_ml_s"]}),
             "threshold_ml_s", variant=feed, structural=True, polish_evals=100))
-    out += _vessel_candidates(ctx, vol, q_total) + _pump_lag_candidates(ctx)
+    out += _vessel_candidates(ctx, vol, q_total) + _pump_lag_candidates(ctx) + _contents_candidates(ctx)
     for feed in ctx.basic_feeds:
         strength = ctx.feed_strength_mol_l.get(feed, 0.0) or 1e-2
         out.append(Candidate(

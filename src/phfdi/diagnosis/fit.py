@@ -112,6 +112,7 @@ class Fitter:
         cands, self.skipped = catalogue(problem.context, problem.only, problem.structure)
         self.groups = list(problem.groups) if problem.groups else ["all"] * len(problem.records)
         self.grouped = problem.groups is not None
+        self.record_keys = _unique_names([r.name for r in problem.records])  # per-record parameters' [key]
         self.candidates = {c.label: c for c in cands}
         self._nominal: FitResult | None = None
         self._n_resid = sum(int(problem.train[i].sum()) * sum(o in problem.records[i].outputs
@@ -136,7 +137,8 @@ class Fitter:
         """Evaluations a fit of ``cands`` may use (start grid, zoom and least-squares budgets, as in
         :meth:`fit`): a weight for scheduling long fits first and for the progress's time estimate."""
         n_groups = len({self.groups[i] for i in self.train_records}) if self.grouped else 1
-        n_par = sum(n_groups if self.grouped and q.name in c.per_group else 1 for c in cands for q in c.params)
+        n_par = sum(len(self.train_records) if q.name in c.per_record else
+                    n_groups if self.grouped and q.name in c.per_group else 1 for c in cands for q in c.params)
         n_x = n_par + len(self.train_records) * (int(self.fit_init) + int(any(c.band is not None for c in cands)))
         grid = len(starts) if starts is not None else len(cands[0].starts)
         if n_x == 0:
@@ -242,7 +244,9 @@ class Fitter:
                 nfev: int, t0: float) -> FitResult:
         """The fit's result: parameters with intervals, information criteria, the held-out score."""
         cands, params, n_par = space.cands, space.params, space.n_par
-        vals = space.values(x_best, space.train_groups[0] if self.grouped else None)
+        # the written model: the first fitted group's per-group values, the first training record's per-record ones
+        vals = space.values(x_best, space.train_groups[0] if self.grouped else None,
+                            self.record_keys[self.train_records[0]] if self.train_records else None)
         start_list = space.starts_of(x_best, vals)
         raw = space.model(vals)
         sse = float(np.sum(r_best ** 2))
@@ -254,15 +258,20 @@ class Fitter:
             flat[_pname(c, q, g, len(cands) > 1, space.dup)] = q.from_unit(float(x_best[j]))
         record_raws = space.raws_of(x_best)
         adapt = None
-        if self.grouped and any(g is not None for _, _, g in params):
-            adapt = (params, x_best[:n_par], space.model, space.values)
+        if (self.grouped and any(g is not None for _, _, g in params)) or space.record_params:
+            adapt = (params, x_best[:n_par], space.model, space.values, space.record_params)
         res_val = self.validate(record_raws, start_list, banded_half=space.half_band(vals), adapt=adapt)
         fitted_where = {}
         if self.grouped:
             fitted_where = {"groups_fitted": space.train_groups,
-                            "per_group": sorted({_pname(c, q, None, len(cands) > 1, space.dup) for c, q, g in params
-                                                 if g is not None}),
+                            "per_group": sorted({_pname(c, q, None, len(cands) > 1, space.dup)
+                                                 for j, (c, q, g) in enumerate(params)
+                                                 if g is not None and j not in space.record_params}),
                             "adapted": res_val.get("adapted", {})}
+        if space.record_params:
+            fitted_where["per_record"] = sorted({_pname(c, q, None, len(cands) > 1, space.dup)
+                                                 for j, (c, q, _) in enumerate(params) if j in space.record_params})
+            fitted_where.setdefault("adapted", res_val.get("adapted", {}))
         aic = n * math.log(max(sse, 1e-300) / n) + 2 * k
         bic = n * math.log(max(sse, 1e-300) / n) + k * math.log(n)
         return FitResult(
@@ -321,10 +330,15 @@ class Fitter:
                 continue
             unseen = i not in self.train_records and self.grouped and self.groups[i] not in seen
             n_fit = max(self.p.init_window, int(round(self.p.adapt * len(rec))))
+            own_start = adapt is not None and bool(adapt[4]) and i not in self.train_records  # per-record params
             if unseen and adapt is not None and self.p.adapt > 0:
                 raws[i], starts[i], info = self._adapt(i, adapt, n_fit, banded_half)
                 adapted[rec.name] = info
                 mask[:n_fit] = False
+            elif own_start and not (unseen and self.p.adapt > 0):  # its own start: where its start pH is set
+                raws[i], starts[i], info = self._adapt(i, adapt, self.p.init_window, banded_half, groups_too=False)
+                adapted[rec.name] = info
+                mask[: self.p.init_window] = False
             elif unseen and self.p.adapt > 0:  # the same samples scored as for a model that adapts
                 if self.fit_init or banded_half > 0:
                     starts[i] = self._start_of(i, raws[i], banded_half, n_fit)
@@ -357,16 +371,19 @@ class Fitter:
                 "lag1": float(np.mean([lag1(e) for e in main_parts])) if main_parts else 0.0,
                 **_whiteness(main_parts)}
 
-    def _adapt(self, i: int, adapt, n_fit: int, half_band: float) -> tuple[dict, Start, dict]:
-        """Start and the declared per-group parameters of record i's (unseen) group, fitted on its first n_fit
-        samples; every shared parameter stays as fitted."""
-        params, x_fit, model, values = adapt
+    def _adapt(self, i: int, adapt, n_fit: int, half_band: float,
+               groups_too: bool = True) -> tuple[dict, Start, dict]:
+        """Start, per-record parameters and (``groups_too``) the declared per-group parameters of record i's
+        (unseen) group, fitted on its first n_fit samples; every shared parameter stays as fitted. Each starts from
+        the fitted records' (groups') mean; a per-record one is pulled toward it (:func:`_record_prior`)."""
+        params, x_fit, model, values, record_params = adapt
         window = np.zeros(len(self.p.records[i]), bool)
         window[:n_fit] = True
         group = self.groups[i]
-        own = [(c, q) for c, q, g in params if g is not None]
+        own = [(c, q) for j, (c, q, g) in enumerate(params) if g is not None and (groups_too or j in record_params)]
         own = list({(id(c), q.name): (c, q) for c, q in own}.values())
-        base = values(x_fit, group)  # shared as fitted, per-group at the fitted groups' mean
+        # shared as fitted; per-group: the group's own if fitted, else the fitted groups' mean; per-record: the mean
+        base = values(x_fit, group)
 
         cands: list = []
         for c, _, _ in params:
@@ -383,16 +400,18 @@ class Fitter:
         lo, hi = [0.0] * len(own), [1.0] * len(own)
         if self.fit_init:
             x0.append(self.first_ph(i)), lo.append(0.0), hi.append(14.0)
+        prior = _record_prior(own, params, x_fit, record_params)
 
         def start(x) -> Start:
             return Start(float(x[len(own)]) if self.fit_init else None, 0.0)
 
         def r(x):
+            pull = [(x[j] - m) / sd for j, m, sd in prior]
             try:
                 err = self._errors(i, self.predict(i, model(vals_of(x)), start(x)))
             except (UserError, ValueError, FloatingPointError):
-                return np.full(int(window.sum()) * len(self.p.outputs), 1e3)
-            return np.concatenate([np.where(np.isfinite(e[window]), e[window], 1e3) for e in err.values()])
+                return np.full(int(window.sum()) * len(self.p.outputs) + len(pull), 1e3)
+            return np.concatenate([np.where(np.isfinite(e[window]), e[window], 1e3) for e in err.values()] + [pull])
 
         sol = least_squares(r, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=60 * (len(x0) + 1))
         vals = vals_of(sol.x)
@@ -435,7 +454,7 @@ def _fixed(cands: list[Candidate]) -> dict:
     for c in cands:
         fixed.update({(k_ if len(cands) == 1 else f"{c.cause}.{k_}"): v for k_, v in c.fixed.items()})
         if c.variant:
-            fixed["feed" if len(cands) == 1 else f"{c.cause}.feed"] = c.variant
+            fixed[c.variant_of if len(cands) == 1 else f"{c.cause}.{c.variant_of}"] = c.variant
     return fixed
 
 
@@ -448,9 +467,17 @@ class _FitSpace:
         self.fitter = fitter
         self.cands = cands
         self.train_groups = sorted({fitter.groups[i] for i in fitter.train_records})
-        # (candidate, parameter, group): group None for a shared parameter, else one entry per fitted group
-        self.params = [(c, q, g) for c in cands for q in c.params
-                       for g in (self.train_groups if fitter.grouped and q.name in c.per_group else [None])]
+        train_keys = [fitter.record_keys[i] for i in fitter.train_records]
+
+        def owners(c: Candidate, q) -> list:
+            if q.name in c.per_record:
+                return train_keys
+            return self.train_groups if fitter.grouped and q.name in c.per_group else [None]
+
+        # (candidate, parameter, owner): None for a shared parameter, else one entry per fitted group (a per-group
+        # parameter) or per training record (a per-record one, whose index is in record_params)
+        self.params = [(c, q, g) for c in cands for q in c.params for g in owners(c, q)]
+        self.record_params = frozenset(j for j, (c, q, _) in enumerate(self.params) if q.name in c.per_record)
         self.n_par = len(self.params)
         self.dup = {c.cause for c in cands if sum(d.cause == c.cause for d in cands) > 1}
         self.banded = [c for c in cands if c.band is not None]
@@ -462,13 +489,14 @@ class _FitSpace:
             if self.banded:
                 self.nuis.append((i, "offset"))
 
-    def values(self, x: np.ndarray, group: str | None = None) -> list[dict]:
-        """Parameter values of one group (a group the fit has not seen: the fitted groups' mean)."""
+    def values(self, x: np.ndarray, group: str | None = None, record: str | None = None) -> list[dict]:
+        """Parameter values of one group and record (a group or record the fit has not seen: the mean of the
+        fitted ones, in search coordinates)."""
         cands = self.cands
         vals: list[dict] = [dict() for _ in cands]
         pooled: dict[tuple, list[float]] = {}
         for j, (c, q, g) in enumerate(self.params):
-            if g is None or g == group:
+            if g is None or g == (record if j in self.record_params else group):
                 vals[cands.index(c)][q.name] = q.from_unit(float(x[j]))
             else:
                 pooled.setdefault((cands.index(c), q.name, id(q)), []).append(float(x[j]))
@@ -501,6 +529,8 @@ class _FitSpace:
 
     def raws_of(self, x: np.ndarray) -> list[dict]:
         f = self.fitter
+        if self.record_params:
+            return [self.model(self.values(x, f.groups[i], f.record_keys[i])) for i in range(len(f.p.records))]
         if not f.grouped or self.n_par == 0 or not any(g is not None for _, _, g in self.params):
             one = self.model(self.values(x))
             return [one] * len(f.p.records)
@@ -687,6 +717,38 @@ def _jacobian(fun, x, f0, lower, upper, step) -> np.ndarray:
         xj[j] = x[j] + h if x[j] + h <= upper[j] else x[j] - h
         jac[:, j] = (fun(xj) - f0) / (xj[j] - x[j])
     return jac
+
+
+#: least spread (search coordinates, 0..1 over a parameter's range) of the fitted records' values of a per-record
+#: parameter, as the width of the pull toward their mean (one fitted record has no spread of its own)
+RECORD_PRIOR_FLOOR = 0.1
+
+
+def _record_prior(own: list, params: list, x_fit: np.ndarray, record_params) -> list[tuple[int, float, float]]:
+    """For each per-record parameter among ``own``: (its index, the fitted records' mean, their spread), all in
+    search coordinates. A new record's value is drawn from the fitted records' population: its start window
+    moves it only as far as the window's samples say (a pull of one unit per spread away from the mean, against
+    the window's errors in noise units); a window that does not see the parameter leaves it at the mean instead of
+    wherever a vanishing gradient ends."""
+    out = []
+    for jo, (c, q) in enumerate(own):
+        us = [float(x_fit[j]) for j, (c2, q2, _) in enumerate(params)
+              if j in record_params and c2 is c and q2.name == q.name]
+        if us:
+            out.append((jo, float(np.mean(us)), max(float(np.std(us)), RECORD_PRIOR_FLOOR)))
+    return out
+
+
+def _unique_names(names: list[str]) -> list[str]:
+    """The names, a repeated one numbered (``name#2``): keys of per-record parameters."""
+    out: list[str] = []
+    for n in names:
+        k, m = n, 1
+        while k in out:
+            m += 1
+            k = f"{n}#{m}"
+        out.append(k)
+    return out
 
 
 def _pname(c: Candidate, q, g: str | None, multi: bool, dup=frozenset()) -> str:

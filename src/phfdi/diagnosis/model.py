@@ -34,7 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from ph_plant_sim.build import build_plant, feed_lines, load_plant_model, plant_start, sensor_chain
+from ph_plant_sim.build import build_plant, feed_lines, initial_contents, load_plant_model, plant_start, sensor_chain
+from ph_plant_sim.contents import contents_vector
 from ph_plant_sim.exchange import AirExchange, exchange_recurrence
 from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from ph_plant_sim.plant import CstrPlant, affine_recurrence, record_sample_maps
@@ -182,7 +183,9 @@ class Evaluator:
             return hit[1]
         model = load_plant_model(spec.plant)
         model_dump = model.model_dump()
-        key = _key(model_dump)
+        # the plant (its chemistry) depends on which component the vessel starts holding, not on how much
+        own = model.initial_contents.component if model.initial_contents is not None else None
+        key = _key({k: v for k, v in model_dump.items() if k != "initial_contents"}, own)
         plant = self._stage["plant"].take(key)
         if plant is None:
             plant = self._stage["plant"].put(key, build_plant(model))
@@ -331,7 +334,9 @@ class Evaluator:
             if self._nominal_volume is None:
                 self._nominal_volume = maps[0]
         volume, coef = maps
-        conc0 = self._initial_conc(plant, q0, initial_ph)
+        contents = initial_contents(model)  # the vessel's own weak acid at the start (ph_plant_sim.contents)
+        extra = contents_vector(plant, contents) if contents is not None else None
+        conc0 = self._initial_conc(plant, q0, initial_ph, extra)
         feed_conc = np.asarray(plant.feed_conc, dtype=float)
         inflow = flows @ feed_conc  # mmol/s per component
         if model.air_exchange is not None:  # the exchanging component at its own steady level (inflow and air)
@@ -339,7 +344,7 @@ class Evaluator:
             exch = AirExchange(x.component, x.kla_per_s, x.equilibrium_mol_l)
             j = [c.name for c in plant.chemistry.components].index(x.component)
             conc0 = list(conc0)
-            conc0[j] = exch.steady_conc(float(inflow[0, j]), float(sum(q0)), v0)
+            conc0[j] = exch.steady_conc(float(inflow[0, j]), float(sum(q0)), v0) + (extra[j] if extra else 0.0)
         amounts = affine_recurrence(coef[:, 0], coef[:, 1:2] * inflow, np.asarray(conc0) * v0)
         if model.air_exchange is not None:  # ph_plant_sim.exchange: the flow map, then the relaxation
             gain, drive = exchange_recurrence(exch, coef, inflow[:, j], volume, self.dt_s)
@@ -362,15 +367,20 @@ class Evaluator:
         out = {"ph": ph, "volume_ml": volume, "level_cm": volume / tank.area_cm2, "flows": flows}
         return self._stage["states"].put(key, out)
 
-    def _initial_conc(self, plant: CstrPlant, q0: list[float], initial_ph: float | None) -> list[float]:
+    def _initial_conc(self, plant: CstrPlant, q0: list[float], initial_ph: float | None,
+                      extra: list[float] | None = None) -> list[float]:
+        """The start composition: the steady state of the first flows plus ``extra`` (the vessel's own contents,
+        as :meth:`ph_plant_sim.process.PlantProcess.rest` adds them), or with ``initial: fit`` a mix of the feeds
+        that, with ``extra``, has the start pH."""
         if self.initial == "steady":
             if sum(q0) <= 0:
                 raise UserError(f"{self.record.name}: no inflow at the first sample: no steady state to start "
                                 f"from (use --initial fit for a record that starts mid-transient)")
-            return plant.mixed_inflow(q0)
+            mixed = plant.mixed_inflow(q0)
+            return [c + e for c, e in zip(mixed, extra)] if extra else mixed
         if initial_ph is None:
             raise ValueError("initial 'fit' needs initial_ph")
-        return mix_for_ph(plant, initial_ph)
+        return mix_for_ph(plant, initial_ph, extra)
 
     def predict(self, raw: dict, start: Start = Start()) -> Prediction:
         spec = self.spec(raw)
@@ -425,9 +435,18 @@ def _run_chain(chain: Chain, x: np.ndarray, t: list[float]) -> np.ndarray:
     return values
 
 
-def mix_for_ph(plant: CstrPlant, ph: float) -> list[float]:
-    """Composition (mol/L) of a mix of the most acidic and the most basic feed with the given pH."""
+def mix_for_ph(plant: CstrPlant, ph: float, extra: list[float] | None = None) -> list[float]:
+    """Composition (mol/L) of a mix of the most acidic and the most basic feed with the given pH.
+
+    ``extra``: a vessel's own contents (mol/L per component, :mod:`ph_plant_sim.contents`) held besides the
+    mix; the mix is then the one that has the given pH together with them (the strong ions under a buffer of
+    the vessel's own water are whatever its start pH says). Beyond the reachable range: the nearer end.
+    """
     acid, base, lo, hi = _mix_ends(plant)
+    if extra is not None and any(extra):
+        add = np.asarray(extra, dtype=float)
+        acid, base = acid + add, base + add
+        lo, hi = plant.balance.ph(acid.tolist()), plant.balance.ph(base.tolist())
     if ph <= lo:
         return acid.tolist()
     if ph >= hi:

@@ -88,6 +88,11 @@ class Options:
     search_steps: int = 5  # at most this many effects
     groups: list[str] | None = None  # per record (fit records, then validation records): its group
     adapt: float = 0.0  # fraction of an unseen group's record on which its declared parameters are fitted
+    #: fit exactly these candidates (labels) jointly and nothing else: no single-cause ranking, no search (a set
+    #: chosen elsewhere, e.g. on other records); the report's structure_search is nominal -> this set, whatever
+    #: its held-out score. Implies the structural candidates; ``effects_start``: its start point (default: grid)
+    effects: list[str] | None = None
+    effects_start: dict | None = None
 
 
 @dataclass
@@ -243,13 +248,18 @@ def _diagnose(records_fit: list[Record], records_val: list[Record], nominal: dic
         return Diagnosis(check_report(report), records, train, val, noise=noise)
     ctx = context_for(nominal, records, outputs)
     problem = Problem(records, nominal, opts.initial, train, val, noise, scale, outputs, ctx, opts.candidates,
-                      structure=opts.structure, groups=opts.groups, adapt=opts.adapt)
+                      structure=opts.structure or opts.effects is not None, groups=opts.groups, adapt=opts.adapt)
     local = Fitter(problem)
     _say(opts, "simulating the nominal model")
     nom = local.nominal()
     nominal_preds = [local.predict(i, nominal, nom.starts[i]) for i in range(len(records))]
     misfit = _misfit(records, nominal_preds, outputs, noise)
     labels = sorted(local.candidates, key=lambda lab: _cost_rank(local.candidates[lab]))
+    if opts.effects is not None:
+        unknown = [lab for lab in opts.effects if lab not in local.candidates]
+        if unknown:
+            raise ValueError(f"effects {unknown} are not candidates here (known: {', '.join(labels)})")
+        labels = []
     _say(opts, f"fitting {len(labels)} candidates ({len(set(c.cause for c in local.candidates.values()))} causes)")
     results, pairs, search = _run_fits(problem, labels, nom, opts, local)
     report = _decide(nom, results, pairs, local, opts)
@@ -400,6 +410,8 @@ def _run_fits(problem: Problem, labels: list[str], nom: FitResult, opts: Options
                 progress.heartbeat(sorted((futures[f] for f in pending), key=order.index)[:workers])
         return out  # in the order of the jobs, whatever the order they finished in
 
+    if opts.effects is not None:
+        return [], [], _given_effects(opts, nom, local)
     pool = None if workers == 1 else ProcessPoolExecutor(max_workers=workers, initializer=init_worker,
                                                          initargs=(problem,))
     try:
@@ -471,8 +483,8 @@ def _duration(seconds: float) -> str:
 
 #: causes that set one thing of the model (a second variant would overwrite the first)
 _VESSEL = {"mixing_zone", "tanks_in_series", "co2_absorption"}
-_EXCLUSIVE = {"tanks_in_series", "co2_absorption", "mixing_zone", "holdup", "valve_gain", "sensor_gain", "sensor_bias",
-              "two_point_calibration",
+_EXCLUSIVE = {"tanks_in_series", "co2_absorption", "flask_contents", "mixing_zone", "holdup", "valve_gain",
+              "sensor_gain", "sensor_bias", "two_point_calibration",
               "sensor_lag", "sensor_delay", "probe_asymmetric_lag", "sensor_drift", "sensor_second_order"}
 
 
@@ -530,6 +542,22 @@ def _structure_search(singles: list[FitResult], nom: FitResult, opts: Options, l
         path.append({"model": best.label, "fit": best, "p": p, "gain": gain})
         _say(opts, f"  + {added}: held-out error {math.sqrt(best.val_cost):.3g} x noise ({100 * gain:+.1f} %)")
     return {"path": path, "final": current if chosen else None, "chosen": chosen, "stopped": stopped, "fits": fits}
+
+
+def _given_effects(opts: Options, nom: FitResult, local: Fitter) -> dict:
+    """``Options.effects``: the given set fitted jointly in this process, reported as a search path of one step
+    that is kept whatever its held-out score (the choice was made elsewhere)."""
+    chosen = list(opts.effects or [])
+    path: list[dict] = [{"model": "nominal", "fit": nom}]
+    final = None
+    if chosen:
+        _say(opts, f"fitting the given effects jointly: {' + '.join(chosen)}")
+        final = local.fit([local.candidates[x] for x in chosen],
+                          [opts.effects_start] if opts.effects_start is not None else None)
+        _, p, gain = _counts(final, nom, opts)
+        path.append({"model": final.label, "fit": final, "p": p, "gain": gain})
+    return {"path": path, "final": final, "chosen": chosen, "fits": len(path) - 1,
+            "stopped": "the given effects (Options.effects): no selection"}
 
 
 def _search_report(search: dict, nom: FitResult, main: str, opts: Options) -> dict:

@@ -72,6 +72,7 @@ CAUSES: dict[str, str] = {
     "pump_lag": "actuator",
     "tanks_in_series": "process",
     "co2_absorption": "process",
+    "flask_contents": "process",
     "sensor_second_order": "sensor",
     "none": "none",
 }

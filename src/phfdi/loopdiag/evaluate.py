@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 FRICTION = ("stiction", "backlash")
 
 
@@ -43,6 +45,48 @@ def read_labels(path: str | Path) -> list[Labelled]:
         for row in csv.DictReader(fh):
             out.append(Labelled(str(path.parent / row["file"]), row["label"].strip() == "stiction",
                                 row["loop_tag"].strip()))
+    return out
+
+
+#: a record repeats another when this share of its 20-sample windows of (OP, PV) appears there too
+REPEAT_SHARE = 0.8
+REPEAT_WINDOW = 20
+
+
+def repeated_records(records: dict[str, tuple[np.ndarray, np.ndarray]], min_share: float = REPEAT_SHARE,
+                     window: int = REPEAT_WINDOW) -> dict[str, tuple[str, float]]:
+    """Records whose samples are (mostly) another record's: {name: (the record it repeats, shared share)}.
+
+    Historian exports of one loop taken at different times can hold the same stretch of data under other
+    time stamps (the refinery records do: several files of one loop share 88-94 % of their samples). Every
+    ``window`` consecutive (OP, PV) pairs, rounded to 1e-5, is a key; a record repeats an earlier one (in
+    name order) when at least ``min_share`` of its windows occur there too. Counting such files once keeps
+    a metric from scoring one stretch twice.
+
+    >>> a = (np.arange(100.0), np.sin(np.arange(100.0)))
+    >>> b = (a[0][5:], a[1][5:])
+    >>> repeated_records({"a": a, "b": b, "c": (np.zeros(50), np.ones(50))})
+    {'b': ('a', 1.0)}
+    """
+    keys: dict[bytes, set[str]] = {}
+    counts: dict[str, int] = {}
+    for name, (op, pv) in records.items():
+        op, pv = np.round(np.asarray(op, float), 5), np.round(np.asarray(pv, float), 5)
+        n = max(len(op) - window + 1, 0)
+        counts[name] = n
+        for i in range(n):
+            keys.setdefault(op[i:i + window].tobytes() + pv[i:i + window].tobytes(), set()).add(name)
+    shared: dict[tuple[str, str], int] = {}
+    for names in keys.values():
+        for a in names:
+            for b in names:
+                if a < b:
+                    shared[(a, b)] = shared.get((a, b), 0) + 1
+    out: dict[str, tuple[str, float]] = {}
+    for (a, b), c in sorted(shared.items()):
+        share = c / max(min(counts[a], counts[b]), 1)
+        if share >= min_share and b not in out:
+            out[b] = (a, round(share, 3))
     return out
 
 

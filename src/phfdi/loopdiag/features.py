@@ -49,6 +49,8 @@ FEATURES: tuple[Feature, ...] = (
             "Horch derivative histogram: share of variance a sinusoid explains (0 Gaussian, 1 camel)", -1),
     Feature("he_curve_fit", "he_curve_fit", 0.5, 0.0, 1.0, "He et al. (2007) SI (triangle vs sinusoid)"),
     Feature("kano_stuck", "kano_stuck", 0.0, 0.0, 1.0, "Kano et al. (2004) share of OP travel while stuck"),
+    Feature("stick_slip", "stick_slip", 0.0, 0.0, 1.0,
+            "share of OP travel in stuck sections that end in a slip (Kano et al.'s model read from OP and PV)"),
     Feature("area_peak_ratio", "area_peak_ratio", 0.0, -2.0, 2.0, "Singhal & Salsbury (2005) log(A1/A2)"),
     Feature("relay_shape", "relay_shape", 0.0, -1.0, 1.0, "Rossi & Scali (2005) SI (relay vs sinusoid)"),
     Feature("bicoherence_ngi", "bicoherence_ngi", 0.0, -0.1, 0.5, "Choudhury et al. (2004) NGI"),

@@ -51,6 +51,7 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
     ax_stem = fig.add_subplot(gs[2, 2])
     kano = next((c for c in ev.causes if c.cause == "stiction"), None) if ev.identifiable else None
     _plot_trends(ax_pv, ax_op, run, ev, kano, unit, op_unit)
+    _mark_slips(ax_pv, run, rep)
     _plot_pv_against_op(ax_xy, run, rep, kano, unit, op_unit)
     _plot_dpv_against_op(ax_dpv, run, kano, unit, op_unit)
     _plot_stem(ax_stem, op, kano, op_unit)
@@ -92,6 +93,19 @@ def _plot_trends(ax_pv, ax_op, run: Run, ev: Evidence, kano, unit: str, op_unit:
     ax_op.set_xlabel("time (min)")
     ax_pv.legend(fontsize=7, loc="best")
     ax_op.legend(fontsize=7, loc="best")
+
+
+def _mark_slips(ax, run: Run, rep: dict) -> None:
+    """Triangles on PV where the stick-slip index found a slip ending a stuck section (its first 20)."""
+    detail = ((rep.get("indicators") or {}).get("stick_slip") or {}).get("detail") or {}
+    times = detail.get("slip_times_s") or []
+    if not times:
+        return
+    t = run.time_s
+    idx = np.clip(np.searchsorted(t - t[0], times), 0, len(t) - 1)
+    ax.plot(t[idx] / 60.0, run["pv"][idx], "v", color="tab:orange", ms=6, ls="none",
+            label=f"slip after a stuck section ({detail.get('slips', len(times))}, stick-slip index)")
+    ax.legend(fontsize=7, loc="best")
 
 
 def _plot_pv_against_op(ax, run: Run, rep: dict, kano, unit: str, op_unit: str) -> None:

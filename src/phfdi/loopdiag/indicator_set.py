@@ -7,6 +7,7 @@ import numpy as np
 from .baselines import he_curve_fit, horch_ccf
 from .bicoherence import apparent_stiction, ngi_nli
 from .indicators import Indicator, area_peak_ratio, horch_histogram, kano_stuck_index, not_applicable, relay_shape
+from .stickslip import stick_slip_index
 
 HORCH_CCF_REF = "Horch (1999), Control Eng. Practice 7, 1221-1231: OP-PV cross-correlation odd = stiction"
 HE_REF = "He, Wang, Pottmann & Qin (2007), Ind. Eng. Chem. Res. 46, 4549-4560: triangle vs sinusoid fit"
@@ -26,6 +27,7 @@ def compute_indicators(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt
                            if he.index is not None else
                            not_applicable("he_curve_fit", str(he.detail.get("reason", he.decision)), HE_REF))
     out["kano_stuck"] = kano_stuck_index(op, pv, dt_s, process_type)
+    out["stick_slip"] = stick_slip_index(op, pv, dt_s, process_type)
     out["area_peak_ratio"] = area_peak_ratio(pv, sp, dt_s, process_type)
     out["relay_shape"] = relay_shape(pv, sp, dt_s, process_type)
     ngi, nli = ngi_nli(pv, sp, dt_s)
