@@ -455,13 +455,15 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
             # ill-conditioned (volume and exchange trade off along a valley): polish, then the simplex along it
             "zone_volume_ml", variant="+".join(feeds), structural=True, polish_evals=100))
     longest = max(5.0 * ctx.dt_s, min(120.0, ctx.duration_s / 5.0))
+    delay_step = max(ctx.dt_s, longest / 120.0)
     for feed in ctx.feeds:
         out.append(Candidate(
             "feed_delay", [Param("delay_s", 0.0, longest, "s")],
-            # every sample interval's middle: the truth's basin is about a pulse edge wide (+-1 s), and between
-            # basins the cost can be lower far away than next to it (seed 1416186938: 17.7 s true, 40 s the best
-            # of starts 1, 4, 15 and 40 s, then 20.8 s fitted at 340 x the truth's training error)
-            [{"delay_s": (k + 0.5) * ctx.dt_s} for k in range(int(longest / ctx.dt_s))],
+            # every sample interval's middle (at most 120: every second of the rig's 0.35 s sampling): the truth's
+            # basin is about a pulse edge wide (+-1 s), and between basins the cost can be lower far away than
+            # next to it (seed 1416186938: 17.7 s true, 40 s the best of starts 1, 4, 15 and 40 s, then 20.8 s
+            # fitted at 340 x the truth's training error)
+            [{"delay_s": (k + 0.5) * delay_step} for k in range(int(longest / delay_step))],
             lambda raw, p, feed=feed: _add_line_block(raw, feed, "line_delay", {"delay_s": p["delay_s"]}),
             "delay_s", variant=feed, structural=True, lattice={"delay_s": ctx.dt_s}))
     for feed in ctx.feeds:
