@@ -431,7 +431,7 @@ def _pump_lag_candidates(ctx: Context) -> list[Candidate]:
     for feed in ctx.feeds:
         out.append(Candidate(
             "pump_lag", [Param("tau_start_s", 0.0, slowest, "s"), Param("tau_stop_s", 0.0, slowest, "s")],
-            [{"tau_start_s": a * slowest, "tau_stop_s": b * slowest} for a in (0.05, 0.3) for b in (0.05, 0.3)],
+            [{"tau_start_s": a * slowest, "tau_stop_s": b * slowest} for a in (0.05, 0.15, 0.3) for b in (0.02, 0.1, 0.3)],
             lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_lag", {
                 "tau_start_s": p["tau_start_s"], "tau_stop_s": p["tau_stop_s"]}),
             "tau_start_s", variant=feed, structural=True))
