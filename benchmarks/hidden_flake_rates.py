@@ -135,7 +135,7 @@ def main() -> int:
     ap.add_argument("--draws", nargs="*", default=None, help="only seeds whose catalogue draw is one of these causes")
     args = ap.parse_args()
     tests = [t for g in args.tests for t in GROUPS.get(g, [g])]
-    xfail = {S + "test_structural_effect_is_named_with_its_parameter[pump_curve]"}
+    xfail: set[str] = set()  # test ids marked xfail in the suite (none since the pump curve's basins, 2026-11-27)
     todo = args.seed_list if args.seed_list is not None else seeds(args.master_seed, args.seeds, args.draws)
     print(f"{len(tests)} tests x {len(todo)} seeds (master seed {args.master_seed}); cores: "
           f"{len(os.sched_getaffinity(0))}", flush=True)

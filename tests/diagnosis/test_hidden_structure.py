@@ -190,12 +190,6 @@ def _diagnose(diagnose_json, path, tmp_path, candidates=CANDIDATES) -> dict:
                          "--candidates", *candidates, "--no-pairs", "--out", tmp_path / "report")
 
 
-PUMP_CURVE_VALLEY = pytest.mark.xfail(strict=False, reason=(
-    "known weak spot (docs/diagnosis.md): the pump curve's (gain, threshold) optimum is a narrow valley for a strong "
-    "acid - strong base (a gain 1 % off costs 17 x the noise floor) and the fit from the start grid can stop outside "
-    "it, then a reagent strength is named instead (seed 1572312089); found in most draws"))
-
-
 #: each side of a reported 95 % interval stretched to 99.9 % (normal quantiles 3.29 / 1.96)
 TO_999 = 3.2905267314919255 / 1.959963984540054
 
@@ -226,8 +220,7 @@ def _at_the_floor_or_as_good_as_the_data_allow(rep: dict, cause: str, main: str,
         f"{what}: {rep['reason']} (95 % interval {interval})"
 
 
-@pytest.mark.parametrize("cause", ["mixing_zone", "feed_delay", pytest.param("pump_curve", marks=PUMP_CURVE_VALLEY),
-                                   "carbonate"])
+@pytest.mark.parametrize("cause", ["mixing_zone", "feed_delay", "pump_curve", "carbonate"])
 def test_structural_effect_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
     path, main, value, tol = make_case(hidden_rng, cause, tmp_path / "data")
     rep = _diagnose(diagnose_json, path, tmp_path)

@@ -116,6 +116,9 @@ class Candidate:
     variant_of: str = "feed"
     structural: bool = False  # tried by the structure search (or when named), not by the single-cause catalogue
     polish_evals: int = 20  # least-squares evaluations per parameter when refining the best start
+    #: start points polished besides the best one, whatever their cost: for a cost of several narrow basins
+    #: whose floors differ less than the start points' costs do (fit._optimise)
+    basins: int = 0
     #: parameter (linear) -> the step of the lattice its cost has kinks on, from its low bound: a dead time
     #: interpolated between samples (the sample time); after the polish the fit tries the neighbouring
     #: intervals of the lattice while that lowers the cost (fit._hop)
@@ -475,7 +478,7 @@ def structural_candidates(ctx: Context) -> list[Candidate]:
              for t in (0.0, 0.05, 0.1, 0.17, 0.25, 0.35)],
             lambda raw, p, feed=feed: _add_line_block(raw, feed, "pump_curve", {
                 "gain": p["gain"], "threshold_ml_s": p["threshold_ml_s"]}),
-            "threshold_ml_s", variant=feed, structural=True, polish_evals=100))
+            "threshold_ml_s", variant=feed, structural=True, polish_evals=100, basins=4))
     out += _vessel_candidates(ctx, vol, q_total) + _pump_lag_candidates(ctx) + _contents_candidates(ctx)
     for feed in ctx.basic_feeds:
         strength = ctx.feed_strength_mol_l.get(feed, 0.0) or 1e-2

@@ -218,6 +218,9 @@ class Fitter:
                 stages = ((0.02, 10), (0.002, 8)) if nonsmooth else ((1e-4, polish),)
                 # the best start, and the next ones when nearly as good (a narrow valley: more of them)
                 refine = [scored[0]] + [t for t in scored[1:2 if polish <= 20 else 3] if t[0] < 1.5 * scored[0][0]]
+                basins = max(c.basins for c in cands)
+                if basins:  # narrow basins of nearly equal cost: the best start's basin is not always the truth's
+                    refine = scored[:1 + basins]
             for i_start, (_, x0, _) in enumerate(refine):
                 for step, evals in (stages if i_start == 0 else stages[:1]):
                     res, used = _polish(resid, x0, lower, upper, step, evals * (n_x + 1))
