@@ -423,7 +423,7 @@ def _vessel_candidates(ctx: Context, vol: float, q_total: float) -> list[Candida
         [{"kla_per_s": k * turnover, "equilibrium_mol_l": c * strength} for k in (0.1, 0.4, 1.5, 6.0)
          for c in (0.01, 0.03, 0.08, 0.2, 0.5)],
         lambda raw, p: _set_air_exchange(raw, p["kla_per_s"], p["equilibrium_mol_l"]), "equilibrium_mol_l",
-        fixed={"pka": list(CARBONATE_PKA)}, structural=True, polish_evals=60))
+        fixed={"pka": list(CARBONATE_PKA)}, structural=True, polish_evals=60, basins=4))
     return out
 
 
