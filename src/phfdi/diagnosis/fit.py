@@ -147,7 +147,8 @@ class Fitter:
             return float(grid + (6 * 4 if n_par == 1 else BOX_EVALS) + 6 * (n_x + 1) * (n_x + 1))
         polish = max(c.polish_evals for c in cands)
         valley = VALLEY_EVALS * n_x if 2 <= n_x <= 4 else 0  # the simplex search of _optimise
-        return float(grid + polish * (n_x + 1) * (1 + n_x / 2) + valley)
+        basins = max(c.basins for c in cands) * polish * (n_x + 1)  # the other starts polished (Candidate.basins)
+        return float(grid + polish * (n_x + 1) * (1 + n_x / 2) + valley + basins)
 
     # ---- residuals --------------------------------------------------------------
     def predict(self, i: int, raw: dict, start: Start) -> Prediction:
@@ -216,11 +217,11 @@ class Fitter:
                 # refine the best start point (and the runner-up when nearly as good)
                 polish = max(c.polish_evals for c in cands)
                 stages = ((0.02, 10), (0.002, 8)) if nonsmooth else ((1e-4, polish),)
-                # the best start, and the next ones when nearly as good (a narrow valley: more of them)
-                refine = [scored[0]] + [t for t in scored[1:2 if polish <= 20 else 3] if t[0] < 1.5 * scored[0][0]]
+                # the best start, and the next ones when nearly as good (a narrow valley: more of them); with
+                # narrow basins of nearly equal cost (Candidate.basins), the next ones whatever their cost
                 basins = max(c.basins for c in cands)
-                if basins:  # narrow basins of nearly equal cost: the best start's basin is not always the truth's
-                    refine = scored[:1 + basins]
+                refine = scored[:1 + basins] if basins else \
+                    [scored[0]] + [t for t in scored[1:2 if polish <= 20 else 3] if t[0] < 1.5 * scored[0][0]]
             for i_start, (_, x0, _) in enumerate(refine):
                 for step, evals in (stages if i_start == 0 else stages[:1]):
                     res, used = _polish(resid, x0, lower, upper, step, evals * (n_x + 1))
