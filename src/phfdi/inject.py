@@ -1,0 +1,429 @@
+"""Faults hidden in measured records: a probe or pump fault written into a CSV's own columns, with its truth.
+
+:func:`inject_fault` reads a measured CSV (checked by :func:`phfdi.records.read_record` under a column map),
+changes only the cells the fault changes from its onset on (the rest of the file, header, other columns, row
+order, line endings and number formats, stays byte for byte) and returns the new file's bytes and the fault's
+truth (a dict for scoring; a detector never needs it). :func:`write_injected` writes both atomically.
+
+Sensor faults change the pH column (rounded to :data:`PH_RESOLUTION`, clipped to 0..14). Pump faults are
+model free: the measured pH is what the pumps really delivered, so a pump fault is written into the
+*recorded* command and flow columns of that pump (kept proportional). See docs/injection.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import os
+import re
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from phfdi_base.errors import UserError
+
+#: the pH meter's resolution (pH): an injected pH is rounded to it
+PH_RESOLUTION = 0.01
+PH_MIN, PH_MAX = 0.0, 14.0
+#: the calibration point a probe_gain turns about (pH)
+PH_CAL_POINT = 7.0
+PUMPS = ("acid", "base")
+TRUTH_FORMAT = "phfdi-fault/1"
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+@dataclass(frozen=True)
+class FaultKind:
+    """One injectable fault: its family (sensor or actuator), the unit of its size and what it does."""
+
+    name: str
+    family: str
+    unit: str
+    what: str
+
+
+KINDS: dict[str, FaultKind] = {k.name: k for k in (
+    FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH"),
+    FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH"),
+    FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)"),
+    FaultKind("probe_noise", "sensor", "pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added"),
+    FaultKind("probe_lag", "sensor", "s", "a first-order lag of time constant SIZE s added to the probe"),
+    FaultKind("probe_gain", "sensor", "fraction", "slope error about pH 7: pH' = 7 + (1 + SIZE)(pH - 7)"),
+    FaultKind("pump_low", "actuator", "fraction", "the pump delivers SIZE less than recorded: "
+                                                  "recorded = delivered / (1 - SIZE)"),
+    FaultKind("pump_high", "actuator", "fraction", "the pump delivers SIZE more than recorded: "
+                                                   "recorded = delivered / (1 + SIZE)"),
+    FaultKind("pump_stuck", "actuator", "mL/s", "the pump delivers nothing while the record says SIZE mL/s "
+                                                "(only where the data's pump is off)"),
+)}
+
+
+# ---- the CSV as text ------------------------------------------------------------------------
+@dataclass
+class CsvText:
+    """A CSV kept as its lines (with their endings) plus the parsed cells of its data rows.
+
+    ``line_of[k]`` is the index in ``lines`` of data row ``k``; ``cells[column][k]`` its cell as the reader
+    parses it. Only :meth:`to_bytes` with changes alters anything, and only inside the changed cells.
+    """
+
+    path: str
+    lines: list[str]
+    header: list[str]
+    cells: dict[str, list[str]]
+    line_of: list[int]
+    delimiter: str
+    encoding: str
+    sha256: str
+    notes: list[str] = field(default_factory=list)
+
+    def numbers(self, column: str) -> np.ndarray:
+        from phfdi.records.cells import to_numbers
+
+        return to_numbers(self.cells[column]).values
+
+    def to_bytes(self, changes: dict[tuple[int, str], str]) -> bytes:
+        """The file with cell (row, column) -> new number text; all else as it was."""
+        lines = list(self.lines)
+        by_row: dict[int, dict[int, str]] = {}
+        for (k, column), text in changes.items():
+            by_row.setdefault(k, {})[self.header.index(column)] = text
+        for k, cols in by_row.items():
+            lines[self.line_of[k]] = _put_cells(lines[self.line_of[k]], self.delimiter, cols)
+        return "".join(lines).encode(self.encoding)
+
+
+def read_csv_text(path: str | Path, encoding: str | None = None) -> CsvText:
+    """A CSV as :class:`CsvText`, parsed by the records reader's own text layer (encoding, delimiter)."""
+    from phfdi.records.errors import ReadError
+    from phfdi.records.text import decode, parse_csv
+
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ReadError(path, f"cannot read the file ({exc.strerror})") from None
+    text, used, _ = decode(data, path, encoding)
+    table = parse_csv(data, path, encoding)
+    if any("decimal commas" in n or "runs over" in n for n in table.notes):
+        raise UserError(f"{path}: inject writes plain CSV rows only (no decimal commas, no cell over several lines)")
+    lines = io.StringIO(text, newline="").readlines()
+    cells = {name: [r[i] if i < len(r) else "" for r in table.rows] for i, name in enumerate(table.header) if name}
+    return CsvText(str(path), lines, table.header, cells, [n - 1 for n in table.lines], table.delimiter,
+                   used, hashlib.sha256(data).hexdigest())
+
+
+def _field_spans(body: str, delimiter: str) -> list[tuple[int, int]]:
+    spans, start, quoted = [], 0, False
+    for i, ch in enumerate(body):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == delimiter and not quoted:
+            spans.append((start, i))
+            start = i + 1
+    spans.append((start, len(body)))
+    return spans
+
+
+def _put_cells(line: str, delimiter: str, new: dict[int, str]) -> str:
+    """The line with the number inside each given field replaced (spaces, quotes and line ending kept)."""
+    body = line.rstrip("\r\n")
+    ending = line[len(body):]
+    spans = _field_spans(body, delimiter)
+    for i in sorted(new, reverse=True):
+        start, end = spans[i]
+        raw = body[start:end]
+        m = _NUMBER.search(raw)
+        assert m is not None, f"no number in cell {raw!r}"  # only cells holding numbers are changed
+        body = body[:start] + raw[:m.start()] + new[i] + raw[m.end():] + body[end:]
+    return body + ending
+
+
+def _decimals(cell: str) -> int:
+    m = _NUMBER.search(cell)
+    text = m.group(0) if m else ""
+    return len(text.split(".")[1].split("e")[0].split("E")[0]) if "." in text else 0
+
+
+def _changed_cells(csv: CsvText, column: str, rows: np.ndarray, values: np.ndarray,
+                   decimals: int | None = None) -> dict[tuple[int, str], str]:
+    """Cell texts for ``values`` at ``rows`` (formatted with the cell's own decimals), those that differ."""
+    out = {}
+    for k, v in zip(rows.tolist(), values.tolist()):
+        old = csv.cells[column][k]
+        if not math.isfinite(v) or not _NUMBER.search(old):
+            continue  # a missing cell stays missing
+        text = f"{v + 0.0:.{_decimals(old) if decimals is None else decimals}f}"
+        if float(text) != float(_NUMBER.search(old).group(0)):  # type: ignore[union-attr]
+            out[(k, column)] = text
+    return out
+
+
+# ---- sensor faults --------------------------------------------------------------------------
+def _filled(x: np.ndarray) -> np.ndarray:
+    """Missing values replaced by the last one before (the first valid one at the start)."""
+    ok = np.isfinite(x)
+    if not ok.any():
+        return x
+    idx = np.where(ok, np.arange(len(x)), 0)
+    np.maximum.accumulate(idx, out=idx)
+    out = x[idx]
+    out[: int(np.argmax(ok))] = x[int(np.argmax(ok))]
+    return out
+
+
+def _lag(ph: np.ndarray, t_s: np.ndarray, tau_s: float, seed: int) -> np.ndarray:  # noqa: ARG001
+    """First-order lag started at the onset's value; exact (zero-order hold) at the mean interval, lfilter."""
+    from scipy.signal import lfilter
+
+    x = _filled(ph)
+    dt_s = float(np.nanmean(np.diff(t_s))) if len(t_s) > 1 else 0.0
+    a = math.exp(-dt_s / tau_s)
+    y, _ = lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
+    return np.asarray(y)
+
+
+SENSOR: dict[str, Callable[[np.ndarray, np.ndarray, float, int], np.ndarray]] = {
+    "probe_bias": lambda ph, t, size, seed: ph + size,
+    "probe_drift": lambda ph, t, size, seed: ph + size * t / 60.0,
+    "probe_frozen": lambda ph, t, size, seed: np.full_like(ph, _filled(ph)[0]),
+    "probe_noise": lambda ph, t, size, seed: ph + np.random.default_rng(seed).normal(0.0, size, len(ph)),
+    "probe_lag": _lag,
+    "probe_gain": lambda ph, t, size, seed: PH_CAL_POINT + (1.0 + size) * (ph - PH_CAL_POINT),
+}
+
+
+def _sensor_changes(csv: CsvText, cmap, kind: str, k0: int, time_s: np.ndarray, onset_s: float, size: float,
+                    seed: int) -> tuple[dict, list[str]]:
+    column = _mapped(cmap, "ph_measured")
+    ph = csv.numbers(column)[k0:]
+    faulty = SENSOR[kind](ph, time_s[k0:] - onset_s, size, seed)  # time since the onset (s)
+    faulty = np.clip(np.round(faulty / PH_RESOLUTION) * PH_RESOLUTION, PH_MIN, PH_MAX)
+    return _changed_cells(csv, column, np.arange(k0, len(time_s)), faulty, decimals=2), [column]
+
+
+# ---- pump faults ----------------------------------------------------------------------------
+def command_column(header: list[str], pump: str) -> str | None:
+    """The pump's command column (%): a header naming '%' and the pump (e.g. "%, Acid"), or None."""
+    found = [c for c in header if "%" in c and pump.lower() in c.lower()]
+    return found[0] if found else None
+
+
+def _flow_per_pct(flow: np.ndarray, cmd: np.ndarray, pump: str, path: str) -> float:
+    runs = (cmd > 0) & (flow > 0)
+    if not runs.any():
+        raise UserError(f"pump_stuck on the {pump} pump: {path} never runs that pump, so its flow per % (to "
+                        f"write the command) is unknown")
+    return float(np.median(flow[runs] / cmd[runs]))
+
+
+def _pump_changes(csv: CsvText, cmap, kind: str, pump: str | None, k0: int, onset_s: float,
+                  size: float) -> tuple[dict, list[str]]:
+    if pump not in PUMPS:
+        raise UserError(f"{kind} needs --pump acid or --pump base")
+    flow_col = _mapped(cmap, f"{pump}_flow_ml_s")
+    unit = cmap.signals[f"{pump}_flow_ml_s"].factor  # file unit -> mL/s
+    cmd_col = command_column(csv.header, pump)
+    flow = csv.numbers(flow_col) * unit
+    rows = np.arange(len(flow)) >= k0
+    if kind == "pump_stuck":
+        rows &= flow == 0
+        if not rows.any():
+            raise UserError(f"pump_stuck would change nothing: the {pump} pump runs in every row from the onset at "
+                            f"{onset_s:g} s (a stuck pump is injected only where the record's pump is off)")
+        new_flow = np.full(len(flow), size)
+        per_pct = _flow_per_pct(flow, csv.numbers(cmd_col) * 1.0, pump, csv.path) if cmd_col else 1.0
+        new_cmd = new_flow / per_pct
+    else:
+        rows &= flow > 0
+        if not rows.any():
+            raise UserError(f"{kind} would change nothing: the {pump} pump is off in every row from the onset at "
+                            f"{onset_s:g} s (a model-free pump fault changes only a running pump's record)")
+        factor = 1.0 / (1.0 - size) if kind == "pump_low" else 1.0 / (1.0 + size)
+        new_flow = flow * factor
+        new_cmd = csv.numbers(cmd_col) * factor if cmd_col else new_flow
+    at = np.flatnonzero(rows)
+    changes = _changed_cells(csv, flow_col, at, new_flow[at] / unit)
+    if cmd_col:
+        changes.update(_changed_cells(csv, cmd_col, at, new_cmd[at]))
+        if (new_cmd[at] > 100.0).any():
+            csv.notes.append(f"the recorded {cmd_col!r} exceeds 100 % in {int((new_cmd[at] > 100.0).sum())} rows "
+                             f"(a real record could not show that)")
+    return changes, [cmd_col, flow_col] if cmd_col else [flow_col]
+
+
+# ---- the fault ------------------------------------------------------------------------------
+def _mapped(cmap, signal: str) -> str:
+    if signal not in cmap.signals:
+        raise UserError(f"the column map names no column for {signal!r} (needed by this fault)")
+    return cmap.signals[signal].column
+
+
+def _check_size(spec: FaultKind, size: float | None) -> float:
+    if spec.name == "probe_frozen":
+        return 0.0
+    if size is None or not math.isfinite(size):
+        raise UserError(f"{spec.name} needs a finite --size (in {spec.unit})")
+    limits = {"probe_noise": (0.0, math.inf, "above 0"), "probe_lag": (0.0, math.inf, "above 0 s"),
+              "probe_gain": (-1.0, math.inf, "above -1"), "pump_low": (0.0, 1.0, "between 0 and 1"),
+              "pump_high": (0.0, math.inf, "above 0"), "pump_stuck": (0.0, math.inf, "above 0 mL/s")}
+    low, high, say = limits.get(spec.name, (-math.inf, math.inf, ""))
+    if not low < size < high:
+        raise UserError(f"{spec.name}: --size must be {say} ({spec.unit}), got {size:g}")
+    return float(size)
+
+
+def _onset_row(time_s: np.ndarray, onset_s: float, column: str) -> int:
+    lo, hi = float(np.nanmin(time_s)), float(np.nanmax(time_s))
+    if not (math.isfinite(onset_s) and lo <= onset_s <= hi):
+        raise UserError(f"--onset {onset_s:g} s is outside the record: its time ({column!r}) runs from {lo:g} to "
+                        f"{hi:g} s")
+    return int(np.argmax(time_s >= onset_s))
+
+
+def inject_fault(path: str | Path, kind: str, onset_s: float, size: float | None = None, *,
+                 pump: str | None = None, seed: int = 0, column_map="ph_rig") -> tuple[bytes, dict]:
+    """The CSV at ``path`` with a fault from ``onset_s`` (record time, s) on, and the fault's truth.
+
+    ``kind``: one of :data:`KINDS` (``size`` in its unit; ``pump`` for the pump faults); ``column_map``: a
+    :class:`~phfdi.records.ColumnMap`, a YAML file or a shipped map name. Raises
+    :class:`~phfdi_base.errors.UserError` for a fault that would change nothing or an onset outside the record.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi.inject import inject_fault
+    >>> path = Path(tempfile.mkdtemp()) / "rig.csv"
+    >>> _ = path.write_text("t,pH,Acid Flow\\n0,7.00,1.00\\n1,7.10,1.00\\n2,7.20,1.00\\n")
+    >>> cmap = {"time_s": "t", "ph_measured": "pH", "acid_flow_ml_s": "Acid Flow"}
+    >>> data, truth = inject_fault(path, "probe_bias", 1.0, 0.5, column_map=cmap)
+    >>> print(data.decode(), end="")
+    t,pH,Acid Flow
+    0,7.00,1.00
+    1,7.60,1.00
+    2,7.70,1.00
+    >>> truth["onset_index"], truth["size"], truth["unit"], truth["channels"]
+    (1, 0.5, 'pH', ['pH'])
+    """
+    from phfdi.records import read_record
+
+    if kind not in KINDS:
+        raise UserError(f"unknown fault {kind!r}; one of {', '.join(KINDS)}")
+    spec = KINDS[kind]
+    cmap = _column_map(column_map)
+    record = read_record(path, cmap)
+    csv = read_csv_text(path)
+    time_col = cmap.signals["time_s"].column
+    time_s = csv.numbers(time_col) * cmap.signals["time_s"].factor
+    k0 = _onset_row(time_s, onset_s, time_col)
+    size = _check_size(spec, size)
+    if spec.family == "sensor":
+        changes, channels = _sensor_changes(csv, cmap, kind, k0, time_s, onset_s, size, seed)
+    else:
+        changes, channels = _pump_changes(csv, cmap, kind, pump, k0, onset_s, size)
+    if not changes:
+        raise UserError(f"{kind} of size {size:g} {spec.unit} from {onset_s:g} s would change no cell of {path} "
+                        f"(at the file's resolution); nothing written")
+    truth = _truth(csv, spec, channels, onset_s, k0, size, pump, seed, changes)
+    truth["onset_index"] = int(np.searchsorted(record.time_s, onset_s, side="left"))
+    return csv.to_bytes(changes), truth
+
+
+def _column_map(given):
+    from phfdi.records import ColumnMap
+
+    if isinstance(given, ColumnMap):
+        return given
+    if isinstance(given, dict):
+        return ColumnMap.from_mapping(given)
+    if isinstance(given, str) and not given.endswith((".yaml", ".yml")):
+        from importlib import resources
+
+        shipped = Path(str(resources.files("phfdi.diagnosis"))) / "maps" / f"{given}.yaml"
+        if not shipped.exists():
+            raise UserError(f"--map {given!r}: not a .yaml file nor a shipped map (ph_rig)")
+        given = shipped
+    return ColumnMap.load(given)
+
+
+def _truth(csv: CsvText, spec: FaultKind, channels: list[str], onset_s: float, k0: int, size: float,
+           pump: str | None, seed: int, changes: dict) -> dict:
+    rows = sorted({k for k, _ in changes})
+    where = f"the {pump} pump's recorded {' and '.join(repr(c) for c in channels)}" if pump and \
+        spec.family == "actuator" else " and ".join(repr(c) for c in channels)
+    amount = "" if spec.name == "probe_frozen" else f" of {size:g} {spec.unit}"
+    truth = {
+        "format": TRUTH_FORMAT, "kind": spec.name, "family": spec.family, "channels": channels,
+        "pump": pump if spec.family == "actuator" else None,
+        "onset_s": float(onset_s), "onset_index": None, "onset_line": csv.line_of[k0] + 1,
+        "size": size, "unit": spec.unit, "seed": seed,
+        "rows_changed": len(rows), "first_changed_line": csv.line_of[rows[0]] + 1,
+        "source": csv.path, "source_sha256": csv.sha256,
+        "description": f"{spec.name}{amount} in {where} from {onset_s:g} s (record time): {spec.what}",
+        "notes": list(csv.notes),
+    }
+    if spec.name == "probe_lag":
+        truth["discretisation"] = "exact (zero-order hold) at the mean sample interval after the onset, lfilter"
+    if spec.family == "sensor":
+        truth["resolution"] = {"value": PH_RESOLUTION, "unit": "pH", "clipped_to": [PH_MIN, PH_MAX]}
+    return truth
+
+
+# ---- writing --------------------------------------------------------------------------------
+def sidecar_path(out: str | Path) -> Path:
+    """Where the truth of ``out`` is written: ``OUT.fault.json`` beside it."""
+    out = Path(out)
+    return out.with_name(out.name + ".fault.json")
+
+
+def _staged(target: Path, data: bytes) -> str:
+    """A temporary file in the target's folder holding ``data``, flushed and synced; its path."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return tmp
+
+
+def write_injected(out: str | Path, data: bytes, truth: dict, overwrite: bool = False) -> tuple[Path, Path]:
+    """Write the faulty CSV and its truth (``OUT.fault.json``) atomically; an OSError becomes one UserError.
+
+    Both are staged in temporary files in the target folder (flushed, synced), then renamed into place;
+    an existing file is replaced only with ``overwrite``. Nothing partial is left when staging fails.
+    """
+    out = Path(out)
+    side = sidecar_path(out)
+    if str(out.resolve()) == str(Path(truth["source"]).resolve()):
+        raise UserError(f"--out {out} is the input file; write the faulty copy elsewhere")
+    for target in (out, side):
+        if target.exists() and not overwrite:
+            raise UserError(f"{target} exists; give --overwrite to replace it")
+    staged: list[str] = []
+    target = out
+    try:
+        staged.append(_staged(out, data))
+        target = side
+        staged.append(_staged(side, (json.dumps(truth, indent=2) + "\n").encode("utf-8")))
+        target = out
+        os.replace(staged[0], out)
+        target = side
+        os.replace(staged[1], side)
+    except OSError as exc:
+        for tmp in staged:
+            Path(tmp).unlink(missing_ok=True)
+        raise UserError(f"cannot write {target}: {exc.strerror or exc}") from None
+    return out, side
