@@ -31,6 +31,7 @@ COMMANDS = [
     "analyze",
     "loop_diagnose",
     "diagnose",
+    "inject",
 ]
 
 

@@ -27,40 +27,9 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 
-#: the pH meter's resolution (pH): an injected pH is rounded to it
-PH_RESOLUTION = 0.01
-PH_MIN, PH_MAX = 0.0, 14.0
-#: the calibration point a probe_gain turns about (pH)
-PH_CAL_POINT = 7.0
-PUMPS = ("acid", "base")
-TRUTH_FORMAT = "phfdi-fault/1"
+from .inject_kinds import KINDS, PH_CAL_POINT, PH_MAX, PH_MIN, PH_RESOLUTION, PUMPS, TRUTH_FORMAT, FaultKind
+
 _NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
-
-
-@dataclass(frozen=True)
-class FaultKind:
-    """One injectable fault: its family (sensor or actuator), the unit of its size and what it does."""
-
-    name: str
-    family: str
-    unit: str
-    what: str
-
-
-KINDS: dict[str, FaultKind] = {k.name: k for k in (
-    FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH"),
-    FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH"),
-    FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)"),
-    FaultKind("probe_noise", "sensor", "pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added"),
-    FaultKind("probe_lag", "sensor", "s", "a first-order lag of time constant SIZE s added to the probe"),
-    FaultKind("probe_gain", "sensor", "fraction", "slope error about pH 7: pH' = 7 + (1 + SIZE)(pH - 7)"),
-    FaultKind("pump_low", "actuator", "fraction", "the pump delivers SIZE less than recorded: "
-                                                  "recorded = delivered / (1 - SIZE)"),
-    FaultKind("pump_high", "actuator", "fraction", "the pump delivers SIZE more than recorded: "
-                                                   "recorded = delivered / (1 + SIZE)"),
-    FaultKind("pump_stuck", "actuator", "mL/s", "the pump delivers nothing while the record says SIZE mL/s "
-                                                "(only where the data's pump is off)"),
-)}
 
 
 # ---- the CSV as text ------------------------------------------------------------------------
@@ -365,7 +334,8 @@ def _truth(csv: CsvText, spec: FaultKind, channels: list[str], onset_s: float, k
         "size": size, "unit": spec.unit, "seed": seed,
         "rows_changed": len(rows), "first_changed_line": csv.line_of[rows[0]] + 1,
         "source": csv.path, "source_sha256": csv.sha256,
-        "description": f"{spec.name}{amount} in {where} from {onset_s:g} s (record time): {spec.what}",
+        "description": f"{spec.name}{amount} in {where} from {onset_s:g} s (record time): "
+                       f"{spec.what.replace('SIZE', f'{size:g}')}",
         "notes": list(csv.notes),
     }
     if spec.name == "probe_lag":
