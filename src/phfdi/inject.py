@@ -373,7 +373,8 @@ def write_injected(out: str | Path, data: bytes, truth: dict, overwrite: bool = 
     """Write the faulty CSV and its truth (``OUT.fault.json``) atomically; an OSError becomes one UserError.
 
     Both are staged in temporary files in the target folder (flushed, synced), then renamed into place;
-    an existing file is replaced only with ``overwrite``. Nothing partial is left when staging fails.
+    an existing file is replaced only with ``overwrite``. Nothing partial is left: a failure removes the
+    staged files, and a CSV renamed into place whose truth then fails to follow is removed too.
     """
     out = Path(out)
     side = sidecar_path(out)
@@ -383,17 +384,19 @@ def write_injected(out: str | Path, data: bytes, truth: dict, overwrite: bool = 
         if target.exists() and not overwrite:
             raise UserError(f"{target} exists; give --overwrite to replace it")
     staged: list[str] = []
-    target = out
+    target, placed = out, False
     try:
         staged.append(_staged(out, data))
         target = side
         staged.append(_staged(side, (json.dumps(truth, indent=2) + "\n").encode("utf-8")))
         target = out
         os.replace(staged[0], out)
-        target = side
+        placed, target = True, side
         os.replace(staged[1], side)
     except OSError as exc:
         for tmp in staged:
             Path(tmp).unlink(missing_ok=True)
+        if placed and not side.exists():
+            out.unlink(missing_ok=True)  # no faulty file without its truth
         raise UserError(f"cannot write {target}: {exc.strerror or exc}") from None
     return out, side
