@@ -229,7 +229,8 @@ def _pump_changes(csv: CsvText, cmap, kind: str, pump: str | None, k0: int, onse
 # ---- the fault ------------------------------------------------------------------------------
 def _mapped(cmap, signal: str) -> str:
     if signal not in cmap.signals:
-        raise UserError(f"the column map names no column for {signal!r} (needed by this fault)")
+        why = "the onset is in the record's time" if signal == "time_s" else "needed by this fault"
+        raise UserError(f"the column map names no column for {signal!r} ({why})")
     return cmap.signals[signal].column
 
 
@@ -288,8 +289,8 @@ def inject_fault(path: str | Path, kind: str, onset_s: float, size: float | None
     cmap = _column_map(column_map)
     record = read_record(path, cmap)
     csv = read_csv_text(path)
-    time_col = cmap.signals["time_s"].column
-    time_s = csv.numbers(time_col) * cmap.signals["time_s"].factor
+    time_col = _mapped(cmap, "time_s")
+    time_s = _times(csv, cmap)
     k0 = _onset_row(time_s, onset_s, time_col)
     size = _check_size(spec, size)
     if spec.family == "sensor":
@@ -302,6 +303,14 @@ def inject_fault(path: str | Path, kind: str, onset_s: float, size: float | None
     truth = _truth(csv, spec, channels, onset_s, k0, size, pump, seed, changes)
     truth["onset_index"] = int(np.searchsorted(record.time_s, onset_s, side="left"))
     return csv.to_bytes(changes), truth
+
+
+def _times(csv: CsvText, cmap) -> np.ndarray:
+    """Each row's record time (s), read as the records reader reads it (seconds, or date-times from the first)."""
+    from phfdi.records.cells import parse_stamps
+
+    time_s, fmt = parse_stamps(csv.cells[cmap.signals["time_s"].column], cmap.time_format)
+    return time_s * cmap.signals["time_s"].factor if fmt is None else time_s
 
 
 def _column_map(given):
