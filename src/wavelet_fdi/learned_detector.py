@@ -42,6 +42,7 @@ from phfdi_base.errors import UserError
 
 from .filterbank import CausalSwt, wavelet_filters
 from .reference_learned import LearnedReference, load_json, save_json
+from .references import Reference, reference_from_dict
 from .statistics import CusumBank, energy_reference
 
 FORMAT = "phfdi-learned-detector/1"
@@ -75,6 +76,10 @@ class LearnedSettings:
     #: energy CUSUMs on the detail bands (off: 0); designed for this variance ratio, threshold h
     energy_variance_ratio: float = 0.0
     energy_h: float = 20.0
+    #: energy-decrease CUSUMs on the detail bands (off: 0): designed for this variance ratio (below 1), e.g.
+    #: a probe that freezes or turns sluggish loses its noise; threshold h
+    energy_down_variance_ratio: float = 0.0
+    energy_down_h: float = 20.0
     #: observer on AJ: time constant (0: off); frozen above this fraction of a threshold
     observer_time_constant_s: float = 300.0
     freeze_ratio: float = 0.5
@@ -101,6 +106,10 @@ class LearnedSettings:
             raise UserError("mean_k must be >= 0 and mean_h > 0")
         if self.energy_variance_ratio and not self.energy_variance_ratio > 1.0:
             raise UserError("energy_variance_ratio must be 0 (off) or above 1")
+        if self.energy_down_variance_ratio and not 0.0 < self.energy_down_variance_ratio < 1.0:
+            raise UserError("energy_down_variance_ratio must be 0 (off) or between 0 and 1")
+        if not (self.energy_h > 0 and self.energy_down_h > 0):
+            raise UserError("energy_h and energy_down_h must be positive")
         if self.block_samples < 1:
             raise UserError("block_samples must be at least 1")
         if self.observer_time_constant_s < 0 or self.observer_alarm_time_constant_s < 0 \
@@ -140,20 +149,26 @@ class LearnedModel:
     (('flow', 'pressure'), (2, 3))
     """
 
-    reference: LearnedReference
+    reference: Reference  # any kind of wavelet_fdi.references
     settings: LearnedSettings
-    #: healthy RMS per channel (rows) and band (columns D1..DJ, AJ), residual-sigma units
+    #: healthy RMS per residual channel (rows) and band (columns D1..DJ, AJ), residual-sigma units
     band_sigma: np.ndarray
     source: dict = field(default_factory=dict)
 
     @property
     def channels(self) -> tuple[str, ...]:
+        """The record's channels the reference reads."""
         return self.reference.channels
+
+    @property
+    def residual_channels(self) -> tuple[str, ...]:
+        """The channels the detector watches (each with its bands and statistics)."""
+        return self.reference.residual_channels
 
     def to_dict(self) -> dict:
         return {"format": FORMAT, "settings": asdict(self.settings), "reference": self.reference.to_dict(),
                 "band_sigma": {c: dict(zip(self.settings.bands(), map(float, row)))
-                               for c, row in zip(self.channels, self.band_sigma)},
+                               for c, row in zip(self.residual_channels, self.band_sigma)},
                 "source": self.source}
 
     def save(self, path: str | Path) -> None:
@@ -167,10 +182,10 @@ class LearnedModel:
     @classmethod
     def from_dict(cls, d: dict, where: str = "model") -> "LearnedModel":
         settings = LearnedSettings.from_dict(dict(d.get("settings") or {}))
-        ref = LearnedReference.from_dict(d.get("reference") or {}, where)
+        ref = reference_from_dict(d.get("reference") or {}, where)
         try:
             bs = d["band_sigma"]
-            sigma = np.array([[float(bs[c][b]) for b in settings.bands()] for c in ref.channels])
+            sigma = np.array([[float(bs[c][b]) for b in settings.bands()] for c in ref.residual_channels])
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: band_sigma missing or incomplete ({exc})") from None
         if not (np.all(np.isfinite(sigma)) and np.all(sigma > 0)):
@@ -211,20 +226,36 @@ def learn(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSetti
     """
     s = (settings or LearnedSettings()).check()
     ref = LearnedReference.fit(x_healthy, channels, s.lags, s.ridge_own, s.ridge_cross)
-    provisional = LearnedModel(ref, s, np.ones((len(ref.channels), s.level + 1)), dict(source or {}))
-    det = LearnedDetector(provisional, alarms=False, record_trace=True)
-    det.process(np.arange(len(x_healthy)) * s.sample_time_s, x_healthy)
-    tr = det.trace()
-    start = det.fill_samples
-    if len(x_healthy) - start < 8 * s.block_samples:
-        raise UserError(f"the healthy part has {len(x_healthy)} rows; calibrating the bands needs at least "
-                        f"{start + 8 * s.block_samples} (more rows, a lower level or smaller blocks)")
-    coef = tr["coef"][start:]  # (n, m, J+1), AJ already observer-corrected
+    src = {"healthy_rows": int(len(x_healthy)), **(source or {})}
+    return calibrate_bands(ref, [(np.arange(len(x_healthy)) * s.sample_time_s, x_healthy)], s, src)
+
+
+def calibrate_bands(reference: Reference, runs: Sequence[tuple[np.ndarray, np.ndarray]],
+                    settings: LearnedSettings, source: dict | None = None) -> LearnedModel:
+    """A detector model for ``reference``: each residual band's healthy RMS measured on healthy runs.
+
+    Every run (time_s, rows in ``reference.channels`` order) goes through a fresh detector; the bands
+    after each run's warm-up are pooled. Works for every reference kind (:mod:`wavelet_fdi.references`).
+    """
+    s = settings.check()
+    m = len(reference.residual_channels)
+    provisional = LearnedModel(reference, s, np.ones((m, s.level + 1)), dict(source or {}))
+    pooled = []
+    for t, rows in runs:
+        det = LearnedDetector(provisional, alarms=False, record_trace=True)
+        det.process(t, rows)
+        pooled.append(det.trace()["coef"][det.fill_samples:])  # (n, m, J+1), AJ already observer-corrected
+    coef = np.concatenate(pooled) if pooled else np.empty((0, m, s.level + 1))
+    fill = LearnedDetector(provisional).fill_samples
+    if len(coef) < 8 * s.block_samples:
+        rows_in = sum(len(r) for _, r in runs)
+        raise UserError(f"the healthy part has {rows_in} rows; calibrating the bands needs at least "
+                        f"{fill + 8 * s.block_samples} after each run's first {fill} "
+                        f"(more rows, a lower level or smaller blocks)")
     coef = np.where(np.isfinite(coef), coef, np.nan)
     sigma = np.sqrt(np.nanmean(coef ** 2, axis=0))
     sigma = np.where(np.isfinite(sigma) & (sigma > 1e-9), sigma, 1.0)
-    src = {"healthy_rows": int(len(x_healthy)), **(source or {})}
-    return LearnedModel(ref, s, sigma, src)
+    return LearnedModel(reference, s, sigma, dict(source or {}))
 
 
 @dataclass
@@ -258,7 +289,8 @@ class LearnedDetector:
     def __init__(self, model: LearnedModel, alarms: bool = True, record_trace: bool = False) -> None:
         self.model = model
         self.settings = s = model.settings.check()
-        self.channels = model.channels
+        self.inputs = model.channels  # what the rows hold
+        self.channels = model.residual_channels  # what is watched
         m = len(self.channels)
         self.m = m
         self.stream = model.reference.new_state()
@@ -283,6 +315,19 @@ class LearnedDetector:
                     names.append(f"{ch}.D{j + 1}.energy")
                     k.append(ke)
                     h.append(s.energy_h)
+                    chan.append(c)
+                    band.append(j)
+        self.energy_down = 0.0 < s.energy_down_variance_ratio < 1.0
+        if self.energy_down:
+            # log-likelihood ratio of a variance decrease to rho: k - d^2 with k = ln(1/rho) / (1/rho - 1);
+            # kept as value -d^2 minus reference -k so that every row is "value - k"
+            rho = s.energy_down_variance_ratio
+            kd = math.log(1.0 / rho) / (1.0 / rho - 1.0)
+            for c, ch in enumerate(self.channels):
+                for j in range(s.level):
+                    names.append(f"{ch}.D{j + 1}.energy_down")
+                    k.append(-kd)
+                    h.append(s.energy_down_h)
                     chan.append(c)
                     band.append(j)
         self.stat_names = names
@@ -313,8 +358,9 @@ class LearnedDetector:
         """Rows x (n, m) at times t_s; returns the events and the alarm state (0/1) of each row."""
         rows = np.asarray(x, dtype=float)
         t = np.asarray(t_s, dtype=float)
-        if rows.ndim != 2 or rows.shape[1] != self.m:
-            raise UserError(f"expected rows x {self.m} channels ({', '.join(self.channels)}), got shape {rows.shape}")
+        if rows.ndim != 2 or rows.shape[1] != len(self.inputs):
+            raise UserError(f"expected rows x {len(self.inputs)} channels ({', '.join(self.inputs)}), "
+                            f"got shape {rows.shape}")
         if len(t) != len(rows):
             raise UserError(f"{len(t)} time stamps for {len(rows)} rows")
         events: list[LearnedEvent] = []
@@ -323,7 +369,7 @@ class LearnedDetector:
             return events, states
         g = self.samples_processed + np.arange(len(rows))
         self._times[g % TIME_RING] = t
-        r = self.stream.residuals(rows)
+        r = self.stream.residuals(t, rows)
         missing = ~np.isfinite(r)
         events += self._missing_events(missing, t)
         out = self.swt.process(np.where(missing, 0.0, r))
@@ -361,10 +407,17 @@ class LearnedDetector:
         nm = 2 * self.m
         vals[0:nm:2] = u.T
         vals[1:nm:2] = -u.T
-        if self.energy:
+        ne = self.m * s.level
+        if self.energy or self.energy_down:
             e = d_norm[:, i0:i1, :]  # (J, nb, m)
-            e = np.where(missing[i0:i1][None], 0.0, e)
-            vals[nm:] = (e.transpose(2, 0, 1).reshape(self.m * s.level, nb)) ** 2
+            e2 = (e.transpose(2, 0, 1).reshape(ne, nb)) ** 2
+            miss = np.repeat(missing[i0:i1].T, s.level, axis=0)  # (m*J, nb): a missing sample is healthy
+            row = nm
+            if self.energy:
+                vals[row:row + ne] = np.where(miss, 0.0, e2)
+                row += ne
+            if self.energy_down:
+                vals[row:row + ne] = np.where(miss, -1.0, -e2)
         z = vals - self.k[:, None]
         warm = g0 < self.fill_samples
         if warm:  # filters not yet filled: no evidence either way

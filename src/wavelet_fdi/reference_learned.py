@@ -62,9 +62,16 @@ class LearnedReference:
     ridge_own: float
     ridge_cross: float
 
+    kind = "arx"
+
     @property
     def n_channels(self) -> int:
         return len(self.channels)
+
+    @property
+    def residual_channels(self) -> tuple[str, ...]:
+        """Every channel gets a residual (the reference protocol, :mod:`wavelet_fdi.references`)."""
+        return self.channels
 
     # ---- fitting -------------------------------------------------------------------
     @classmethod
@@ -120,13 +127,13 @@ class LearnedReference:
     def new_state(self) -> "ReferenceStream":
         return ReferenceStream(self)
 
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        """Residuals of a whole record (n, m) in healthy-sigma units (a fresh stream)."""
-        return self.new_state().residuals(x)
+    def residuals(self, t_s: np.ndarray | None, x: np.ndarray) -> np.ndarray:
+        """Residuals of a whole record (n, m) in healthy-sigma units (a fresh stream; times not used)."""
+        return self.new_state().residuals(t_s, x)
 
     # ---- file ---------------------------------------------------------------------------
     def to_dict(self) -> dict:
-        return {"channels": list(self.channels), "lags": self.lags, "mean": self.mean.tolist(),
+        return {"kind": self.kind, "channels": list(self.channels), "lags": self.lags, "mean": self.mean.tolist(),
                 "scale": self.scale.tolist(), "intercept": self.intercept.tolist(), "own": self.own.tolist(),
                 "cross": self.cross.tolist(), "residual_sigma": self.residual_sigma.tolist(),
                 "fit_rows": self.fit_rows, "ridge_own": self.ridge_own, "ridge_cross": self.ridge_cross}
@@ -154,8 +161,9 @@ class ReferenceStream:
         self.ref = ref
         self._hist: np.ndarray | None = None  # (lags, m), oldest first
 
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        """Residuals of the next rows x (n, m), in healthy-sigma units; NaN where x is missing."""
+    def residuals(self, t_s: np.ndarray | None, x: np.ndarray) -> np.ndarray:
+        """Residuals of the next rows x (n, m), in healthy-sigma units; NaN where x is missing. The ARX
+        predictor works in samples: ``t_s`` is accepted for the reference protocol and not used."""
         r = self.ref
         x = np.asarray(x, dtype=float)
         if x.ndim != 2 or x.shape[1] != r.n_channels:

@@ -108,7 +108,7 @@ def test_model_file_round_trip(tmp_path):
     model.save(tmp_path / "ref.json")
     back = LearnedModel.load(tmp_path / "ref.json")
     assert back.settings == model.settings and back.channels == model.channels
-    np.testing.assert_array_equal(back.reference.residuals(x), model.reference.residuals(x))
+    np.testing.assert_array_equal(back.reference.residuals(None, x), model.reference.residuals(None, x))
     np.testing.assert_array_equal(back.band_sigma, model.band_sigma)
 
 
@@ -124,7 +124,7 @@ def test_reference_recovers_a_known_arx_plant():
     own = ref.own[1, 0]
     cross = ref.cross[1, 0] * ref.scale[1] / ref.scale[0]
     assert own == pytest.approx(0.6, abs=0.02) and cross == pytest.approx(0.8, abs=0.02)
-    assert np.nanstd(ref.residuals(np.column_stack((u, y)))[:, 1]) == pytest.approx(1.0, abs=0.05)
+    assert np.nanstd(ref.residuals(None, np.column_stack((u, y)))[:, 1]) == pytest.approx(1.0, abs=0.05)
 
 
 def test_bad_inputs_are_user_errors(tmp_path):

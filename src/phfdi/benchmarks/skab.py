@@ -291,7 +291,7 @@ def peer_detector(name: str, settings=None, arl0_samples: float = PEER_ARL0_SAMP
 
     def detect(train: np.ndarray, test: np.ndarray, t_s: np.ndarray) -> np.ndarray:
         ref = LearnedReference.fit(train, SENSOR_COLUMNS, s.lags, s.ridge_own, s.ridge_cross)
-        u = ref.residuals(np.vstack((train, test)))
+        u = ref.residuals(None, np.vstack((train, test)))
         m = u.shape[1]
         healthy = [u[ref.lags:len(train), c] for c in range(m)]
         k = 0.5  # design shift: 1 healthy sigma, as in the pH-plant comparison

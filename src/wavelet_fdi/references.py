@@ -1,0 +1,69 @@
+"""The reference protocol: what a healthy reference gives the multichannel wavelet-CUSUM detector.
+
+A reference reads some channels of a record and gives residuals, each in units of its healthy (or
+predicted) standard deviation, that :class:`~wavelet_fdi.learned_detector.LearnedDetector` splits
+into wavelet bands and watches with CUSUMs. Every kind provides
+
+* ``kind``: its name in the reference file;
+* ``channels``: the record's channels it reads, in the order of the rows it is given;
+* ``residual_channels``: the names of the residuals it gives (a subset of, or equal to, ``channels``);
+* ``lags``: samples it needs before its first residual;
+* ``new_state()``: a stream whose ``residuals(t_s, rows)`` gives the next rows' residuals (n, r) and keeps
+  its state between calls, so that any chunking of a record gives the same residuals;
+* ``to_dict()`` / ``from_dict(d, where)``: the reference file's ``reference`` entry, ``kind`` in it.
+
+Kinds (chosen by the reference file, :data:`KINDS`):
+
+* ``arx`` (:class:`~wavelet_fdi.reference_learned.LearnedReference`): each channel from its own past and
+  the others, learned from healthy rows; any plant, no model;
+* ``estimator`` (:class:`~wavelet_fdi.reference_estimator.EstimatorReference`, ``correct: true``): a
+  Kalman filter on a stirred vessel's reaction invariant driven by the measured pH;
+* the same physics run open loop (``correct: false``): the model simulated from the record's first pH on
+  the measured pump flows, never corrected, the way ``phfdi diagnose`` compares a model with a run.
+
+The valve loop of the paper keeps its own physics reference and detector
+(:class:`~wavelet_fdi.detector.StreamingDetector`): it isolates valve faults by re-running that model.
+Adding a kind: a class with the members above, one entry in :data:`KINDS`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+
+from phfdi_base.errors import UserError
+
+from .reference_estimator import EstimatorReference
+from .reference_learned import LearnedReference
+
+
+class ReferenceStream(Protocol):
+    def residuals(self, t_s: np.ndarray | None, rows: np.ndarray) -> np.ndarray: ...
+
+
+class Reference(Protocol):
+    kind: str
+    lags: int
+
+    @property
+    def channels(self) -> tuple[str, ...]: ...
+
+    @property
+    def residual_channels(self) -> tuple[str, ...]: ...
+
+    def new_state(self) -> Any: ...
+
+    def to_dict(self) -> dict: ...
+
+
+#: reference kinds by the name their files carry
+KINDS: dict[str, Any] = {"arx": LearnedReference, "estimator": EstimatorReference}
+
+
+def reference_from_dict(d: dict, where: str = "reference") -> Reference:
+    """The reference a file's ``reference`` entry describes (no ``kind``: ``arx``, the first format)."""
+    kind = str(d.get("kind", "arx"))
+    if kind not in KINDS:
+        raise UserError(f"{where}: unknown reference kind {kind!r} (known: {', '.join(KINDS)})")
+    return KINDS[kind].from_dict(d, where)
