@@ -1,0 +1,372 @@
+"""Estimator reference: a Kalman filter on the flask's reaction invariant, driven by the measured pH.
+
+For a stirred overflow vessel fed by pumps of strong acid and strong base (the teaching-lab rig of
+../shared/data/ph_rig: H2SO4 and NaOH into a flask), where an open-loop simulation drifts away from a
+real run within minutes (docs/diagnosis.md: held-out NRMSE near 1). Instead of simulating, the filter
+follows the plant: every sample it predicts the next pH from the physics and the measured pump flows,
+compares it with the measured pH and corrects its state by the Kalman gain. The innovations
+(measured - predicted pH, in units of their predicted standard deviation) are the residual the
+wavelet-CUSUM bank watches (:mod:`wavelet_fdi.learned_detector`). A healthy plant gives innovations of
+unit variance whatever its reagent strengths or starting contents; a fault the physics cannot produce
+(a probe that jumps, freezes or drifts; a pump that delivers other than recorded) gives innovations
+the filter's noise model does not expect.
+
+The model (reaction invariants, Gustafsson & Waller 1983; the charge-balance form of Wright & Kravaris
+1991). The state is the excess of strong base over strong acid in the vessel, x = [Na+] - 2[SO4 2-]
+(mM, "charge equivalents"), which reactions do not change:
+
+    dx/dt = sum_i f_i s_i q_i / V - (sum_i q_i / V) x          (overflow: constant volume V)
+
+with feed i's flow q_i (mL/s, the record's column), signed strength s_i (mM of charge: + base, - acid)
+and an adapted strength factor f_i (below). The measured pH follows from the charge balance
+
+    x = Kw/h - h + sum_j c_j Ka_j / (Ka_j + h)                  (h = [H+], mM)
+
+with a weak background buffer c_j (a ladder of pKa 3..11 and carbonate, what tap water and air bring;
+concentrations fitted) that keeps the titration curve's slope finite. The curve is tabulated once on
+a 0.001 pH grid; x(pH) is explicit and pH(x) an interpolation in that table.
+
+The filter (a scalar Kalman filter in x; the measurement is mapped into x exactly through the curve,
+so its update needs no linearisation):
+
+    x-  = x_ss + (x - x_ss) exp(-D dt),   P- = a^2 P + (rate_rel_std * (x- - x))^2 + (walk * beta(pH-))^2 dt
+    x_m = x(pH_measured),                 R  = (probe_noise * beta(pH_measured))^2 + curve_std^2
+    K = P- / (P- + R),   x = x- + K (x_m - x-),   P = (1 - K) P-
+
+beta = dx/dpH is the buffer capacity. The residual is the pH innovation pH_measured - pH(x-) divided
+by sqrt((P- + curve_std^2) / beta(pH-)^2 + probe_noise^2), its predicted standard deviation.
+
+Adaptation ("slowly adapted run parameters"). Day-to-day the reagents' strengths differ by tens of per
+cent (docs/diagnosis.md), which a fixed model would call a fault on every run. Each feed's factor f_i
+is re-estimated at every block boundary (``block_samples``) by least squares of the filter's
+corrections K*nu on the feeds' modelled contributions over the block, and moved toward it with gain
+(seconds that feed ran in the block) / ``adapt_time_constant_s``: a strength error is absorbed with
+that time constant of pump-on time. A fault that appears faster (a pump that suddenly delivers 30 %
+less, any probe fault) shows in the innovations first. The flask's starting contents need no
+adaptation: the state starts at x(first pH) and the filter keeps it. A probe offset is not adapted:
+with one pH probe it cannot be told from the contents x (both move the reading), so the contents
+absorb a constant offset at the start, and an offset that appears later is a fault.
+
+The noise model (probe_noise, rate_rel_std, walk, curve_std), the strengths, the volume and the buffer
+are fitted on healthy runs by maximising the innovations' Gaussian likelihood (the prediction-error
+method for state-space models: Ljung 1999, ch. 7; Schweppe 1965), :meth:`EstimatorReference.fit`.
+
+Any chunking of a record gives bit-identical residuals: the recursion runs sample by sample and the
+adaptation acts at fixed global sample indices.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import asdict, dataclass, field, replace
+from typing import Sequence
+
+import numpy as np
+
+from phfdi_base.errors import UserError
+
+KIND = "estimator"
+LN10 = math.log(10.0)
+KW_MM2 = 1e-8  # water's ion product at 25 degC, (mM)^2
+PH_GRID = np.linspace(0.0, 14.0, 14001)  # 0.001 pH steps
+LADDER_PKAS = tuple(float(p) for p in range(3, 12))  # the background buffer: one weak acid per pH unit
+CARBONATE_PKAS = (6.35, 10.33)
+FACTOR_BOUNDS = (0.25, 4.0)  # an adapted strength factor stays within these
+MAX_BLOCK_STEP = 0.5  # relative error one block may report
+
+
+@dataclass(frozen=True)
+class Feed:
+    """One pumped feed: the record's flow channel (mL/s) and its strength in mM of charge (+ base, - acid)."""
+
+    channel: str
+    strength_mM: float
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.strength_mM) or self.strength_mM == 0.0:
+            raise UserError(f"feed {self.channel!r}: strength must be a non-zero number of mM (+ base, - acid)")
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """What the filter expects of a healthy plant (fitted with the chemistry)."""
+
+    probe_noise_ph: float = 0.03  # measurement noise of the pH probe (pH)
+    rate_rel_std: float = 0.3  # relative uncertainty of one step's modelled change of x
+    walk_ph_per_sqrt_s: float = 0.005  # unexplained random walk of the pH (pH per sqrt(s))
+    curve_std_mM: float = 1e-6  # uncertainty of the titration curve (mM of x); not fitted (fits drove it to 0)
+    timing_s: float = 0.5  # timing uncertainty of what the probe sees (mixing, probe response): s
+
+    def check(self) -> "NoiseModel":
+        for k, v in asdict(self).items():
+            if not (math.isfinite(v) and v > 0):
+                raise UserError(f"estimator noise model: {k} must be a positive number, got {v}")
+        return self
+
+
+@dataclass(frozen=True)
+class EstimatorReference:
+    """A Kalman filter of a stirred overflow vessel's reaction invariant (see the module docstring).
+
+    Examples
+    --------
+    >>> ref = EstimatorReference((Feed("acid_flow_ml_s", -3.4), Feed("base_flow_ml_s", 20.0)),
+    ...                          "ph_measured", volume_ml=4000.0)
+    >>> ref.channels, ref.residual_channels
+    (('acid_flow_ml_s', 'base_flow_ml_s', 'ph_measured'), ('ph_measured',))
+    >>> round(ref.ph_of_x(0.0), 2), round(ref.ph_of_x(1.0), 2)  # neutral; 1 mM of excess base
+    (7.0, 11.0)
+    """
+
+    feeds: tuple[Feed, ...]
+    ph_channel: str
+    volume_ml: float
+    buffer_mM: float = 0.0  # each weak acid of the ladder (pKa 3..11)
+    carbonate_mM: float = 0.0
+    noise: NoiseModel = field(default_factory=NoiseModel)
+    adapt_time_constant_s: float = 120.0  # 0: no adaptation
+    block_samples: int = 32
+    #: False: the same physics run open loop from the first pH (never corrected): a simulation reference
+    correct: bool = True
+    fit_info: dict = field(default_factory=dict, compare=False)
+
+    kind = KIND
+    lags = 1  # the first sample only starts the state
+
+    def __post_init__(self) -> None:
+        if not self.feeds:
+            raise UserError("the estimator needs at least one feed")
+        if not (math.isfinite(self.volume_ml) and self.volume_ml > 0):
+            raise UserError(f"estimator: volume_ml must be positive, got {self.volume_ml}")
+        if self.buffer_mM < 0 or self.carbonate_mM < 0:
+            raise UserError("estimator: buffer and carbonate concentrations must be >= 0")
+        if self.adapt_time_constant_s < 0 or self.block_samples < 1:
+            raise UserError("estimator: adapt_time_constant_s must be >= 0 and block_samples >= 1")
+        self.noise.check()
+        x, beta = titration_curve(self.buffer_mM, self.carbonate_mM)
+        object.__setattr__(self, "_x_table", x)
+        object.__setattr__(self, "_beta_table", beta)
+        object.__setattr__(self, "_x_list", x.tolist())
+
+    # ---- the protocol every reference kind shares ------------------------------------------
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """The record's channels this reference reads, in the order of the rows it is given."""
+        return tuple(f.channel for f in self.feeds) + (self.ph_channel,)
+
+    @property
+    def residual_channels(self) -> tuple[str, ...]:
+        return (self.ph_channel,)
+
+    def new_state(self) -> "EstimatorStream":
+        return EstimatorStream(self)
+
+    def residuals(self, t_s: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Innovations of a whole record (n, len(channels)) in predicted-sigma units (a fresh stream)."""
+        return self.new_state().residuals(t_s, x)
+
+    def to_dict(self) -> dict:
+        return {"kind": KIND, "feeds": [asdict(f) for f in self.feeds], "ph_channel": self.ph_channel,
+                "volume_ml": self.volume_ml, "buffer_mM": self.buffer_mM, "carbonate_mM": self.carbonate_mM,
+                "noise": asdict(self.noise), "adapt_time_constant_s": self.adapt_time_constant_s,
+                "block_samples": self.block_samples, "correct": self.correct, "fit": self.fit_info}
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "reference") -> "EstimatorReference":
+        try:
+            feeds = tuple(Feed(str(f["channel"]), float(f["strength_mM"])) for f in d["feeds"])
+            return cls(feeds, str(d["ph_channel"]), float(d["volume_ml"]), float(d.get("buffer_mM", 0.0)),
+                       float(d.get("carbonate_mM", 0.0)), NoiseModel(**{k: float(v) for k, v in d["noise"].items()}),
+                       float(d.get("adapt_time_constant_s", 120.0)), int(d.get("block_samples", 32)),
+                       bool(d.get("correct", True)), dict(d.get("fit") or {}))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{where}: not an estimator reference ({exc})") from None
+
+    # ---- the titration curve ---------------------------------------------------------------
+    def x_of_ph(self, ph: np.ndarray) -> np.ndarray:
+        """Excess base (mM) at these pH values (the curve, interpolated)."""
+        return np.interp(ph, PH_GRID, self._x_table)  # type: ignore[attr-defined]
+
+    def beta_of_ph(self, ph: np.ndarray) -> np.ndarray:
+        """Buffer capacity dx/dpH (mM per pH)."""
+        return np.interp(ph, PH_GRID, self._beta_table)  # type: ignore[attr-defined]
+
+    def ph_of_x(self, x: float) -> float:
+        xs: list[float] = self._x_list  # type: ignore[attr-defined]
+        i = min(max(bisect.bisect_left(xs, x), 1), len(xs) - 1)
+        lo, hi = xs[i - 1], xs[i]
+        frac = 0.0 if hi == lo else min(max((x - lo) / (hi - lo), 0.0), 1.0)
+        return float(PH_GRID[i - 1] + frac * (PH_GRID[i] - PH_GRID[i - 1]))
+
+    # ---- fitting ---------------------------------------------------------------------------
+    @classmethod
+    def fit(cls, runs: Sequence[tuple[np.ndarray, np.ndarray]], start: "EstimatorReference",
+            max_evaluations: int = 300) -> "EstimatorReference":
+        """Strengths, volume, buffer and noise model that maximise the innovations' likelihood on healthy runs.
+
+        ``runs``: (time_s, rows) per run, rows in ``start.channels`` order. ``start`` gives the feeds'
+        channels and signs, the first guesses and the adaptation settings.
+        """
+        from .estimator_fit import fit_reference
+
+        return fit_reference(cls, runs, start, max_evaluations)
+
+    def with_values(self, **changes) -> "EstimatorReference":
+        return replace(self, **changes)
+
+
+def titration_curve(buffer_mM: float, carbonate_mM: float) -> tuple[np.ndarray, np.ndarray]:
+    """x(pH) (mM of excess strong base) and beta(pH) = dx/dpH on :data:`PH_GRID`."""
+    h = 1000.0 * 10.0 ** -PH_GRID
+    x = KW_MM2 / h - h
+    beta = KW_MM2 / h + h
+    for pka, c in [(p, buffer_mM) for p in LADDER_PKAS] + [(p, carbonate_mM) for p in CARBONATE_PKAS]:
+        if c <= 0:
+            continue
+        ka = 1000.0 * 10.0 ** -pka
+        x = x + c * ka / (ka + h)
+        beta = beta + c * ka * h / (ka + h) ** 2
+    return x, LN10 * beta
+
+
+class EstimatorStream:
+    """The filter's state between chunks: x, P, the strength factors and the block's adaptation sums."""
+
+    def __init__(self, ref: EstimatorReference) -> None:
+        self.ref = ref
+        m = len(ref.feeds)
+        self.x: float | None = None
+        self.p: float = 0.0
+        self.factors = [1.0] * m
+        self.last_flows = [0.0] * m
+        self.last_t: float | None = None
+        self.samples = 0
+        self._gg = [[0.0] * m for _ in range(m)]  # block sums for the strength adaptation
+        self._gy = [0.0] * m
+        self._on_s = [0.0] * m
+        self.nll = 0.0  # running negative log-likelihood of the innovations (for fitting)
+        self.state_trace: list[float] | None = None
+
+    def residuals(self, t_s: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Innovations of the next rows (n, len(channels)) at times t_s, in predicted-sigma units."""
+        ref = self.ref
+        rows = np.asarray(rows, dtype=float)
+        t = np.asarray(t_s, dtype=float)
+        m = len(ref.feeds)
+        if rows.ndim != 2 or rows.shape[1] != m + 1:
+            raise ValueError(f"expected rows x {m + 1} channels ({', '.join(ref.channels)}), got shape {rows.shape}")
+        ph = rows[:, m]
+        ok = np.isfinite(ph)
+        php = np.where(ok, ph, 7.0)
+        xm = ref.x_of_ph(php).tolist()
+        nz = ref.noise
+        r_meas = ((nz.probe_noise_ph * ref.beta_of_ph(php)) ** 2 + nz.curve_std_mM ** 2).tolist()
+        return np.array(self._run(t.tolist(), rows[:, :m].tolist(), ok.tolist(), xm, r_meas, ph.tolist()))[:, None]
+
+    def _run(self, t, flows, ok, xm, r_meas, ph) -> list[float]:  # noqa: C901 - one tight loop, kept flat for speed
+        ref, nz = self.ref, self.ref.noise
+        v = ref.volume_ml
+        strengths = [f.strength_mM for f in ref.feeds]
+        m = len(strengths)
+        rel2, walk2, eps2, sp2 = nz.rate_rel_std ** 2, nz.walk_ph_per_sqrt_s ** 2, nz.curve_std_mM ** 2, \
+            nz.probe_noise_ph ** 2
+        tim = nz.timing_s
+        xs: list[float] = ref._x_list  # type: ignore[attr-defined]
+        betas = ref._beta_table  # type: ignore[attr-defined]
+        grid_n = len(xs) - 1
+        block = ref.block_samples
+        correct = ref.correct
+        out = [math.nan] * len(t)
+        for k in range(len(t)):
+            q = flows[k]
+            for i in range(m):  # a missing flow holds the last one
+                if q[i] != q[i]:
+                    q[i] = self.last_flows[i]
+            if self.x is None:  # the first sample with a pH starts the state
+                if ok[k]:
+                    self.x, self.p = xm[k], r_meas[k]
+                    self.last_t = t[k]
+                    self.last_flows = list(q)
+                    out[k] = 0.0  # the start: no evidence either way
+                self.samples += 1
+                continue
+            dt = t[k] - self.last_t if self.last_t is not None else 0.0
+            dt = dt if dt > 0 else 0.0
+            qp = self.last_flows
+            inflow = 0.0
+            qsum = 0.0
+            for i in range(m):
+                inflow += self.factors[i] * strengths[i] * qp[i]
+                qsum += qp[i]
+            d = qsum / v
+            x0 = self.x
+            if d > 0:
+                a = math.exp(-d * dt)
+                xss = inflow / v / d
+                xp = xss + (x0 - xss) * a
+            else:
+                a = 1.0
+                xp = x0 + inflow / v * dt
+            # pH(x-) and beta there: the curve's table
+            j = bisect.bisect_left(xs, xp)
+            j = 1 if j < 1 else grid_n if j > grid_n else j
+            lo, hi = xs[j - 1], xs[j]
+            frac = (xp - lo) / (hi - lo) if hi > lo else 0.0
+            frac = 0.0 if frac < 0 else 1.0 if frac > 1 else frac
+            php = (j - 1 + frac) * 0.001
+            bp = float(betas[j])
+            pm = a * a * self.p + rel2 * (xp - x0) ** 2 + walk2 * bp * bp * dt
+            if ok[k]:
+                # the reading's timing is uncertain by `tim` seconds: an error of rate * tim, large only while
+                # the pH moves fast (a titration's steep part), added to the measurement's variance
+                tv = (tim * (xp - x0) / dt) ** 2 if dt > 0 else 0.0
+                s = pm + r_meas[k] + tv
+                nu = xm[k] - xp
+                gain = pm / s if correct else 0.0
+                corr = gain * nu
+                self.x = xp + corr
+                self.p = (1.0 - gain) * pm
+                sd = math.sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
+                out[k] = (ph[k] - php) / sd
+                self.nll += 0.5 * (math.log(s) + nu * nu / s)
+                self._accumulate(qp, strengths, dt, corr)
+            else:
+                self.x, self.p = xp, pm
+            self.last_t = t[k]
+            self.last_flows = list(q)
+            self.samples += 1
+            if self.samples % block == 0:
+                self._adapt()
+        return out
+
+    def _accumulate(self, q: list[float], strengths: list[float], dt: float, corr: float) -> None:
+        """Block sums for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V
+        (plain floats: this runs once per sample)."""
+        if self.ref.adapt_time_constant_s <= 0:
+            return
+        v = self.ref.volume_ml
+        g = [self.factors[i] * strengths[i] * q[i] * dt / v for i in range(len(q))]
+        gg, gy, on = self._gg, self._gy, self._on_s
+        for i, gi in enumerate(g):
+            if gi == 0.0:
+                continue
+            gy[i] += gi * corr
+            on[i] += dt
+            for j, gj in enumerate(g):
+                gg[i][j] += gi * gj
+
+    def _adapt(self) -> None:
+        tau = self.ref.adapt_time_constant_s
+        m = len(self.factors)
+        if tau > 0 and any(self._on_s):
+            gg = np.array(self._gg)
+            ridge = 1e-12 + 1e-6 * float(np.trace(gg))
+            rel = np.linalg.solve(gg + ridge * np.eye(m), np.array(self._gy))  # relative strength error
+            rel = np.clip(rel, -MAX_BLOCK_STEP, MAX_BLOCK_STEP)  # one block (a cliff's misfit) moves a factor little
+            lo, hi = FACTOR_BOUNDS
+            self.factors = [min(hi, max(lo, f * (1.0 + min(1.0, on / tau) * float(r))))
+                            for f, r, on in zip(self.factors, rel, self._on_s)]
+        self._gg = [[0.0] * m for _ in range(m)]
+        self._gy = [0.0] * m
+        self._on_s = [0.0] * m
