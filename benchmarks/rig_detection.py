@@ -1,0 +1,47 @@
+"""Leave-one-run-out fault detection on the real pH rig: held-out healthy runs and injected faults.
+
+Usage: PHFDI_SHARED_DATA=../shared/data .venv/bin/python benchmarks/rig_detection.py [--json OUT.json]
+(about a minute per fold on this 2-core machine). Method: src/phfdi/benchmarks/rig_detection.py.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import time
+from pathlib import Path
+
+from phfdi.benchmarks.rig_detection import evaluate, summary
+from phfdi.commands.common import shipped_map
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=os.environ.get("PHFDI_SHARED_DATA", "../shared/data"))
+    ap.add_argument("--json", default=None, help="write every case and the summary here")
+    ap.add_argument("--detectors", nargs="+", default=None, metavar="NAME",
+                    help="only these (estimator, 'open loop', 'learned ARX', 'plain CUSUM (estimator residual)')")
+    args = ap.parse_args()
+    paths = sorted(glob.glob(str(Path(args.data) / "ph_rig" / "*.csv")))
+    if not paths:
+        raise SystemExit(f"no rig runs under {args.data}/ph_rig")
+    t0 = time.perf_counter()
+    result = evaluate(paths, shipped_map("ph_rig"), progress=lambda s: print(s, flush=True),
+                      only=args.detectors)
+    result["summary"] = summary(result)
+    print(f"\n{len(paths)} folds in {time.perf_counter() - t0:.0f} s; load average {os.getloadavg()[0]:.1f}")
+    for e in result["summary"]:
+        print(f"\n{e['detector']}: held-out healthy runs: {e['healthy_false_alarms']} alarms in "
+              f"{e['healthy_hours'] * 60:.1f} min ({e['healthy_runs_with_alarm']} of 5 runs with an alarm)")
+        for k, v in e["kinds"].items():
+            d = "" if v["median_delay_s"] is None else f", median delay {v['median_delay_s']:.1f} s"
+            print(f"  {k:22s} detected {v['detected']:3d}/{v['cases']:<3d}{d}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1), encoding="utf-8")
+        print(f"wrote {args.json}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,188 @@
+"""Leave-one-run-out fault detection on the real pH rig (issue 21): calibrate on four runs, replay the fifth
+healthy and with faults injected by :mod:`phfdi.inject`, for each reference kind side by side.
+
+Per fold: the estimator reference (Kalman filter on the reaction invariant, :mod:`phfdi.estimator`), the same
+physics open loop (simulation reference, same fitted parameters), the learned ARX reference fitted on the
+four training runs, and a plain two-sided CUSUM (k = 0.5, h for an average run length of 1e5 samples on
+unit-variance residuals, Siegmund's approximation) on the estimator's residual. Nothing is chosen on the
+held-out run: the fault sizes and onsets are fixed below, the thresholds come from the training runs.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from phfdi.estimator import fit_estimator, start_from_model
+from phfdi.inject import inject_fault
+from phfdi.learned import MeasuredRecord, read_measured
+from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, run_record
+from wavelet_fdi.reference_learned import LearnedReference
+
+CHANNELS = ("acid_flow_ml_s", "base_flow_ml_s", "ph_measured")
+#: fault kinds with (larger, smaller) sizes in their units (phfdi inject --help), fixed before any run
+SIZES: dict[str, tuple[float, ...]] = {
+    "probe_bias": (1.0, 0.3), "probe_drift": (1.0, 0.2), "probe_frozen": (0.0,), "probe_noise": (0.15, 0.05),
+    "probe_lag": (30.0, 10.0), "probe_gain": (0.3, 0.1), "pump_low": (0.5, 0.2), "pump_high": (0.5, 0.2),
+    "pump_stuck": (3.0, 1.0)}
+ONSET_FRACTIONS = (0.35, 0.55, 0.75)
+PLAIN_CUSUM_K = 0.5
+
+
+def plain_cusum_h(arl0: float = 1e5, k: float = PLAIN_CUSUM_K) -> float:
+    """Threshold of a one-sided CUSUM on N(0, 1) for an in-control ARL (Siegmund's approximation), solved."""
+    from scipy.optimize import brentq
+
+    def arl(h: float) -> float:
+        b = h + 1.166
+        return (math.exp(2 * k * b) - 2 * k * b - 1) / (2 * k * k)
+
+    return float(brentq(lambda h: arl(h) - arl0, 0.1, 100.0))
+
+
+@dataclass
+class Outcome:
+    alarms_before: int = 0
+    first_after_s: float | None = None
+    alarms: list[dict] = field(default_factory=list)
+
+
+def outcome(alarm_times: Sequence[float], onset_s: float | None) -> Outcome:
+    out = Outcome()
+    for ta in alarm_times:
+        if onset_s is None or ta < onset_s:
+            out.alarms_before += 1
+        elif out.first_after_s is None:
+            out.first_after_s = float(ta)
+    return out
+
+
+def learned_alarm_times(model: LearnedModel, rec: MeasuredRecord) -> list[float]:
+    events, _, _ = run_record(model, rec.time_s - rec.time_s[0], rec.x)
+    return [e.time_s + float(rec.time_s[0]) for e in events if e.kind == "alarm"]
+
+
+def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = PLAIN_CUSUM_K) -> list[float]:
+    """Two-sided CUSUM restarted after each alarm (NaN counts as 0)."""
+    up = down = 0.0
+    times = []
+    for ti, r in zip(t, np.nan_to_num(residual)):
+        up = max(0.0, up + r - k)
+        down = max(0.0, down - r - k)
+        if up > h or down > h:
+            times.append(float(ti))
+            up = down = 0.0
+    return times
+
+
+@dataclass
+class Fold:
+    held_out: str
+    detectors: dict[str, Callable[[MeasuredRecord], list[float]]]
+    info: dict
+
+
+def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_flask") -> Fold:
+    est = fit_estimator(train, start_from_model(model))
+    runs = [(r.time_s - r.time_s[0], r.x) for r in train]
+    open_ref = est.reference.with_values(correct=False)  # type: ignore[attr-defined]
+    open_model = calibrate_bands(open_ref, runs, est.settings, {"files": [r.path for r in train]})
+    x_all = np.vstack([r.x for r in train])
+    arx_settings = LearnedSettings(sample_time_s=est.settings.sample_time_s)
+    arx = LearnedReference.fit(x_all, CHANNELS, arx_settings.lags, arx_settings.ridge_own, arx_settings.ridge_cross)
+    arx_model = calibrate_bands(arx, runs, arx_settings, {"files": [r.path for r in train]})
+    h = plain_cusum_h()
+
+    def plain(rec: MeasuredRecord) -> list[float]:
+        r = est.reference.new_state().residuals(rec.time_s - rec.time_s[0], rec.x)[:, 0]
+        return cusum_alarm_times(r, rec.time_s, h)
+
+    dets = {"estimator": lambda rec: learned_alarm_times(est, rec),
+            "open loop": lambda rec: learned_alarm_times(open_model, rec),
+            "learned ARX": lambda rec: learned_alarm_times(arx_model, rec),
+            "plain CUSUM (estimator residual)": plain}
+    ref = est.reference
+    info = {"strengths_mM": [f.strength_mM for f in ref.feeds], "volume_ml": ref.volume_ml,  # type: ignore[attr-defined]
+            "noise": ref.noise.__dict__, "plain_cusum_h": h}  # type: ignore[attr-defined]
+    return Fold(held_out, dets, info)
+
+
+def injected_cases(path: str, rec: MeasuredRecord, workdir: Path, column_map) -> list[tuple[dict, MeasuredRecord]]:
+    """Every (kind, size, onset, pump) that changes this run, as (truth, record)."""
+    from phfdi_base.errors import UserError
+
+    t0, t1 = float(rec.time_s[0]), float(rec.time_s[-1])
+    cases = []
+    for kind, sizes in SIZES.items():
+        pumps: tuple[str | None, ...] = ("acid", "base") if kind.startswith("pump") else (None,)
+        for rank, size in enumerate(sizes):
+            for frac in ONSET_FRACTIONS:
+                onset = round(t0 + frac * (t1 - t0), 2)
+                for pump in pumps:
+                    try:
+                        data, truth = inject_fault(path, kind, onset, size, pump=pump, seed=rank + 1,
+                                                   column_map=column_map)
+                    except UserError:
+                        continue  # no effect on this run (a pump that is off, ...)
+                    f = workdir / f"{kind}-{rank}-{frac}-{pump}.csv"
+                    f.write_bytes(data)
+                    truth.update({"size_rank": "larger" if rank == 0 else "smaller", "onset_s": onset})
+                    cases.append((truth, read_measured(f, column_map, channels=list(CHANNELS))))
+    return cases
+
+
+def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] = print,
+             only: Sequence[str] | None = None) -> dict:
+    records = {p: read_measured(p, column_map, channels=list(CHANNELS)) for p in paths}
+    rows = []
+    folds = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for p in paths:
+            progress(f"fold: {Path(p).name} held out")
+            fold = build_fold([records[q] for q in paths if q != p], p)
+            folds[Path(p).name] = fold.info
+            rec = records[p]
+            hours = (rec.time_s[-1] - rec.time_s[0]) / 3600.0
+            if only:
+                fold.detectors = {k: v for k, v in fold.detectors.items() if k in only}
+            for name, det in fold.detectors.items():
+                o = outcome(det(rec), None)
+                rows.append({"run": Path(p).name, "detector": name, "case": "healthy", "hours": hours,
+                             "false_alarms": o.alarms_before})
+            for truth, frec in injected_cases(p, rec, Path(tmp), column_map):
+                for name, det in fold.detectors.items():
+                    o = outcome(det(frec), truth["onset_s"])
+                    rows.append({"run": Path(p).name, "detector": name, "case": truth["kind"],
+                                 "family": truth["family"], "size": truth["size"], "size_rank": truth["size_rank"],
+                                 "pump": truth.get("pump"), "onset_s": truth["onset_s"],
+                                 "alarms_before": o.alarms_before,
+                                 "delay_s": None if o.first_after_s is None else o.first_after_s - truth["onset_s"]})
+    return {"rows": rows, "folds": folds}
+
+
+def summary(result: dict) -> list[dict]:
+    """Per detector: false alarms per hour on held-out healthy runs; per kind and size: detected share."""
+    rows = result["rows"]
+    out = []
+    for det in sorted({r["detector"] for r in rows}, key=lambda d: list(dict.fromkeys(r["detector"] for r in rows)).index(d)):
+        healthy = [r for r in rows if r["detector"] == det and r["case"] == "healthy"]
+        fa = sum(r["false_alarms"] for r in healthy)
+        hours = sum(r["hours"] for r in healthy)
+        entry = {"detector": det, "healthy_false_alarms": fa, "healthy_hours": hours,
+                 "healthy_runs_with_alarm": sum(1 for r in healthy if r["false_alarms"]), "kinds": {}}
+        for kind in SIZES:
+            for rank in ("larger", "smaller"):
+                cs = [r for r in rows if r["detector"] == det and r["case"] == kind and r["size_rank"] == rank]
+                if not cs:
+                    continue
+                ok = [r for r in cs if r["alarms_before"] == 0 and r["delay_s"] is not None]
+                delays = sorted(r["delay_s"] for r in ok)
+                entry["kinds"][f"{kind} {rank}"] = {"cases": len(cs), "detected": len(ok),
+                                                     "median_delay_s": delays[len(delays) // 2] if delays else None}
+        out.append(entry)
+    return out
