@@ -2,7 +2,7 @@
 
 Simulations are not timed: the 35 runs are simulated first (or read with --runs DIR of .parquet files
 written by `phfdi analyze --save-runs`, e.g. out/analysis/runs/section6). Prints the time of each step and of
-the whole analysis (wavelet_fdi.analysis.analyze_multisignal: decomposition, approximations, denoising with
+the whole analysis (phfdi.study.analysis.analyze_multisignal: decomposition, approximations, denoising with
 every rule at levels 5 and 7, compression, clustering with both methods and silhouette-chosen k, severity),
 first call (imports and caches cold) and best of --repeat warm calls. Figures and Section 7 are not included.
 
@@ -26,8 +26,8 @@ def main() -> int:
     args = ap.parse_args()
 
     from phfdi.records import read_run
+    from phfdi.study.multisignal import from_runs
     from phfdi.study.paperset import PAPER_GROUPING, section6_variants, simulate_variants
-    from wavelet_fdi.multisignal import from_runs
 
     t0 = time.perf_counter()
     if args.runs:
@@ -46,9 +46,9 @@ def main() -> int:
     ms = from_runs(runs, labels, "ph_measured", 1440, names, info=info)
     print(f"resampling {len(runs)} runs to {ms.shape[0]} x {ms.shape[1]}: {1000 * (time.perf_counter() - t):.1f} ms")
 
-    from wavelet_fdi import cluster, compress, denoise
-    from wavelet_fdi.analysis import Options, analyze_multisignal
-    from wavelet_fdi.multisignal import decompose
+    from phfdi.study import cluster, compress, denoise
+    from phfdi.study.analysis import Options, analyze_multisignal
+    from phfdi.study.multisignal import decompose
 
     t = time.perf_counter()
     analyze_multisignal(ms, Options(), PAPER_GROUPING)

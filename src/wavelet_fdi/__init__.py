@@ -1,12 +1,10 @@
-"""Wavelet-residual fault detection and offline multisignal wavelet analysis. ROS-free; the node lives in
-:mod:`wavelet_fdi.node`.
+"""Online wavelet-residual fault detection. ROS-free; the node lives in :mod:`wavelet_fdi.node`.
 
-Online: :class:`StreamingDetector` (the physics reference's residual, calibrated by
-:class:`DetectorSettings` and :class:`Calibration`) and :class:`LearnedDetector` (a reference learned from
-healthy records, :func:`learn`), built on :class:`CausalSwt` and :class:`CusumBank`. Offline (the paper's
-Sections 6 and 7): :class:`Multisignal`, :func:`decompose`, :func:`compress_energy`,
-:func:`variance_change_points`. The names in ``__all__`` are imported from their modules on first use
-(:mod:`phfdi_base.lazy`), so ``import wavelet_fdi`` does not import scipy or PyWavelets.
+:class:`StreamingDetector` (the physics reference's residual, calibrated by :class:`DetectorSettings` and
+:class:`Calibration`) and :class:`LearnedDetector` (a reference learned from healthy records, :func:`learn`),
+built on :class:`CausalSwt` and :class:`CusumBank`. The paper's offline multisignal analysis (Sections 6 and
+7) is the application's, :mod:`phfdi.study`. The names in ``__all__`` are imported from their modules on
+first use (:mod:`phfdi_base.lazy`), so ``import wavelet_fdi`` does not import scipy or PyWavelets.
 """
 
 from typing import TYPE_CHECKING
@@ -14,17 +12,14 @@ from typing import TYPE_CHECKING
 from phfdi_base.lazy import lazy_exports
 
 __all__ = ["Calibration", "CausalSwt", "CusumBank", "DetectorSettings", "Event", "LearnedDetector",
-           "LearnedModel", "LearnedSettings", "Multisignal", "StreamingDetector", "compress_energy", "decompose",
-           "learn", "load_default_calibration", "run_record", "variance_change_points"]
+           "LearnedModel", "LearnedSettings", "StreamingDetector", "learn", "load_default_calibration",
+           "run_record"]
 
 if TYPE_CHECKING:  # the public names, for type checkers; lazy_exports reads them too
-    from .changepoint import variance_change_points
-    from .compress import compress_energy
     from .config import Calibration, DetectorSettings, load_default_calibration
     from .detector import Event, StreamingDetector
     from .filterbank import CausalSwt
     from .learned_detector import LearnedDetector, LearnedModel, LearnedSettings, learn, run_record
-    from .multisignal import Multisignal, decompose
     from .statistics import CusumBank
 else:
     __getattr__, __dir__ = lazy_exports(__name__, __file__)

@@ -94,10 +94,10 @@ def test_help_has_examples(capsys):
 def test_every_figure_axis_has_a_label_with_units(small_analysis, tmp_path, monkeypatch):
     """Draw every figure of the small set; check labels on the figure objects instead of rendering PNGs."""
     from phfdi.commands.analyze import load_runs, section7_pairs
+    from phfdi.study import figures, report
+    from phfdi.study.analysis import Options
+    from phfdi.study.multisignal import from_runs
     from phfdi.study.paperset import PAPER_GROUPING
-    from wavelet_fdi import figures, report
-    from wavelet_fdi.analysis import Options
-    from wavelet_fdi.multisignal import from_runs
 
     checked = []
 

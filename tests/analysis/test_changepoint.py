@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavelet_fdi.changepoint import level1_details, penalty_intervals, select_n_changes, variance_change_points
+from phfdi.study.changepoint import level1_details, penalty_intervals, select_n_changes, variance_change_points
 
 
 def test_finds_a_planted_variance_change():

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavelet_fdi import cluster
-from wavelet_fdi.compress import compress_energy
-from wavelet_fdi.multisignal import decompose
+from phfdi.study import cluster
+from phfdi.study.compress import compress_energy
+from phfdi.study.multisignal import decompose
 
 
 def test_adjusted_rand_index_hand_case():
@@ -67,7 +67,7 @@ def test_contingency_and_canonical_labels():
 
 
 def test_spearman_hand_cases():
-    from wavelet_fdi.analysis import spearman
+    from phfdi.study.analysis import spearman
 
     # ranks (0,1,2,3) vs (0,1,3,2): rho = 1 - 6 * 2 / (4 * 15) = 0.8
     assert spearman([1, 2, 3, 4], [10, 20, 40, 30]) == pytest.approx(0.8)

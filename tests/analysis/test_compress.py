@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavelet_fdi.compress import compress_energy, compress_threshold
-from wavelet_fdi.multisignal import decompose
+from phfdi.study.compress import compress_energy, compress_threshold
+from phfdi.study.multisignal import decompose
 
 
 @pytest.fixture

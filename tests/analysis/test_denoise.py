@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wavelet_fdi import denoise
-from wavelet_fdi.multisignal import decompose
+from phfdi.study import denoise
+from phfdi.study.multisignal import decompose
 
 
 def test_universal_threshold_hand_case():

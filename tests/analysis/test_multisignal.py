@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import pywt
 
-from wavelet_fdi.multisignal import Multisignal, decompose, from_runs, pywt_mode, reconstruction_error, resample_mean
+from phfdi.study.multisignal import Multisignal, decompose, from_runs, pywt_mode, reconstruction_error, resample_mean
 
 
 def matlab_length(n: int, filter_length: int) -> int:

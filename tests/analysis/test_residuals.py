@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavelet_fdi import residuals
+from phfdi.study import residuals
 
 
 @pytest.mark.parametrize("wavelet", ["sym4", "db8"])

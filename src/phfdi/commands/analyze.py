@@ -100,7 +100,7 @@ def _onset(run) -> float | None:
 def section7_pairs(runs: list, labels: list[str], signal: str, opts):
     """Each faulty run with a known onset > 0 against healthy runs: its twin (same seed if known, else the
     first healthy run), a reference and a calibration run (two other healthy runs), when there are any."""
-    from wavelet_fdi.analysis import analyze_pair
+    from phfdi.study.analysis import analyze_pair
 
     healthy = [r for r, lab in zip(runs, labels) if lab == "healthy"]
     faulty = [(r, lab) for r, lab in zip(runs, labels) if lab != "healthy" and _onset(r) is not None]
@@ -133,7 +133,7 @@ class _RunSets:
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.study.paperset import PAPER_GROUPING
-    from wavelet_fdi.report import section6_claims, section7_claims, write_all
+    from phfdi.study.report import section6_claims, section7_claims, write_all
 
     out = Path(args.out)
     opts = _options(args)
@@ -162,8 +162,8 @@ def _options(args: argparse.Namespace):
     """The analysis options from the command line, each checked (UserError naming the option)."""
     import pywt
 
+    from phfdi.study.analysis import Options
     from phfdi_base.errors import UserError
-    from wavelet_fdi.analysis import Options
 
     if args.samples < 16:
         raise UserError(f"--samples {args.samples}: need at least 16")
@@ -232,8 +232,8 @@ def _multisignal(args: argparse.Namespace, sets: _RunSets):
     """The Section 6 runs as a multisignal of ``--samples`` bins of ``--signal`` per row."""
     import numpy as np
 
+    from phfdi.study.multisignal import from_runs
     from phfdi_base.errors import UserError
-    from wavelet_fdi.multisignal import from_runs
 
     for r, lab in zip(sets.runs6, sets.labels6):
         if args.signal not in r:

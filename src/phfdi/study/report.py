@@ -1,7 +1,7 @@
 """REPORT.md and figures of the offline analysis: each claim of the paper's Sections 6 and 7 beside ours.
 
 :func:`write_all` takes a multisignal and Section 7 pairs, runs
-:mod:`wavelet_fdi.analysis`, draws the figures (:mod:`wavelet_fdi.figures`)
+:mod:`phfdi.study.analysis`, draws the figures (:mod:`phfdi.study.figures`)
 and writes ``REPORT.md`` and ``results.json``. Verdicts are computed from the
 measured numbers; the reasons given for a difference are the mechanisms we
 checked (see docs/analysis.md).

@@ -56,7 +56,7 @@ class Multisignal:
     Examples
     --------
     >>> import numpy as np
-    >>> from wavelet_fdi import Multisignal
+    >>> from phfdi.study import Multisignal
     >>> ms = Multisignal(np.zeros((3, 1440)), ["healthy", "backlash", "backlash"], ["h1", "b1", "b2"],
     ...                  np.arange(1440.0))
     >>> ms.shape, ms.classes, ms.rows("backlash").tolist()
@@ -271,7 +271,7 @@ def decompose(data: np.ndarray | Multisignal, wavelet: str = "sym4", level: int 
     Examples
     --------
     >>> import numpy as np
-    >>> from wavelet_fdi import decompose
+    >>> from phfdi.study import decompose
     >>> dec = decompose(np.sin(np.linspace(0.0, 20.0, 1440))[None, :].repeat(35, axis=0), "sym4", level=7)
     >>> dec.ca.shape, len(dec.cd)
     ((35, 18), 7)

@@ -82,7 +82,7 @@ def variance_change_points(y: np.ndarray, max_changes: int = 6, min_distance: in
     Examples
     --------
     >>> import numpy as np
-    >>> from wavelet_fdi import variance_change_points
+    >>> from phfdi.study import variance_change_points
     >>> rng = np.random.default_rng(0)
     >>> y = np.concatenate([rng.normal(0.0, 1.0, 300), rng.normal(0.0, 4.0, 200)])
     >>> variance_change_points(y, max_changes=3).points

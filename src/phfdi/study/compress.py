@@ -57,7 +57,7 @@ def compress_energy(dec: Decomposition, retain: float = 0.99, keep_approx: bool 
     Examples
     --------
     >>> import numpy as np
-    >>> from wavelet_fdi import compress_energy, decompose
+    >>> from phfdi.study import compress_energy, decompose
     >>> dec = decompose(np.sin(np.linspace(0.0, 20.0, 1440))[None, :], "sym4", level=7)
     >>> c = compress_energy(dec, retain=0.99)
     >>> round(float(c.nonzero_pct[0]), 2), bool(c.energy_retained_pct[0] >= 99.0)

@@ -4,7 +4,7 @@
 decomposition, approximations, denoising (every rule, levels 5 and 7),
 compression, clustering, variance change points and the severity read from
 level-3 residuals. :func:`analyze_pair` runs Section 7 on one healthy and
-one faulty run. :mod:`wavelet_fdi.report` turns the results into figures and
+one faulty run. :mod:`phfdi.study.report` turns the results into figures and
 REPORT.md; ``benchmarks/analysis.py`` times :func:`analyze_multisignal`.
 """
 

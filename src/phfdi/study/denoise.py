@@ -1,6 +1,6 @@
 """Wavelet denoising of a multisignal in three steps (MATLAB's wden / mswden).
 
-1. decompose every row at level N (:func:`wavelet_fdi.multisignal.decompose`);
+1. decompose every row at level N (:func:`phfdi.study.multisignal.decompose`);
 2. for each level 1..N and each row, pick a threshold from a rule and the
    noise level of that row and level, and shrink the detail coefficients
    (:func:`pywt.threshold`, soft or hard);
