@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from phfdi.faults import base_scenario
 from phfdi.records import ReadError, read_record
 from phfdi.run import Run
 from phfdi.scenario import load_scenario
@@ -86,12 +87,7 @@ def replay_run(run: Run, spec: ScenarioSpec | None = None, calibration: Calibrat
                isolate: bool = True) -> ReplayResult:
     spec = spec or scenario_of(run)
     settings = settings or DetectorSettings()
-    calibration = calibration or load_default_calibration(_base_name(spec), settings)
+    calibration = calibration or load_default_calibration(base_scenario(spec.name), settings)
     det = StreamingDetector(spec, calibration, settings, isolate=isolate)
     events = run_chunks(det, run, chunk)
     return ReplayResult(det.alarms, events, det.diagnostics(), len(run))
-
-
-def _base_name(spec: ScenarioSpec) -> str:
-    """Scenario preset a spec comes from ('paper-backlash' -> 'paper')."""
-    return spec.name.split("-")[0]
