@@ -338,3 +338,41 @@ def test_bounds_checker_catches_a_second_definition(tmp_path):
                      "pkg/iso.py": 'H = Hypothesis("backlash", "backlash", "width_pct", "% of span", 0.05, 20.0)\n'})
     assert own_fault_bounds(tmp_path, {"backlash": {"width_pct"}}) == {"pkg.fit": ["line 1: backlash.width_pct"],
                                                                        "pkg.iso": ["line 1: backlash.width_pct"]}
+
+
+# ---- one reader of run and record files ----------------------------------------------------------------------
+#: the suffixes of record files (runs, bags, historian exports); see phfdi.records.formats
+RECORD_SUFFIXES = frozenset({".csv", ".parquet", ".pq", ".mcap", ".txt", ".tsv"})
+#: the modules that may decide on a record file's suffix: the registry and readers, the bag reader below them
+#: and the run's writer
+FILE_FORMAT_MODULES = ("phfdi.records", "phfdi.bagread", "phfdi.run")
+
+
+def suffix_decisions(src: Path, allowed: tuple[str, ...] = FILE_FORMAT_MODULES) -> dict[str, list[str]]:
+    """module -> lines outside ``allowed`` that compare a path's ``suffix`` with a record file's suffix (a
+    reader or a file list chosen by extension, where the registry phfdi.records.formats should be asked)."""
+    out: dict[str, list[str]] = {}
+    for module, path in project_modules(src).items():
+        if module.startswith(tuple(f"{a}." for a in allowed)) or module in allowed:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.Compare):
+                continue
+            subs = [s for side in (node.left, *node.comparators) for s in ast.walk(side)]
+            if any(isinstance(s, ast.Attribute) and s.attr == "suffix" for s in subs) and any(
+                    isinstance(s, ast.Constant) and s.value in RECORD_SUFFIXES for s in subs):
+                out.setdefault(module, []).append(f"line {node.lineno}")
+    return out
+
+
+def test_record_files_are_told_apart_only_by_the_format_registry():
+    assert suffix_decisions(SRC) == {}, \
+        "ask phfdi.records.formats (format_of, is_format, run_suffixes, historian_suffixes) instead"
+
+
+def test_suffix_checker_catches_a_reader_of_its_own(tmp_path):
+    _tree(tmp_path, {"phfdi/__init__.py": "", "phfdi/records/__init__.py": "",
+                     "phfdi/records/sources.py": 'def f(p):\n    return p.suffix == ".csv"\n',
+                     "phfdi/tool.py": 'def f(p):\n    if p.suffix.lower() in (".csv", ".pq"):\n        pass\n'
+                                      '    return p.suffix == ".yaml"\n'})
+    assert suffix_decisions(tmp_path) == {"phfdi.tool": ["line 2"]}
