@@ -21,7 +21,7 @@ def read_toy(path, data, encoding):
 
 @pytest.fixture
 def toy():
-    fmt = register_format(Format("toy", (".toy",), read_toy, historian=True))
+    fmt = register_format(Format("toy", (".toy",), read_toy, historian=4))
     yield fmt
     unregister_format("toy")
     assert "toy" not in FORMATS

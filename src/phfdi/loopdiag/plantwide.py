@@ -1,6 +1,6 @@
 """Plant-wide loop diagnosis: many loops on Dask, one table, the worst loops first.
 
-Inputs are files, folders (every historian export below them: ``.parquet``, ``.csv``, ``.txt``; the formats
+Inputs are files, folders (every historian export below them: ``.txt``, ``.csv``, ``.parquet``; the formats
 registered in :mod:`phfdi.records.formats`) and wide historian
 exports: a CSV whose header holds the tags of several loops (``<tag>.OP``/``.MV``, ``.PV``,
 ``.SP``/``.SV``, optionally ``.MODE``) becomes one job per loop tag. Each job is read and diagnosed
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from phfdi.records.formats import historian_suffixes, is_format
+from phfdi.records.formats import firsts, historian_suffixes, is_format
 from phfdi_base.errors import UserError
 
 from .diagnose import Settings
@@ -73,7 +73,7 @@ def expand(inputs: list[str], columns: ColumnMap | None = None) -> list[Job]:
             suffixes = historian_suffixes()  # the formats registered as historian exports (phfdi.records.formats)
             files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in suffixes)
             if not files:
-                raise UserError(f"{item}: no {', '.join(suffixes)} files in this folder")
+                raise UserError(f"{item}: no {', '.join(firsts(suffixes))} files in this folder")
         else:
             files = [p]
         for f in files:

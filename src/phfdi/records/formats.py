@@ -49,7 +49,8 @@ class Format:
     bytes, None for a folder). A file is of the first registered format whose ``suffixes`` hold its suffix or
     whose ``magic`` its first bytes start with; a folder of the first whose ``folder_marker`` file it holds;
     anything else is read as text. ``run``: a run is read from it (:func:`phfdi.records.read_run`);
-    ``historian``: the loop diagnosis takes it from a folder (plant historian exports).
+    ``historian``: the loop diagnosis takes it from a folder (plant historian exports), listed in this order
+    (1 first; 0: not taken).
     """
 
     name: str
@@ -58,7 +59,7 @@ class Format:
     magic: bytes | None = None
     folder_marker: str | None = None
     run: bool = True
-    historian: bool = False
+    historian: int = 0
 
 
 #: name -> format, in registration (matching) order
@@ -103,12 +104,26 @@ def run_suffixes() -> tuple[str, ...]:
 
 
 def historian_suffixes() -> tuple[str, ...]:
-    """Suffixes the loop diagnosis takes from a folder."""
-    return tuple(s for f in FORMATS.values() if f.historian for s in f.suffixes)
+    """Suffixes the loop diagnosis takes from a folder, in its listing order.
+
+    >>> historian_suffixes()
+    ('.txt', '.csv', '.parquet', '.pq')
+    """
+    formats = sorted((f for f in FORMATS.values() if f.historian), key=lambda f: f.historian)
+    return tuple(s for f in formats for s in f.suffixes)
+
+
+def firsts(suffixes: tuple[str, ...]) -> list[str]:
+    """One of ``suffixes`` per format (the first), in their order."""
+    out: list[str] = []
+    for s in suffixes:
+        fmt = next(f for f in FORMATS.values() if s in f.suffixes)
+        if not any(o in fmt.suffixes for o in out):
+            out.append(s)
+    return out
 
 
 def expected(suffixes: tuple[str, ...]) -> str:
     """'.a, .b or .c' (one suffix per format: the first)."""
-    firsts = [next(s for s in f.suffixes if s in suffixes) for f in FORMATS.values()
-              if any(s in suffixes for s in f.suffixes)]
-    return firsts[0] if len(firsts) == 1 else f"{', '.join(firsts[:-1])} or {firsts[-1]}"
+    names = firsts(suffixes)
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"

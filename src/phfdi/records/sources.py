@@ -166,6 +166,6 @@ def read_bag(path: Path, data: bytes | None = None, encoding: str | None = None)
 
 # ---- the built-in formats (matching order: a bag, Parquet, then text; see :mod:`.formats`) ------------------
 register_format(Format("bag", (".mcap",), read_bag, magic=MCAP_MAGIC, folder_marker="metadata.yaml"))
-register_format(Format("parquet", (".parquet", ".pq"), read_parquet, magic=PARQUET_MAGIC, historian=True))
-register_format(Format("csv", (".csv",), read_text, historian=True))
-register_format(Format("text", (".txt",), read_text, run=False, historian=True))  # plant_loops exports
+register_format(Format("parquet", (".parquet", ".pq"), read_parquet, magic=PARQUET_MAGIC, historian=3))
+register_format(Format("csv", (".csv",), read_text, historian=2))
+register_format(Format("text", (".txt",), read_text, run=False, historian=1))  # plant_loops exports
