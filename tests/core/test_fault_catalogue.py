@@ -198,6 +198,9 @@ def test_the_base_scenario_is_decided_from_the_catalogues_names():
     assert base_scenario(spec.name) == "my-plant"
     assert base_scenario("my-plant") == "my-plant" and base_scenario("paper-probe_delay") == "paper"
     assert base_scenario("paper-coulomb_viscous_friction") == "paper" and base_scenario("-backlash") == "-backlash"
+    assert base_scenario("paper-extended-valve_gain") == "paper"  # the model phfdi diagnose writes (extends paper)
+    assert base_scenario("my-plant-extended-stiction-backlash") == "my-plant"
+    assert base_scenario("paper-extendedness") == "paper-extendedness"
     assert recorded_part(spec).base_scenario == "my-plant"
     with pytest.raises(Exception, match="no shipped calibration for scenario 'my-plant'"):
         replay_run(Run({"time_s": np.zeros(1)}, {}), spec)  # asks for the base scenario's calibration
