@@ -289,26 +289,50 @@ def _strings(call: ast.Call) -> tuple[list[str], bool]:
     return [a.value for a in args if isinstance(a, ast.Constant) and isinstance(a.value, str)], any(map(_is_number, args))
 
 
-def own_fault_bounds(src: Path, params: dict[str, set[str]]) -> dict[str, list[str]]:
-    """module -> places outside the modules that declare faults where a call names a catalogued fault (its
-    name or block, e.g. ``Candidate("backlash", ...)``) and, within it, a call names one of that fault's
-    parameters next to a number (``Param("width_pct", 0.02, 20.0)``): a bound defined a second time.
-    ``params``: fault name or block -> its parameter names."""
+def _draws_a_range(value: ast.AST) -> bool:
+    """A value drawn over a range written out: a call with two numbers (``logu(rng, 0.3, 6.0)``) within it."""
+    return any(isinstance(c, ast.Call) and sum(map(_is_number, c.args)) >= 2 for c in ast.walk(value))
+
+
+def _named_with_number(sub: ast.AST, in_call: bool) -> tuple[list[str], bool]:
+    """Strings a call names and whether a number goes with them; within a tuple such as a valve
+    ``("backlash", {"width_pct": logu(rng, 0.3, 6.0)})`` also a dict's keys whose values draw over a range."""
+    if isinstance(sub, ast.Call):
+        return _strings(sub)
+    if isinstance(sub, ast.Dict) and not in_call:
+        drawn = [k.value for k, v in zip(sub.keys, sub.values) if isinstance(k, ast.Constant)
+                 and isinstance(k.value, str) and _draws_a_range(v)]
+        return drawn, bool(drawn)
+    return [], False
+
+
+def _container_strings(node: ast.AST) -> list[str]:
+    if isinstance(node, ast.Call):
+        return _strings(node)[0]
+    if isinstance(node, (ast.Tuple, ast.List)):
+        return [e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)]
+    return []
+
+
+def own_fault_bounds(src: Path, params: dict[str, set[str]], vocabulary: str = "") -> dict[str, list[str]]:
+    """module -> places outside the modules that declare faults (and the loop diagnosis's declared
+    ``vocabulary``) where a call or a tuple names a catalogued fault (its name or block, e.g.
+    ``Candidate("backlash", ...)``, ``("backlash", {...})``) and, within it, a call names one of that fault's
+    parameters next to a number (``Param("width_pct", 0.02, 20.0)``) or, within a tuple, a dict draws it over a
+    range written out (``{"width_pct": logu(rng, 0.3, 6.0)}``; a fixed value is no bound): a bound defined a
+    second time. ``params``: fault name or block -> its parameter names."""
     out: dict[str, set[str]] = {}
     for module, path in project_modules(src).items():
         tree = ast.parse(path.read_text(encoding="utf-8"))
-        if _registers_faults(tree):
+        if _registers_faults(tree) or module == vocabulary:
             continue
         for node in ast.walk(tree):
-            if not isinstance(node, ast.Call):
-                continue
-            for fault in set(_strings(node)[0]) & set(params):
+            for fault in set(_container_strings(node)) & set(params):
                 for sub in ast.walk(node):
-                    if isinstance(sub, ast.Call):
-                        names, number = _strings(sub)
-                        named = [n for n in names if n in params[fault]]
-                        if named and number:
-                            out.setdefault(module, set()).add(f"line {sub.lineno}: {fault}.{named[0]}")
+                    names, number = _named_with_number(sub, isinstance(node, ast.Call))
+                    named = [n for n in names if n in params[fault]]
+                    if named and number:
+                        out.setdefault(module, set()).add(f"line {sub.lineno}: {fault}.{named[0]}")
     return {m: sorted(v) for m, v in out.items()}
 
 
@@ -322,8 +346,13 @@ def _catalogued_params() -> dict[str, set[str]]:
     return out
 
 
+#: the loop diagnosis's own vocabulary (names and ranges in % of each loop's OP span, not the catalogue's physical
+#: ranges; docs/architecture.md): the one module besides the catalogue that bounds a valve fault's parameters
+LOOP_VOCABULARY = "phfdi.loopdiag.vocabulary"
+
+
 def test_fault_parameters_are_bounded_only_in_the_catalogue():
-    found = own_fault_bounds(SRC, _catalogued_params())
+    found = own_fault_bounds(SRC, _catalogued_params(), LOOP_VOCABULARY)
     assert {m: v for m, v in found.items() if m not in KNOWN_OWN_BOUNDS} == {}, \
         "read the bounds from the fault catalogue (phfdi_base.faults, declared with the block)"
     assert sorted(KNOWN_OWN_BOUNDS - set(found)) == [], "these read the catalogue now: remove them from KNOWN_OWN_BOUNDS"
@@ -335,6 +364,87 @@ def test_bounds_checker_catches_a_second_definition(tmp_path):
                      "pkg/fit.py": 'C = [Candidate("backlash", [Param("width_pct", 0.02, 20.0, "%")]),\n'
                                    '     Candidate("backlash", [Param("width_pct", lo, hi)]),\n'
                                    '     Candidate("feed_delay", [Param("width_pct", 0.0, 9.0)])]\n',
-                     "pkg/iso.py": 'H = Hypothesis("backlash", "backlash", "width_pct", "% of span", 0.05, 20.0)\n'})
-    assert own_fault_bounds(tmp_path, {"backlash": {"width_pct"}}) == {"pkg.fit": ["line 1: backlash.width_pct"],
-                                                                       "pkg.iso": ["line 1: backlash.width_pct"]}
+                     "pkg/iso.py": 'H = Hypothesis("backlash", "backlash", "width_pct", "% of span", 0.05, 20.0)\n',
+                     "pkg/train.py": 'def draw(rng):\n    return ("backlash", {"width_pct": logu(rng, 0.3, 6.0)})\n'
+                                     'CASE = ("backlash", {"width_pct": 2.0})\n',
+                     "pkg/vocabulary.py": 'D = [("backlash", {"width_pct": (0.3, 6.0)})]\n'})
+    assert own_fault_bounds(tmp_path, {"backlash": {"width_pct"}}, "pkg.vocabulary") == {
+        "pkg.fit": ["line 1: backlash.width_pct"], "pkg.iso": ["line 1: backlash.width_pct"],
+        "pkg.train": ["line 2: backlash.width_pct"]}
+
+
+def loop_cause_lists(src: Path, causes: set[str], vocabulary: str = LOOP_VOCABULARY) -> dict[str, list[str]]:
+    """module -> lines in the loop diagnosis (the package of ``vocabulary``) outside the vocabulary with a tuple,
+    list or set of two or more loop causes' names and nothing else (a cause list written again)."""
+    out: dict[str, list[str]] = {}
+    package = vocabulary.rpartition(".")[0]
+    for module, path in project_modules(src).items():
+        if module == vocabulary or not module.startswith(package + "."):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.Tuple, ast.List, ast.Set)) and len(node.elts) >= 2 and all(
+                    isinstance(e, ast.Constant) and e.value in causes for e in node.elts):
+                out.setdefault(module, []).append(f"line {node.lineno}")
+    return out
+
+
+def test_the_loop_diagnosis_names_its_causes_in_its_vocabulary_only():
+    """Loop diagnosis declares its causes and their relative ranges once (phfdi.loopdiag.vocabulary): each is a
+    registered block whose parameters it names, and no other module lists them again."""
+    import valve_actuator.blocks  # noqa: F401  (registers the blocks)
+    from phfdi.loopdiag.hammerstein import FITTERS
+    from phfdi.loopdiag.vocabulary import ACTUATOR_CAUSES, FRICTION_CAUSES, OTHER_NONLINEARITIES, TRAINING_DRAWS
+    from phfdi_base.blocks import BLOCKS
+
+    causes = set(ACTUATOR_CAUSES)
+    assert set(FITTERS) == causes and set(FRICTION_CAUSES) | set(OTHER_NONLINEARITIES) == causes
+    assert set(TRAINING_DRAWS) <= set(BLOCKS), "loop causes are blocks the simulator runs"
+    catalogued = _catalogued_params()
+    for cause, draws in TRAINING_DRAWS.items():
+        own = [k for k in draws if k.endswith("_pct")]
+        assert set(own) <= catalogued.get(cause, set(own)), f"{cause}: {own} are not its catalogued parameters"
+    assert loop_cause_lists(SRC, causes | {"stiction_he"}) == {}
+
+
+def test_cause_list_checker_catches_a_second_list(tmp_path):
+    _tree(tmp_path, {"pkg/__init__.py": "", "pkg/vocabulary.py": 'C = ("backlash", "stiction")\n',
+                     "pkg/eval.py": 'F = ("stiction", "backlash")\nL = ("stiction", "healthy")\n'})
+    assert loop_cause_lists(tmp_path, {"backlash", "stiction"}, "pkg.vocabulary") == {"pkg.eval": ["line 1"]}
+
+
+# ---- one reader of run and record files ----------------------------------------------------------------------
+#: the suffixes of record files (runs, bags, historian exports); see phfdi.records.formats
+RECORD_SUFFIXES = frozenset({".csv", ".parquet", ".pq", ".mcap", ".txt", ".tsv"})
+#: the modules that may decide on a record file's suffix: the registry and readers, the bag reader below them
+#: and the run's writer
+FILE_FORMAT_MODULES = ("phfdi.records", "phfdi.bagread", "phfdi.run")
+
+
+def suffix_decisions(src: Path, allowed: tuple[str, ...] = FILE_FORMAT_MODULES) -> dict[str, list[str]]:
+    """module -> lines outside ``allowed`` that compare a path's ``suffix`` with a record file's suffix (a
+    reader or a file list chosen by extension, where the registry phfdi.records.formats should be asked)."""
+    out: dict[str, list[str]] = {}
+    for module, path in project_modules(src).items():
+        if module.startswith(tuple(f"{a}." for a in allowed)) or module in allowed:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.Compare):
+                continue
+            subs = [s for side in (node.left, *node.comparators) for s in ast.walk(side)]
+            if any(isinstance(s, ast.Attribute) and s.attr == "suffix" for s in subs) and any(
+                    isinstance(s, ast.Constant) and s.value in RECORD_SUFFIXES for s in subs):
+                out.setdefault(module, []).append(f"line {node.lineno}")
+    return out
+
+
+def test_record_files_are_told_apart_only_by_the_format_registry():
+    assert suffix_decisions(SRC) == {}, \
+        "ask phfdi.records.formats (format_of, is_format, run_suffixes, historian_suffixes) instead"
+
+
+def test_suffix_checker_catches_a_reader_of_its_own(tmp_path):
+    _tree(tmp_path, {"phfdi/__init__.py": "", "phfdi/records/__init__.py": "",
+                     "phfdi/records/sources.py": 'def f(p):\n    return p.suffix == ".csv"\n',
+                     "phfdi/tool.py": 'def f(p):\n    if p.suffix.lower() in (".csv", ".pq"):\n        pass\n'
+                                      '    return p.suffix == ".yaml"\n'})
+    assert suffix_decisions(tmp_path) == {"phfdi.tool": ["line 2"]}

@@ -37,7 +37,7 @@ from phfdi_base.stamps import join_ns, seconds_to_ns, split_ns
 from wavelet_fdi.alarm_messages import to_dict as alarm_message_dict
 
 from . import __version__
-from .bagread import RUN_METADATA, _feed_names, _one_line, load_bag, read_metadata, run_signal_names
+from .bagread import RUN_METADATA, _feed_names, _one_line, read_metadata, run_signal_names
 
 INTERFACES_PACKAGE = "phfdi_interfaces"
 DEFAULT_CHUNK_BYTES = 16 * 1024
@@ -201,19 +201,16 @@ def stamp_of_cdr(cdr: bytes) -> int:
 
 
 def load_run(path: str | Path) -> Run:
-    """A run from a bag of the graph (.mcap; :func:`phfdi.bagread.load_bag`) or a run file (.csv, .parquet;
-    :func:`phfdi.records.read_run`).
+    """A run from a bag of the graph (.mcap) or a run file (.csv, .parquet): :func:`phfdi.records.read_run`,
+    the one reader of runs (kept under this name for the bag tools' users).
 
     Bag topics map onto the run's signals (``/plant/measurement.ph`` ->
     ``ph_measured``, ...; the table is in docs/ros_graph.md); the time base is
     the stamps of /plant/measurement.
     """
-    path = Path(path)
-    if path.suffix.lower() in (".csv", ".parquet", ".pq"):
-        from .records import read_run
+    from .records import read_run
 
-        return read_run(path)
-    return load_bag(path)
+    return read_run(path)
 
 
 def read_messages(path: str | Path, topic: str) -> list:

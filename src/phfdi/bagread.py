@@ -17,7 +17,7 @@ from phfdi.run import Run
 from phfdi_base import topics as T
 from phfdi_base.errors import UserError
 from phfdi_base.signals import SIGNALS
-from phfdi_base.stamps import join_ns
+from phfdi_base.stamps import time_ns, times_on_grid_s
 
 RUN_METADATA = "phfdi_run"
 
@@ -97,7 +97,7 @@ def load_bag(path: str | Path) -> Run:
                 raise UserError(f"{path}: no {T.MEASUREMENT.name} topic: not a bag of the phfdi graph")
             for conn, _t, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
-                ns = join_ns(msg.stamp.sec, msg.stamp.nanosec)
+                ns = time_ns(msg.stamp)
                 _extract(conn.topic, msg, rows[ns])
                 if conn.topic == T.MEASUREMENT.name:
                     measured.add(ns)
@@ -110,15 +110,7 @@ def load_bag(path: str | Path) -> Run:
                         f"was killed, run: phfdi bag recover {path} FIXED.mcap") from None
     metadata = _run_metadata(path)
     stamps = sorted(measured)
-    dt = metadata.get("sample_time_s")
-    try:
-        dt_ns = T.sample_period_ns(float(dt)) if dt else None
-    except (TypeError, ValueError, OverflowError):
-        dt_ns = None
-    if dt_ns and all(ns % dt_ns == 0 for ns in stamps):
-        time_s = [(ns // dt_ns) * dt for ns in stamps]  # k * dt exactly as the simulation
-    else:
-        time_s = [ns * 1e-9 for ns in stamps]
+    time_s = times_on_grid_s(stamps, metadata.get("sample_time_s"))  # k * dt exactly as the simulation
     names = run_signal_names(feeds or [])
     signals = {n: np.full(len(stamps), np.nan) for n in names}
     signals["time_s"] = np.asarray(time_s, dtype=float)

@@ -11,7 +11,7 @@ import ph_plant_sim.sensors  # noqa: F401  (registers the probe's faults)
 import valve_actuator.blocks  # noqa: F401  (registers the valve's faults)
 from phfdi_base.faults import Fault, faults
 
-__all__ = ["block_name", "catalogue", "fault_library", "preset_name", "preset_names"]
+__all__ = ["EXTENDED_MARK", "base_scenario", "block_name", "catalogue", "fault_library", "preset_name", "preset_names"]
 
 
 def catalogue() -> dict[str, Fault]:
@@ -55,3 +55,25 @@ def block_name(name: str) -> str:
     """
     f = faults().get(name)
     return f.block if f is not None else name
+
+
+#: what phfdi diagnose puts after a model's name for the extended model it writes ("paper-extended-valve_gain")
+EXTENDED_MARK = "-extended"
+
+
+def base_scenario(name: str) -> str:
+    """The scenario a resolved scenario's name comes from: the name without the ``-<fault>`` that naming a
+    preset fault added (:func:`phfdi_base.spec.resolve_scenario`) and without the :data:`EXTENDED_MARK` and
+    cause that ``phfdi diagnose`` adds to the model it extends; other names unchanged. Decided from the
+    catalogue's names and that mark, never by splitting on '-', so a scenario whose own name holds '-' keeps
+    it. The one rule (shipped calibrations and a recording's base scenario are per base scenario).
+
+    >>> base_scenario("paper-backlash"), base_scenario("my-plant-probe_delay"), base_scenario("my-plant")
+    ('paper', 'my-plant', 'my-plant')
+    >>> base_scenario("paper-extended-valve_gain"), base_scenario("my-plant-extended-stiction-backlash")
+    ('paper', 'my-plant')
+    """
+    names = sorted({n for f in faults().values() if f.preset for n in (f.name, f.block)}, key=len, reverse=True)
+    base = next((name[: -len(n) - 1] for n in names if name.endswith(f"-{n}") and len(name) > len(n) + 1), name)
+    mark = base.find(EXTENDED_MARK)
+    return base[:mark] if mark > 0 and base[mark + len(EXTENDED_MARK):][:1] in ("", "-") else base

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.records import ReadError, read_record
+from phfdi.faults import base_scenario
+from phfdi.records import ReadError, read_run
 from phfdi.run import Run
 from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
@@ -61,16 +62,16 @@ def scenario_of(run: Run, fallback: str = "paper") -> ScenarioSpec:
 
 
 def load_any(path: str | Path, column_map=None, encoding: str | None = None) -> Run:
-    """A run from .csv/.parquet or an .mcap bag of phfdi launch, read under the run policy of
-    :func:`phfdi.records.read_record` (repairs in ``metadata["notes"]``): it needs ph_measured and the pH
-    controller output (valve_command_pct or ph_controller_output_pct), by name or through ``column_map``."""
+    """A run read by :func:`phfdi.records.read_run` (.csv, .parquet or an .mcap bag; repairs in
+    ``metadata["notes"]``) that the detector can replay: it needs ph_measured and the pH controller output
+    (valve_command_pct or ph_controller_output_pct), by name or through ``column_map``."""
 
-    record = read_record(path, column_map, policy="run", encoding=encoding, required=("ph_measured",))
-    if not {"valve_command_pct", "ph_controller_output_pct"} & set(record.signals):
+    run = read_run(path, column_map, encoding=encoding, required=("ph_measured",))
+    if not {"valve_command_pct", "ph_controller_output_pct"} & set(run.names):
         raise ReadError(path, "no valve command (valve_command_pct or ph_controller_output_pct): the detector "
                               "needs the pH controller output; map it with --column valve_command_pct=COLUMN",
-                        line=1 if record.where == "line" else None)
-    return record.to_run()
+                        line=1 if "delimiter" in run.metadata else None)  # a text file's header line
+    return run
 
 
 @dataclass
@@ -86,12 +87,7 @@ def replay_run(run: Run, spec: ScenarioSpec | None = None, calibration: Calibrat
                isolate: bool = True) -> ReplayResult:
     spec = spec or scenario_of(run)
     settings = settings or DetectorSettings()
-    calibration = calibration or load_default_calibration(_base_name(spec), settings)
+    calibration = calibration or load_default_calibration(base_scenario(spec.name), settings)
     det = StreamingDetector(spec, calibration, settings, isolate=isolate)
     events = run_chunks(det, run, chunk)
     return ReplayResult(det.alarms, events, det.diagnostics(), len(run))
-
-
-def _base_name(spec: ScenarioSpec) -> str:
-    """Scenario preset a spec comes from ('paper-backlash' -> 'paper')."""
-    return spec.name.split("-")[0]

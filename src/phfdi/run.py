@@ -100,12 +100,20 @@ class Run:
 
     def save(self, path: str | Path) -> Path:
         """Write by extension: .csv or .parquet."""
-        suffix = Path(path).suffix.lower()
-        if suffix == ".csv":
-            return self.to_csv(path)
-        if suffix in (".parquet", ".pq"):
-            return self.to_parquet(path)
+        writer = {"csv": self.to_csv, "parquet": self.to_parquet}[writable_format(path)]
+        return writer(path)
+
+
+#: the formats a run is written to (the readers are registered in :mod:`phfdi.records.formats`)
+WRITE_SUFFIXES = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet"}
+
+
+def writable_format(path: str | Path) -> str:
+    """The format :meth:`Run.save` writes ``path`` in ("csv" or "parquet"); a one-line UserError for others."""
+    fmt = WRITE_SUFFIXES.get(Path(path).suffix.lower())
+    if fmt is None:
         raise UserError(f"cannot write a run to {path}: use a .csv or .parquet file name")
+    return fmt
 
 
 class RunRecorder:

@@ -13,13 +13,16 @@ Examples
 3
 >>> seconds_to_ns(1.25), ns_to_seconds(1, 250000000)
 (1250000000, 1.25)
+>>> time_on_grid_s(3 * dt_ns, dt_ns, 0.5), time_on_grid_s(3 * dt_ns + 1, dt_ns, 0.5)
+(1.5, 1.500000001)
 """
 
 from __future__ import annotations
 
 import math
 
-__all__ = ["NS_PER_S", "finite_or", "join_ns", "ns_to_seconds", "sample_index", "sample_period_ns", "seconds_to_ns", "split_ns"]
+__all__ = ["NS_PER_S", "finite_or", "join_ns", "ns_to_seconds", "sample_index", "sample_period_ns", "seconds_to_ns",
+           "split_ns", "time_ns", "time_on_grid_s", "times_on_grid_s"]
 
 NS_PER_S = 1_000_000_000
 
@@ -42,6 +45,11 @@ def join_ns(sec: int, nanosec: int) -> int:
     return sec * NS_PER_S + nanosec
 
 
+def time_ns(stamp) -> int:
+    """Nanoseconds of a ROS time, or of anything with ``sec`` and ``nanosec`` (a bag's decoded stamp)."""
+    return join_ns(stamp.sec, stamp.nanosec)
+
+
 def seconds_to_ns(t_s: float) -> int:
     """Seconds -> whole nanoseconds, rounded, never negative."""
     return max(0, round(t_s * 1e9))
@@ -61,3 +69,30 @@ def sample_index(ns: int, dt_ns: int) -> int | None:
 def finite_or(t_s: float, fallback_ns: int) -> int:
     """Nanoseconds of ``t_s``, or ``fallback_ns`` when it is not finite."""
     return seconds_to_ns(t_s) if math.isfinite(t_s) else fallback_ns
+
+
+def time_on_grid_s(ns: int, dt_ns: int, dt_s: float) -> float:
+    """Time (s) of the sample stamped ``ns``: ``k * dt_s`` exactly as the simulation computes it when the
+    stamp is on the sample grid, else the stamp itself in seconds. The one rule for the live detector and
+    for reading a bag back (:func:`times_on_grid_s`), so both see the same floats."""
+    return (ns // dt_ns) * dt_s if ns % dt_ns == 0 else ns * 1e-9
+
+
+def times_on_grid_s(stamps: list[int], dt_s) -> list[float]:
+    """Times (s) of a recording's stamps by :func:`time_on_grid_s` when ``dt_s`` is a usable sample time and
+    every stamp is on its grid; else every stamp in seconds (a recording off the grid is not forced onto it).
+
+    Examples
+    --------
+    >>> times_on_grid_s([0, 500_000_000, 1_000_000_000], 0.5)
+    [0.0, 0.5, 1.0]
+    >>> times_on_grid_s([0, 250_000_000], 0.5), times_on_grid_s([0, 1], None)
+    ([0.0, 0.25], [0.0, 1e-09])
+    """
+    try:
+        dt_ns = sample_period_ns(float(dt_s)) if dt_s else None
+    except (TypeError, ValueError, OverflowError):
+        dt_ns = None
+    if dt_ns and all(ns % dt_ns == 0 for ns in stamps):
+        return [time_on_grid_s(ns, dt_ns, dt_s) for ns in stamps]
+    return [ns * 1e-9 for ns in stamps]

@@ -46,7 +46,7 @@ from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
 
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main, to_time
-from phfdi_base.stamps import finite_or, join_ns, seconds_to_ns
+from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s
 from phfdi_base.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
 
 from .alarm_messages import severity_of
@@ -85,16 +85,6 @@ PROBLEM_COUNTERS = ("bad_time", "duplicate_stamps", "out_of_order", "extra_sampl
                     "nonfinite_command", "nonfinite_outlet_command", "command_stale_episodes",
                     "commands_missing", "late_controller_outputs", "unpaired_controller_outputs", "core_errors")
 LAG_WINDOW = 4096  # samples whose processing lag the statistics cover
-
-
-def stamp_ns(stamp) -> int:
-    """Nanoseconds of a message's stamp."""
-    return join_ns(stamp.sec, stamp.nanosec)
-
-
-def time_s_of(ns: int, dt_ns: int, dt_s: float) -> float:
-    """Sample time of a stamp, exactly as :func:`phfdi.bagio.load_run` computes it (k * dt on the grid)."""
-    return (ns // dt_ns) * dt_s if ns % dt_ns == 0 else ns * 1e-9
 
 
 class Pairing:
@@ -264,10 +254,10 @@ class DetectorNode(GraphNode):
 
     # ---- executor thread: queue only ------------------------------------------------------
     def _on_measurement(self, msg: Measurement) -> None:
-        self._enqueue(self.pairing.measurement(stamp_ns(msg.stamp), msg.ph, msg.level_cm, time.monotonic()))
+        self._enqueue(self.pairing.measurement(time_ns(msg.stamp), msg.ph, msg.level_cm, time.monotonic()))
 
     def _on_output(self, msg: ControllerOutput) -> None:
-        self._enqueue(self.pairing.output(stamp_ns(msg.stamp),
+        self._enqueue(self.pairing.output(time_ns(msg.stamp),
                                           (msg.ph_output_pct, msg.level_output_pct, msg.ph_setpoint),
                                           time.monotonic()))
 
@@ -296,7 +286,7 @@ class DetectorNode(GraphNode):
 
     def _chunk(self, rows: list[tuple]) -> dict[str, np.ndarray]:
         nan = (math.nan, math.nan, math.nan)
-        t = [time_s_of(r[0], self.dt_ns, self.dt_s) for r in rows]
+        t = [time_on_grid_s(r[0], self.dt_ns, self.dt_s) for r in rows]
         cmds = [r[3] or nan for r in rows]
         return {"time_s": np.array(t), "ph_measured": np.array([r[1] for r in rows], dtype=float),
                 "level_measured_cm": np.array([r[2] for r in rows], dtype=float),

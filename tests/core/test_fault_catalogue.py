@@ -184,3 +184,23 @@ def test_a_plugins_fault_is_a_preset_of_the_scenario_naming_it(tmp_path):
         BLOCKS.pop("test_plugin_slip", None)
         FAULTS.pop("plugin_slip", None)
         sys.modules.pop("phfdi_plugin_slip", None)
+
+
+def test_the_base_scenario_is_decided_from_the_catalogues_names():
+    """One rule for the scenario a resolved name comes from (shipped calibrations, a recording's base): a name
+    holding '-' of its own keeps it (replay used to split on the first '-': 'my-plant' gave 'my')."""
+    from phfdi.faults import base_scenario
+    from phfdi.replay import replay_run
+    from phfdi.ros.parts import recorded_part
+    from phfdi_base.spec import resolve_scenario
+
+    spec = resolve_scenario(dict(raw_scenario("paper"), name="my-plant"), "backlash", fault_library(), [], None)
+    assert base_scenario(spec.name) == "my-plant"
+    assert base_scenario("my-plant") == "my-plant" and base_scenario("paper-probe_delay") == "paper"
+    assert base_scenario("paper-coulomb_viscous_friction") == "paper" and base_scenario("-backlash") == "-backlash"
+    assert base_scenario("paper-extended-valve_gain") == "paper"  # the model phfdi diagnose writes (extends paper)
+    assert base_scenario("my-plant-extended-stiction-backlash") == "my-plant"
+    assert base_scenario("paper-extendedness") == "paper-extendedness"
+    assert recorded_part(spec).base_scenario == "my-plant"
+    with pytest.raises(Exception, match="no shipped calibration for scenario 'my-plant'"):
+        replay_run(Run({"time_s": np.zeros(1)}, {}), spec)  # asks for the base scenario's calibration

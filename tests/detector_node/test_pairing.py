@@ -7,7 +7,8 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wavelet_fdi.node import Pairing, time_s_of
+from phfdi_base.stamps import time_on_grid_s
+from wavelet_fdi.node import Pairing
 
 
 def _feed(pairing: Pairing, arrivals: list[tuple[str, int]], clock_step_s: float = 0.1) -> list[tuple]:
@@ -93,5 +94,5 @@ def test_unpaired_outputs_are_bounded_and_counted():
 def test_sample_times_equal_the_bag_readers():
     """k * dt on the grid (as phfdi.bagio.load_run), so live and offline replay see the same floats."""
     dt_ns = 100_000_000
-    assert time_s_of(7 * dt_ns, dt_ns, 0.1) == 7 * 0.1
-    assert time_s_of(7 * dt_ns + 5, dt_ns, 0.1) == (7 * dt_ns + 5) * 1e-9
+    assert time_on_grid_s(7 * dt_ns, dt_ns, 0.1) == 7 * 0.1
+    assert time_on_grid_s(7 * dt_ns + 5, dt_ns, 0.1) == (7 * dt_ns + 5) * 1e-9

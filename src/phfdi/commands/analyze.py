@@ -67,13 +67,13 @@ def _say(text: str) -> None:
 
 def load_runs(paths: list[str]) -> list:
     """Runs (.csv, .parquet or .mcap bags) read by phfdi.records under the run policy; repairs noted on stderr."""
-    from phfdi.records import read_record
+    from phfdi.records import read_run
 
     from .common import print_notes
 
     runs = []
     for path in paths:
-        runs.append(read_record(path, policy="run").to_run())
+        runs.append(read_run(path))
         print_notes("analyze", runs[-1].metadata["notes"])
     return runs
 

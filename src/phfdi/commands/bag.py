@@ -77,18 +77,17 @@ def run_recover(args: argparse.Namespace) -> int:
 
 
 def run_to_run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from phfdi.records import read_record
+    from phfdi.records import read_run
+    from phfdi.records.formats import is_format
+    from phfdi.run import writable_format
     from phfdi_base.errors import UserError
 
     from .common import print_notes
 
-    if Path(args.output).suffix.lower() not in (".csv", ".parquet", ".pq"):
-        raise UserError(f"cannot write a run to {args.output}: use a .csv or .parquet file name")
-    if Path(args.input).suffix.lower() != ".mcap" and not (Path(args.input) / "metadata.yaml").exists():
+    writable_format(args.output)  # refused before the bag is read
+    if not is_format(args.input, "bag"):
         raise UserError(f"{args.input}: to-run converts a bag: give an .mcap file")
-    run = read_record(args.input, policy="run").to_run()
+    run = read_run(args.input)
     print_notes("bag", run.metadata["notes"])
     path = run.save(args.output)
     print(f"wrote {len(run)} samples of {len(run.names)} signals to {path}")

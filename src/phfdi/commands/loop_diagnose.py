@@ -77,10 +77,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.loopdiag.diagnose import Settings
-    from phfdi.loopdiag.hammerstein import ACTUATOR_CAUSES
     from phfdi.loopdiag.plantwide import diagnose_jobs, expand, format_worst, write_table
     from phfdi.loopdiag.readers import ColumnMap
     from phfdi.loopdiag.report import format_report, format_summary, to_json
+    from phfdi.loopdiag.vocabulary import ACTUATOR_CAUSES
     from phfdi_base.errors import UserError
 
     columns = ColumnMap.parse(args.columns) if args.columns else None

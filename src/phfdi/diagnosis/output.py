@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from phfdi.faults import EXTENDED_MARK
 from phfdi.loop import build_parts
 from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
@@ -31,7 +32,7 @@ def write_extended(d: Diagnosis, out_dir: Path, model: str) -> Path | None:
     if d.extended_raw is None:
         return None
     rep = d.report
-    name = f"{Path(model).stem}-extended-{rep['cause'].replace('+', '-')}"
+    name = f"{Path(model).stem}{EXTENDED_MARK}-{rep['cause'].replace('+', '-')}"  # phfdi.faults.base_scenario
     header = (f"written by phfdi diagnose: the nominal model {model!r} plus the fitted extension\n"
               f"cause: {rep['cause']} ({rep['family']}); {fmt_params(rep['parameters'], rep.get('confidence_intervals'))}\n"
               f"verdict: {rep['verdict']}; held-out NRMSE {fmt_num(rep['nrmse_nominal'])} -> "

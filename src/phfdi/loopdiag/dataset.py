@@ -15,10 +15,11 @@ from phfdi_base.errors import UserError
 
 from .diagnose import Settings
 from .evaluate import Labelled
-from .features import FEATURE_NAMES, FRICTION_CAUSES, loop_evidence
+from .features import FEATURE_NAMES, loop_evidence
 from .readers import read_loop
 from .synthetic import simulate_loop
 from .training import DrawnLoop
+from .vocabulary import FRICTION_CAUSES
 
 
 def row_for_run(run: Run, stiction: bool, group: str, source: str, name: str,

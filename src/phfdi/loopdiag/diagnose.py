@@ -32,9 +32,10 @@ from phfdi.run import Run
 
 from .baselines import run_baselines
 from .controller import ControllerEstimate, estimate_pi
-from .hammerstein import ACTUATOR_CAUSES, CauseFit, Problem, fit_causes
+from .hammerstein import CauseFit, Problem, fit_causes
 from .identify import LinearModel, Split, fit_linear, increments
 from .oscillation import Oscillation, detect_oscillation, period_regularity
+from .vocabulary import ACTUATOR_CAUSES
 
 #: default: the extended model must cut the held-out NRMSE by this much (%) to name a cause
 GAIN_THRESHOLD_PERCENT = 10.0

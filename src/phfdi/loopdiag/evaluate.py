@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-FRICTION = ("stiction", "backlash")
+from .vocabulary import FRICTION_CAUSES
 
 
 @dataclass(frozen=True)
@@ -115,7 +115,7 @@ def _gain(r: dict) -> float | None:
 
 def _gain_friction(r: dict) -> float | None:
     g = _gain(r)
-    return g if g is not None and r.get("extended_cause") in FRICTION else None
+    return g if g is not None and r.get("extended_cause") in FRICTION_CAUSES else None
 
 
 def _horch(r: dict) -> float | None:

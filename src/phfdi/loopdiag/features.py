@@ -26,6 +26,7 @@ from phfdi.run import Run
 from .diagnose import Evidence, Settings, gather_evidence
 from .indicator_set import compute_indicators
 from .indicators import Indicator
+from .vocabulary import FRICTION_CAUSES
 
 
 @dataclass(frozen=True)
@@ -70,8 +71,6 @@ def _clip(v: float, f: Feature) -> float:
     return float(min(max(v, f.low), f.high))
 
 
-#: the valve models the features use
-FRICTION_CAUSES = ("backlash", "stiction")
 
 
 def hammerstein_gains(ev: Evidence) -> tuple[float | None, float | None]:

@@ -44,12 +44,11 @@ from .identify import (
     lag_criteria,
     score,
 )
+from .vocabulary import ACTUATOR_CAUSES, WIDTH_SEARCH_SPAN
 
 #: grid points whose linear part is searched in one batch (bounds the (points, tau, samples) arrays)
 BATCH_ROWS = 32
 
-#: causes of the actuator family, in catalogue order (simplest first breaks ties)
-ACTUATOR_CAUSES = ("backlash", "deadzone", "saturation", "quantization", "stiction")
 
 
 def through_block(block, u: np.ndarray) -> np.ndarray:
@@ -172,8 +171,10 @@ def _no_motion(p: Problem, v: np.ndarray) -> LinearModel:
 
 # ---- the search per cause ---------------------------------------------------------------
 def _widths(p: Problem, n: int = 12) -> np.ndarray:
-    """Widths from 1 % to 80 % of the training OP span, log-spaced (log10 values)."""
-    return np.linspace(math.log10(0.01 * p.span), math.log10(0.8 * p.span), n)
+    """Widths from 1 % to 80 % of the training OP span (:data:`.vocabulary.WIDTH_SEARCH_SPAN`), log-spaced
+    (log10 values)."""
+    lo, hi = WIDTH_SEARCH_SPAN
+    return np.linspace(math.log10(lo * p.span), math.log10(hi * p.span), n)
 
 
 def _grid(p: Problem, block_at: Callable[[np.ndarray], object], ranges: tuple, full_output: bool = False):

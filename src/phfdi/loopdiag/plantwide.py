@@ -1,6 +1,7 @@
 """Plant-wide loop diagnosis: many loops on Dask, one table, the worst loops first.
 
-Inputs are files, folders (every ``.txt``, ``.csv`` and ``.parquet`` below them) and wide historian
+Inputs are files, folders (every historian export below them: ``.txt``, ``.csv``, ``.parquet``; the formats
+registered in :mod:`phfdi.records.formats`) and wide historian
 exports: a CSV whose header holds the tags of several loops (``<tag>.OP``/``.MV``, ``.PV``,
 ``.SP``/``.SV``, optionally ``.MODE``) becomes one job per loop tag. Each job is read and diagnosed
 on a Dask worker (:mod:`.dask_run`: a LocalCluster by default, ``--scheduler`` for a running one).
@@ -20,12 +21,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from phfdi.records.formats import firsts, historian_suffixes, is_format
 from phfdi_base.errors import UserError
 
 from .diagnose import Settings
 from .readers import ColumnMap, read_loop
 
-SUFFIXES = (".txt", ".csv", ".parquet")
 _ROLE = {"OP": "op", "MV": "op", "OUT": "op", "PV": "pv", "SP": "sp", "SV": "sp", "MODE": "mode"}
 _TIME = ("time_s", "timestamp", "time", "datetime", "date", "tagname")
 
@@ -69,9 +70,10 @@ def expand(inputs: list[str], columns: ColumnMap | None = None) -> list[Job]:
     for item in inputs:
         p = Path(item)
         if p.is_dir():
-            files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in SUFFIXES)
+            suffixes = historian_suffixes()  # the formats registered as historian exports (phfdi.records.formats)
+            files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in suffixes)
             if not files:
-                raise UserError(f"{item}: no {', '.join(SUFFIXES)} files in this folder")
+                raise UserError(f"{item}: no {', '.join(firsts(suffixes))} files in this folder")
         else:
             files = [p]
         for f in files:
@@ -80,7 +82,7 @@ def expand(inputs: list[str], columns: ColumnMap | None = None) -> list[Job]:
 
 
 def _jobs_of_file(f: Path, columns: ColumnMap | None) -> list[Job]:
-    if columns is not None or f.suffix.lower() != ".csv" or not f.is_file():
+    if columns is not None or not is_format(f, "csv") or not f.is_file():
         return [Job(str(f), columns)]
     try:
         header = _csv_header(f)

@@ -16,7 +16,7 @@ the label by itself:
   stiction to any method, and its label would only be noise;
 * measurement: white noise of 0.02 to 0.3 % of span in PV units, and in a third of the loops PV
   rounded to the historian's resolution;
-* stiction: half of the sticky valves follow Kano et al.'s model (S from 0.3 to 6 % of span, J from
+* stiction (ranges in :mod:`.vocabulary`): half of the sticky valves follow Kano et al.'s model (S from 0.3 to 6 % of span, J from
   0 to 1.2 S), half He et al.'s (2007: fs from 0.3 to 6 %, fd from 0 to fs), which sticks again
   after every slip; the Hammerstein features fit Kano's model only, so the He valves check that
   the classifier does not merely recognise its own model.
@@ -35,6 +35,8 @@ import numpy as np
 from phfdi.run import Run
 
 from .synthetic import SyntheticLoop, simulate_loop
+from .vocabulary import OTHER_NONLINEARITIES
+from .vocabulary import TRAINING_DRAWS as DRAWS
 
 DT_S = 10.0
 SAMPLES = 751
@@ -112,11 +114,7 @@ def draw_spec(rng: np.random.Generator, stiction: bool, tag: str) -> DrawnLoop:
     quantum = float(noise * rng.uniform(0.5, 3.0)) if rng.random() < 0.33 else 0.0
     valve = None
     if stiction:
-        s = _logu(rng, 0.3, 6.0)
-        if rng.random() < 0.5:
-            valve = ("stiction", {"s_pct": s, "j_pct": s * float(rng.uniform(0.0, 1.2))})
-        else:
-            valve = ("stiction_he", {"fs_pct": s, "fd_pct": s * float(rng.uniform(0.0, 1.0))})
+        valve = _sticky_valve(rng)
     spec = SyntheticLoop(process="integrating" if integrating else "foptd", gain=gain, time_constant_s=tau,
                          dead_time_s=theta, dt_s=dt, duration_s=duration, kp=kp, ti_s=ti, valve=valve,
                          setpoint_steps=sp_steps, noise_std=noise, pv_quantum=quantum,
@@ -204,21 +202,27 @@ def _draw_class_valve(rng: np.random.Generator, loop_class: str) -> tuple[str, d
     """The valve model of a loop of ``loop_class`` as (block name, parameters in % of travel);
     None for a healthy valve."""
     if loop_class == "stiction":
-        s = _logu(rng, 0.3, 6.0)
-        if rng.random() < 0.5:
-            return ("stiction", {"s_pct": s, "j_pct": s * float(rng.uniform(0.0, 1.2))})
-        return ("stiction_he", {"fs_pct": s, "fd_pct": s * float(rng.uniform(0.0, 1.0))})
+        return _sticky_valve(rng)
     if loop_class == "other_nonlinearity":
-        kind = str(rng.choice(("deadzone", "quantization", "saturation")))
+        kind = str(rng.choice(OTHER_NONLINEARITIES))
+        d = DRAWS[kind]
         if kind == "deadzone":
-            return ("deadzone", {"width_pct": _logu(rng, 0.5, 4.0)})
+            return (kind, {"width_pct": _logu(rng, *d["width_pct"])})
         if kind == "quantization":
-            return ("quantization", {"step_pct": _logu(rng, 0.3, 2.0)})
+            return (kind, {"step_pct": _logu(rng, *d["step_pct"])})
         # the stem cannot open past a limit a little above where the loop works
-        return ("saturation", {"low_pct": 0.0, "high_pct": 50.0 + _logu(rng, 0.5, 5.0)})
+        return (kind, {"low_pct": d["low_pct"], "high_pct": d["high_pct"]["base"] + _logu(rng, *d["high_pct"]["above"])})
     if loop_class == "backlash":
-        return ("backlash", {"width_pct": _logu(rng, 0.3, 6.0)})
+        return ("backlash", {"width_pct": _logu(rng, *DRAWS["backlash"]["width_pct"])})
     return None
+
+
+def _sticky_valve(rng: np.random.Generator) -> tuple[str, dict]:
+    """Kano's stiction or He's, half each, S (fs) and J/S (fd/fs) drawn over the vocabulary's ranges."""
+    s = _logu(rng, *DRAWS["stiction"]["s_pct"])
+    if rng.random() < 0.5:
+        return ("stiction", {"s_pct": s, "j_pct": s * float(rng.uniform(*DRAWS["stiction"]["j_over_s"]))})
+    return ("stiction_he", {"fs_pct": s, "fd_pct": s * float(rng.uniform(*DRAWS["stiction_he"]["fd_over_fs"]))})
 
 
 def draw_class_spec(rng: np.random.Generator, loop_class: str, tag: str) -> DrawnLoop:

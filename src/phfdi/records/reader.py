@@ -16,6 +16,7 @@ from . import policy as P
 from .cells import parse_stamps, to_numbers
 from .columns import PROJECT_UNIT, ColumnMap, ColumnSpec, kind_of, normal_cell
 from .errors import ReadError
+from .formats import expected, format_of, run_suffixes
 from .notes import counted, places
 from .record import Record
 from .sources import Table, read_table
@@ -74,12 +75,15 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
 
 
 
-def read_run(path: str | Path) -> Run:
-    """A run file (.csv or .parquet) read by :func:`read_record` under the run policy.
+def read_run(path: str | Path, column_map: MapLike | Callable = None, *, encoding: str | None = None,
+             required: tuple[str, ...] = ()) -> Run:
+    """A run from a run file or a bag of the graph (any format of :mod:`.formats` a run is read from: .mcap,
+    .parquet, .csv), read by :func:`read_record` under the run policy: the one way every command and
+    :func:`phfdi.bagio.load_run` read a run.
 
     Repairs (duplicate rows, repeated stamps, cells that are not numbers: NaN) are listed in
     ``metadata["notes"]``; what cannot be repaired is a one-line :class:`~phfdi_base.errors.UserError`.
-    A bag of the graph is read by :func:`phfdi.bagio.load_run`.
+    ``column_map``, ``encoding``, ``required``: as :func:`read_record`.
 
     Examples
     --------
@@ -93,9 +97,9 @@ def read_run(path: str | Path) -> Run:
     (array([7. , 7.1, 7.2]), 1)
     """
     path = Path(path)
-    if path.suffix.lower() not in (".csv", ".parquet", ".pq"):
-        raise UserError(f"cannot read a run from {path}: expected .csv or .parquet")
-    return read_record(path, policy="run").to_run()
+    if not format_of(path).run:
+        raise UserError(f"cannot read a run from {path}: expected {expected(run_suffixes())}")
+    return read_record(path, column_map, policy="run", encoding=encoding, required=required).to_run()
 
 
 def _apply_policy(rows: P.Rows, policy: str) -> None:

@@ -8,7 +8,6 @@ Damaged files give a :class:`ReadError`, never the parser's own exception.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -16,33 +15,19 @@ import numpy as np
 from phfdi_base.errors import UserError
 
 from .errors import ReadError
+from .formats import Format, Table, format_of, register_format
 from .text import TextTable, decode, parse_csv
 
 PARQUET_MAGIC = b"PAR1"
 MCAP_MAGIC = b"\x89MCAP"
 
 
-@dataclass
-class Table:
-    """Columns of one file: strings (text files) or arrays (Parquet, bags), one entry per row."""
-
-    path: str
-    columns: dict[str, list | np.ndarray]
-    lines: np.ndarray  # source line (text) or row/sample number (1-based) of each row
-    where: str  # "line", "row" or "sample": what ``lines`` counts
-    metadata: dict = field(default_factory=dict)
-    units: dict[str, str] = field(default_factory=dict)
-    notes: list[str] = field(default_factory=list)
-
-    def __len__(self) -> int:
-        return len(self.lines)
-
-
 def read_table(path: Path, encoding: str | None = None) -> Table:
-    """The raw table of any supported file, by extension and then by its first bytes."""
+    """The raw table of any registered format (:mod:`.formats`): by extension and then by its first bytes."""
     if path.is_dir():
-        if (path / "metadata.yaml").exists():
-            return read_bag(path)
+        fmt = format_of(path)
+        if fmt.folder_marker and (path / fmt.folder_marker).exists():
+            return fmt.read(path, None, encoding)
         raise ReadError(path, "a folder, not a record file (CSV, Parquet or MCAP)")
     if not path.is_file():
         raise ReadError(path, "no such file")
@@ -50,17 +35,13 @@ def read_table(path: Path, encoding: str | None = None) -> Table:
         data = path.read_bytes()
     except OSError as exc:
         raise ReadError(path, f"cannot read the file ({exc.strerror})") from None
-    suffix = path.suffix.lower()
-    if suffix == ".mcap" or data.startswith(MCAP_MAGIC):
-        return read_bag(path)
-    if suffix in (".parquet", ".pq") or data.startswith(PARQUET_MAGIC):
-        return read_parquet(path, data)
-    return read_text(path, data, encoding)
+    return format_of(path, data).read(path, data, encoding)
 
 
 # ---- text ---------------------------------------------------------------------------------
-def read_text(path: Path, data: bytes, encoding: str | None = None) -> Table:
+def read_text(path: Path, data: bytes | None, encoding: str | None = None) -> Table:
     """A CSV (or the plant_loops export, detected by its title line)."""
+    data = path.read_bytes() if data is None else data
     if not data.strip():
         raise ReadError(path, "empty file", line=1)
     head = data[:16].lstrip(b"\xef\xbb\xbf")
@@ -117,7 +98,7 @@ def read_processdata(path: Path, data: bytes, encoding: str | None = None) -> Ta
 
 
 # ---- Parquet ------------------------------------------------------------------------------
-def read_parquet(path: Path, data: bytes | None = None) -> Table:
+def read_parquet(path: Path, data: bytes | None = None, encoding: str | None = None) -> Table:
     """Columns of a Parquet file; numbers as float arrays, time stamps as seconds, the rest as text."""
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -164,7 +145,7 @@ def _short(exc: BaseException, limit: int = 160) -> str:
 
 
 # ---- bags ---------------------------------------------------------------------------------
-def read_bag(path: Path) -> Table:
+def read_bag(path: Path, data: bytes | None = None, encoding: str | None = None) -> Table:
     """The run signals of a bag of the node graph (time from /plant/measurement's stamps)."""
     from phfdi.bagread import load_bag
 
@@ -181,3 +162,10 @@ def read_bag(path: Path) -> Table:
         raise ReadError(path, "the bag holds no sample of /plant/measurement")
     units = run.units()
     return Table(str(path), dict(run.signals), np.arange(1, len(run) + 1), "sample", dict(run.metadata), units)
+
+
+# ---- the built-in formats (matching order: a bag, Parquet, then text; see :mod:`.formats`) ------------------
+register_format(Format("bag", (".mcap",), read_bag, magic=MCAP_MAGIC, folder_marker="metadata.yaml"))
+register_format(Format("parquet", (".parquet", ".pq"), read_parquet, magic=PARQUET_MAGIC, historian=3))
+register_format(Format("csv", (".csv",), read_text, historian=2))
+register_format(Format("text", (".txt",), read_text, run=False, historian=1))  # plant_loops exports

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import asdict
 
 from ph_plant_sim.build import load_plant_model
-from phfdi.faults import fault_library
+from phfdi.faults import base_scenario, fault_library
 from phfdi.loop import build_parts
 from phfdi.scenario import raw_scenario
 from phfdi_base.parts import LoopStart, NodePart
@@ -47,7 +47,7 @@ def part_for(spec: ScenarioSpec, raw: dict, library: dict, base_scenario: str) -
 
 def recorded_part(spec: ScenarioSpec) -> NodePart:
     """The part of a scenario read back from a recording (a bag's metadata): its base scenario is its name
-    without the ``-<fault>`` suffix that naming a library fault added (:func:`phfdi_base.spec.resolve_scenario`).
+    without the ``-<fault>`` suffix that naming a library fault added (:func:`phfdi.faults.base_scenario`).
 
     Examples
     --------
@@ -55,6 +55,4 @@ def recorded_part(spec: ScenarioSpec) -> NodePart:
     >>> recorded_part(load_scenario("paper", fault="backlash")).base_scenario
     'paper'
     """
-    library = fault_library()
-    base = next((spec.name[: -len(name) - 1] for name in library if spec.name.endswith(f"-{name}")), spec.name)
-    return part_for(spec, spec.model_dump(mode="json"), library, base)
+    return part_for(spec, spec.model_dump(mode="json"), fault_library(), base_scenario(spec.name))

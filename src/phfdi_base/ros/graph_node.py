@@ -20,7 +20,7 @@ from rclpy.node import Node
 
 from phfdi_base.errors import UserError
 from phfdi_base.parts import NodePart, read_part, resolve_part
-from phfdi_base.stamps import join_ns, sample_index, sample_period_ns, split_ns
+from phfdi_base.stamps import sample_index, sample_period_ns, split_ns, time_ns  # time_ns: re-exported
 
 from .barrier import DATA_QOS, READY_QOS, StartBarrierMixin
 from .params import COMMON_PARAMS, NodeStartError, ParametersMixin, ParamSpec, common_params, print_parameter_help
@@ -34,11 +34,6 @@ def to_time(ns: int) -> Time:
     """A ROS time from nanoseconds."""
     sec, nanosec = split_ns(ns)
     return Time(sec=sec, nanosec=nanosec)
-
-
-def time_ns(stamp: Time) -> int:
-    """Nanoseconds of a ROS time."""
-    return join_ns(stamp.sec, stamp.nanosec)
 
 
 class GraphNode(ParametersMixin, StartBarrierMixin, Node):
