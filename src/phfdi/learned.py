@@ -108,8 +108,11 @@ def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | 
     order = [rec.channels.index(c) for c in model.channels]
     rec = MeasuredRecord(rec.path, rec.time_s, rec.x[:, order], model.channels, rec.lines, rec.where, rec.notes)
     if refit_rows is not None:
+        if getattr(model.reference, "kind", "arx") != "arx":
+            raise UserError(f"--refit-rows re-fits a learned (arx) reference; this one is {model.reference.kind!r} "
+                            f"(phfdi calibrate --estimator fits it on healthy runs)")
         model = learn_from(rec, refit_rows, model.settings)
-    events, states, _ = run_record(model, rec.time_s - rec.time_s[0], rec.x)
+    events, states, _ = run_record(model, rec.time_s, rec.x)  # alarms in the record's own time
     return events, states, model
 
 

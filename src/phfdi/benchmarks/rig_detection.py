@@ -63,8 +63,8 @@ def outcome(alarm_times: Sequence[float], onset_s: float | None) -> Outcome:
 
 
 def learned_alarm_times(model: LearnedModel, rec: MeasuredRecord) -> list[float]:
-    events, _, _ = run_record(model, rec.time_s - rec.time_s[0], rec.x)
-    return [e.time_s + float(rec.time_s[0]) for e in events if e.kind == "alarm"]
+    events, _, _ = run_record(model, rec.time_s, rec.x)
+    return [e.time_s for e in events if e.kind == "alarm"]
 
 
 def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = PLAIN_CUSUM_K) -> list[float]:

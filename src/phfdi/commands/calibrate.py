@@ -13,6 +13,7 @@ EXAMPLES = """examples:
   phfdi calibrate --scenario my_loop.yaml --runs healthy1.parquet healthy2.parquet --out plant.yaml
   phfdi calibrate --scenario my_loop.yaml --runs h1.csv h2.csv --map plant_columns.yaml --out plant.yaml
   phfdi calibrate --learn healthy.csv --rows 400 --exclude anomaly,changepoint --out ref.json
+  phfdi calibrate --estimator ../shared/data/ph_rig/2025.02.24-*.csv --model rig_flask --map ph_rig --out rig.json
 
 --learn fits a learned healthy reference (no plant model needed) on the first
 --rows rows of a measured record (all of them by default): every channel
@@ -20,6 +21,16 @@ predicted from its own past and the other channels (ARX, ridge), the wavelet
 bands of the residuals and their healthy noise per band; phfdi replay FILE
 --reference ref.json then watches any record with those columns. Channels:
 every column but time and --exclude, or the ones a --map/--column names.
+
+--estimator fits the estimator reference (docs/detector.md, "The real pH rig") on
+healthy runs of a plant with pumped feeds of strong acid and base into an overflow
+vessel: a Kalman filter on the reaction invariant, driven by the measured pH and
+pump flows, its strengths, volume and noise model fitted by the innovations'
+likelihood, the residual's healthy bands measured on the same runs (--open-loop:
+the same physics simulated, never corrected). --model gives the feeds and first
+guesses; the channels are the model's feeds' flows (<feed>_flow_ml_s) and
+ph_measured, so a --map is needed for other column names (ph_rig is shipped).
+phfdi replay RUN --map ph_rig --reference rig.json watches a run with it.
 
 The seeds default to 1001-1016, disjoint from the evaluation's (1-99). The file
 records the seeds, the noise level per band and each threshold; pass it to
@@ -89,7 +100,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "comma-separated (e.g. labels)")
     g.add_argument("--learned", action="append", default=[], metavar="KEY=VALUE",
                    help="with --learn: a detector setting, e.g. --learned mean_h=8 (see docs/detector.md)")
-    p.add_argument("--out", required=True, help="file to write (.yaml or .json; --learn: .json)")
+    g = p.add_argument_group("estimator reference (a vessel with pumped feeds of strong acid and base)")
+    g.add_argument("--estimator", nargs="+", default=None, metavar="RUN",
+                   help="fit the estimator reference on these healthy runs (.csv, .parquet, .mcap)")
+    g.add_argument("--model", default="rig_flask", help="with --estimator: the plant model giving the feeds and "
+                   "first guesses (preset or .yaml; default rig_flask)")
+    g.add_argument("--open-loop", action="store_true",
+                   help="with --estimator: simulate the model from each run's first pH, never correct it")
+    p.add_argument("--out", required=True, help="file to write (.yaml or .json; --learn, --estimator: .json)")
     p.set_defaults(func=run)
 
 
@@ -99,6 +117,8 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.scenario import load_scenario
     from phfdi_base.errors import UserError
 
+    if args.estimator:
+        return run_estimator(args)
     if args.learn:
         return run_learn(args)
     if args.rows is not None or args.exclude or args.learned:
@@ -173,5 +193,37 @@ def run_learn(args: argparse.Namespace) -> int:
     for c, name in enumerate(model.channels):
         print(f"  {name:28s} {model.reference.residual_sigma[c]:12.3f}  "
               + " ".join(f"{v:6.2f}" for v in model.band_sigma[c]))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def run_estimator(args: argparse.Namespace) -> int:
+    from phfdi.estimator import fit_estimator, read_runs, start_from_model
+    from phfdi_base.errors import UserError
+
+    if args.learn or args.runs:
+        raise UserError("--estimator, --learn and --runs are different calibrations: give one")
+    if not args.out.endswith(".json"):
+        raise UserError(f"--out {args.out}: an estimator reference is written as .json")
+    start = start_from_model(args.model, correct=not args.open_loop)
+    records = read_runs(args.estimator, start.channels, column_map_from_args(args))
+    for r in records:
+        print_notes("calibrate", r.notes)
+    with plant_runs_on(", ".join(args.estimator)):
+        model = fit_estimator(records, start)
+    model.save(args.out)
+    ref = model.reference
+    kind = "open-loop simulation" if args.open_loop else "estimator"
+    print(f"{kind} reference on {len(records)} healthy runs ({model.source['rows']} rows), "
+          f"sample time {model.settings.sample_time_s:g} s; fitted by the innovations' likelihood:")
+    for f in ref.feeds:  # type: ignore[attr-defined]
+        print(f"  {f.channel:24s} strength {f.strength_mM:9.3f} mM of charge ({'base' if f.strength_mM > 0 else 'acid'})")
+    print(f"  {'volume':24s} {ref.volume_ml:9.0f} mL")  # type: ignore[attr-defined]
+    for k, v in ref.noise.__dict__.items():  # type: ignore[attr-defined]
+        print(f"  {k:24s} {v:9.4g}")
+    print(f"  strengths adapt with a time constant of {ref.adapt_time_constant_s:g} s of pump-on time "  # type: ignore[attr-defined]
+          f"(every {ref.block_samples} samples)")  # type: ignore[attr-defined]
+    print(f"  healthy RMS per band ({', '.join(model.settings.bands())}): "
+          + " ".join(f"{v:.2f}" for v in model.band_sigma[0]))
     print(f"wrote {args.out}")
     return 0
