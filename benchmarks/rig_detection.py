@@ -37,7 +37,8 @@ def main() -> None:
               f"{e['healthy_hours'] * 60:.1f} min ({e['healthy_runs_with_alarm']} of 5 runs with an alarm)")
         for k, v in e["kinds"].items():
             d = "" if v["median_delay_s"] is None else f", median delay {v['median_delay_s']:.1f} s"
-            print(f"  {k:22s} detected {v['detected']:3d}/{v['cases']:<3d}{d}")
+            fam = "" if e["detector"] not in ("estimator", "open loop") else f", family right {v['family_right']}"
+            print(f"  {k:22s} detected {v['detected']:3d}/{v['cases']:<3d}{d}{fam}")
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1), encoding="utf-8")
         print(f"wrote {args.json}")

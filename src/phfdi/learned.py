@@ -113,7 +113,27 @@ def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | 
                             f"(phfdi calibrate --estimator fits it on healthy runs)")
         model = learn_from(rec, refit_rows, model.settings)
     events, states, _ = run_record(model, rec.time_s, rec.x)  # alarms in the record's own time
+    name_faults(model, rec, events)
     return events, states, model
+
+
+def name_faults(model: LearnedModel, rec: MeasuredRecord, events: list[LearnedEvent]) -> None:
+    """An estimator reference's alarms get the fault that explains them best (family, class, size):
+    :func:`wavelet_fdi.estimator_isolation.isolate`, in ``alarm["isolation"]`` of every event of the alarm."""
+    from wavelet_fdi.estimator_isolation import isolate
+    from wavelet_fdi.reference_estimator import EstimatorReference
+
+    if not isinstance(model.reference, EstimatorReference):
+        return
+    named: dict[int, dict] = {}
+    for e in events:
+        if e.alarm is None:
+            continue
+        a = e.alarm
+        if a["alarm_id"] not in named:
+            named[a["alarm_id"]] = isolate(model.reference, rec.time_s, rec.x, a["onset_index"],
+                                           a["detection_index"])
+        a["isolation"] = named[a["alarm_id"]]
 
 
 def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
@@ -129,6 +149,10 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
                      f"({where}){onset}, by "
                      f"{a['statistic']} ({a['statistic_value']:.1f} > {a['threshold']:.1f})")
         lines.append(f"  channels: {top}")
+        iso = a.get("isolation")
+        if iso:
+            lines.append(f"  named: {iso['family']} fault, {iso['description']} ({iso['size']:g} {iso['unit']}; "
+                         f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)")
         if a.get("cleared_time") is not None:
             ep = a.get("episode_contributions") or {}
             lines.append(f"  cleared {a['cleared_time']:g} {unit_of_time}; over the episode: "

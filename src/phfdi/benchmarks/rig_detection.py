@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from phfdi.estimator import fit_estimator, start_from_model
 from phfdi.inject import inject_fault
-from phfdi.learned import MeasuredRecord, read_measured
+from phfdi.learned import MeasuredRecord, name_faults, read_measured
 from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, run_record
 from wavelet_fdi.reference_learned import LearnedReference
 
@@ -49,25 +49,28 @@ def plain_cusum_h(arl0: float = 1e5, k: float = PLAIN_CUSUM_K) -> float:
 class Outcome:
     alarms_before: int = 0
     first_after_s: float | None = None
-    alarms: list[dict] = field(default_factory=list)
+    family: str | None = None  # named by the first alarm after the onset (None: the detector names none)
 
 
-def outcome(alarm_times: Sequence[float], onset_s: float | None) -> Outcome:
+def outcome(alarms: Sequence[tuple[float, str | None]], onset_s: float | None) -> Outcome:
     out = Outcome()
-    for ta in alarm_times:
+    for ta, family in alarms:
         if onset_s is None or ta < onset_s:
             out.alarms_before += 1
         elif out.first_after_s is None:
-            out.first_after_s = float(ta)
+            out.first_after_s, out.family = float(ta), family
     return out
 
 
-def learned_alarm_times(model: LearnedModel, rec: MeasuredRecord) -> list[float]:
+def learned_alarm_times(model: LearnedModel, rec: MeasuredRecord) -> list[tuple[float, str | None]]:
+    """(detection time, family named or None) of every alarm."""
     events, _, _ = run_record(model, rec.time_s, rec.x)
-    return [e.time_s for e in events if e.kind == "alarm"]
+    name_faults(model, rec, events)
+    return [(e.time_s, (e.alarm or {}).get("isolation", {}).get("family")) for e in events if e.kind == "alarm"]
 
 
-def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = PLAIN_CUSUM_K) -> list[float]:
+def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = PLAIN_CUSUM_K
+                      ) -> list[tuple[float, str | None]]:
     """Two-sided CUSUM restarted after each alarm (NaN counts as 0)."""
     up = down = 0.0
     times = []
@@ -75,7 +78,7 @@ def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = 
         up = max(0.0, up + r - k)
         down = max(0.0, down - r - k)
         if up > h or down > h:
-            times.append(float(ti))
+            times.append((float(ti), None))
             up = down = 0.0
     return times
 
@@ -83,7 +86,7 @@ def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = 
 @dataclass
 class Fold:
     held_out: str
-    detectors: dict[str, Callable[[MeasuredRecord], list[float]]]
+    detectors: dict[str, Callable[[MeasuredRecord], list[tuple[float, str | None]]]]
     info: dict
 
 
@@ -160,7 +163,7 @@ def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] =
                     rows.append({"run": Path(p).name, "detector": name, "case": truth["kind"],
                                  "family": truth["family"], "size": truth["size"], "size_rank": truth["size_rank"],
                                  "pump": truth.get("pump"), "onset_s": truth["onset_s"],
-                                 "alarms_before": o.alarms_before,
+                                 "alarms_before": o.alarms_before, "family_named": o.family,
                                  "delay_s": None if o.first_after_s is None else o.first_after_s - truth["onset_s"]})
     return {"rows": rows, "folds": folds}
 
@@ -183,6 +186,7 @@ def summary(result: dict) -> list[dict]:
                 ok = [r for r in cs if r["alarms_before"] == 0 and r["delay_s"] is not None]
                 delays = sorted(r["delay_s"] for r in ok)
                 entry["kinds"][f"{kind} {rank}"] = {"cases": len(cs), "detected": len(ok),
+                                                     "family_right": sum(1 for r in ok if r["family_named"] == r["family"]),
                                                      "median_delay_s": delays[len(delays) // 2] if delays else None}
         out.append(entry)
     return out
