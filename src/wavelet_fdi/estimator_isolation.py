@@ -20,7 +20,6 @@ fault model per hypothesis.
 
 from __future__ import annotations
 
-import copy
 from dataclasses import replace
 
 import numpy as np
@@ -38,9 +37,7 @@ STIFFNESS = 0.1
 
 
 def _window_nll(start: EstimatorStream, ref: EstimatorReference, t: np.ndarray, rows: np.ndarray) -> float:
-    stream = copy.deepcopy(start)
-    stream.ref = ref
-    stream.nll = 0.0
+    stream = start.fork(ref)
     stream.residuals(t, rows)
     return stream.nll
 

@@ -148,6 +148,7 @@ class EstimatorReference:
         object.__setattr__(self, "_x_table", x)
         object.__setattr__(self, "_beta_table", beta)
         object.__setattr__(self, "_x_list", x.tolist())
+        object.__setattr__(self, "_beta_list", beta.tolist())
 
     # ---- the protocol every reference kind shares ------------------------------------------
     @property
@@ -248,6 +249,15 @@ class EstimatorStream:
         self.nll = 0.0  # running negative log-likelihood of the innovations (for fitting)
         self.state_trace: list[float] | None = None
 
+    def fork(self, ref: EstimatorReference | None = None) -> "EstimatorStream":
+        """A copy of this state (the same or another reference, e.g. a fault hypothesis), log-likelihood reset."""
+        other = EstimatorStream(ref or self.ref)
+        other.x, other.p, other.last_t, other.samples = self.x, self.p, self.last_t, self.samples
+        other.factors, other.last_flows = list(self.factors), list(self.last_flows)
+        other._gg = [list(r) for r in self._gg]
+        other._gy, other._on_s = list(self._gy), list(self._on_s)
+        return other
+
     def residuals(self, t_s: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Innovations of the next rows (n, len(channels)) at times t_s, in predicted-sigma units."""
         ref = self.ref
@@ -265,108 +275,121 @@ class EstimatorStream:
         return np.array(self._run(t.tolist(), rows[:, :m].tolist(), ok.tolist(), xm, r_meas, ph.tolist()))[:, None]
 
     def _run(self, t, flows, ok, xm, r_meas, ph) -> list[float]:  # noqa: C901 - one tight loop, kept flat for speed
+        """The recursion over plain floats and lists (a sample costs a few microseconds this way); the state
+        lives in locals and is written back at block boundaries and at the end."""
         ref, nz = self.ref, self.ref.noise
         v = ref.volume_ml
         strengths = [f.strength_mM for f in ref.feeds]
         m = len(strengths)
+        rng_m = range(m)
         rel2, walk2, eps2, sp2 = nz.rate_rel_std ** 2, nz.walk_ph_per_sqrt_s ** 2, nz.curve_std_mM ** 2, \
             nz.probe_noise_ph ** 2
         tim = nz.timing_s
         xs: list[float] = ref._x_list  # type: ignore[attr-defined]
-        betas = ref._beta_table  # type: ignore[attr-defined]
+        betas: list[float] = ref._beta_list  # type: ignore[attr-defined]
         grid_n = len(xs) - 1
         block = ref.block_samples
         correct = ref.correct
+        adapting = ref.adapt_time_constant_s > 0
+        fac, gg, gy, on = self.factors, self._gg, self._gy, self._on_s  # mutated in place by _adapt
+        x, pv, last_t, qp, samples, nll = self.x, self.p, self.last_t, self.last_flows, self.samples, self.nll
+        exp, sqrt, log, bisect_left = math.exp, math.sqrt, math.log, bisect.bisect_left
         out = [math.nan] * len(t)
         for k in range(len(t)):
             q = flows[k]
-            for i in range(m):  # a missing flow holds the last one
+            for i in rng_m:  # a missing flow holds the last one
                 if q[i] != q[i]:
-                    q[i] = self.last_flows[i]
-            if self.x is None:  # the first sample with a pH starts the state
+                    q[i] = qp[i]
+            if x is None:  # the first sample with a pH starts the state
                 if ok[k]:
-                    self.x, self.p = xm[k], r_meas[k]
-                    self.last_t = t[k]
-                    self.last_flows = list(q)
+                    x, pv, last_t, qp = xm[k], r_meas[k], t[k], q
                     out[k] = 0.0  # the start: no evidence either way
-                self.samples += 1
+                samples += 1
                 continue
-            dt = t[k] - self.last_t if self.last_t is not None else 0.0
-            dt = dt if dt > 0 else 0.0
-            qp = self.last_flows
-            inflow = 0.0
-            qsum = 0.0
-            for i in range(m):
-                inflow += self.factors[i] * strengths[i] * qp[i]
+            dt = t[k] - last_t
+            if not dt > 0:
+                dt = 0.0
+            inflow = qsum = 0.0
+            for i in rng_m:
+                inflow += fac[i] * strengths[i] * qp[i]
                 qsum += qp[i]
             d = qsum / v
-            x0 = self.x
             if d > 0:
-                a = math.exp(-d * dt)
+                a = exp(-d * dt)
                 xss = inflow / v / d
-                xp = xss + (x0 - xss) * a
+                xp = xss + (x - xss) * a
             else:
                 a = 1.0
-                xp = x0 + inflow / v * dt
+                xp = x + inflow / v * dt
             # pH(x-) and beta there: the curve's table
-            j = bisect.bisect_left(xs, xp)
+            j = bisect_left(xs, xp)
             j = 1 if j < 1 else grid_n if j > grid_n else j
             lo, hi = xs[j - 1], xs[j]
             frac = (xp - lo) / (hi - lo) if hi > lo else 0.0
             frac = 0.0 if frac < 0 else 1.0 if frac > 1 else frac
             php = (j - 1 + frac) * 0.001
-            bp = float(betas[j])
-            pm = a * a * self.p + rel2 * (xp - x0) ** 2 + walk2 * bp * bp * dt
+            bp = betas[j]
+            step = xp - x
+            pm = a * a * pv + rel2 * step * step + walk2 * bp * bp * dt
             if ok[k]:
                 # the reading's timing is uncertain by `tim` seconds: an error of rate * tim, large only while
                 # the pH moves fast (a titration's steep part), added to the measurement's variance
-                tv = (tim * (xp - x0) / dt) ** 2 if dt > 0 else 0.0
-                s = pm + r_meas[k] + tv
+                tv = (tim * step / dt) ** 2 if dt > 0 else 0.0
+                sv = pm + r_meas[k] + tv
                 nu = xm[k] - xp
-                gain = pm / s if correct else 0.0
+                gain = pm / sv if correct else 0.0
                 corr = gain * nu
-                self.x = xp + corr
-                self.p = (1.0 - gain) * pm
-                sd = math.sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
-                out[k] = (ph[k] - php) / sd
-                self.nll += 0.5 * (math.log(s) + nu * nu / s)
-                self._accumulate(qp, strengths, dt, corr)
+                x = xp + corr
+                pv = (1.0 - gain) * pm
+                out[k] = (ph[k] - php) / sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
+                nll += 0.5 * (log(sv) + nu * nu / sv)
+                if adapting and corr != 0.0:
+                    # block sums for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V
+                    for i in rng_m:
+                        gi = fac[i] * strengths[i] * qp[i] * dt / v
+                        if gi == 0.0:
+                            continue
+                        gy[i] += gi * corr
+                        on[i] += dt
+                        row = gg[i]
+                        for jj in rng_m:
+                            row[jj] += gi * fac[jj] * strengths[jj] * qp[jj] * dt / v
             else:
-                self.x, self.p = xp, pm
-            self.last_t = t[k]
-            self.last_flows = list(q)
-            self.samples += 1
-            if self.samples % block == 0:
+                x, pv = xp, pm
+            last_t, qp = t[k], q
+            samples += 1
+            if samples % block == 0:
                 self._adapt()
+        self.x, self.p, self.last_t, self.last_flows, self.samples, self.nll = x, pv, last_t, qp, samples, nll
         return out
 
-    def _accumulate(self, q: list[float], strengths: list[float], dt: float, corr: float) -> None:
-        """Block sums for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V
-        (plain floats: this runs once per sample)."""
-        if self.ref.adapt_time_constant_s <= 0:
-            return
-        v = self.ref.volume_ml
-        g = [self.factors[i] * strengths[i] * q[i] * dt / v for i in range(len(q))]
-        gg, gy, on = self._gg, self._gy, self._on_s
-        for i, gi in enumerate(g):
-            if gi == 0.0:
-                continue
-            gy[i] += gi * corr
-            on[i] += dt
-            for j, gj in enumerate(g):
-                gg[i][j] += gi * gj
-
     def _adapt(self) -> None:
+        """At a block boundary: move each feed's factor toward the block's least-squares estimate, with gain
+        (seconds the feed ran in the block) / adapt_time_constant_s; then clear the block's sums (in place:
+        the recursion holds these lists)."""
         tau = self.ref.adapt_time_constant_s
         m = len(self.factors)
         if tau > 0 and any(self._on_s):
-            gg = np.array(self._gg)
-            ridge = 1e-12 + 1e-6 * float(np.trace(gg))
-            rel = np.linalg.solve(gg + ridge * np.eye(m), np.array(self._gy))  # relative strength error
-            rel = np.clip(rel, -MAX_BLOCK_STEP, MAX_BLOCK_STEP)  # one block (a cliff's misfit) moves a factor little
+            rel = _ridge_solve(self._gg, self._gy)  # relative strength error of each feed over the block
             lo, hi = FACTOR_BOUNDS
-            self.factors = [min(hi, max(lo, f * (1.0 + min(1.0, on / tau) * float(r))))
-                            for f, r, on in zip(self.factors, rel, self._on_s)]
-        self._gg = [[0.0] * m for _ in range(m)]
-        self._gy = [0.0] * m
-        self._on_s = [0.0] * m
+            cap = MAX_BLOCK_STEP  # one block (a cliff's misfit) moves a factor little
+            self.factors[:] = [min(hi, max(lo, f * (1.0 + min(1.0, on / tau) * max(-cap, min(cap, r)))))
+                               for f, r, on in zip(self.factors, rel, self._on_s)]
+        for i in range(m):
+            self._gg[i][:] = [0.0] * m
+        self._gy[:] = [0.0] * m
+        self._on_s[:] = [0.0] * m
+
+
+def _ridge_solve(gg: list[list[float]], gy: list[float]) -> list[float]:
+    """(G + ridge I) r = y for the small normal equations of the adaptation (closed form for one or two feeds,
+    numpy beyond), ridge 1e-6 of the trace."""
+    m = len(gy)
+    ridge = 1e-12 + 1e-6 * sum(gg[i][i] for i in range(m))
+    if m == 1:
+        return [gy[0] / (gg[0][0] + ridge)]
+    if m == 2:
+        a, b, c, d = gg[0][0] + ridge, gg[0][1], gg[1][0], gg[1][1] + ridge
+        det = a * d - b * c
+        return [(d * gy[0] - b * gy[1]) / det, (a * gy[1] - c * gy[0]) / det]
+    return np.linalg.solve(np.array(gg) + ridge * np.eye(m), np.array(gy)).tolist()
