@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from phfdi.benchmarks import skab
+from phfdi.commands.calibrate import learned_settings
 from phfdi_base.errors import UserError
 from wavelet_fdi.peers import PEER_LABELS, PEERS
 
@@ -46,9 +47,9 @@ ORACLE = "labels as prediction (ceiling)"
 PEER_NAMES = {f"{PEER_LABELS[p]} on our residuals": p for p in PEERS}
 
 
-def peers() -> dict[str, skab.Detector]:
+def peers(settings=None) -> dict[str, skab.Detector]:
     """The peer change detectors on the learned reference's residuals (see the module docstring)."""
-    return {label: skab.peer_detector(p) for label, p in PEER_NAMES.items()}
+    return {label: skab.peer_detector(p, settings) for label, p in PEER_NAMES.items()}
 
 
 def baselines() -> dict[str, skab.Detector]:
@@ -100,8 +101,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="also run the peer change detectors (CUSUM, FOCuS, Page-Hinkley, ADWIN) on our residuals")
     ap.add_argument("--toggler-seeds", type=int, default=0, metavar="N",
                     help="also print the random togglers' NAB over N seeds (mean, min, max)")
+    ap.add_argument("--learned", action="append", default=[], metavar="KEY=VALUE",
+                    help="a learned-detector setting for ours and the peers, e.g. --learned form=oe "
+                         "(the output-error reference) --learned correction_samples=100")
     args = ap.parse_args(argv)
     try:
+        settings = learned_settings(args.learned)
         paths = skab.find_files(args.data_dir)
         files = [skab.read_skab_csv(p) for p in paths]
     except UserError as exc:
@@ -112,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{sum(len(f.values) - skab.TRAIN_ROWS for f in labelled)} test rows", flush=True)
     out = Path(args.out)
     results, report = [], {}
-    detectors = {OURS: skab.learned_detector(), **(peers() if args.peers else {}), **baselines()}
+    detectors = {OURS: skab.learned_detector(settings), **(peers(settings) if args.peers else {}), **baselines()}
     per_detector = {}
     for i, (name, det) in enumerate(detectors.items()):
         t0 = time.perf_counter()
@@ -130,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
             for g in sorted({f.group for f in labelled}):
                 report[name][g] = skab.score(name, [r for r in per_file if r.file.group == g]).row()
     written = skab.write_predictions(per_detector[OURS], out)
-    causal = causality_check(skab.learned_detector(), files)
+    causal = causality_check(skab.learned_detector(settings), files)
     if args.peers:
         for name, det in peers().items():
             causality_check(det, files)

@@ -42,11 +42,14 @@ from phfdi_base.errors import UserError
 
 from .filterbank import CausalSwt, wavelet_filters
 from .reference_learned import LearnedReference, load_json, save_json
+from .reference_oe import OutputErrorReference
 from .references import Reference, reference_from_dict
 from .statistics import CusumBank, energy_reference
 
 FORMAT = "phfdi-learned-detector/1"
-TIME_RING = 1 << 16  # sample times kept to date an alarm's onset
+TIME_RING = 1 << 16
+#: learned reference forms (LearnedSettings.form)
+LEARNED_FORMS = ("arx", "oe")  # sample times kept to date an alarm's onset
 
 
 @dataclass
@@ -70,6 +73,11 @@ class LearnedSettings:
     lags: int = 2
     ridge_own: float = 1.0
     ridge_cross: float = 10.0
+    #: form of the learned reference: "arx" (own lags measured, wavelet_fdi.reference_learned) or "oe"
+    #: (output error: own lags simulated, pulled toward the measurement over correction_samples samples;
+    #: wavelet_fdi.reference_oe), which keeps a sensor fault in its channel's residual
+    form: str = "arx"
+    correction_samples: float = 100.0
     #: mean CUSUMs on AJ: reference value k and threshold h (healthy sigmas of AJ)
     mean_k: float = 5.0
     mean_h: float = 5.0
@@ -102,6 +110,10 @@ class LearnedSettings:
             raise UserError(str(exc)) from None
         if not 1 <= self.level <= 8:
             raise UserError(f"level must be 1..8, got {self.level}")
+        if self.form not in LEARNED_FORMS:
+            raise UserError(f"form must be one of {', '.join(LEARNED_FORMS)}, got {self.form!r}")
+        if self.correction_samples < 0 or 0 < self.correction_samples < 1:
+            raise UserError("correction_samples must be 0 (pure simulation) or at least 1")
         if self.mean_k < 0 or not self.mean_h > 0:
             raise UserError("mean_k must be >= 0 and mean_h > 0")
         if self.energy_variance_ratio and not self.energy_variance_ratio > 1.0:
@@ -193,6 +205,15 @@ class LearnedModel:
         return cls(ref, settings, sigma, dict(d.get("source") or {}))
 
 
+def fit_reference(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSettings) -> Reference:
+    """The learned reference of ``settings.form`` fitted on healthy rows (n, m)."""
+    s = settings
+    if s.form == "oe":
+        return OutputErrorReference.fit(x_healthy, channels, s.lags, s.ridge_own, s.ridge_cross,
+                                        s.correction_samples)
+    return LearnedReference.fit(x_healthy, channels, s.lags, s.ridge_own, s.ridge_cross)
+
+
 def learn(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSettings | None = None,
           source: dict | None = None) -> LearnedModel:
     """Fit the reference on healthy rows and measure each band's healthy RMS on the same rows.
@@ -225,7 +246,7 @@ def learn(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSetti
     4000
     """
     s = (settings or LearnedSettings()).check()
-    ref = LearnedReference.fit(x_healthy, channels, s.lags, s.ridge_own, s.ridge_cross)
+    ref = fit_reference(x_healthy, channels, s)
     src = {"healthy_rows": int(len(x_healthy)), **(source or {})}
     return calibrate_bands(ref, [(np.arange(len(x_healthy)) * s.sample_time_s, x_healthy)], s, src)
 

@@ -16,6 +16,9 @@ Kinds (chosen by the reference file, :data:`KINDS`):
 
 * ``arx`` (:class:`~wavelet_fdi.reference_learned.LearnedReference`): each channel from its own past and
   the others, learned from healthy rows; any plant, no model;
+* ``oe`` (:class:`~wavelet_fdi.reference_oe.OutputErrorReference`): the same linear model in output-error
+  form, its own lags from its own past predictions pulled slowly toward the measurement, so a sensor
+  fault (a step that stays, a frozen channel) stays in the channel's residual (``--learned form=oe``);
 * ``estimator`` (:class:`~wavelet_fdi.reference_estimator.EstimatorReference`, ``correct: true``): a
   Kalman filter on a stirred vessel's reaction invariant driven by the measured pH;
 * the same physics run open loop (``correct: false``): the model simulated from the record's first pH on
@@ -36,6 +39,7 @@ from phfdi_base.errors import UserError
 
 from .reference_estimator import EstimatorReference
 from .reference_learned import LearnedReference
+from .reference_oe import OutputErrorReference
 
 
 class ReferenceStream(Protocol):
@@ -58,7 +62,7 @@ class Reference(Protocol):
 
 
 #: reference kinds by the name their files carry
-KINDS: dict[str, Any] = {"arx": LearnedReference, "estimator": EstimatorReference}
+KINDS: dict[str, Any] = {"arx": LearnedReference, "oe": OutputErrorReference, "estimator": EstimatorReference}
 
 
 def reference_from_dict(d: dict, where: str = "reference") -> Reference:

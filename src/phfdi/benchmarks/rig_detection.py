@@ -2,10 +2,11 @@
 healthy and with faults injected by :mod:`phfdi.inject`, for each reference kind side by side.
 
 Per fold: the estimator reference (Kalman filter on the reaction invariant, :mod:`phfdi.estimator`), the same
-physics open loop (simulation reference, same fitted parameters), the learned ARX reference fitted on the
-four training runs, and a plain two-sided CUSUM (k = 0.5, h for an average run length of 1e5 samples on
-unit-variance residuals, Siegmund's approximation) on the estimator's residual. Nothing is chosen on the
-held-out run: the fault sizes and onsets are fixed below, the thresholds come from the training runs.
+physics open loop (simulation reference, same fitted parameters), the learned ARX reference and the learned
+output-error reference (``form=oe``, :mod:`wavelet_fdi.reference_oe`) fitted on the four training runs,
+and a plain two-sided CUSUM (k = 0.5, h for an average run length of 1e5 samples on unit-variance
+residuals, Siegmund's approximation) on the estimator's residual. Nothing is chosen on the held-out run:
+the fault sizes and onsets are fixed below, the thresholds come from the training runs.
 """
 
 from __future__ import annotations
@@ -21,8 +22,7 @@ import numpy as np
 from phfdi.estimator import fit_estimator, start_from_model
 from phfdi.inject import inject_fault
 from phfdi.learned import MeasuredRecord, name_faults, read_measured
-from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, run_record
-from wavelet_fdi.reference_learned import LearnedReference
+from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, fit_reference, run_record
 
 CHANNELS = ("acid_flow_ml_s", "base_flow_ml_s", "ph_measured")
 #: fault kinds with (larger, smaller) sizes in their units (phfdi inject --help), fixed before any run
@@ -52,25 +52,41 @@ class Outcome:
     family: str | None = None  # named by the first alarm after the onset (None: the detector names none)
 
 
-def outcome(alarms: Sequence[tuple[float, str | None]], onset_s: float | None) -> Outcome:
+def outcome(alarms: Sequence[dict], onset_s: float | None) -> Outcome:
     out = Outcome()
-    for ta, family in alarms:
+    for a in alarms:
+        ta = a["t"]
         if onset_s is None or ta < onset_s:
             out.alarms_before += 1
         elif out.first_after_s is None:
-            out.first_after_s, out.family = float(ta), family
+            out.first_after_s, out.family = float(ta), a.get("family")
     return out
 
 
-def learned_alarm_times(model: LearnedModel, rec: MeasuredRecord) -> list[tuple[float, str | None]]:
-    """(detection time, family named or None) of every alarm."""
+def learned_alarms(model: LearnedModel, rec: MeasuredRecord) -> list[dict]:
+    """Each alarm's raise time ``t``, the time it cleared (``until``; the record's end if it did not) and the
+    fault family named (estimator references; None for the others)."""
     events, _, _ = run_record(model, rec.time_s, rec.x)
     name_faults(model, rec, events)
-    return [(e.time_s, (e.alarm or {}).get("isolation", {}).get("family")) for e in events if e.kind == "alarm"]
+    out: list[dict] = []
+    for e in events:
+        if e.kind == "alarm":
+            out.append({"t": float(e.time_s), "until": float(rec.time_s[-1]),
+                        "family": (e.alarm or {}).get("isolation", {}).get("family")})
+        elif e.kind == "cleared" and out:
+            out[-1]["until"] = float(e.time_s)
+    return out
 
 
-def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = PLAIN_CUSUM_K
-                      ) -> list[tuple[float, str | None]]:
+def held_share(alarms: Sequence[dict], onset_s: float, end_s: float) -> float:
+    """Share of the time from the onset to the record's end with an alarm up (the fault stays to the end)."""
+    if not end_s > onset_s:
+        return 0.0
+    up = sum(max(0.0, min(a["until"], end_s) - max(a["t"], onset_s)) for a in alarms)
+    return up / (end_s - onset_s)
+
+
+def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = PLAIN_CUSUM_K) -> list[float]:
     """Two-sided CUSUM restarted after each alarm (NaN counts as 0)."""
     up = down = 0.0
     times = []
@@ -78,7 +94,7 @@ def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = 
         up = max(0.0, up + r - k)
         down = max(0.0, down - r - k)
         if up > h or down > h:
-            times.append((float(ti), None))
+            times.append(float(ti))
             up = down = 0.0
     return times
 
@@ -86,32 +102,41 @@ def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = 
 @dataclass
 class Fold:
     held_out: str
-    detectors: dict[str, Callable[[MeasuredRecord], list[tuple[float, str | None]]]]
+    detectors: dict[str, Callable[[MeasuredRecord], list[float]]]
     info: dict
 
 
-def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_flask") -> Fold:
-    est = fit_estimator(train, start_from_model(model))
+def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_flask",
+               only: Sequence[str] | None = None) -> Fold:
+    physics = only is None or bool({"estimator", "open loop", "plain CUSUM (estimator residual)"} & set(only))
     runs = [(r.time_s - r.time_s[0], r.x) for r in train]
-    open_ref = est.reference.with_values(correct=False)  # type: ignore[attr-defined]
-    open_model = calibrate_bands(open_ref, runs, est.settings, {"files": [r.path for r in train]})
+    dt = float(np.median(np.concatenate([np.diff(t) for t, _ in runs if len(t) > 1])))
     x_all = np.vstack([r.x for r in train])
-    arx_settings = LearnedSettings(sample_time_s=est.settings.sample_time_s)
-    arx = LearnedReference.fit(x_all, CHANNELS, arx_settings.lags, arx_settings.ridge_own, arx_settings.ridge_cross)
-    arx_model = calibrate_bands(arx, runs, arx_settings, {"files": [r.path for r in train]})
-    h = plain_cusum_h()
+    files = {"files": [r.path for r in train]}
+    arx_settings = LearnedSettings(sample_time_s=dt)
+    arx_model = calibrate_bands(fit_reference(x_all, CHANNELS, arx_settings), runs, arx_settings, files)
+    oe_settings = LearnedSettings(sample_time_s=dt, form="oe")
+    oe_model = calibrate_bands(fit_reference(x_all, CHANNELS, oe_settings), runs, oe_settings, files)
+    dets: dict[str, Callable[[MeasuredRecord], list[dict]]] = {
+        "learned ARX": lambda rec: learned_alarms(arx_model, rec),
+        "learned OE": lambda rec: learned_alarms(oe_model, rec)}
+    info: dict = {}
+    if physics:
+        est = fit_estimator(train, start_from_model(model))
+        open_ref = est.reference.with_values(correct=False)  # type: ignore[attr-defined]
+        open_model = calibrate_bands(open_ref, runs, est.settings, files)
+        h = plain_cusum_h()
 
-    def plain(rec: MeasuredRecord) -> list[float]:
-        r = est.reference.new_state().residuals(rec.time_s - rec.time_s[0], rec.x)[:, 0]
-        return cusum_alarm_times(r, rec.time_s, h)
+        def plain(rec: MeasuredRecord) -> list[dict]:
+            r = est.reference.new_state().residuals(rec.time_s - rec.time_s[0], rec.x)[:, 0]
+            return [{"t": t, "until": t} for t in cusum_alarm_times(r, rec.time_s, h)]
 
-    dets = {"estimator": lambda rec: learned_alarm_times(est, rec),
-            "open loop": lambda rec: learned_alarm_times(open_model, rec),
-            "learned ARX": lambda rec: learned_alarm_times(arx_model, rec),
-            "plain CUSUM (estimator residual)": plain}
-    ref = est.reference
-    info = {"strengths_mM": [f.strength_mM for f in ref.feeds], "volume_ml": ref.volume_ml,  # type: ignore[attr-defined]
-            "noise": ref.noise.__dict__, "plain_cusum_h": h}  # type: ignore[attr-defined]
+        dets = {"estimator": lambda rec: learned_alarms(est, rec),
+                "open loop": lambda rec: learned_alarms(open_model, rec), **dets,
+                "plain CUSUM (estimator residual)": plain}
+        ref = est.reference
+        info = {"strengths_mM": [f.strength_mM for f in ref.feeds], "volume_ml": ref.volume_ml,  # type: ignore[attr-defined]
+                "noise": ref.noise.__dict__, "plain_cusum_h": h}  # type: ignore[attr-defined]
     return Fold(held_out, dets, info)
 
 
@@ -147,7 +172,7 @@ def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] =
     with tempfile.TemporaryDirectory() as tmp:
         for p in paths:
             progress(f"fold: {Path(p).name} held out")
-            fold = build_fold([records[q] for q in paths if q != p], p)
+            fold = build_fold([records[q] for q in paths if q != p], p, only=only)
             folds[Path(p).name] = fold.info
             rec = records[p]
             hours = (rec.time_s[-1] - rec.time_s[0]) / 3600.0
@@ -159,11 +184,13 @@ def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] =
                              "false_alarms": o.alarms_before})
             for truth, frec in injected_cases(p, rec, Path(tmp), column_map):
                 for name, det in fold.detectors.items():
-                    o = outcome(det(frec), truth["onset_s"])
+                    alarms = det(frec)
+                    o = outcome(alarms, truth["onset_s"])
                     rows.append({"run": Path(p).name, "detector": name, "case": truth["kind"],
                                  "family": truth["family"], "size": truth["size"], "size_rank": truth["size_rank"],
                                  "pump": truth.get("pump"), "onset_s": truth["onset_s"],
                                  "alarms_before": o.alarms_before, "family_named": o.family,
+                                 "held_share": held_share(alarms, truth["onset_s"], float(frec.time_s[-1])),
                                  "delay_s": None if o.first_after_s is None else o.first_after_s - truth["onset_s"]})
     return {"rows": rows, "folds": folds}
 
@@ -185,8 +212,10 @@ def summary(result: dict) -> list[dict]:
                     continue
                 ok = [r for r in cs if r["alarms_before"] == 0 and r["delay_s"] is not None]
                 delays = sorted(r["delay_s"] for r in ok)
+                held = sorted(r["held_share"] for r in cs)
                 entry["kinds"][f"{kind} {rank}"] = {"cases": len(cs), "detected": len(ok),
                                                      "family_right": sum(1 for r in ok if r["family_named"] == r["family"]),
-                                                     "median_delay_s": delays[len(delays) // 2] if delays else None}
+                                                     "median_delay_s": delays[len(delays) // 2] if delays else None,
+                                                     "median_held_share": held[len(held) // 2]}
         out.append(entry)
     return out

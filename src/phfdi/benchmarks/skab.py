@@ -25,9 +25,8 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from phfdi_base.errors import UserError
-from wavelet_fdi.learned_detector import LearnedSettings, learn, run_record
+from wavelet_fdi.learned_detector import LearnedSettings, fit_reference, learn, run_record
 from wavelet_fdi.peers import Peer, calibrate_peers, multichannel_states
-from wavelet_fdi.reference_learned import LearnedReference
 
 from .scoring import BinaryScores, NabResult, binary_scores, match_changepoints, nab_scores, switches
 
@@ -290,7 +289,7 @@ def peer_detector(name: str, settings=None, arl0_samples: float = PEER_ARL0_SAMP
     s = settings or LearnedSettings()
 
     def detect(train: np.ndarray, test: np.ndarray, t_s: np.ndarray) -> np.ndarray:
-        ref = LearnedReference.fit(train, SENSOR_COLUMNS, s.lags, s.ridge_own, s.ridge_cross)
+        ref = fit_reference(train, SENSOR_COLUMNS, s)
         u = ref.residuals(None, np.vstack((train, test)))
         m = u.shape[1]
         healthy = [u[ref.lags:len(train), c] for c in range(m)]

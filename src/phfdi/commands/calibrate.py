@@ -13,6 +13,7 @@ EXAMPLES = """examples:
   phfdi calibrate --scenario my_loop.yaml --runs healthy1.parquet healthy2.parquet --out plant.yaml
   phfdi calibrate --scenario my_loop.yaml --runs h1.csv h2.csv --map plant_columns.yaml --out plant.yaml
   phfdi calibrate --learn healthy.csv --rows 400 --exclude anomaly,changepoint --out ref.json
+  phfdi calibrate --learn healthy.csv --rows 400 --learned form=oe --learned correction_samples=100 --out ref.json
   phfdi calibrate --estimator ../shared/data/ph_rig/2025.02.24-*.csv --model rig_flask --map ph_rig --out rig.json
 
 --learn fits a learned healthy reference (no plant model needed) on the first
@@ -99,7 +100,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--exclude", default="", metavar="COLS", help="with --learn: columns that are not channels, "
                    "comma-separated (e.g. labels)")
     g.add_argument("--learned", action="append", default=[], metavar="KEY=VALUE",
-                   help="with --learn: a detector setting, e.g. --learned mean_h=8 (see docs/detector.md)")
+                   help="with --learn: a detector setting, e.g. --learned mean_h=8, or --learned form=oe for the "
+                        "output-error reference that keeps a sensor fault in its residual (see docs/detector.md)")
     g = p.add_argument_group("estimator reference (a vessel with pumped feeds of strong acid and base)")
     g.add_argument("--estimator", nargs="+", default=None, metavar="RUN",
                    help="fit the estimator reference on these healthy runs (.csv, .parquet, .mcap)")
@@ -187,7 +189,7 @@ def run_learn(args: argparse.Namespace) -> int:
     model.save(args.out)
     s = model.settings
     print(f"learned reference on {model.source['rows']} healthy rows of {args.learn}: {len(model.channels)} channels, "
-          f"{s.lags} own lags + the other channels (ridge), {s.wavelet} level {s.level}, "
+          f"{s.form} form, {s.lags} own lags + the other channels (ridge), {s.wavelet} level {s.level}, "
           f"sample time {s.sample_time_s:g} s")
     print(f"  {'channel':28s} {'residual/std':>12s}  healthy RMS per band ({', '.join(s.bands())})")
     for c, name in enumerate(model.channels):
