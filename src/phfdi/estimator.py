@@ -2,7 +2,7 @@
 
 ``phfdi calibrate --estimator RUN... --model rig_flask --map ph_rig`` ends here: the plant model (an
 overflow vessel with feeds of strong acid and base) gives the filter's feeds and first guesses
-(strength in mM of charge, flask volume), :meth:`wavelet_fdi.reference_estimator.EstimatorReference.fit`
+(strength in mM of charge, flask volume), :func:`wavelet_fdi.estimator_fit.fit_reference`
 fits strengths, volume and noise model on the healthy runs by the innovations' likelihood, and
 :func:`wavelet_fdi.learned_detector.calibrate_bands` measures the residual's healthy band RMS on the same
 runs. The result is a detector model file that ``phfdi replay --reference`` and the detector node load
@@ -18,6 +18,7 @@ import numpy as np
 
 from phfdi.learned import MeasuredRecord, read_measured
 from phfdi_base.errors import UserError
+from wavelet_fdi.estimator_fit import fit_reference
 from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands
 from wavelet_fdi.reference_estimator import EstimatorReference, Feed
 
@@ -79,5 +80,5 @@ def fit_estimator(records: Sequence[MeasuredRecord], start: EstimatorReference,
     dt = float(np.median(np.concatenate([np.diff(t) for t, _ in runs if len(t) > 1])))
     base = settings or LearnedSettings(**ESTIMATOR_SETTINGS)
     s = LearnedSettings(**{**base.__dict__, "sample_time_s": dt})
-    ref = EstimatorReference.fit(runs, start)
+    ref = fit_reference(runs, start)
     return calibrate_bands(ref, runs, s, {"files": [r.path for r in records], "rows": int(sum(len(r.x) for r in records))})

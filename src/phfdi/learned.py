@@ -132,7 +132,7 @@ def name_faults(model: LearnedModel, rec: MeasuredRecord, events: list[LearnedEv
         a = e.alarm
         if a["alarm_id"] not in named:
             named[a["alarm_id"]] = isolate(model.reference, rec.time_s, rec.x, a["onset_index"],
-                                           a["detection_index"])
+                                           a["detection_index"], a["statistic"])
         a["isolation"] = named[a["alarm_id"]]
 
 

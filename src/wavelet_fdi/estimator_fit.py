@@ -9,15 +9,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 from scipy.optimize import minimize
 
 from phfdi_base.errors import UserError
 
-if TYPE_CHECKING:
-    from .reference_estimator import EstimatorReference
+from .reference_estimator import EstimatorReference
 
 #: bounds of the fitted values (physical sense, wide: the rig's fits land well inside)
 STRENGTH_BOUNDS_MM = (0.05, 1000.0)
@@ -27,7 +26,7 @@ NOISE_BOUNDS = {"probe_noise_ph": (0.002, 0.5), "rate_rel_std": (0.01, 5.0), "wa
 NOISE_KEYS = tuple(NOISE_BOUNDS)
 
 
-def _unpack(cls, start: "EstimatorReference", theta: np.ndarray) -> "EstimatorReference":
+def _unpack(start: EstimatorReference, theta: np.ndarray) -> EstimatorReference:
     m = len(start.feeds)
     v = np.exp(theta)
     feeds = tuple(replace(f, strength_mM=math.copysign(float(v[i]), f.strength_mM)) for i, f in enumerate(start.feeds))
@@ -35,7 +34,7 @@ def _unpack(cls, start: "EstimatorReference", theta: np.ndarray) -> "EstimatorRe
     return replace(start, feeds=feeds, volume_ml=float(v[m]), noise=noise)
 
 
-def _pack(start: "EstimatorReference") -> tuple[np.ndarray, list[tuple[float, float]]]:
+def _pack(start: EstimatorReference) -> tuple[np.ndarray, list[tuple[float, float]]]:
     vals = [abs(f.strength_mM) for f in start.feeds] + [start.volume_ml]
     bounds = [STRENGTH_BOUNDS_MM] * len(start.feeds) + [VOLUME_BOUNDS_ML]
     for k in NOISE_KEYS:
@@ -47,7 +46,7 @@ def _pack(start: "EstimatorReference") -> tuple[np.ndarray, list[tuple[float, fl
     return theta, list(zip(lo, hi))
 
 
-def negative_log_likelihood(ref: "EstimatorReference", runs: Sequence[tuple[np.ndarray, np.ndarray]]) -> float:
+def negative_log_likelihood(ref: EstimatorReference, runs: Sequence[tuple[np.ndarray, np.ndarray]]) -> float:
     total = 0.0
     for t, rows in runs:
         stream = ref.new_state()
@@ -56,22 +55,27 @@ def negative_log_likelihood(ref: "EstimatorReference", runs: Sequence[tuple[np.n
     return total
 
 
-def fit_reference(cls, runs: Sequence[tuple[np.ndarray, np.ndarray]], start: "EstimatorReference",
-                  max_evaluations: int = 300) -> "EstimatorReference":
+def fit_reference(runs: Sequence[tuple[np.ndarray, np.ndarray]], start: EstimatorReference,
+                  max_evaluations: int = 300) -> EstimatorReference:
+    """Strengths, volume and noise model that maximise the innovations' likelihood on healthy runs.
+
+    ``runs``: (time_s, rows) per run, rows in ``start.channels`` order. ``start`` gives the feeds'
+    channels and signs, the first guesses and the adaptation settings.
+    """
     if not runs or sum(len(t) for t, _ in runs) < 50:
         raise UserError("fitting the estimator needs healthy runs with at least 50 samples in all")
     theta0, bounds = _pack(start)
 
     def cost(theta: np.ndarray) -> float:
         try:
-            value = negative_log_likelihood(_unpack(cls, start, theta), runs)
+            value = negative_log_likelihood(_unpack(start, theta), runs)
         except (UserError, FloatingPointError, ValueError, ZeroDivisionError, OverflowError):
             return 1e300
         return value if math.isfinite(value) else 1e300
 
     res = minimize(cost, theta0, method="Powell", bounds=bounds,
                    options={"maxfev": int(max_evaluations), "xtol": 1e-3, "ftol": 1e-6})
-    fitted = _unpack(cls, start, res.x)
+    fitted = _unpack(start, res.x)
     n = sum(len(t) for t, _ in runs)
     info = {"runs": len(runs), "samples": int(n), "nll_per_sample": float(res.fun) / n,
             "evaluations": int(res.nfev), "method": "maximum likelihood of the innovations (Powell, bounded)"}

@@ -34,6 +34,8 @@ OFFSET_RANGE_PH = (-4.0, 4.0)
 NOISE_RANGE = (0.02, 20.0)  # searched on its logarithm
 PUMP_RANGE = (0.0, 3.0)
 STIFFNESS = 0.1
+#: the detector's statistics that watch the reading's noise (wavelet_fdi.learned_detector)
+NOISE_STATISTICS = (".energy", ".energy_down")
 
 
 def _window_nll(start: EstimatorStream, ref: EstimatorReference, t: np.ndarray, rows: np.ndarray) -> float:
@@ -43,10 +45,13 @@ def _window_nll(start: EstimatorStream, ref: EstimatorReference, t: np.ndarray, 
 
 
 def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_index: int,
-            detection_index: int) -> dict:
+            detection_index: int, statistic: str = "") -> dict:
     """Family, class and size of the fault behind an alarm (see the module docstring).
 
     ``rows``/``t_s``: the record from its start (the filter is re-run to the onset to get its state there).
+    ``statistic``: the detector's statistic that raised the alarm. When it is an energy statistic of a detail
+    band (the reading's noise changed), only the probe-noise hypothesis is fitted: a pump delivering other than
+    recorded changes what the pH does, never how noisy its reading is.
     """
     n = len(rows)
     a = max(1, min(int(onset_index), n - 1))
@@ -81,7 +86,9 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     hyps: list[tuple[str, str, str, str, object, tuple[float, float], float]] = [
         ("probe_offset", "sensor", "probe offset", "pH", offset, OFFSET_RANGE_PH, 0.0),
         ("probe_noise", "sensor", "probe noise", "x healthy noise", noise, tuple(np.log(NOISE_RANGE)), 0.0)]
-    for i, f in enumerate(ref.feeds):
+    if statistic.endswith(NOISE_STATISTICS):
+        hyps = hyps[1:]
+    for i, f in enumerate(ref.feeds if not statistic.endswith(NOISE_STATISTICS) else ()):
         if np.nanmax(np.abs(xw[:, i])) > 0:
             hyps.append((f"pump:{f.channel}", "actuator", f"{f.channel} delivers other than recorded",
                          "x recorded", pump(i), PUMP_RANGE, 1.0))

@@ -49,7 +49,7 @@ absorb a constant offset at the start, and an offset that appears later is a fau
 
 The noise model (probe_noise, rate_rel_std, walk, curve_std), the strengths, the volume and the buffer
 are fitted on healthy runs by maximising the innovations' Gaussian likelihood (the prediction-error
-method for state-space models: Ljung 1999, ch. 7; Schweppe 1965), :meth:`EstimatorReference.fit`.
+method for state-space models: Ljung 1999, ch. 7; Schweppe 1965), :func:`wavelet_fdi.estimator_fit.fit_reference`.
 
 Any chunking of a record gives bit-identical residuals: the recursion runs sample by sample and the
 adaptation acts at fixed global sample indices.
@@ -60,7 +60,6 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import asdict, dataclass, field, replace
-from typing import Sequence
 
 import numpy as np
 
@@ -200,19 +199,6 @@ class EstimatorReference:
         frac = 0.0 if hi == lo else min(max((x - lo) / (hi - lo), 0.0), 1.0)
         return float(PH_GRID[i - 1] + frac * (PH_GRID[i] - PH_GRID[i - 1]))
 
-    # ---- fitting ---------------------------------------------------------------------------
-    @classmethod
-    def fit(cls, runs: Sequence[tuple[np.ndarray, np.ndarray]], start: "EstimatorReference",
-            max_evaluations: int = 300) -> "EstimatorReference":
-        """Strengths, volume, buffer and noise model that maximise the innovations' likelihood on healthy runs.
-
-        ``runs``: (time_s, rows) per run, rows in ``start.channels`` order. ``start`` gives the feeds'
-        channels and signs, the first guesses and the adaptation settings.
-        """
-        from .estimator_fit import fit_reference
-
-        return fit_reference(cls, runs, start, max_evaluations)
-
     def with_values(self, **changes) -> "EstimatorReference":
         return replace(self, **changes)
 
@@ -291,7 +277,7 @@ class EstimatorStream:
         block = ref.block_samples
         correct = ref.correct
         adapting = ref.adapt_time_constant_s > 0
-        fac, gg, gy, on = self.factors, self._gg, self._gy, self._on_s  # mutated in place by _adapt
+        fac = self.factors  # mutated in place by _adapt
         x, pv, last_t, qp, samples, nll = self.x, self.p, self.last_t, self.last_flows, self.samples, self.nll
         exp, sqrt, log, bisect_left = math.exp, math.sqrt, math.log, bisect.bisect_left
         out = [math.nan] * len(t)
@@ -344,16 +330,7 @@ class EstimatorStream:
                 out[k] = (ph[k] - php) / sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
                 nll += 0.5 * (log(sv) + nu * nu / sv)
                 if adapting and corr != 0.0:
-                    # block sums for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V
-                    for i in rng_m:
-                        gi = fac[i] * strengths[i] * qp[i] * dt / v
-                        if gi == 0.0:
-                            continue
-                        gy[i] += gi * corr
-                        on[i] += dt
-                        row = gg[i]
-                        for jj in rng_m:
-                            row[jj] += gi * fac[jj] * strengths[jj] * qp[jj] * dt / v
+                    self._accumulate(qp, strengths, dt, corr)
             else:
                 x, pv = xp, pm
             last_t, qp = t[k], q
@@ -362,6 +339,18 @@ class EstimatorStream:
                 self._adapt()
         self.x, self.p, self.last_t, self.last_flows, self.samples, self.nll = x, pv, last_t, qp, samples, nll
         return out
+
+    def _accumulate(self, qp: list[float], strengths: list[float], dt: float, corr: float) -> None:
+        """Block sums for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V."""
+        v, fac = self.ref.volume_ml, self.factors
+        g = [fac[i] * strengths[i] * qp[i] * dt / v for i in range(len(qp))]
+        for i, gi in enumerate(g):
+            if gi != 0.0:
+                self._gy[i] += gi * corr
+                self._on_s[i] += dt
+                row = self._gg[i]
+                for j, gj in enumerate(g):
+                    row[j] += gi * gj
 
     def _adapt(self) -> None:
         """At a block boundary: move each feed's factor toward the block's least-squares estimate, with gain

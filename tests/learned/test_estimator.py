@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from phfdi_base.errors import UserError
+from wavelet_fdi.estimator_fit import fit_reference
 from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, run_record
 from wavelet_fdi.reference_estimator import EstimatorReference, Feed, NoiseModel
 from wavelet_fdi.references import reference_from_dict
@@ -149,7 +150,7 @@ def test_the_fit_recovers_the_strength_ratio_of_synthetic_runs():
     runs = [simulate(truth, 1500, lambda k: 2.0 if (k // 250) % 2 == 0 else 0.5, seed=30 + i, ph0=11.0)
             for i in range(2)]
     start = flask(base_mM=30.0)
-    fitted = EstimatorReference.fit(runs, start, max_evaluations=200)
+    fitted = fit_reference(runs, start, max_evaluations=200)
     ratio = fitted.feeds[1].strength_mM / fitted.volume_ml
     assert ratio == pytest.approx(50.0 / 1000.0, rel=0.2)
     assert fitted.noise.probe_noise_ph == pytest.approx(0.03, rel=0.35)
