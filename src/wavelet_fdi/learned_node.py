@@ -7,6 +7,12 @@ reference's by name (a channel a message lacks is missing for that row). Output:
 (phfdi_interfaces/FaultAlarm) when an alarm is raised or cleared and when a channel goes missing,
 with the channels that carry the alarm (``channels``, ``channel_shares``, ``channel_bands``).
 
+The reference is the kind the model file names (a learned ARX reference from ``phfdi calibrate --learn``,
+the rig's Kalman estimator from ``phfdi calibrate --estimator``, ...). The core takes each row at its
+stamp in seconds (:func:`phfdi_base.stamps.stamp_seconds`; ``phfdi bag from-csv`` stamps a row with the
+record's own time to the ns), the times the offline ``phfdi replay RECORD --reference REF`` gives it: the
+estimator steps by their differences.
+
 Callbacks only queue rows; a worker thread hands everything queued to the core in one call (the
 result is the same for any chunking; :mod:`wavelet_fdi.node_base`). The node prints one JSON line per
 published change and, on exit, a ``detector_done`` report with every alarm (the launcher and
@@ -26,14 +32,14 @@ from phfdi_interfaces.msg import FaultAlarm, MeasuredSample
 
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
-from phfdi_base.stamps import ns_to_seconds, seconds_to_ns
+from phfdi_base.stamps import seconds_to_ns, stamp_seconds, time_ns
 from phfdi_base.topics import MEASURED_SAMPLE
 
 from .learned_detector import LearnedDetector, LearnedModel
 from .node_base import DetectorNodeBase
 
 PARAMS = (
-    ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn"),
+    ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
     ParamSpec("loop", "measured", "name of the monitored plant or loop in /fault_alarm"),
 )
 STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
@@ -69,7 +75,7 @@ class LearnedDetectorNode(DetectorNodeBase):
             if i is not None:
                 row[i] = value
         self._received += 1
-        self.enqueue([(ns_to_seconds(msg.stamp.sec, msg.stamp.nanosec), row)])
+        self.enqueue([(stamp_seconds(time_ns(msg.stamp)), row)])
 
     def received(self) -> int:
         return self._received
