@@ -33,7 +33,7 @@ import numpy as np
 from phfdi.run import Run
 from phfdi_base import topics as T
 from phfdi_base.errors import UserError
-from phfdi_base.stamps import join_ns, seconds_to_ns, split_ns
+from phfdi_base.stamps import join_ns, record_stamps_ns, seconds_to_ns, split_ns
 from wavelet_fdi.alarm_messages import to_dict as alarm_message_dict
 
 from . import __version__
@@ -287,17 +287,26 @@ def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES)
     return path
 
 
+#: the largest record time (s) a bag of a measured record stamps as it is (int64 nanoseconds, with room)
+MAX_STAMP_S = 9.0e9
+
+
 def write_measured(time_s: np.ndarray, x: np.ndarray, channels: list[str], path: str | Path, source: str = "",
                    metadata: dict | None = None, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
     """A measured record as a bag: one phfdi_interfaces/MeasuredSample per row on /measured/sample,
-    stamped with the row's time (s from the first row), schemas embedded (ros2 profile)."""
+    stamped with the row's own time to the ns (:func:`phfdi_base.stamps.record_stamps_ns`: the learned node
+    then gives the detector the times the offline replay does), schemas embedded (ros2 profile). A record
+    whose own time does not fit a stamp (below 0, or beyond ``MAX_STAMP_S``) is stamped from its first row
+    (the metadata's ``time_origin_s`` says from which time)."""
     store = typestore()
     msg_type = store.types[T.MEASURED_SAMPLE.type]
     t = np.asarray(time_s, dtype=float)
     x = np.asarray(x, dtype=np.float64)
     if x.ndim != 2 or x.shape != (len(t), len(channels)):
         raise UserError(f"measured record: {x.shape} values for {len(t)} times and {len(channels)} channels")
-    stamps = np.round((t - t[0]) * 1e9).astype(np.int64) if len(t) else np.zeros(0, dtype=np.int64)
+    fits = len(t) and 0.0 <= t[0] and np.nanmax(t) < MAX_STAMP_S  # a ROS time and an MCAP log time
+    origin = 0.0 if fits or not len(t) else float(t[0])
+    stamps = record_stamps_ns(t - origin if origin else t)
     if len(t) > 1 and np.any(np.diff(stamps) <= 0):
         raise UserError("measured record: time stamps must increase")
     names = [str(c) for c in channels]
@@ -305,7 +314,8 @@ def write_measured(time_s: np.ndarray, x: np.ndarray, channels: list[str], path:
     try:
         cid = bag.add_topic(T.MEASURED_SAMPLE.name, T.MEASURED_SAMPLE.type)
         bag.add_metadata(RUN_METADATA, {"json": json.dumps({"kind": "measured", "source": source,
-                                                            "channels": names, **(metadata or {})}, default=str)})
+                                                            "channels": names, "time_origin_s": origin,
+                                                            **(metadata or {})}, default=str)})
         for i in range(len(t)):
             ns = int(stamps[i])
             msg = msg_type(stamp=_time(store, ns), source=source, names=names, values=x[i].copy())

@@ -16,6 +16,7 @@ import numpy as np
 
 from phfdi.records import read_record
 from phfdi_base.errors import UserError
+from phfdi_base.stamps import record_stamps_ns, stamps_seconds
 from wavelet_fdi.learned_detector import LearnedEvent, LearnedModel, LearnedSettings, learn, run_record
 
 #: a channel may miss at most this fraction of the healthy rows the reference learns from
@@ -112,7 +113,8 @@ def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | 
             raise UserError(f"--refit-rows re-fits a learned (arx) reference; this one is {model.reference.kind!r} "
                             f"(phfdi calibrate --estimator fits it on healthy runs)")
         model = learn_from(rec, refit_rows, model.settings)
-    events, states, _ = run_record(model, rec.time_s, rec.x)  # alarms in the record's own time
+    # alarms in the record's own time, to the ns as a bag's stamps carry it: the learned node gets the same floats
+    events, states, _ = run_record(model, stamps_seconds(record_stamps_ns(rec.time_s)), rec.x)
     name_faults(model, rec, events)
     return events, states, model
 

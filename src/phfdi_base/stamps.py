@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["NS_PER_S", "finite_or", "join_ns", "ns_to_seconds", "sample_index", "sample_period_ns", "seconds_to_ns",
-           "split_ns", "time_ns", "time_on_grid_s", "times_on_grid_s"]
+__all__ = ["NS_PER_S", "finite_or", "join_ns", "ns_to_seconds", "record_stamps_ns", "sample_index", "sample_period_ns",
+           "seconds_to_ns", "split_ns", "stamp_seconds", "stamps_seconds", "time_ns", "time_on_grid_s",
+           "times_on_grid_s"]
 
 NS_PER_S = 1_000_000_000
 
@@ -96,3 +97,47 @@ def times_on_grid_s(stamps: list[int], dt_s) -> list[float]:
     if dt_ns and all(ns % dt_ns == 0 for ns in stamps):
         return [time_on_grid_s(ns, dt_ns, dt_s) for ns in stamps]
     return [ns * 1e-9 for ns in stamps]
+
+
+# ---- measured records (phfdi bag from-csv, the learned node) ---------------------------------------------
+def record_stamps_ns(time_s):
+    """Stamps (ns, int64 array) of a measured record's rows: its own time rounded to the nanosecond, what
+    ``phfdi bag from-csv`` writes and :func:`stamps_seconds` turns back into the detector's seconds.
+
+    Examples
+    --------
+    >>> record_stamps_ns([1.25200000000041, 1.60399999999936]).tolist()
+    [1252000000, 1604000000]
+    """
+    import numpy as np
+
+    return np.round(np.asarray(time_s, dtype=float) * 1e9).astype(np.int64)
+
+
+def stamp_seconds(ns: int) -> float:
+    """Seconds of a measured record's stamp: ``ns / 1e9`` correctly rounded (the decimal time to the ns, as
+    written). The one rule for the learned detector node (each message) and the offline replay of a record
+    (:func:`stamps_seconds`): both give the detector the same floats.
+
+    Examples
+    --------
+    >>> stamp_seconds(1_000_013), ns_to_seconds(0, 1_000_013)  # the sum of two roundings can miss it
+    (0.001000013, 0.0010000130000000001)
+    """
+    return ns / NS_PER_S
+
+
+def stamps_seconds(ns):
+    """:func:`stamp_seconds` of every stamp (a float array).
+
+    Examples
+    --------
+    >>> stamps_seconds(record_stamps_ns([1.25200000000041, 505.798999999999])).tolist()
+    [1.252, 505.799]
+    """
+    import numpy as np
+
+    ns = np.asarray(ns, dtype=np.int64)
+    if ns.size and int(np.abs(ns).max()) >= 2 ** 53:  # not exact as float64: Python's int division, per stamp
+        return np.array([stamp_seconds(int(v)) for v in ns])
+    return ns / NS_PER_S  # exact operands, one correctly rounded division: the floats of stamp_seconds

@@ -1,4 +1,5 @@
-"""Online wavelet-residual fault detection. ROS-free; the node lives in :mod:`wavelet_fdi.node`.
+"""Online wavelet-residual fault detection. ROS-free; the nodes live in :mod:`wavelet_fdi.node` and
+:mod:`wavelet_fdi.learned_node` (their shared base :mod:`wavelet_fdi.node_base`).
 
 :class:`StreamingDetector` (the physics reference's residual, calibrated by :class:`DetectorSettings` and
 :class:`Calibration`) and :class:`LearnedDetector` (a reference learned from healthy records, :func:`learn`),

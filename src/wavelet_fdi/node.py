@@ -32,10 +32,8 @@ result and exits.
 
 from __future__ import annotations
 
-import json
 import math
 import sys
-import threading
 import time
 import traceback
 from collections import deque
@@ -45,13 +43,14 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
 
 from phfdi_base.errors import UserError
-from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main, to_time
+from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
 from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s
-from phfdi_base.topics import CONTROLLER, DETECTOR, DIAGNOSTICS, FAULT_ALARM, MEASUREMENT
+from phfdi_base.topics import CONTROLLER, DIAGNOSTICS, MEASUREMENT
 
 from .alarm_messages import severity_of
 from .config import Calibration, DetectorSettings, load_default_calibration
 from .detector import StreamingDetector
+from .node_base import STATE_OF_LEVEL, DetectorNodeBase
 from .reference import KnownStart
 
 PARAMS = (
@@ -76,9 +75,6 @@ PARAMS = (
               range=(0.0, 1e9), runtime=True),
 )
 
-#: FaultAlarm.state of the core's levels
-STATE_OF_LEVEL = {"OK": FaultAlarm.OK, "WARN": FaultAlarm.WARN, "ERROR": FaultAlarm.ALARM}
-STATE_NAMES = {FaultAlarm.OK: "OK", FaultAlarm.WARN: "WARN", FaultAlarm.ALARM: "ALARM"}
 #: diagnostics counters that mean bad input (a growth is reported at once)
 PROBLEM_COUNTERS = ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
                     "gap_resets", "time_resets", "nonfinite_ph", "out_of_range_ph", "bad_level",
@@ -198,34 +194,27 @@ class LagStats:
                 "core_s_per_sample": self.core_s / self.samples if self.samples else math.nan}
 
 
-class DetectorNode(GraphNode):
+class DetectorNode(DetectorNodeBase):
     PARAMS = PARAMS
 
     def __init__(self) -> None:
-        super().__init__(DETECTOR)
+        super().__init__()
         self.core, self.calibration_source = self._build_core()
         self.pairing = Pairing(self.param("pairing_window"), self.param("pairing_timeout_s"))
         self.lag = LagStats()
         self._heartbeat_s = self.param("heartbeat_period_s")
         self._diagnostics_s = self.param("diagnostics_period_s")
-        self._loop = self.param("loop")
-        self.pub_alarm = self.data_publisher(FaultAlarm, FAULT_ALARM.name)
+        self.open_alarm_output()
         self.pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
         self.data_subscription(Measurement, MEASUREMENT.name, self._on_measurement)
         self.data_subscription(ControllerOutput, CONTROLLER.name, self._on_output)
-        # worker: the only thread that touches the core and the two publishers
-        self._queue: list[tuple] = []
-        self._cond = threading.Condition()
-        self._closing = False
-        self._state = FaultAlarm.OK
+        # the worker (DetectorNodeBase) is the only thread that touches the core and the two publishers
         self._core_state = "starting"
         self._last_heartbeat_t = -math.inf
         self._last_diag_t = -math.inf
         self._reported_problems: dict[str, int] = {}
         self._last_ns = 0
-        self.core_errors = 0
-        self._worker = threading.Thread(target=self._work, name="detector-core", daemon=True)
-        self._worker.start()
+        self.start_worker()
         self.start_barrier()
 
     # ---- parameters -----------------------------------------------------------------------
@@ -254,35 +243,22 @@ class DetectorNode(GraphNode):
 
     # ---- executor thread: queue only ------------------------------------------------------
     def _on_measurement(self, msg: Measurement) -> None:
-        self._enqueue(self.pairing.measurement(time_ns(msg.stamp), msg.ph, msg.level_cm, time.monotonic()))
+        self.enqueue(self.pairing.measurement(time_ns(msg.stamp), msg.ph, msg.level_cm, time.monotonic()))
 
     def _on_output(self, msg: ControllerOutput) -> None:
-        self._enqueue(self.pairing.output(time_ns(msg.stamp),
+        self.enqueue(self.pairing.output(time_ns(msg.stamp),
                                           (msg.ph_output_pct, msg.level_output_pct, msg.ph_setpoint),
                                           time.monotonic()))
 
     def after_spin(self) -> None:
         if self.pairing.pending:
-            self._enqueue(self.pairing.expire(time.monotonic()))
+            self.enqueue(self.pairing.expire(time.monotonic()))
 
-    def _enqueue(self, rows: list[tuple]) -> None:
-        if rows:
-            with self._cond:
-                self._queue.extend(rows)
-                self._cond.notify()
+    def received(self) -> int:
+        counts = self.pairing.counts
+        return counts["measurements"] + counts["controller_outputs"]
 
     # ---- worker thread: the core and the publishers ----------------------------------------
-    def _work(self) -> None:
-        while True:
-            with self._cond:
-                while not self._queue and not self._closing:
-                    self._cond.wait()
-                rows, self._queue = self._queue, []
-                closing = self._closing
-            if rows:
-                self._process(rows)
-            if closing and not rows:
-                return
 
     def _chunk(self, rows: list[tuple]) -> dict[str, np.ndarray]:
         nan = (math.nan, math.nan, math.nan)
@@ -294,7 +270,7 @@ class DetectorNode(GraphNode):
                 "level_controller_output_pct": np.array([c[1] for c in cmds], dtype=float),
                 "ph_setpoint": np.array([c[2] for c in cmds], dtype=float)}
 
-    def _process(self, rows: list[tuple], flush: bool = False) -> None:
+    def process(self, rows: list[tuple], flush: bool = False) -> None:
         before = self._state
         t0 = time.perf_counter()
         try:
@@ -368,9 +344,7 @@ class DetectorNode(GraphNode):
         self._alarm_fields(msg, ev.alarm)
         if ev.alarm:
             msg.statistic, msg.threshold = float(ev.alarm["statistic_value"]), float(ev.alarm["threshold"])
-        self.pub_alarm.publish(msg)
-        self._report({"event": "fault_alarm", "kind": ev.kind, "state": STATE_NAMES[state], "time_s": ev.time_s,
-                      "message": ev.message, "alarm": ev.alarm})
+        self.publish_alarm(msg, ev.kind, ev.time_s, ev.alarm)
         return state
 
     def _publish_heartbeat(self, status: dict, t_s: float, changed: bool) -> None:
@@ -382,11 +356,8 @@ class DetectorNode(GraphNode):
                          statistic=status["worst_statistic_value"], threshold=status["worst_threshold"])
         msg.stamp = to_time(finite_or(t_s, self._last_ns))
         self._alarm_fields(msg, status["alarm"])
-        self.pub_alarm.publish(msg)
+        self.publish_alarm(msg, "state", t_s, status["alarm"], report=changed)
         self._last_heartbeat_t = t_s
-        if changed:
-            self._report({"event": "fault_alarm", "kind": "state", "state": STATE_NAMES[state], "time_s": t_s,
-                          "message": msg.message, "alarm": status["alarm"]})
 
     def _problems(self) -> dict[str, int]:
         d = self.core.diagnostics()
@@ -425,34 +396,23 @@ class DetectorNode(GraphNode):
         self._last_diag_t = t_s
         self._reported_problems = problems
 
-    @staticmethod
-    def _report(event: dict) -> None:
-        """One JSON line on stdout per published state change (the launcher follows them)."""
-        print(json.dumps(event, default=_json_default), flush=True)
-
     # ---- the end ---------------------------------------------------------------------------
-    def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
-        """Take what the readers already hold (acknowledged to the writers)."""
-        counts = self.pairing.counts
-        self.spin_until_idle(executor, lambda: counts["measurements"] + counts["controller_outputs"], idle_s, limit_s)
-
     def close(self) -> None:
         """Process everything queued, run pending isolations, publish, then deliver and report."""
-        self._enqueue(self.pairing.drain())
-        with self._cond:
-            self._closing = True
-            self._cond.notify()
-        self._worker.join()
-        self._process([], flush=True)
+        self.enqueue(self.pairing.drain())
+        super().close()
+
+    def finish(self) -> None:
+        self.process([], flush=True)
         self._publish_heartbeat(self.core.status(), self._t_last(), False)
         self._publish_diagnostics(self._t_last(), self._problems(), False)
-        self.flush_publishers(5.0)
-        self.report_published()
+
+    def done_report(self) -> dict:
         alarms = [{"alarm_id": a.alarm_id, **a.summary()} for a in self.core.alarms]
-        self._report({"event": "detector_done", "samples": self.core.samples_processed, "alarms": alarms,
-                      "diagnostics": self.core.diagnostics() | self.pairing.counts,
-                      "lag": self.lag.summary() | {"pairing_wait_max_s": self.pairing.max_wait_s},
-                      "calibration": self.calibration_source})
+        return {"samples": self.core.samples_processed, "alarms": alarms,
+                "diagnostics": self.core.diagnostics() | self.pairing.counts,
+                "lag": self.lag.summary() | {"pairing_wait_max_s": self.pairing.max_wait_s},
+                "calibration": self.calibration_source}
 
 
 def _next_multiple(t_s: float, period_s: float) -> float:
@@ -463,12 +423,6 @@ def _next_multiple(t_s: float, period_s: float) -> float:
 
 def _text(v) -> str:
     return repr(v) if isinstance(v, float) else str(v)
-
-
-def _json_default(x):
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    return str(x)
 
 
 def run() -> int:

@@ -62,7 +62,7 @@ def test_node_refuses_a_bad_reference_in_one_line(reference, tmp_path):
         params["reference"] = str(tmp_path / reference)
     lease = reserve_domain_id()
     try:
-        proc = subprocess.run(node_cmd("phfdi.ros.learned_node", **params), capture_output=True, text=True,
+        proc = subprocess.run(node_cmd("wavelet_fdi.learned_node", **params), capture_output=True, text=True,
                               timeout=60, env=graph_env(lease.domain_id), cwd=tmp_path)
     finally:
         lease.release()

@@ -18,7 +18,8 @@ EXAMPLES = """examples:
 from-csv reads the record like phfdi replay (--map/--column/--encoding, the
 reading policy of docs/records.md, a note per repair) and writes one
 phfdi_interfaces/MeasuredSample per row on /measured/sample (every column but
-time and --exclude), stamped with the row's time from the first row.
+time and --exclude), stamped with the row's own time to the ns (a record whose
+time is below 0 or beyond 9e9 s: from its first row).
 """
 
 

@@ -211,7 +211,7 @@ def run_live_learned(args: argparse.Namespace) -> int:
     common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
     nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
                                                     "pace": float(args.pace)}),
-             NodeSpec(DETECTOR, "phfdi.ros.learned_node",
+             NodeSpec(DETECTOR, "wavelet_fdi.learned_node",
                       {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
     result, report, elapsed = _play_live(args, nodes, spec, say, on_event)
     if report is None:

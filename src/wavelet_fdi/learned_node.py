@@ -7,43 +7,50 @@ reference's by name (a channel a message lacks is missing for that row). Output:
 (phfdi_interfaces/FaultAlarm) when an alarm is raised or cleared and when a channel goes missing,
 with the channels that carry the alarm (``channels``, ``channel_shares``, ``channel_bands``).
 
-Callbacks only queue rows; a worker thread hands everything queued to the core in one call (the
-result is the same for any chunking). The node prints one JSON line per published change and, on
-exit, a ``detector_done`` report with every alarm (the launcher and ``phfdi replay --live`` read it).
+The reference is the kind the model file names (a learned ARX reference from ``phfdi calibrate --learn``,
+the rig's Kalman estimator from ``phfdi calibrate --estimator``, ...). The core takes each row at its
+stamp in seconds (:func:`phfdi_base.stamps.stamp_seconds`; ``phfdi bag from-csv`` stamps a row with the
+record's own time to the ns), the times the offline ``phfdi replay RECORD --reference REF`` gives it: the
+estimator steps by their differences.
 
-    python -m phfdi.ros.learned_node --ros-args -p reference:=ref.json -p graph_nodes:="[detector]"
+Callbacks only queue rows; a worker thread hands everything queued to the core in one call (the
+result is the same for any chunking; :mod:`wavelet_fdi.node_base`). The node prints one JSON line per
+published change and, on exit, a ``detector_done`` report with every alarm (the launcher and
+``phfdi replay --live`` read it).
+
+    python -m wavelet_fdi.learned_node --ros-args -p reference:=ref.json -p graph_nodes:="[detector]"
 """
 
 from __future__ import annotations
 
-import json
 import math
 import sys
-import threading
 import traceback
 
 import numpy as np
 from phfdi_interfaces.msg import FaultAlarm, MeasuredSample
 
 from phfdi_base.errors import UserError
-from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main, to_time
-from phfdi_base.stamps import seconds_to_ns
-from phfdi_base.topics import DETECTOR, FAULT_ALARM, MEASURED_SAMPLE
-from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel
+from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
+from phfdi_base.stamps import seconds_to_ns, stamp_seconds, time_ns
+from phfdi_base.topics import MEASURED_SAMPLE
+
+from .learned_detector import LearnedDetector, LearnedModel
+from .node_base import DetectorNodeBase
 
 PARAMS = (
-    ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn"),
+    ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
     ParamSpec("loop", "measured", "name of the monitored plant or loop in /fault_alarm"),
 )
 STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
-STATE_NAMES = {FaultAlarm.OK: "OK", FaultAlarm.WARN: "WARN", FaultAlarm.ALARM: "ALARM"}
 
 
-class LearnedDetectorNode(GraphNode):
+class LearnedDetectorNode(DetectorNodeBase):
     PARAMS = PARAMS
+    WORKER_NAME = "learned-detector-core"
 
     def __init__(self) -> None:
-        super().__init__(DETECTOR)
+        super().__init__()
         path = self.param("reference")
         if not path:
             raise NodeStartError("parameter reference: give the learned reference file (phfdi calibrate --learn)")
@@ -53,18 +60,11 @@ class LearnedDetectorNode(GraphNode):
             raise NodeStartError(f"parameter reference = {path!r}: {exc}") from None
         self.core = LearnedDetector(self.model)
         self._index = {c: i for i, c in enumerate(self.model.channels)}
-        self._loop = self.param("loop")
-        self._state = FaultAlarm.OK
         self._t_last = 0.0
-        self.core_errors = 0
-        self.pub_alarm = self.data_publisher(FaultAlarm, FAULT_ALARM.name)
+        self.open_alarm_output()
         self.data_subscription(MeasuredSample, MEASURED_SAMPLE.name, self._on_sample)
-        self._queue: list[tuple[float, np.ndarray]] = []
-        self._cond = threading.Condition()
-        self._closing = False
-        self.received = 0
-        self._worker = threading.Thread(target=self._work, name="learned-detector-core", daemon=True)
-        self._worker.start()
+        self._received = 0
+        self.start_worker()
         self.start_barrier()
 
     # ---- executor thread: queue only ----------------------------------------------------------
@@ -74,26 +74,14 @@ class LearnedDetectorNode(GraphNode):
             i = self._index.get(name)
             if i is not None:
                 row[i] = value
-        t = msg.stamp.sec + msg.stamp.nanosec * 1e-9
-        self.received += 1
-        with self._cond:
-            self._queue.append((t, row))
-            self._cond.notify()
+        self._received += 1
+        self.enqueue([(stamp_seconds(time_ns(msg.stamp)), row)])
+
+    def received(self) -> int:
+        return self._received
 
     # ---- worker thread: the core and the publisher --------------------------------------------
-    def _work(self) -> None:
-        while True:
-            with self._cond:
-                while not self._queue and not self._closing:
-                    self._cond.wait()
-                rows, self._queue = self._queue, []
-                closing = self._closing
-            if rows:
-                self._process(rows)
-            if closing and not rows:
-                return
-
-    def _process(self, rows: list[tuple[float, np.ndarray]]) -> None:
+    def process(self, rows: list[tuple[float, np.ndarray]]) -> None:
         t = np.array([r[0] for r in rows])
         x = np.vstack([r[1] for r in rows])
         try:
@@ -121,30 +109,17 @@ class LearnedDetectorNode(GraphNode):
             msg.channel_bands = [max(v["bands"], key=v["bands"].get) for v in cont.values()]
             band = msg.channel_bands[0] if msg.channel_bands else ""
             msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
-        self.pub_alarm.publish(msg)
+        self.publish_alarm(msg, ev.kind, ev.time_s, a)
         self._state = state
-        print(json.dumps({"event": "fault_alarm", "kind": ev.kind, "state": STATE_NAMES[state], "time_s": ev.time_s,
-                          "message": ev.message, "alarm": a}), flush=True)
 
     # ---- the end ---------------------------------------------------------------------------------
-    def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
-        """Take what the readers already hold (acknowledged to the writers)."""
-        self.spin_until_idle(executor, lambda: self.received, idle_s, limit_s)
-
-    def close(self) -> None:
-        with self._cond:
-            self._closing = True
-            self._cond.notify()
-        self._worker.join()
-        self.flush_publishers(5.0)
-        self.report_published()
-        print(json.dumps({"event": "detector_done", "samples": self.core.samples_processed,
-                          "alarms": self.core.alarms, "core_errors": self.core_errors,
-                          "reference": self.param("reference")}), flush=True)
+    def done_report(self) -> dict:
+        return {"samples": self.core.samples_processed, "alarms": self.core.alarms, "core_errors": self.core_errors,
+                "reference": self.param("reference")}
 
 
 def run() -> int:
-    return main(LearnedDetectorNode, "phfdi.ros.learned_node", __doc__.strip().splitlines()[0], PARAMS)
+    return main(LearnedDetectorNode, "wavelet_fdi.learned_node", __doc__.strip().splitlines()[0], PARAMS)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,138 @@
+"""What the detector nodes share: the physics detector (:mod:`wavelet_fdi.node`) and the learned detector
+(:mod:`wavelet_fdi.learned_node`). Imports rclpy; no side effects at import.
+
+* the states of /fault_alarm (phfdi_interfaces/FaultAlarm OK, WARN, ALARM) and their names in the JSON lines;
+* the worker: the executor's callbacks only queue rows (:meth:`DetectorNodeBase.enqueue`); one worker thread
+  hands everything queued since its last call to the core (:meth:`DetectorNodeBase.process`, the only place
+  that touches the core and the publishers), so a slow core call never stops the executor from taking
+  messages, and nothing is lost;
+* the JSON lines on stdout the launcher and ``phfdi replay --live`` follow: one ``fault_alarm`` line per
+  published state change (:meth:`DetectorNodeBase.publish_alarm`) and, on exit, a ``detector_done`` report
+  (:meth:`DetectorNodeBase.done_report`);
+* the end: take what the readers hold, stop the worker after it has processed everything queued, the
+  node's last results (:meth:`DetectorNodeBase.finish`), deliver, report.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from typing import Any
+
+import numpy as np
+from phfdi_interfaces.msg import FaultAlarm
+
+from phfdi_base.ros.graph_node import GraphNode
+from phfdi_base.topics import DETECTOR, FAULT_ALARM
+
+#: FaultAlarm.state of the core's levels
+STATE_OF_LEVEL = {"OK": FaultAlarm.OK, "WARN": FaultAlarm.WARN, "ERROR": FaultAlarm.ALARM}
+#: names of the FaultAlarm states in the JSON lines
+STATE_NAMES = {FaultAlarm.OK: "OK", FaultAlarm.WARN: "WARN", FaultAlarm.ALARM: "ALARM"}
+
+
+class DetectorNodeBase(GraphNode):
+    """A detector node: publishes /fault_alarm, runs its core on a worker thread, reports in JSON lines.
+
+    A subclass builds its core, calls :meth:`open_alarm_output`, subscribes its inputs (callbacks call
+    :meth:`enqueue`), then :meth:`start_worker` and ``start_barrier()``; it implements :meth:`process`,
+    :meth:`received` and :meth:`done_report` (and :meth:`finish` for work after the last rows).
+    """
+
+    #: name of the worker thread
+    WORKER_NAME = "detector-core"
+
+    def __init__(self) -> None:
+        super().__init__(DETECTOR)
+        self._loop = self.param("loop")
+        self._state = FaultAlarm.OK
+        self.core_errors = 0
+        self._queue: list[Any] = []
+        self._cond = threading.Condition()
+        self._closing = False
+        self._worker: threading.Thread | None = None
+
+    def open_alarm_output(self) -> None:
+        self.pub_alarm = self.data_publisher(FaultAlarm, FAULT_ALARM.name)
+
+    # ---- executor thread: queue only ------------------------------------------------------
+    def enqueue(self, rows: list) -> None:
+        """Hand rows to the worker (the only thing an executor callback does with them)."""
+        if rows:
+            with self._cond:
+                self._queue.extend(rows)
+                self._cond.notify()
+
+    def received(self) -> int:
+        """Messages taken from the readers so far (the end waits until it stops moving)."""
+        raise NotImplementedError
+
+    # ---- worker thread ------------------------------------------------------------------------
+    def start_worker(self) -> None:
+        self._worker = threading.Thread(target=self._work, name=self.WORKER_NAME, daemon=True)
+        self._worker.start()
+
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                while not self._queue and not self._closing:
+                    self._cond.wait()
+                rows, self._queue = self._queue, []
+                closing = self._closing
+            if rows:
+                self.process(rows)
+            if closing and not rows:
+                return
+
+    def process(self, rows: list) -> None:
+        """Everything queued since the last call through the core; publish the results (worker thread)."""
+        raise NotImplementedError
+
+    def stop_worker(self) -> None:
+        """Let the worker process everything queued, then end it."""
+        with self._cond:
+            self._closing = True
+            self._cond.notify()
+        if self._worker is not None:
+            self._worker.join()
+
+    # ---- output --------------------------------------------------------------------------------
+    def publish_alarm(self, msg: FaultAlarm, kind: str, time_s: float, alarm: dict | None,
+                      report: bool = True) -> None:
+        """Publish ``msg`` on /fault_alarm; with ``report`` also its JSON line (a state change)."""
+        self.pub_alarm.publish(msg)
+        if report:
+            self.report({"event": "fault_alarm", "kind": kind, "state": STATE_NAMES[msg.state], "time_s": time_s,
+                         "message": msg.message, "alarm": alarm})
+
+    @staticmethod
+    def report(event: dict) -> None:
+        """One JSON line on stdout (the launcher and phfdi replay --live follow them)."""
+        print(json.dumps(event, default=json_default), flush=True)
+
+    # ---- the end ---------------------------------------------------------------------------------
+    def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
+        """Take what the readers already hold (acknowledged to the writers)."""
+        self.spin_until_idle(executor, self.received, idle_s, limit_s)
+
+    def finish(self) -> None:
+        """After the worker has ended: the node's last results (worker-free, so on this thread)."""
+
+    def done_report(self) -> dict:
+        """The fields of the ``detector_done`` report: samples, alarms, ..."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Process everything queued, the last results, then deliver and report."""
+        self.stop_worker()
+        self.finish()
+        self.flush_publishers(5.0)
+        self.report_published()
+        self.report({"event": "detector_done", **self.done_report()})
+
+
+def json_default(x):
+    """numpy scalars as numbers, anything else as its text."""
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    return str(x)
