@@ -7,7 +7,8 @@ once per hypothesis, each with one parameter fitted by the innovations' likeliho
 * ``probe_offset`` (sensor): the reading is off by b pH from the onset (a bias; locally also a drift or a
   slope error);
 * ``probe_noise`` (sensor): the reading's noise is s times the healthy one (s > 1: a noisy probe; s < 1: a
-  probe that froze or turned sluggish and lost its noise);
+  probe that froze or turned sluggish and lost its noise), fitted with the filter tracking as it runs (in the
+  model-trusting window a frozen reading diverges from the model and would pass for noise);
 * ``pump`` (actuator), one per feed that ran in the window: the feed delivers c times what is recorded
   (c < 1: less, c = 0: nothing; c > 1: more).
 
@@ -72,9 +73,12 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
         shifted[:, m] -= bias
         return _window_nll(start, quiet, tw, shifted)
 
+    tracking = replace(ref, adapt_time_constant_s=0.0)  # the filter as it runs: a noise change is seen in it
+    healthy_tracking = _window_nll(start, tracking, tw, xw)
+
     def noise(log_s: float) -> float:
-        nz = replace(quiet.noise, probe_noise_ph=quiet.noise.probe_noise_ph * float(np.exp(log_s)))
-        return _window_nll(start, replace(quiet, noise=nz), tw, xw)
+        nz = replace(tracking.noise, probe_noise_ph=tracking.noise.probe_noise_ph * float(np.exp(log_s)))
+        return _window_nll(start, replace(tracking, noise=nz), tw, xw) - healthy_tracking + healthy
 
     def pump(i: int):
         def cost(c: float) -> float:
