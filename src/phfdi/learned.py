@@ -115,27 +115,7 @@ def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | 
         model = learn_from(rec, refit_rows, model.settings)
     # alarms in the record's own time, to the ns as a bag's stamps carry it: the learned node gets the same floats
     events, states, _ = run_record(model, stamps_seconds(record_stamps_ns(rec.time_s)), rec.x)
-    name_faults(model, rec, events)
     return events, states, model
-
-
-def name_faults(model: LearnedModel, rec: MeasuredRecord, events: list[LearnedEvent]) -> None:
-    """An estimator reference's alarms get the fault that explains them best (family, class, size):
-    :func:`wavelet_fdi.estimator_isolation.isolate`, in ``alarm["isolation"]`` of every event of the alarm."""
-    from wavelet_fdi.estimator_isolation import isolate
-    from wavelet_fdi.reference_estimator import EstimatorReference
-
-    if not isinstance(model.reference, EstimatorReference):
-        return
-    named: dict[int, dict] = {}
-    for e in events:
-        if e.alarm is None:
-            continue
-        a = e.alarm
-        if a["alarm_id"] not in named:
-            named[a["alarm_id"]] = isolate(model.reference, rec.time_s, rec.x, a["onset_index"],
-                                           a["detection_index"], a["statistic"])
-        a["isolation"] = named[a["alarm_id"]]
 
 
 def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:

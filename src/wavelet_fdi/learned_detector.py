@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields
+from functools import partial
 from pathlib import Path
 from typing import Sequence
 
@@ -43,11 +44,13 @@ from phfdi_base.errors import UserError
 from .filterbank import CausalSwt, wavelet_filters
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
-from .references import Reference, reference_from_dict
+from .references import NAMERS, Reference, reference_from_dict
 from .statistics import CusumBank, energy_reference
 
 FORMAT = "phfdi-learned-detector/1"
 TIME_RING = 1 << 16
+NAMING_RING = 1 << 13  # rows kept for naming an alarm's fault (about 48 min at the rig's 0.35 s)
+NAMING_AFTER = 64  # samples after a detection that the naming window takes in
 #: learned reference forms (LearnedSettings.form)
 LEARNED_FORMS = ("arx", "oe")  # sample times kept to date an alarm's onset
 
@@ -373,6 +376,14 @@ class LearnedDetector:
         self.samples_processed = 0
         self._times = np.full(TIME_RING, np.nan)  # times of the last TIME_RING samples (onset times)
         self._trace: dict[str, list] | None = {"coef": [], "stat": [], "state": []} if record_trace else None
+        # a reference that can name the fault behind an alarm (wavelet_fdi.references: ``name_fault``) gets the
+        # last NAMING_RING rows and, NAMING_AFTER samples after each detection, names it (a "named" event)
+        namer = NAMERS.get(getattr(model.reference, "kind", ""))
+        self.namer = partial(namer, model.reference) if namer is not None and alarms else None
+        self._ring_t = np.full(NAMING_RING, np.nan) if self.namer else np.empty(0)
+        self._ring_x = np.full((NAMING_RING, len(self.inputs)), np.nan) if self.namer else np.empty((0, 0))
+        self._to_name: list[dict] = []
+        self._named: list[int] = []
 
     # ---- public API ------------------------------------------------------------------
     def process(self, t_s: npt.ArrayLike, x: npt.ArrayLike) -> tuple[list[LearnedEvent], np.ndarray]:
@@ -407,8 +418,49 @@ class LearnedDetector:
             ev = self._block(t, pos, end, a_raw, d_norm, missing, states)
             events += ev
             pos = end
+        if self.namer is not None:
+            events += self._name_faults(t, rows, final=False)
+            events.sort(key=lambda e: e.index)  # in sample order, as a chunk of one row at a time gives them
         self.samples_processed += n
         return events, states
+
+    def finish(self) -> list[LearnedEvent]:
+        """The record ended: name every alarm still waiting for its NAMING_AFTER samples with what there is."""
+        if self.namer is None or not self.samples_processed:
+            return []
+        return self._name_faults(np.empty(0), np.empty((0, len(self.inputs))), final=True)
+
+    def _name_faults(self, t: np.ndarray, rows: np.ndarray, final: bool) -> list[LearnedEvent]:
+        """Keep the rows in the ring; name each alarm whose window (to NAMING_AFTER samples after its detection)
+        is complete. The window ends at a fixed global index, so any chunking names it the same way."""
+        g0 = self.samples_processed
+        idx = (g0 + np.arange(len(rows))) % NAMING_RING
+        self._ring_t[idx] = t
+        self._ring_x[idx] = rows
+        for a in self.alarms[len(self._named_ids()):]:
+            self._to_name.append(a)
+        end_all = g0 + len(rows)
+        events = []
+        for a in list(self._to_name):
+            end = a["detection_index"] + NAMING_AFTER
+            if end > end_all and not final:
+                continue
+            end = min(end, end_all)
+            first = max(0, end - NAMING_RING)
+            k = (np.arange(first, end)) % NAMING_RING
+            iso = self.namer(self._ring_t[k], self._ring_x[k], a["onset_index"] - first,
+                             a["detection_index"] - first, a["statistic"])
+            a["isolation"] = iso
+            self._to_name.remove(a)
+            self._named.append(a["alarm_id"])
+            when = float(self._ring_t[(end - 1) % NAMING_RING])
+            events.append(LearnedEvent("named", when, end - 1, "ERROR" if self.in_alarm else "OK",
+                                       f"alarm {a['alarm_id']} named: {iso['family']} fault, {iso['description']} "
+                                       f"({iso['size']:g} {iso['unit']})", dict(a)))
+        return events
+
+    def _named_ids(self) -> list[int]:
+        return self._named + [a["alarm_id"] for a in self._to_name]
 
     def trace(self) -> dict[str, np.ndarray]:
         if self._trace is None:
@@ -635,4 +687,5 @@ def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int |
         ev, st = det.process(t_s[a:a + step], x[a:a + step])
         events += ev
         states.append(st)
+    events += det.finish()
     return events, (np.concatenate(states) if states else np.zeros(0, dtype=np.int8)), det

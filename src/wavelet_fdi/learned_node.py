@@ -5,7 +5,9 @@ Input: /measured/sample (phfdi_interfaces/MeasuredSample: channel names and valu
 measured record, e.g. played from a bag of ``phfdi bag from-csv``). The channels are matched to the
 reference's by name (a channel a message lacks is missing for that row). Output: /fault_alarm
 (phfdi_interfaces/FaultAlarm) when an alarm is raised or cleared and when a channel goes missing,
-with the channels that carry the alarm (``channels``, ``channel_shares``, ``channel_bands``).
+with the channels that carry the alarm (``channels``, ``channel_shares``, ``channel_bands``); for a
+reference that names faults (the estimator), once more when the alarm is named (``fault_class``,
+``severity`` and ``severity_unit``: the hypothesis that explains it best and its size).
 
 The reference is the kind the model file names (a learned ARX reference from ``phfdi calibrate --learn``,
 the rig's Kalman estimator from ``phfdi calibrate --estimator``, ...). The core takes each row at its
@@ -100,7 +102,10 @@ class LearnedDetectorNode(DetectorNodeBase):
         msg.stamp = to_time(seconds_to_ns(ev.time_s))
         a = ev.alarm
         if a:
-            msg.fault_class = "unknown"
+            iso = a.get("isolation") or {}
+            msg.fault_class = iso.get("fault_class", "unknown")  # named NAMING_AFTER samples after the detection
+            if iso:
+                msg.severity, msg.severity_unit = float(iso["size"]), str(iso["unit"])
             msg.detection_time = to_time(seconds_to_ns(a["detection_time"]))
             msg.statistic, msg.threshold = float(a["statistic_value"]), float(a["threshold"])
             cont = a["contributions"] if ev.kind == "alarm" else a.get("episode_contributions") or a["contributions"]
@@ -113,6 +118,11 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._state = state
 
     # ---- the end ---------------------------------------------------------------------------------
+    def finish(self) -> None:
+        """The stream ended: name the alarms still waiting for their window (as the offline replay does)."""
+        for ev in self.core.finish():
+            self._publish(ev)
+
     def done_report(self) -> dict:
         return {"samples": self.core.samples_processed, "alarms": self.core.alarms, "core_errors": self.core_errors,
                 "reference": self.param("reference")}

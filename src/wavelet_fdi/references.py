@@ -26,7 +26,8 @@ Kinds (chosen by the reference file, :data:`KINDS`):
 
 The valve loop of the paper keeps its own physics reference and detector
 (:class:`~wavelet_fdi.detector.StreamingDetector`): it isolates valve faults by re-running that model.
-Adding a kind: a class with the members above, one entry in :data:`KINDS`.
+Adding a kind: a class with the members above, one entry in :data:`KINDS` (and, if it can name the fault
+behind an alarm, one in :data:`NAMERS`).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 
+from .estimator_isolation import isolate
 from .reference_estimator import EstimatorReference
 from .reference_learned import LearnedReference
 from .reference_oe import OutputErrorReference
@@ -63,6 +65,11 @@ class Reference(Protocol):
 
 #: reference kinds by the name their files carry
 KINDS: dict[str, Any] = {"arx": LearnedReference, "oe": OutputErrorReference, "estimator": EstimatorReference}
+
+
+#: kinds whose alarms can be named (family, class, size): namer(reference, t_s, rows, onset_index,
+#: detection_index, statistic) -> dict, called by the detector on the rows it kept (LearnedDetector)
+NAMERS: dict[str, Any] = {"estimator": isolate}
 
 
 def reference_from_dict(d: dict, where: str = "reference") -> Reference:

@@ -154,3 +154,21 @@ def test_the_fit_recovers_the_strength_ratio_of_synthetic_runs():
     ratio = fitted.feeds[1].strength_mM / fitted.volume_ml
     assert ratio == pytest.approx(50.0 / 1000.0, rel=0.2)
     assert fitted.noise.probe_noise_ph == pytest.approx(0.03, rel=0.35)
+
+
+def test_alarms_are_named_the_same_whatever_the_chunking():
+    """The detector names an estimator alarm NAMING_AFTER samples after its detection from the rows it kept:
+    the same family, class and size for any chunking of the record (the node gets rows a few at a time)."""
+    ref = flask()
+    model = _model(ref, 300)
+    onset = 1400
+    flow = lambda k: 2.0 if (k // 300) % 2 == 0 else 0.5  # noqa: E731
+    t, rows = simulate(ref, 2400, flow, seed=11,
+                       fault_ph=lambda t, ph: np.where(np.arange(len(ph)) >= onset, ph + 0.5, ph))
+    whole, _, _ = run_record(model, t, rows, chunk=None)
+    named = [e for e in whole if e.kind == "named"]
+    assert named and named[0].alarm["isolation"]["family"] == "sensor"
+    assert named[0].alarm["isolation"]["fault_class"] == "probe_offset"
+    for chunk in (1, 7, 500):
+        again, _, _ = run_record(model, t, rows, chunk=chunk)
+        assert [(e.kind, e.index, e.message) for e in again] == [(e.kind, e.index, e.message) for e in whole]

@@ -21,7 +21,7 @@ import numpy as np
 
 from phfdi.estimator import fit_estimator, start_from_model
 from phfdi.inject import inject_fault
-from phfdi.learned import MeasuredRecord, name_faults, read_measured
+from phfdi.learned import MeasuredRecord, read_measured
 from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, fit_reference, run_record
 
 CHANNELS = ("acid_flow_ml_s", "base_flow_ml_s", "ph_measured")
@@ -67,7 +67,6 @@ def learned_alarms(model: LearnedModel, rec: MeasuredRecord) -> list[dict]:
     """Each alarm's raise time ``t``, the time it cleared (``until``; the record's end if it did not) and the
     fault family named (estimator references; None for the others)."""
     events, _, _ = run_record(model, rec.time_s, rec.x)
-    name_faults(model, rec, events)
     out: list[dict] = []
     for e in events:
         if e.kind == "alarm":
