@@ -433,6 +433,8 @@ class LearnedDetector:
     def _name_faults(self, t: np.ndarray, rows: np.ndarray, final: bool) -> list[LearnedEvent]:
         """Keep the rows in the ring; name each alarm whose window (to NAMING_AFTER samples after its detection)
         is complete. The window ends at a fixed global index, so any chunking names it the same way."""
+        namer = self.namer
+        assert namer is not None, "called only for a reference that names faults"
         g0 = self.samples_processed
         idx = (g0 + np.arange(len(rows))) % NAMING_RING
         self._ring_t[idx] = t
@@ -448,7 +450,7 @@ class LearnedDetector:
             end = min(end, end_all)
             first = max(0, end - NAMING_RING)
             k = (np.arange(first, end)) % NAMING_RING
-            iso = self.namer(self._ring_t[k], self._ring_x[k], a["onset_index"] - first,
+            iso = namer(self._ring_t[k], self._ring_x[k], a["onset_index"] - first,
                              a["detection_index"] - first, a["statistic"])
             a["isolation"] = iso
             self._to_name.remove(a)
