@@ -513,7 +513,7 @@ class LearnedDetector:
             self._trace["state"].append(states[i0:i1].copy())
         # observer: block sums of the deviation; correction at block boundaries when not frozen
         ok = ~missing[i0:i1]
-        self._acc += np.where(ok, dev, 0.0).sum(axis=0)
+        self._acc = _running_sum(self._acc, np.where(ok, dev, 0.0), axis=0)
         self._acc_n += nb
         at_boundary = (g0 + nb) % s.block_samples == 0
         if at_boundary:
@@ -585,7 +585,7 @@ class LearnedDetector:
                 q = int(np.argmax(quiet))
                 jc = j + q
                 states[i0 + j:i0 + jc] = 1
-                self._episode += np.clip(ratio[:, j:jc], 0.0, None).sum(axis=1)
+                self._episode = _running_sum(self._episode, np.clip(ratio[:, j:jc], 0.0, None), axis=1)
                 events.append(self._clear(t[i0 + jc], g0 + jc))
                 self.in_alarm = False
                 self._holdoff = True
@@ -593,7 +593,7 @@ class LearnedDetector:
                     self._rebase = 1
                 break
             states[i0 + j:i1] = 1
-            self._episode += np.clip(ratio[:, j:], 0.0, None).sum(axis=1)
+            self._episode = _running_sum(self._episode, np.clip(ratio[:, j:], 0.0, None), axis=1)
             self._last_crossing = int(last[-1])
             self._peak = np.maximum(self._peak, absu[j:].max(axis=0))
             break
@@ -656,6 +656,15 @@ class LearnedDetector:
             self._missing_open[c] = bool(col[-1])
         out.sort(key=lambda e: e.index)
         return out
+
+
+def _running_sum(total: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray:
+    """``total`` plus ``values`` summed along ``axis`` one sample after another (np.cumsum adds in order;
+    ndarray.sum adds pairwise), so that a block split across two chunks sums to the same last bit."""
+    if values.shape[axis] == 0:
+        return total
+    stacked = np.concatenate((np.expand_dims(total, axis), values), axis=axis)
+    return np.take(np.cumsum(stacked, axis=axis), -1, axis=axis)
 
 
 def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096

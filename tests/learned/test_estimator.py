@@ -172,3 +172,4 @@ def test_alarms_are_named_the_same_whatever_the_chunking():
     for chunk in (1, 7, 500):
         again, _, _ = run_record(model, t, rows, chunk=chunk)
         assert [(e.kind, e.index, e.message) for e in again] == [(e.kind, e.index, e.message) for e in whole]
+
