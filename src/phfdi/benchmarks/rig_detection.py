@@ -67,11 +67,13 @@ def learned_alarms(model: LearnedModel, rec: MeasuredRecord) -> list[dict]:
     """Each alarm's raise time ``t``, the time it cleared (``until``; the record's end if it did not) and the
     fault family named (estimator references; None for the others)."""
     events, _, _ = run_record(model, rec.time_s, rec.x)
+    # the core names an alarm NAMING_AFTER samples after its detection (a "named" event)
+    families = {e.alarm["alarm_id"]: e.alarm["isolation"]["family"] for e in events if e.kind == "named" and e.alarm}
     out: list[dict] = []
     for e in events:
-        if e.kind == "alarm":
+        if e.kind == "alarm" and e.alarm:
             out.append({"t": float(e.time_s), "until": float(rec.time_s[-1]),
-                        "family": (e.alarm or {}).get("isolation", {}).get("family")})
+                        "family": families.get(e.alarm["alarm_id"])})
         elif e.kind == "cleared" and out:
             out[-1]["until"] = float(e.time_s)
     return out
