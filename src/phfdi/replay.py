@@ -68,8 +68,12 @@ def load_any(path: str | Path, column_map=None, encoding: str | None = None) -> 
 
     run = read_run(path, column_map, encoding=encoding, required=("ph_measured",))
     if not {"valve_command_pct", "ph_controller_output_pct"} & set(run.names):
+        pumps = sorted(n for n in run.names if n.endswith("_flow_ml_s"))
+        hint = (f"; this record has pump flows ({', '.join(pumps)}): fit the estimator reference on healthy runs "
+                f"(phfdi calibrate --estimator RUN... --map MAP --out rig.json) and replay with --reference rig.json"
+                if pumps else "")
         raise ReadError(path, "no valve command (valve_command_pct or ph_controller_output_pct): the detector "
-                              "needs the pH controller output; map it with --column valve_command_pct=COLUMN",
+                              "needs the pH controller output; map it with --column valve_command_pct=COLUMN" + hint,
                         line=1 if "delimiter" in run.metadata else None)  # a text file's header line
     return run
 
