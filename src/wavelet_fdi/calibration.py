@@ -37,7 +37,7 @@ import numpy as np
 from phfdi_base.errors import UserError
 
 from .config import Calibration, DetectorSettings
-from .statistics import increments
+from .statistics import increments, parse_statistic
 
 #: seeds of the calibration runs: disjoint from the evaluation's (1..99)
 DEFAULT_CALIBRATION_SEEDS = tuple(range(1001, 1017))
@@ -128,7 +128,7 @@ def statistic_increments(trace: dict[str, np.ndarray], name: str, sigma: dict[st
                          settings: DetectorSettings) -> np.ndarray:
     """Increments of one detector statistic on the monitored samples of a trace."""
 
-    ch, band, kind = name.split(".")
+    ch, band, kind = parse_statistic(name)
     j = settings.rows().index(band)
     mask = trace[f"{ch}_monitored"]
     u = trace[f"{ch}_coefficients"][mask, j] / sigma[ch]["raw" if band == "R" else band]
@@ -147,9 +147,9 @@ def calibrate_from_traces(traces: list[dict[str, np.ndarray]], settings: Detecto
         # up and down mean CUSUMs share one threshold: the healthy residual is symmetric, and
         # pooling their window maxima halves the fit's scatter
         group = [name]
-        if name.endswith(".mean_up") or name.endswith(".mean_down"):
-            base = name.rsplit(".", 1)[0]
-            group = [n for n in (f"{base}.mean_up", f"{base}.mean_down") if n in names]
+        ch, band, kind = parse_statistic(name)
+        if kind in ("mean_up", "mean_down"):
+            group = [n for n in (f"{ch}.{band}.mean_up", f"{ch}.{band}.mean_down") if n in names]
         maxima = np.concatenate([window_maxima(statistic_increments(t, g, sigma, settings), window)
                                  for t in traces for g in group])
         fit = tail_threshold(maxima, p_target)

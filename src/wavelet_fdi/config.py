@@ -21,7 +21,7 @@ from phfdi_base.errors import UserError
 from phfdi_base.yamlfile import read_mapping
 
 from .filterbank import wavelet_filters
-from .statistics import energy_reference
+from .statistics import energy_reference, parse_statistic
 
 CALIBRATION_DIR = Path(str(resources.files("wavelet_fdi"))) / "calibrations"
 CHANNELS = ("ph", "level")
@@ -130,7 +130,7 @@ class DetectorSettings:
     def reference_value(self, name: str) -> float:
         """k of a statistic: the energy CUSUM's for variance_ratio; the mean CUSUM's for a shift of
         mean_shift_sigma residual standard deviations, which A_J carries 2^(J/2) times (its DC gain)."""
-        band, kind = name.split(".")[1:]
+        _, band, kind = parse_statistic(name)
         if kind == "energy":
             return energy_reference(self.variance_ratio)
         gain = 1.0 if band == "R" else 2.0 ** (0.5 * self.level)

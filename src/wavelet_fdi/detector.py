@@ -40,7 +40,7 @@ from .history import History
 from .inputs import InputRegularizer
 from .isolation import FaultIsolator
 from .reference import HealthyReference, KnownStart, ReferenceState
-from .statistics import CusumBank, increments
+from .statistics import CusumBank, increments, parse_statistic
 
 if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
     from phfdi_base.spec import ScenarioSpec
@@ -201,7 +201,7 @@ class StreamingDetector:
         self.names = s.statistic_names()
         self.k = np.array([s.reference_value(n) for n in self.names])
         self.h = np.array([calibration.thresholds[n] for n in self.names])
-        self._parsed = [n.split(".") for n in self.names]
+        self._parsed = [parse_statistic(n) for n in self.names]
         self.bands = s.bands()
         self._row = {b: i for i, b in enumerate(s.rows())}
         self.channels = s.channels

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .reference_estimator import EstimatorReference, EstimatorStream
+from .statistics import parse_statistic
 
 #: samples after the detection that the window keeps (when the record has them)
 AFTER_DETECTION_SAMPLES = 64
@@ -36,7 +37,7 @@ NOISE_RANGE = (0.02, 20.0)  # searched on its logarithm
 PUMP_RANGE = (0.0, 3.0)
 STIFFNESS = 0.1
 #: the detector's statistics that watch the reading's noise (wavelet_fdi.learned_detector)
-NOISE_STATISTICS = (".energy", ".energy_down")
+NOISE_STATISTICS = ("energy", "energy_down")
 
 
 def _window_nll(start: EstimatorStream, ref: EstimatorReference, t: np.ndarray, rows: np.ndarray) -> float:
@@ -90,9 +91,10 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     hyps: list[tuple[str, str, str, str, object, tuple[float, float], float]] = [
         ("probe_offset", "sensor", "probe offset", "pH", offset, OFFSET_RANGE_PH, 0.0),
         ("probe_noise", "sensor", "probe noise", "x healthy noise", noise, tuple(np.log(NOISE_RANGE)), 0.0)]
-    if statistic.endswith(NOISE_STATISTICS):
+    noise_alarm = bool(statistic) and parse_statistic(statistic)[2] in NOISE_STATISTICS
+    if noise_alarm:
         hyps = hyps[1:]
-    for i, f in enumerate(ref.feeds if not statistic.endswith(NOISE_STATISTICS) else ()):
+    for i, f in enumerate(ref.feeds if not noise_alarm else ()):
         if np.nanmax(np.abs(xw[:, i])) > 0:
             hyps.append((f"pump:{f.channel}", "actuator", f"{f.channel} delivers other than recorded",
                          "x recorded", pump(i), PUMP_RANGE, 1.0))

@@ -30,6 +30,21 @@ import numpy as np
 KINDS = ("energy", "mean_up", "mean_down")
 
 
+def parse_statistic(name: str) -> tuple[str, str, str]:
+    """(channel, band, kind) of a statistic's name ``CHANNEL.BAND.KIND``, e.g. ``ph.A3.mean_up``; the one place
+    names are taken apart (a channel's own name may hold dots: the last two fields are band and kind).
+
+    >>> parse_statistic("ph.R.mean_down")
+    ('ph', 'R', 'mean_down')
+    >>> parse_statistic("Pressure.v2.D1.energy_down")
+    ('Pressure.v2', 'D1', 'energy_down')
+    """
+    parts = name.rsplit(".", 2)
+    if len(parts) != 3 or not all(parts):
+        raise ValueError(f"not a statistic name (CHANNEL.BAND.KIND): {name!r}")
+    return parts[0], parts[1], parts[2]
+
+
 def energy_reference(variance_ratio: float) -> float:
     """Reference value k of the variance CUSUM designed for a variance ratio rho > 1."""
     if not variance_ratio > 1.0:
