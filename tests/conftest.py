@@ -22,6 +22,19 @@ def shared_data() -> Path:
 GRAPH_TEST_DIRS = {"ros", "detector_node"}
 
 
+@pytest.fixture
+def run_cli(capsys):
+    """Run `phfdi ...` in process: (exit status, stdout, stderr)."""
+    from phfdi.cli import main
+
+    def run(*argv: object):
+        status = main([str(a) for a in argv])
+        out = capsys.readouterr()
+        return status, out.out, out.err
+
+    return run
+
+
 def pytest_collection_modifyitems(config, items):
     """Tests that start ROS 2 graphs run one after another on one xdist worker (``--dist loadgroup``), the rest
     beside them: two graphs at once on 2 cores slow each other's lock step, and Fast DDS's per-participant

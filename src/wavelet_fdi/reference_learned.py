@@ -141,17 +141,25 @@ class LearnedReference:
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "LearnedReference":
         try:
-            channels = tuple(str(c) for c in d["channels"])
-            m, lags = len(channels), int(d["lags"])
-            arr = {k: np.asarray(d[k], dtype=float) for k in ("mean", "scale", "intercept", "residual_sigma")}
-            own = np.asarray(d["own"], dtype=float).reshape(m, lags)
-            cross = np.asarray(d["cross"], dtype=float).reshape(m, m)
-            if any(v.shape != (m,) for v in arr.values()):
-                raise ValueError("a per-channel array has the wrong length")
+            channels, lags, arr, own, cross = linear_arrays(d)
             return cls(channels, lags, arr["mean"], arr["scale"], arr["intercept"], own, cross,
                        arr["residual_sigma"], int(d["fit_rows"]), float(d["ridge_own"]), float(d["ridge_cross"]))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not a learned reference ({exc})") from None
+
+
+def linear_arrays(d: dict) -> tuple[tuple[str, ...], int, dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """The linear predictor in a reference file's entry (the arx and oe kinds share it): channels, lags, the
+    per-channel arrays (mean, scale, intercept, residual_sigma), own (m, lags) and cross (m, m). Raises
+    KeyError, TypeError or ValueError when the entry is malformed (the caller names the file)."""
+    channels = tuple(str(c) for c in d["channels"])
+    m, lags = len(channels), int(d["lags"])
+    arr = {k: np.asarray(d[k], dtype=float) for k in ("mean", "scale", "intercept", "residual_sigma")}
+    own = np.asarray(d["own"], dtype=float).reshape(m, lags)
+    cross = np.asarray(d["cross"], dtype=float).reshape(m, m)
+    if any(v.shape != (m,) for v in arr.values()):
+        raise ValueError("a per-channel array has the wrong length")
+    return channels, lags, arr, own, cross
 
 
 class ReferenceStream:

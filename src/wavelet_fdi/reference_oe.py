@@ -40,7 +40,7 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 
-from .reference_learned import LearnedReference
+from .reference_learned import LearnedReference, linear_arrays
 
 #: stability margin: roots of the own-lag polynomial are kept within this radius
 MAX_ROOT = 0.999
@@ -123,13 +123,7 @@ class OutputErrorReference:
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "OutputErrorReference":
         try:
-            channels = tuple(str(c) for c in d["channels"])
-            m, lags = len(channels), int(d["lags"])
-            arr = {k: np.asarray(d[k], dtype=float) for k in ("mean", "scale", "intercept", "residual_sigma")}
-            own = np.asarray(d["own"], dtype=float).reshape(m, lags)
-            cross = np.asarray(d["cross"], dtype=float).reshape(m, m)
-            if any(v.shape != (m,) for v in arr.values()):
-                raise ValueError("a per-channel array has the wrong length")
+            channels, lags, arr, own, cross = linear_arrays(d)
             corr = float(d["correction_samples"])
             if corr < 0 or 0 < corr < 1:
                 raise ValueError("correction_samples must be 0 or at least 1")

@@ -24,19 +24,6 @@ def hidden_rng(request):
 
 
 @pytest.fixture
-def run_cli(capsys):
-    """Run `phfdi ...` in process: (exit status, stdout, stderr)."""
-    from phfdi.cli import main
-
-    def run(*argv: str):
-        status = main([str(a) for a in argv])
-        out = capsys.readouterr()
-        return status, out.out, out.err
-
-    return run
-
-
-@pytest.fixture
 def diagnose_json(run_cli):
     def run(*argv: str):
         status, out, err = run_cli("diagnose", *argv, "--json", "--quiet")

@@ -32,16 +32,3 @@ def rig_file(tmp_path) -> Path:
     """The real control record when ../shared/data is there (PHFDI_SHARED_DATA), else a rig-like CSV."""
     real = SHARED_DATA / RIG_CONTROL
     return real if real.is_file() else rig_like_csv(tmp_path / "rig.csv")
-
-
-@pytest.fixture
-def run_cli(capsys):
-    """Run `phfdi ...` in process: (exit status, stdout, stderr)."""
-    from phfdi.cli import main
-
-    def run(*argv: object):
-        status = main([str(a) for a in argv])
-        out = capsys.readouterr()
-        return status, out.out, out.err
-
-    return run

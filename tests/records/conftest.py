@@ -17,16 +17,3 @@ def short_run():
         _RUN["run"] = simulate(load_scenario("paper", fault="healthy", overrides=[
             "duration_s=900", "setpoints.ph.changes=[{at_s: 200, value: 8.0}]"]))
     return _RUN["run"]
-
-
-@pytest.fixture
-def run_cli(capsys):
-    """Run `phfdi ...` in process: (exit status, stdout, stderr)."""
-    from phfdi.cli import main
-
-    def run(*argv: object):
-        status = main([str(a) for a in argv])
-        out = capsys.readouterr()
-        return status, out.out, out.err
-
-    return run
