@@ -144,12 +144,9 @@ def calibrate_from_traces(traces: list[dict[str, np.ndarray]], settings: Detecto
     for name in names:
         if name in thresholds:
             continue
-        # up and down mean CUSUMs share one threshold: the healthy residual is symmetric, and
-        # pooling their window maxima halves the fit's scatter
-        group = [name]
-        ch, band, kind = parse_statistic(name)
-        if kind in ("mean_up", "mean_down"):
-            group = [n for n in (f"{ch}.{band}.mean_up", f"{ch}.{band}.mean_down") if n in names]
+        # statistics of one group share one threshold (up and down mean CUSUMs: the healthy residual is
+        # symmetric, and pooling their window maxima halves the fit's scatter)
+        group = settings.threshold_group(name)
         maxima = np.concatenate([window_maxima(statistic_increments(t, g, sigma, settings), window)
                                  for t in traces for g in group])
         fit = tail_threshold(maxima, p_target)

@@ -45,7 +45,7 @@ from .filterbank import CausalSwt, wavelet_filters
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
 from .references import NAMERS, Reference, reference_from_dict
-from .statistics import CusumBank, energy_reference
+from .statistics import CusumBank, energy_decrease_reference, energy_reference
 
 FORMAT = "phfdi-learned-detector/1"
 TIME_RING = 1 << 16
@@ -345,8 +345,7 @@ class LearnedDetector:
         if self.energy_down:
             # log-likelihood ratio of a variance decrease to rho: k - d^2 with k = ln(1/rho) / (1/rho - 1);
             # kept as value -d^2 minus reference -k so that every row is "value - k"
-            rho = s.energy_down_variance_ratio
-            kd = math.log(1.0 / rho) / (1.0 / rho - 1.0)
+            kd = energy_decrease_reference(s.energy_down_variance_ratio)
             for c, ch in enumerate(self.channels):
                 for j in range(s.level):
                     names.append(f"{ch}.D{j + 1}.energy_down")

@@ -27,8 +27,6 @@ import math
 
 import numpy as np
 
-KINDS = ("energy", "mean_up", "mean_down")
-
 
 def parse_statistic(name: str) -> tuple[str, str, str]:
     """(channel, band, kind) of a statistic's name ``CHANNEL.BAND.KIND``, e.g. ``ph.A3.mean_up``; the one place
@@ -52,14 +50,114 @@ def energy_reference(variance_ratio: float) -> float:
     return math.log(variance_ratio) / (1.0 - 1.0 / variance_ratio)
 
 
-def increments(kind: str, u: np.ndarray, k: float) -> np.ndarray:
-    if kind == "energy":
-        return u * u - k
-    if kind == "mean_up":
+def energy_decrease_reference(variance_ratio: float) -> float:
+    """Reference value k of the variance-decrease CUSUM (increments k - u^2) for a variance ratio 0 < rho < 1: the
+    Gaussian log-likelihood ratio ln(1/rho) / (1/rho - 1), scaled like :func:`energy_reference`."""
+    if not 0.0 < variance_ratio < 1.0:
+        raise ValueError(f"variance ratio of a decrease must be between 0 and 1, got {variance_ratio}")
+    return math.log(1.0 / variance_ratio) / (1.0 / variance_ratio - 1.0)
+
+
+class Statistic:
+    """One kind of CUSUM statistic the detector can run: where it looks, its reference value, its increment.
+
+    A new statistic is one subclass registered with :func:`register_statistic` and named in
+    :attr:`wavelet_fdi.DetectorSettings.statistics`; ``phfdi calibrate`` then measures its threshold like any
+    other (window maxima on healthy runs, tail fit for the false-alarm target; statistics of one channel and
+    band with the same ``group`` share one threshold). ``settings`` is a :class:`wavelet_fdi.DetectorSettings`.
+
+    Examples
+    --------
+    >>> STATISTICS["mean_up"].increments(np.array([0.0, 2.0]), 0.5)
+    array([-0.5,  1.5])
+    """
+
+    kind: str = ""
+    #: statistics of one channel and band with the same group share a threshold (pooled window maxima)
+    group: str = ""
+
+    def rows(self, settings) -> tuple[str, ...]:
+        """The coefficient rows watched: wavelet bands D1..DJ, AJ, or R (the residual itself)."""
+        raise NotImplementedError
+
+    def reference_value(self, settings, band: str) -> float:
+        raise NotImplementedError
+
+    def increments(self, u: np.ndarray, k: float) -> np.ndarray:
+        """CUSUM increments (drift below 0 when healthy, above after the change) of normalised coefficients u."""
+        raise NotImplementedError
+
+
+#: kind -> statistic, in the order the detector lists a band's statistics
+STATISTICS: dict[str, Statistic] = {}
+
+
+def register_statistic(cls: type[Statistic]) -> type[Statistic]:
+    """Class decorator: make a statistic known by its ``kind`` (one kind, one class)."""
+    if not cls.kind or cls.kind in STATISTICS:
+        raise ValueError(f"statistic kind {cls.kind!r} is empty or already registered")
+    STATISTICS[cls.kind] = cls()
+    return cls
+
+
+def statistic(kind: str) -> Statistic:
+    try:
+        return STATISTICS[kind]
+    except KeyError:
+        raise ValueError(f"unknown statistic kind {kind!r}; known: {', '.join(STATISTICS)}") from None
+
+
+class _Mean(Statistic):
+    """A mean shift of ``mean_shift_sigma`` residual sigmas, on R (``raw_band``) or else on AJ, which carries a
+    residual mean 2^(J/2) times (its DC gain): the same information, later."""
+
+    group = "mean"
+
+    def rows(self, settings) -> tuple[str, ...]:
+        return ("R",) if settings.raw_band else (f"A{settings.level}",)
+
+    def reference_value(self, settings, band: str) -> float:
+        gain = 1.0 if band == "R" else 2.0 ** (0.5 * settings.level)
+        return 0.5 * settings.mean_shift_sigma * gain
+
+
+@register_statistic
+class MeanUp(_Mean):
+    kind = "mean_up"
+
+    def increments(self, u: np.ndarray, k: float) -> np.ndarray:
         return u - k
-    if kind == "mean_down":
+
+
+@register_statistic
+class MeanDown(_Mean):
+    kind = "mean_down"
+
+    def increments(self, u: np.ndarray, k: float) -> np.ndarray:
         return -u - k
-    raise ValueError(f"unknown statistic kind {kind!r}; known: {', '.join(KINDS)}")
+
+
+@register_statistic
+class Energy(Statistic):
+    """Energy of every wavelet band: a variance increase by ``variance_ratio``."""
+
+    kind = group = "energy"
+
+    def rows(self, settings) -> tuple[str, ...]:
+        return tuple(settings.bands())
+
+    def reference_value(self, settings, band: str) -> float:
+        return energy_reference(settings.variance_ratio)
+
+    def increments(self, u: np.ndarray, k: float) -> np.ndarray:
+        return u * u - k
+
+
+KINDS = tuple(STATISTICS)
+
+
+def increments(kind: str, u: np.ndarray, k: float) -> np.ndarray:
+    return statistic(kind).increments(u, k)
 
 
 class CusumBank:

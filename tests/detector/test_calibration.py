@@ -12,7 +12,7 @@ from phfdi_base.errors import UserError
 from wavelet_fdi.calibration import DEFAULT_CALIBRATION_SEEDS, calibrate_from_traces, tail_threshold, window_maxima
 from wavelet_fdi.config import Calibration, DetectorSettings, load_default_calibration
 from wavelet_fdi.filterbank import CausalSwt
-from wavelet_fdi.statistics import increments
+from wavelet_fdi.statistics import increments, parse_statistic
 
 
 def test_tail_fit_recovers_an_exponential_quantile():
@@ -54,9 +54,9 @@ def test_calibrated_union_detector_meets_its_false_alarm_target_on_fresh_noise()
     names = settings.statistic_names()
     rows = settings.rows()
     u = fresh["ph_coefficients"][200:]
-    z = np.vstack([increments(n.split(".")[2], u[:, rows.index(n.split(".")[1])]
-                              / cal.sigma["ph"]["raw" if n.split(".")[1] == "R" else n.split(".")[1]],
-                              settings.reference_value(n)) for n in names])
+    parsed = [parse_statistic(n) for n in names]
+    z = np.vstack([increments(kind, u[:, rows.index(band)] / cal.sigma["ph"]["raw" if band == "R" else band],
+                              settings.reference_value(n)) for n, (_, band, kind) in zip(names, parsed)])
     alarms = alarm_positions(z, np.array([cal.thresholds[n] for n in names]), 0)
     arl = len(u) / max(len(alarms), 1)
     # 50 alarms expected at the target; the tail extrapolation is good to about a factor 2
