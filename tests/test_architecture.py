@@ -448,3 +448,77 @@ def test_suffix_checker_catches_a_reader_of_its_own(tmp_path):
                      "phfdi/tool.py": 'def f(p):\n    if p.suffix.lower() in (".csv", ".pq"):\n        pass\n'
                                       '    return p.suffix == ".yaml"\n'})
     assert suffix_decisions(tmp_path) == {"phfdi.tool": ["line 2"]}
+
+
+#: functions that read a table of samples from a file; only the record readers call them
+TABLE_READERS = frozenset({"read_csv", "read_parquet", "read_table", "loadtxt", "genfromtxt", "reader", "DictReader"})
+#: modules beside the readers that call one, each for something that is not a run: the wide export's header
+#: line (its loops are then read by phfdi.records), the labels file of a loop collection
+NOT_A_RUN = {"phfdi.loopdiag.plantwide": "a wide export's header line",
+             "phfdi.loopdiag.evaluate": "labels.csv of a loop collection"}
+
+
+def table_reads(src: Path, allowed: tuple[str, ...] = FILE_FORMAT_MODULES) -> dict[str, list[str]]:
+    """module -> lines outside ``allowed`` and :data:`NOT_A_RUN` that call a table reader (pandas, numpy, csv,
+    pyarrow): a second reader of runs, where phfdi.records.read_run should be asked."""
+    out: dict[str, list[str]] = {}
+    for module, path in project_modules(src).items():
+        if module.startswith(tuple(f"{a}." for a in allowed)) or module in allowed or module in NOT_A_RUN:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+                    and node.func.attr in TABLE_READERS:
+                out.setdefault(module, []).append(f"line {node.lineno}")
+    return out
+
+
+def test_runs_are_read_only_by_the_record_readers():
+    assert table_reads(SRC) == {}, "read runs with phfdi.records.read_run (or add a reader to phfdi.records)"
+
+
+def test_table_read_checker_catches_a_reader_of_its_own(tmp_path):
+    _tree(tmp_path, {"phfdi/__init__.py": "", "phfdi/records/__init__.py": "",
+                     "phfdi/records/csvfile.py": "import pandas as pd\ndef f(p):\n    return pd.read_csv(p)\n",
+                     "phfdi/tool.py": "import numpy as np\ndef f(p):\n    return np.loadtxt(p, delimiter=',')\n"})
+    assert table_reads(tmp_path) == {"phfdi.tool": ["line 3"]}
+
+
+# ---- detector settings declared once ---------------------------------------------------------------------
+#: modules with options of the same name that are not the detector's: the paper's offline wavelet analysis
+OWN_WAVELET_OPTIONS = {"phfdi.commands.analyze": "the offline analysis's wavelet and level"}
+
+
+def setting_redeclarations(src: Path, names: set[str], flags: set[str],
+                           home: str = "wavelet_fdi.config") -> dict[str, list[str]]:
+    """module -> lines outside ``home`` that declare a detector setting again: an ``add_argument`` of one of
+    its option flags or a ``ParamSpec`` of its name (both are derived from DetectorSettings' declaration)."""
+    out: dict[str, list[str]] = {}
+    for module, path in project_modules(src).items():
+        if module == home or module in OWN_WAVELET_OPTIONS:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)):
+                continue
+            func = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+            first = node.args[0].value
+            if (func == "add_argument" and first in flags) or (func == "ParamSpec" and first in names):
+                out.setdefault(module, []).append(f"line {node.lineno}")
+    return out
+
+
+def test_detector_settings_are_declared_once():
+    from wavelet_fdi.config import setting_specs
+
+    specs = setting_specs()
+    assert setting_redeclarations(SRC, {s.name for s in specs}, {s.flag for s in specs}) == {}, \
+        "declare a detector setting in wavelet_fdi.config.DetectorSettings (setting(...)); derive the rest"
+
+
+def test_settings_checker_catches_a_second_declaration(tmp_path):
+    _tree(tmp_path, {"wavelet_fdi/__init__.py": "", "wavelet_fdi/config.py": "",
+                     "wavelet_fdi/node.py": 'P = (ParamSpec("arl0_samples", 1e5, "target"),)\n',
+                     "phfdi/__init__.py": "",
+                     "phfdi/cli.py": 'def f(p):\n    p.add_argument("--arl0", type=float)\n'
+                                     '    p.add_argument("--out")\n'})
+    assert setting_redeclarations(tmp_path, {"arl0_samples"}, {"--arl0"}) == {
+        "wavelet_fdi.node": ["line 1"], "phfdi.cli": ["line 2"]}

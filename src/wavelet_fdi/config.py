@@ -12,27 +12,36 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, get_type_hints
 
 from phfdi_base.errors import UserError
 from phfdi_base.yamlfile import read_mapping
 
 from .filterbank import wavelet_filters
-from .statistics import energy_reference, parse_statistic
+from .statistics import STATISTICS, parse_statistic
 
 CALIBRATION_DIR = Path(str(resources.files("wavelet_fdi"))) / "calibrations"
 CHANNELS = ("ph", "level")
 
 
+def setting(default: Any, help: str, *, range: tuple[float, float] | None = None, option: str | None = None,
+            exposed: bool = False) -> Any:
+    """A detector setting, declared once: default, help and allowed range. ``exposed`` settings are also an
+    option of ``phfdi calibrate``, ``replay`` and ``evaluate`` (``--<option or name>``) and a parameter of the
+    detector node; :func:`setting_specs` derives those, and the docs table (:func:`settings_table_markdown`)."""
+    return field(default=default, metadata={"help": help, "range": range, "option": option, "exposed": exposed})
+
+
 @dataclass
 class DetectorSettings:
-    """Design of the detector (units in the names; see docs/detector.md).
+    """Design of the detector (units in the names; see docs/detector.md, "Detector settings").
 
     Every field has a default (the shipped calibrations' design); the statistics it runs are
-    :meth:`statistic_names`, each needing a threshold in the :class:`Calibration`.
+    :meth:`statistic_names`, each needing a threshold in the :class:`Calibration`. Each field is declared
+    once here, with its help and range; the CLI options and node parameters are derived from it.
 
     Examples
     --------
@@ -42,59 +51,60 @@ class DetectorSettings:
     ['ph.R.mean_up', 'ph.R.mean_down', 'ph.D1.energy', 'ph.D2.energy', 'ph.D3.energy', 'ph.A3.energy']
     """
 
-    wavelet: str = "sym4"
-    level: int = 3
-    #: average run length to a false alarm of the whole detector, in samples
-    arl0_samples: float = 1e5
-    #: residual channels watched for detection ("ph", optionally "level")
-    channels: tuple[str, ...] = ("ph",)
-    #: watch the residual's own mean (R) besides the wavelet bands' energies; False: the paper's bands only
-    raw_band: bool = True
-    #: mean CUSUMs on the approximation band are designed for a residual mean shift of this many sigma
-    mean_shift_sigma: float = 1.0
-    #: energy CUSUMs are designed for this variance ratio
-    variance_ratio: float = 4.0
-    #: observer corrections, pH-solve guesses and state snapshots happen every this many samples
-    block_samples: int = 256
-    #: no alarms until this long after a start or a reset (the reference settles, the filters fill)
-    warmup_s: float = 600.0
-    #: time constant of the slow observer that removes model-plant mismatch; 0 switches it off
-    observer_time_constant_s: float = 3600.0
-    #: a gap in the time stamps longer than this resets the window; shorter gaps are bridged
-    max_gap_s: float = 10.0
-    #: the valve command may be missing this long before the detector stops trusting the reference
-    command_timeout_s: float = 10.0
-    #: an alarm clears after this long without a statistic crossing its threshold
-    clear_after_s: float = 1800.0
-    #: isolation runs this long after a detection (and again at each further delay given)
-    isolation_delays_s: tuple[float, ...] = (300.0,)
-    #: when the diagnosis is unsure (confidence below isolation_confidence or class unknown), isolate
-    #: again, one isolation delay later each time, at most this many times
-    isolation_retries: int = 2
-    isolation_confidence: float = 0.9
-    #: past samples kept for isolation (bounds memory)
-    history_samples: int = 4096
-    #: statistics are held this long after a setpoint change (0: off)
-    setpoint_holdoff_s: float = 0.0
+    wavelet: str = setting("sym4", "PyWavelets orthogonal wavelet of the filter bank (sym4, db8, ...); the "
+                                   "calibration must match", exposed=True)
+    level: int = setting(3, "wavelet decomposition level", range=(1, 10), exposed=True)
+    arl0_samples: float = setting(1e5, "false-alarm target: average run length to a false alarm of the whole "
+                                       "detector (samples); the calibration must match", range=(10.0, 1e12),
+                                  option="arl0", exposed=True)
+    channels: tuple[str, ...] = setting(("ph",), "residual channels watched: ph, or ph and level", exposed=True)
+    raw_band: bool = setting(True, "watch the residual's own mean (R) besides the wavelet bands' energies; "
+                                   "false: the paper's bands only (the mean of AJ instead of R's)")
+    statistics: tuple[str, ...] = setting(("mean_up", "mean_down", "energy"),
+                                          "kinds of CUSUM statistic run (wavelet_fdi.statistics.STATISTICS)")
+    mean_shift_sigma: float = setting(1.0, "the mean CUSUMs are designed for a residual mean shift of this many "
+                                           "sigma", range=(1e-3, 1e3))
+    variance_ratio: float = setting(4.0, "the energy CUSUMs are designed for this variance ratio (above 1)",
+                                    range=(1.0, 1e6))
+    block_samples: int = setting(256, "observer corrections, pH-solve guesses and state snapshots happen every "
+                                      "this many samples", range=(8, 1_000_000))
+    warmup_s: float = setting(600.0, "no alarms until this long after a start or a reset (the reference "
+                                     "settles, the filters fill), s", range=(0.0, 1e9))
+    observer_time_constant_s: float = setting(3600.0, "time constant of the slow observer that removes "
+                                                      "model-plant mismatch, s; 0 switches it off", range=(0.0, 1e9))
+    max_gap_s: float = setting(10.0, "a gap in the time stamps longer than this resets the window; shorter gaps "
+                                     "are bridged, s", range=(0.0, 1e9))
+    command_timeout_s: float = setting(10.0, "the valve command may be missing this long before the detector "
+                                             "stops trusting the reference, s", range=(0.0, 1e9))
+    clear_after_s: float = setting(1800.0, "an alarm clears after this long without a statistic crossing its "
+                                           "threshold, s", range=(0.0, 1e9))
+    isolation_delays_s: tuple[float, ...] = setting((300.0,), "isolation runs this long after a detection (and "
+                                                              "again at each further delay given), s")
+    isolation_retries: int = setting(2, "when the diagnosis is unsure, isolate again one isolation delay later, "
+                                        "at most this many times", range=(0, 100))
+    isolation_confidence: float = setting(0.9, "below this confidence (or class unknown) the diagnosis is "
+                                               "unsure", range=(0.0, 1.0))
+    history_samples: int = setting(4096, "past samples kept for isolation (bounds memory); at least twice "
+                                         "block_samples", range=(16, 100_000_000))
+    setpoint_holdoff_s: float = setting(0.0, "statistics are held this long after a setpoint change (0: off), s",
+                                        range=(0.0, 1e9))
 
     def __post_init__(self) -> None:
         self.channels = tuple(self.channels)
+        self.statistics = tuple(self.statistics)
         self.isolation_delays_s = tuple(float(d) for d in self.isolation_delays_s)
+        for spec in setting_specs():
+            _check_range(spec, getattr(self, spec.name))
         for c in self.channels:
             if c not in CHANNELS:
                 raise UserError(f"detector channel {c!r} unknown; use {', '.join(CHANNELS)}")
-        if not self.arl0_samples > 1.0:
-            raise UserError(f"arl0_samples must exceed 1, got {self.arl0_samples}")
-        if self.block_samples < 8:
-            raise UserError(f"block_samples must be at least 8, got {self.block_samples}")
-        if self.history_samples < 2 * self.block_samples:
-            raise UserError("history_samples must be at least twice block_samples")
-        if not self.mean_shift_sigma > 0:
-            raise UserError("mean_shift_sigma must be positive")
+        for kind in self.statistics:
+            if kind not in STATISTICS:
+                raise UserError(f"statistic kind {kind!r} unknown; registered: {', '.join(STATISTICS)}")
         if not self.variance_ratio > 1.0:
             raise UserError(f"variance_ratio must exceed 1, got {self.variance_ratio}")
-        if not 1 <= self.level <= 10:
-            raise UserError(f"wavelet level must be between 1 and 10, got {self.level}")
+        if self.history_samples < 2 * self.block_samples:
+            raise UserError("history_samples must be at least twice block_samples")
         try:
             wavelet_filters(self.wavelet)
         except ValueError as exc:
@@ -109,32 +119,109 @@ class DetectorSettings:
         return self.bands() + ["R"]
 
     def statistic_names(self) -> list[str]:
-        """channel.band.kind for every CUSUM the detector runs.
+        """channel.band.kind for every CUSUM the detector runs: per channel, R's statistics then each band's
+        (D1..DJ, AJ), within a band in the order of :attr:`statistics`.
 
-        With ``raw_band`` (default): the residual's mean (R, up and down) and
-        the energy of every wavelet band. Without it, the paper's bands only:
-        the mean of AJ replaces R's. (AJ's mean is R's mean seen through a
-        low-pass filter: the same information, later.)
+        With the defaults (``raw_band``): the residual's mean (R, up and down) and the energy of every wavelet
+        band. Without ``raw_band``, the paper's bands only: the mean of AJ replaces R's.
         """
-        out: list[str] = []
-        a = f"A{self.level}"
-        for ch in self.channels:
-            if self.raw_band:
-                out.extend((f"{ch}.R.mean_up", f"{ch}.R.mean_down"))
-            for b in self.bands():
-                if b == a and not self.raw_band:
-                    out.extend((f"{ch}.{b}.mean_up", f"{ch}.{b}.mean_down"))
-                out.append(f"{ch}.{b}.energy")
-        return out
+        stats = [STATISTICS[kind] for kind in self.statistics]
+        return [f"{ch}.{row}.{st.kind}" for ch in self.channels for row in ["R", *self.bands()]
+                for st in stats if row in st.rows(self)]
 
     def reference_value(self, name: str) -> float:
-        """k of a statistic: the energy CUSUM's for variance_ratio; the mean CUSUM's for a shift of
-        mean_shift_sigma residual standard deviations, which A_J carries 2^(J/2) times (its DC gain)."""
+        """k of a statistic (its class's design: a mean shift of mean_shift_sigma residual standard deviations,
+        a variance ratio of variance_ratio, ...)."""
         _, band, kind = parse_statistic(name)
-        if kind == "energy":
-            return energy_reference(self.variance_ratio)
-        gain = 1.0 if band == "R" else 2.0 ** (0.5 * self.level)
-        return 0.5 * self.mean_shift_sigma * gain
+        return STATISTICS[kind].reference_value(self, band)
+
+    def threshold_group(self, name: str) -> list[str]:
+        """The statistics sharing a threshold with ``name`` (same channel, band and group), in run order."""
+        ch, band, kind = parse_statistic(name)
+        group = STATISTICS[kind].group or kind
+        return [n for n in self.statistic_names() if parse_statistic(n)[:2] == (ch, band)
+                and (STATISTICS[parse_statistic(n)[2]].group or parse_statistic(n)[2]) == group]
+
+
+@dataclass(frozen=True)
+class SettingSpec:
+    """One detector setting as declared in :class:`DetectorSettings`."""
+
+    name: str
+    type: Any
+    default: Any
+    help: str
+    range: tuple[float, float] | None
+    option: str | None
+    exposed: bool
+
+    @property
+    def flag(self) -> str:
+        """The CLI option: ``--arl0``, ``--wavelet``, ..."""
+        return "--" + (self.option or self.name).replace("_", "-")
+
+    @property
+    def is_list(self) -> bool:
+        return isinstance(self.default, tuple)
+
+
+def setting_specs(exposed_only: bool = False) -> list[SettingSpec]:
+    """Every detector setting (or only those exposed as CLI options and node parameters), in declaration order."""
+    hints = get_type_hints(DetectorSettings)
+    out = [SettingSpec(f.name, hints[f.name], f.default, f.metadata["help"], f.metadata["range"],
+                       f.metadata["option"], f.metadata["exposed"]) for f in fields(DetectorSettings)]
+    return [s for s in out if s.exposed or not exposed_only]
+
+
+def settings_from_values(values: dict[str, Any], base: DetectorSettings | None = None) -> DetectorSettings:
+    """Settings from option or parameter values (a list setting as a list or a comma-separated string), the
+    others from ``base`` (or the defaults): the one conversion the CLI and the node share.
+
+    >>> settings_from_values({"level": 2, "channels": "ph, level"}).channels
+    ('ph', 'level')
+    """
+    out = dict(asdict(base)) if base is not None else {}
+    for spec in setting_specs():
+        if spec.name not in values:
+            continue
+        v = values[spec.name]
+        if spec.is_list and isinstance(v, str):
+            v = tuple(c.strip() for c in v.split(",") if c.strip())
+        out[spec.name] = tuple(v) if spec.is_list else v
+    return DetectorSettings(**out)
+
+
+def settings_as_params(settings: DetectorSettings) -> dict[str, Any]:
+    """The exposed settings as detector-node parameter values (lists for list settings)."""
+    return {s.name: list(getattr(settings, s.name)) if s.is_list else getattr(settings, s.name)
+            for s in setting_specs(exposed_only=True)}
+
+
+def _check_range(spec: SettingSpec, value: Any) -> None:
+    if spec.range is None:
+        return
+    lo, hi = spec.range
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (lo <= value <= hi):
+        raise UserError(f"detector setting {spec.name} must be a number in {_shown_range(spec)}, got {value!r}")
+
+
+def _shown_range(spec: SettingSpec) -> str:
+    if spec.range is None:
+        return ""
+    lo, hi = spec.range
+    return f"{int(lo)}..{int(hi)}" if spec.type is int else f"{lo:g}..{hi:g}"
+
+
+def settings_table_markdown() -> str:
+    """The docs table of every detector setting (docs/detector.md holds it; a test checks it is current)."""
+    lines = ["| setting | default | range | option / node parameter | what |", "|---|---|---|---|---|"]
+    for s in setting_specs():
+        default = ", ".join(map(str, s.default)) if s.is_list else str(s.default).lower() if isinstance(
+            s.default, bool) else f"{s.default:g}" if isinstance(s.default, float) else str(s.default)
+        rng = _shown_range(s)
+        where = f"`{s.flag}`, `{s.name}`" if s.exposed else ""
+        lines.append(f"| `{s.name}` | {default} | {rng} | {where} | {s.help} |")
+    return "\n".join(lines) + "\n"
 
 
 def _positive(x: object) -> bool:

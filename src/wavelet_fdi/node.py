@@ -48,7 +48,7 @@ from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s
 from phfdi_base.topics import CONTROLLER, DIAGNOSTICS, MEASUREMENT
 
 from .alarm_messages import severity_of
-from .config import Calibration, DetectorSettings, load_default_calibration
+from .config import Calibration, load_default_calibration, setting_specs, settings_from_values
 from .detector import StreamingDetector
 from .node_base import STATE_OF_LEVEL, DetectorNodeBase
 from .reference import KnownStart
@@ -56,11 +56,9 @@ from .reference import KnownStart
 PARAMS = (
     ParamSpec("calibration", "", "calibration file (.yaml/.json) from phfdi calibrate; '' takes the one shipped "
                                  "for the scenario"),
-    ParamSpec("wavelet", "sym4", "PyWavelets orthogonal wavelet of the filter bank (sym4, db8, ...)"),
-    ParamSpec("level", 3, "wavelet decomposition level", range=(1, 10)),
-    ParamSpec("arl0_samples", 1e5, "false-alarm target: average run length to a false alarm (samples)",
-              range=(10.0, 1e12)),
-    ParamSpec("channels", ["ph"], "residual channels watched: [ph] or [ph, level]"),
+    # the detector settings exposed to users, from their one declaration (wavelet_fdi.config.DetectorSettings)
+    *(ParamSpec(s.name, list(s.default) if s.is_list else s.default, s.help, range=s.range)
+      for s in setting_specs(exposed_only=True)),
     ParamSpec("isolate", True, "name the fault class (and estimate its parameter) after an alarm"),
     ParamSpec("loop", "ph", "name of the monitored loop in /fault_alarm"),
     ParamSpec("pairing_window", 1, "measurements that must wait behind a sample before its controller output "
@@ -220,9 +218,7 @@ class DetectorNode(DetectorNodeBase):
     # ---- parameters -----------------------------------------------------------------------
     def _build_core(self):
         try:
-            settings = DetectorSettings(wavelet=self.param("wavelet"), level=self.param("level"),
-                                        arl0_samples=self.param("arl0_samples"),
-                                        channels=tuple(self.param("channels")))
+            settings = settings_from_values({s.name: self.param(s.name) for s in setting_specs(exposed_only=True)})
             path = self.param("calibration")
             if path:
                 cal, source = Calibration.load(path), path

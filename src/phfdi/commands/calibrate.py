@@ -62,18 +62,21 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def add_detector_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--wavelet", default="sym4", help="PyWavelets orthogonal wavelet (default sym4; e.g. db8)")
-    p.add_argument("--level", type=int, default=3, help="decomposition level (default 3)")
-    p.add_argument("--arl0", type=float, default=1e5, metavar="SAMPLES",
-                   help="average run length to a false alarm, in samples (default 1e5)")
-    p.add_argument("--channels", default="ph", help="residual channels watched: ph or ph,level (default ph)")
+    """The detector settings exposed as options, derived from their one declaration (wavelet_fdi.config)."""
+    from wavelet_fdi.config import setting_specs
+
+    for s in setting_specs(exposed_only=True):
+        default = ",".join(s.default) if s.is_list else s.default
+        metavar = "A,B" if s.is_list else "SAMPLES" if s.name == "arl0_samples" else None
+        p.add_argument(s.flag, dest=s.name, type=str if s.is_list else s.type, default=default, metavar=metavar,
+                       help=f"{s.help} (default {default:g})" if isinstance(default, float)
+                       else f"{s.help} (default {default})")
 
 
 def settings_from_args(args: argparse.Namespace):
-    from wavelet_fdi.config import DetectorSettings
+    from wavelet_fdi.config import setting_specs, settings_from_values
 
-    return DetectorSettings(wavelet=args.wavelet, level=args.level, arl0_samples=args.arl0,
-                            channels=tuple(c.strip() for c in args.channels.split(",") if c.strip()))
+    return settings_from_values({s.name: getattr(args, s.name) for s in setting_specs(exposed_only=True)})
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -262,11 +262,12 @@ def run_live(args: argparse.Namespace) -> int:
     from phfdi.ros.launcher import NodeSpec, detector_spec
     from phfdi.ros.player import PLAYER
     from phfdi_base.topics import DETECTOR
+    from wavelet_fdi.config import settings_as_params
 
     from .launch import alarm_event_line
 
     _check_live_bag(args, "/plant/measurement", "not a bag of the phfdi graph")
-    settings_from_args(args)  # one line for bad detector settings before any process starts
+    settings = settings_from_args(args)  # one line for bad detector settings before any process starts
     say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
 
     def on_event(node: str, event: dict) -> None:
@@ -276,9 +277,7 @@ def run_live(args: argparse.Namespace) -> int:
 
     spec = _replay_scenario(args.file, args.scenario)
     common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
-    detector = {**common, "wavelet": args.wavelet, "level": args.level, "arl0_samples": float(args.arl0),
-                "channels": [c.strip() for c in args.channels.split(",") if c.strip()],
-                "isolate": not args.no_isolation}
+    detector = {**common, **settings_as_params(settings), "isolate": not args.no_isolation}
     if args.calibration:
         detector["calibration"] = str(Path(args.calibration).resolve())
     nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
