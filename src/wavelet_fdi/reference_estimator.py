@@ -233,12 +233,15 @@ class EstimatorStream:
         self._gy = [0.0] * m
         self._on_s = [0.0] * m
         self.nll = 0.0  # running negative log-likelihood of the innovations (for fitting)
-        self.state_trace: list[float] | None = None
+        self.blocks = 0  # block boundaries passed (the adaptation's clock: block_samples samples each)
+        #: set to a list to record every adaptation: (block boundary, relative errors, pump-on s, factors before)
+        self.adapt_trace: list[tuple[int, list[float], list[float], list[float]]] | None = None
 
     def fork(self, ref: EstimatorReference | None = None) -> "EstimatorStream":
         """A copy of this state (the same or another reference, e.g. a fault hypothesis), log-likelihood reset."""
         other = EstimatorStream(ref or self.ref)
         other.x, other.p, other.last_t, other.samples = self.x, self.p, self.last_t, self.samples
+        other.blocks = self.blocks
         other.factors, other.last_flows = list(self.factors), list(self.last_flows)
         other._gg = [list(r) for r in self._gg]
         other._gy, other._on_s = list(self._gy), list(self._on_s)
@@ -356,10 +359,13 @@ class EstimatorStream:
         """At a block boundary: move each feed's factor toward the block's least-squares estimate, with gain
         (seconds the feed ran in the block) / adapt_time_constant_s; then clear the block's sums (in place:
         the recursion holds these lists)."""
+        self.blocks += 1
         tau = self.ref.adapt_time_constant_s
         m = len(self.factors)
         if tau > 0 and any(self._on_s):
             rel = _ridge_solve(self._gg, self._gy)  # relative strength error of each feed over the block
+            if self.adapt_trace is not None:
+                self.adapt_trace.append((self.blocks, list(rel), list(self._on_s), list(self.factors)))
             lo, hi = FACTOR_BOUNDS
             cap = MAX_BLOCK_STEP  # one block (a cliff's misfit) moves a factor little
             self.factors[:] = [min(hi, max(lo, f * (1.0 + min(1.0, on / tau) * max(-cap, min(cap, r)))))
