@@ -113,3 +113,21 @@ def test_help_says_what_it_does_with_an_example(command, capsys):
         main([command, "--help"])
     assert exc.value.code == 0
     assert f"phfdi {command}" in capsys.readouterr().out.split("examples:")[1]
+
+
+def test_a_closed_pipe_ends_the_command_quietly(backlash_file):
+    """`phfdi replay FILE --json | head -c 1`: the reader is gone before the report is written; one quiet exit
+    (141 = 128 + SIGPIPE, as a shell reports it), no BrokenPipeError traceback."""
+    import os
+    import subprocess
+    import sys
+
+    r, w = os.pipe()
+    os.close(r)  # the reader is gone before the command writes anything
+    try:
+        proc = subprocess.run([sys.executable, "-m", "phfdi.cli", "replay", str(backlash_file), "--json"],
+                              stdout=w, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w)
+    assert proc.returncode == 141, proc.stderr
+    assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr, proc.stderr
