@@ -38,6 +38,8 @@ H = "tests/diagnosis/test_hidden.py::"
 S = "tests/diagnosis/test_hidden_structure.py::"
 R = "tests/diagnosis/test_reference_model.py::"
 L = "tests/loops/test_stickslip.py::"
+#: draws a hidden-effect test of tests/diagnosis/test_hidden*.py may take in the suite (hidden_cases.HIDDEN_DRAWS)
+DRAWS_IN_CI = 3
 #: every test whose data depend on the per-run seed -> times it runs in one suite run
 SEEDED = {
     H + "test_catalogue_effect_is_named_with_its_parameter[0]": 2,  # [1] draws the same way: one id, run twice
@@ -80,7 +82,8 @@ def run_seed(tests: list[str], seed: int) -> dict[str, tuple[str, str]]:
     """One pytest process with PHFDI_HIDDEN_SEED=seed: test id -> (outcome, first line of the failure)."""
     with tempfile.TemporaryDirectory() as tmp:
         xml = Path(tmp) / "junit.xml"
-        env = dict(os.environ, PHFDI_HIDDEN_SEED=str(seed))
+        # one draw per test: the rate of a single draw (the suite lets a test take up to DRAWS_IN_CI draws)
+        env = dict(os.environ, PHFDI_HIDDEN_SEED=str(seed), PHFDI_HIDDEN_DRAWS="1")
         subprocess.run([sys.executable, "-m", "pytest", *tests, "-n", "0", "-q", "--runxfail", "-p",
                         "no:cacheprovider", f"--junitxml={xml}", "--basetemp", str(Path(tmp) / "t")],
                        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
@@ -121,9 +124,10 @@ def report(results: dict[str, list[tuple[int, str, str]]], xfail: set[str]) -> N
             if outcome == "failed":
                 print(f"    seed {seed}: {msg}")
         if test not in xfail and n:
-            p_ok *= (1.0 - k / n) ** SEEDED.get(test, 1)
-    print(f"\nchance that one CI run fails from these tests (point estimate, xfail excluded): "
-          f"{100 * (1.0 - p_ok):.1f} %")
+            draws = 1 if test.startswith(R) or test.startswith(L) else DRAWS_IN_CI
+            p_ok *= (1.0 - (k / n) ** draws) ** SEEDED.get(test, 1)
+    print(f"\nchance that one CI run fails from these tests (point estimate, xfail excluded; the hidden-effect "
+          f"tests take up to {DRAWS_IN_CI} draws, failing when all do): {100 * (1.0 - p_ok):.3f} %")
 
 
 def main() -> int:

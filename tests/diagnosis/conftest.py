@@ -31,3 +31,4 @@ def diagnose_json(run_cli):
         return json.loads(out)
 
     return run
+

@@ -19,7 +19,9 @@ out puts the plant in the steady state of the effect.
 
 from __future__ import annotations
 
+import functools
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -275,3 +277,30 @@ def make_case(rng: np.random.Generator, cause: str, excitation: str, out_dir: Pa
     else:
         tol = math.nan
     return HiddenCase(cause, params, main, value, tol, excitation, path)
+
+
+#: independent draws a seeded hidden-effect test may take: it passes at the first draw that passes. With a
+#: per-draw failure rate p (benchmarks/hidden_flake_rates.py measures it with PHFDI_HIDDEN_DRAWS=1) a suite run
+#: fails by chance with probability p^3 per test (p = 5 %: 1.3e-4); a method that no longer finds the effect
+#: fails every draw. The failure message gives every draw's reason.
+HIDDEN_DRAWS = max(1, int(os.environ.get("PHFDI_HIDDEN_DRAWS", "3")))
+
+
+def fresh_draws(test):
+    """Run a test taking ``hidden_rng`` on up to HIDDEN_DRAWS independent draws (children of the seed's generator:
+    the first draw is the seed's own, as before; the others reproducible from the same seed)."""
+
+    @functools.wraps(test)
+    def run(*args, **kwargs):
+        rng = kwargs["hidden_rng"]
+        draws = [rng, *rng.spawn(HIDDEN_DRAWS - 1)]  # spawning leaves the first draw's stream as it was
+        failures = []
+        for k, draw in enumerate(draws):
+            kwargs["hidden_rng"] = draw
+            try:
+                return test(*args, **kwargs)
+            except AssertionError as exc:
+                failures.append(f"draw {k + 1} of {len(draws)}: {str(exc).splitlines()[0] if str(exc) else exc!r}")
+        raise AssertionError("every draw failed:\n" + "\n".join(failures))
+
+    return run

@@ -24,7 +24,7 @@ from phfdi.run import Run
 from phfdi.scenario import load_scenario
 from phfdi_base.spec import validate_scenario
 
-from .hidden_cases import CATALOGUE_CAUSES, COLUMNS, make_case
+from .hidden_cases import CATALOGUE_CAUSES, COLUMNS, fresh_draws, make_case
 
 DURATION_S = 1700.0
 PACKAGE = Path(__file__).resolve().parents[2] / "src" / "phfdi" / "diagnosis"
@@ -41,6 +41,7 @@ def _what(case) -> str:
 
 
 @pytest.mark.parametrize("draw", range(2))
+@fresh_draws
 def test_catalogue_effect_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, draw):
     cause = str(hidden_rng.choice(CATALOGUE_CAUSES))
     excitation = str(hidden_rng.choice(["closed", "open"]))
@@ -65,6 +66,7 @@ def test_catalogue_effect_is_named_with_its_parameter(hidden_rng, diagnose_json,
         f"{_what(case)}: named {cause} ({named['n_params']} parameters) over {top['cause']} ({top['n_params']})"
 
 
+@fresh_draws
 def test_no_effect_comes_back_none(hidden_rng, diagnose_json, tmp_path):
     case = make_case(hidden_rng, "none", str(hidden_rng.choice(["closed", "open"])), tmp_path / "data", DURATION_S)
     rep = _diagnose(diagnose_json, case, tmp_path)
@@ -73,6 +75,7 @@ def test_no_effect_comes_back_none(hidden_rng, diagnose_json, tmp_path):
     assert "extended_model" not in rep and not (tmp_path / "report" / "extended_model.yaml").exists()
 
 
+@fresh_draws
 def test_effect_outside_the_catalogue_is_not_explained(hidden_rng, diagnose_json, tmp_path):
     # The probe's alkaline error only under closed-loop excitation: the open-loop steps visit pH above 10 too
     # briefly, and a buffer with a probe gain error then reproduces it to the noise floor with a white error
@@ -119,6 +122,7 @@ def test_effect_outside_the_catalogue_is_not_explained(hidden_rng, diagnose_json
                                                       rel=0.25, abs=0.003)
 
 
+@fresh_draws
 def test_the_answer_cannot_reach_the_diagnosis(hidden_rng, tmp_path):
     """The data file holds historian columns only; the diagnosis code reads no run metadata nor test code."""
     case = make_case(hidden_rng, str(hidden_rng.choice(CATALOGUE_CAUSES)), "closed", tmp_path / "d", 600.0)

@@ -21,6 +21,8 @@ from phfdi.loop import simulate_open_loop
 from phfdi.run import Run
 from phfdi_base.spec import validate_scenario
 
+from .hidden_cases import fresh_draws
+
 DT_S = 1.0
 DURATION_S = 700.0
 NOISE_PH = 0.02
@@ -221,6 +223,7 @@ def _at_the_floor_or_as_good_as_the_data_allow(rep: dict, cause: str, main: str,
 
 
 @pytest.mark.parametrize("cause", ["mixing_zone", "feed_delay", "pump_curve", "carbonate"])
+@fresh_draws
 def test_structural_effect_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
     path, main, value, tol = make_case(hidden_rng, cause, tmp_path / "data")
     rep = _diagnose(diagnose_json, path, tmp_path)
@@ -236,6 +239,7 @@ def test_structural_effect_is_named_with_its_parameter(hidden_rng, diagnose_json
     assert rep["fixed"]["feed"] == "base", f"{what}: found on the {rep['fixed']['feed']} feed"
 
 
+@fresh_draws
 def test_no_structural_effect_comes_back_none(hidden_rng, diagnose_json, tmp_path):
     path, *_ = make_case(hidden_rng, "none", tmp_path / "data")
     rep = _diagnose(diagnose_json, path, tmp_path)
@@ -244,6 +248,7 @@ def test_no_structural_effect_comes_back_none(hidden_rng, diagnose_json, tmp_pat
 
 
 @pytest.mark.parametrize("cause", ["pump_lag", "sensor_second_order"])
+@fresh_draws
 def test_dynamics_of_pump_or_probe_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
     """A pump's slow start (on/off dosing) and a probe with two lags: each among the other ways a response comes
     late or slow (a line dead time, one probe lag or delay, an asymmetric probe, the holdup, the reagent strength)."""
@@ -260,6 +265,7 @@ def test_dynamics_of_pump_or_probe_is_named_with_its_parameter(hidden_rng, diagn
 
 
 @pytest.mark.parametrize("cause", ["tanks_in_series", "co2_absorption"])
+@fresh_draws
 def test_vessel_structure_is_named_with_its_parameter(hidden_rng, diagnose_json, tmp_path, cause):
     """A plug-flow-like flask (compartments in series) and CO2 taken up from the air, among the other ways the
     flask's response is late, slow or buffered (mixing zone, dead time, probe lag, volume, reagent strength,
@@ -281,6 +287,7 @@ CONTENTS = ["flask_contents", "buffer", "carbonate", "co2_absorption", "holdup",
             "sensor_lag", "feed_delay"]
 
 
+@fresh_draws
 def test_flask_contents_are_named_with_their_pka_and_amount(hidden_rng, diagnose_json, tmp_path):
     """The flask starts holding a weak acid of its own (pKa 6.9..8.5, 0.5..2 mM) that then washes out; the record
     starts where the inputs put it, so its start pH is fitted (``--initial fit``, as for the rig's runs)."""
@@ -308,6 +315,7 @@ def test_flask_contents_are_named_with_their_pka_and_amount(hidden_rng, diagnose
     assert abs(fitted - truth) <= 0.1 * truth or inside, f"{what}: fitted {fitted:.4g} [{lo:.4g}, {hi:.4g}]"
 
 
+@fresh_draws
 def test_no_flask_contents_with_a_fitted_start_comes_back_none(hidden_rng, diagnose_json, tmp_path):
     path, *_ = make_case(hidden_rng, "none", tmp_path / "data", balanced=True)
     rep = diagnose_json("--data", path, "--model", "rig_flask", "--set", NOMINAL[0], "--initial", "fit",
