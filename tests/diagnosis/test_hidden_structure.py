@@ -14,14 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hidden_cases import fresh_draws  # (conftest puts this folder on sys.path; other tests import this module by name)
 
 from phfdi.diagnosis.model import nominal_raw
 from phfdi.diagnosis.residual import noise_floor
 from phfdi.loop import simulate_open_loop
 from phfdi.run import Run
 from phfdi_base.spec import validate_scenario
-
-from .hidden_cases import fresh_draws
 
 DT_S = 1.0
 DURATION_S = 700.0
