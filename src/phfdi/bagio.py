@@ -33,6 +33,7 @@ import numpy as np
 from phfdi.run import Run
 from phfdi_base import topics as T
 from phfdi_base.errors import UserError
+from phfdi_base.outputs import staged
 from phfdi_base.stamps import join_ns, record_stamps_ns, seconds_to_ns, split_ns
 from wavelet_fdi.alarm_messages import to_dict as alarm_message_dict
 
@@ -415,7 +416,7 @@ def format_info(info: dict) -> str:
     return "\n".join(lines)
 
 
-def recover(src: str | Path, dst: str | Path) -> dict:
+def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
     """Copy everything up to the last complete chunk of a (truncated) bag into a new, finished bag."""
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
@@ -429,12 +430,11 @@ def recover(src: str | Path, dst: str | Path) -> dict:
         if f.read(8) != b"\x89MCAP0\r\n":
             raise UserError(f"{src}: not an MCAP file")
     records, _chunks, error = _scan(src)
-    dst.parent.mkdir(parents=True, exist_ok=True)
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
     n = 0
     last_ns = None
-    with open(dst, "wb") as out:
+    with staged(dst, overwrite) as tmp, open(tmp, "wb") as out:
         w = Writer(out, chunk_size=DEFAULT_CHUNK_BYTES, compression=CompressionType.ZSTD)
         header = next((r for r in records if type(r).__name__ == "Header"), None)
         w.start(profile=header.profile if header else "ros2", library=f"phfdi {__version__} (recovered)")

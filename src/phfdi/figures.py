@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from phfdi_base.outputs import save_figure
+
 from .run import Run  # noqa: E402
 
 
@@ -59,7 +61,7 @@ def plot_run(run: Run, path: str | Path) -> Path:
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -77,7 +79,7 @@ def plot_overview(runs: Sequence[Run], labels: Sequence[str], path: str | Path) 
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -96,6 +98,6 @@ def plot_overview_3d(runs: Sequence[Run], labels: Sequence[str], path: str | Pat
     ax.set_title("Healthy and faulty pH responses")
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path

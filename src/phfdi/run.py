@@ -21,6 +21,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from phfdi_base.errors import UserError
+from phfdi_base.outputs import staged
 from phfdi_base.signals import unit_of
 
 
@@ -78,30 +79,31 @@ class Run:
         return Run({k: v[m] for k, v in self.signals.items()}, dict(self.metadata))
 
     # ---- files ---------------------------------------------------------------
-    def to_csv(self, path: str | Path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
+    def to_csv(self, path: str | Path, overwrite: bool = True) -> Path:
+        """Write as CSV (header of signal names, full float precision), atomically (phfdi_base.outputs)."""
         names = self.names
         data = np.column_stack([self.signals[n] for n in names])
-        np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
-        return path
+        with staged(path, overwrite) as tmp:
+            np.savetxt(tmp, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        return Path(path)
 
-    def to_parquet(self, path: str | Path) -> Path:
+    def to_parquet(self, path: str | Path, overwrite: bool = True) -> Path:
+        """Write as Parquet (units in the fields' metadata, the run's metadata in the schema's), atomically."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         fields = [pa.field(n, pa.float64(), metadata={"unit": unit_of(n)}) for n in self.names]
         schema = pa.schema(fields, metadata={"phfdi_run": json.dumps(self.metadata, default=str)})
         table = pa.table({n: np.asarray(self.signals[n], dtype=float) for n in self.names}, schema=schema)
-        pq.write_table(table, path)
-        return path
+        with staged(path, overwrite) as tmp:
+            pq.write_table(table, tmp)
+        return Path(path)
 
-    def save(self, path: str | Path) -> Path:
-        """Write by extension: .csv or .parquet."""
+    def save(self, path: str | Path, overwrite: bool = True) -> Path:
+        """Write by extension: .csv or .parquet. The library replaces an existing file; the commands pass
+        ``overwrite=args.overwrite`` (an existing file is kept without ``--overwrite``)."""
         writer = {"csv": self.to_csv, "parquet": self.to_parquet}[writable_format(path)]
-        return writer(path)
+        return writer(path, overwrite)
 
 
 #: the formats a run is written to (the readers are registered in :mod:`phfdi.records.formats`)

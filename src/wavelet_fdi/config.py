@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, get_type_hints
 
 from phfdi_base.errors import UserError
+from phfdi_base.outputs import write_text
 from phfdi_base.yamlfile import read_mapping
 
 from .filterbank import wavelet_filters
@@ -300,20 +301,19 @@ class Calibration:
                 raise UserError(f"calibration was made for {key} = {self.design[key]:g}, detector uses "
                                 f"{getattr(settings, key):g}: run phfdi calibrate with the same settings")
 
-    def save(self, path: str | Path) -> Path:
-        """Write as YAML (.yaml/.yml) or JSON (.json)."""
+    def save(self, path: str | Path, overwrite: bool = True) -> Path:
+        """Write as YAML (.yaml/.yml) or JSON (.json), atomically (phfdi_base.outputs)."""
         import yaml
 
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         data = asdict(self)
         if path.suffix.lower() == ".json":
-            path.write_text(json.dumps(data, indent=2) + "\n")
+            text = json.dumps(data, indent=2) + "\n"
         elif path.suffix.lower() in (".yaml", ".yml"):
-            path.write_text(yaml.safe_dump(data, sort_keys=False))
+            text = yaml.safe_dump(data, sort_keys=False)
         else:
             raise UserError(f"cannot write a calibration to {path}: use a .yaml or .json file name")
-        return path
+        return write_text(path, text, overwrite)
 
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":

@@ -186,8 +186,8 @@ class LearnedModel:
                                for c, row in zip(self.residual_channels, self.band_sigma)},
                 "source": self.source}
 
-    def save(self, path: str | Path) -> None:
-        save_json(path, self.to_dict())
+    def save(self, path: str | Path, overwrite: bool = True) -> None:
+        save_json(path, self.to_dict(), overwrite)
 
     @classmethod
     def load(cls, path: str | Path) -> "LearnedModel":

@@ -42,6 +42,7 @@ from typing import Sequence
 import numpy as np
 
 from phfdi_base.errors import UserError
+from phfdi_base.outputs import write_text
 
 FORMAT = "phfdi-learned-reference/1"
 
@@ -204,9 +205,9 @@ class ReferenceStream:
         return np.where(missing, np.nan, res)
 
 
-def save_json(path: str | Path, payload: dict) -> None:
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text(json.dumps(payload, indent=1, allow_nan=False), encoding="utf-8")
+def save_json(path: str | Path, payload: dict, overwrite: bool = True) -> None:
+    """A model file, atomically (phfdi_base.outputs)."""
+    write_text(path, json.dumps(payload, indent=1, allow_nan=False), overwrite)
 
 
 def load_json(path: str | Path, fmt: str) -> dict:

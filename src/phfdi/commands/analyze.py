@@ -134,8 +134,9 @@ class _RunSets:
 def run(args: argparse.Namespace) -> int:
     from phfdi.study.paperset import PAPER_GROUPING
     from phfdi.study.report import section6_claims, section7_claims, write_all
+    from phfdi_base.outputs import check_writable_folder
 
-    out = Path(args.out)
+    out = check_writable_folder(args.out)  # before the simulations, not after them
     opts = _options(args)
     t_start = time.perf_counter()
     sets = _read_runs(args) if args.bags else _simulate_runs(args, out)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .common import EPILOG_FORMAT
+from .common import EPILOG_FORMAT, add_overwrite_arg
 
 EXAMPLES = """examples:
   phfdi bag info bags/run.mcap                 # topics, types, counts, simulated time range
@@ -38,11 +38,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                              epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     rec.add_argument("input", help="truncated bag (.mcap)")
     rec.add_argument("output", help="new bag to write (.mcap)")
+    add_overwrite_arg(rec)
     rec.set_defaults(func=run_recover)
     conv = bag_sub.add_parser("to-run", help="write the run's signals (names with units) as CSV or Parquet",
                               epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     conv.add_argument("input", help="bag (.mcap)")
     conv.add_argument("output", help="run file to write (.csv or .parquet)")
+    add_overwrite_arg(conv)
     conv.set_defaults(func=run_to_run)
     fc = bag_sub.add_parser("from-csv", help="write a measured record (CSV, Parquet) as a bag of "
                                              "/measured/sample messages",
@@ -52,6 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                             epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     fc.add_argument("input", help="measured record (.csv or .parquet)")
     fc.add_argument("output", help="bag to write (.mcap)")
+    add_overwrite_arg(fc)
     fc.add_argument("--exclude", default="", metavar="COLS", help="columns that are not channels (e.g. labels)")
     from .common import add_record_args
 
@@ -70,7 +73,7 @@ def run_info(args: argparse.Namespace) -> int:
 def run_recover(args: argparse.Namespace) -> int:
     from phfdi.bagio import recover
 
-    r = recover(args.input, args.output)
+    r = recover(args.input, args.output, overwrite=args.overwrite)
     where = "the input was complete" if r["complete_input"] else f"the input stops at {r['stopped_at']}"
     last = f", last at {r['last_s']:.3f} s" if r["last_s"] is not None else ""
     print(f"recovered {r['messages']} messages{last} into {r['path']} ({where})")
@@ -82,15 +85,17 @@ def run_to_run(args: argparse.Namespace) -> int:
     from phfdi.records.formats import is_format
     from phfdi.run import writable_format
     from phfdi_base.errors import UserError
+    from phfdi_base.outputs import refuse_existing
 
     from .common import print_notes
 
     writable_format(args.output)  # refused before the bag is read
+    refuse_existing(args.output, args.overwrite)
     if not is_format(args.input, "bag"):
         raise UserError(f"{args.input}: to-run converts a bag: give an .mcap file")
     run = read_run(args.input)
     print_notes("bag", run.metadata["notes"])
-    path = run.save(args.output)
+    path = run.save(args.output, overwrite=args.overwrite)
     print(f"wrote {len(run)} samples of {len(run.names)} signals to {path}")
     return 0
 
@@ -99,15 +104,19 @@ def run_from_csv(args: argparse.Namespace) -> int:
     from phfdi.bagio import write_measured
     from phfdi.learned import read_measured
     from phfdi_base.errors import UserError
+    from phfdi_base.outputs import refuse_existing, staged
 
     from .common import column_map_from_args, print_notes
 
     if not args.output.endswith(".mcap"):
         raise UserError(f"{args.output}: the bag must be an .mcap file")
+    refuse_existing(args.output, args.overwrite)  # before the record is read
     rec = read_measured(args.input, column_map_from_args(args),
                         exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
     print_notes("bag from-csv", rec.notes)
-    path = write_measured(rec.time_s, rec.x, list(rec.channels), args.output, source=str(args.input))
+    with staged(args.output, args.overwrite) as tmp:
+        write_measured(rec.time_s, rec.x, list(rec.channels), tmp, source=str(args.input))
+    path = args.output
     print(f"wrote {len(rec.x)} rows x {len(rec.channels)} channels ({', '.join(rec.channels)}) to {path} "
           f"on /measured/sample")
     return 0

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from .common import EPILOG_FORMAT, Progress, add_record_args, column_map_from_args, plant_runs_on, print_notes
+from .common import (
+    EPILOG_FORMAT,
+    Progress,
+    add_overwrite_arg,
+    add_record_args,
+    column_map_from_args,
+    plant_runs_on,
+    print_notes,
+)
 
 EXAMPLES = """examples:
   phfdi calibrate --out my_calibration.yaml                 # paper scenario, sym4 level 3, ARL0 1e5 samples
@@ -113,6 +121,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--open-loop", action="store_true",
                    help="with --estimator: simulate the model from each run's first pH, never correct it")
     p.add_argument("--out", required=True, help="file to write (.yaml or .json; --learn, --estimator: .json)")
+    add_overwrite_arg(p)
     p.set_defaults(func=run)
 
 
@@ -121,7 +130,9 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.replay import load_any
     from phfdi.scenario import load_scenario
     from phfdi_base.errors import UserError
+    from phfdi_base.outputs import refuse_existing
 
+    refuse_existing(args.out, args.overwrite)  # before any fitting
     if args.estimator:
         return run_estimator(args)
     if args.learn:
@@ -147,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
         cal = calibrate(args.scenario, settings, seeds, args.overrides,
                         progress=Progress(f"calibrate on {len(seeds)} healthy runs", enabled=True))
         source = f"seeds {seeds[0]}..{seeds[-1]}"
-    path = cal.save(args.out)
+    path = cal.save(args.out, overwrite=args.overwrite)
     print(f"calibrated {settings.wavelet} level {settings.level} on {cal.healthy_samples} healthy samples "
           f"({source}), ARL0 {settings.arl0_samples:g} samples:")
     for name, h in cal.thresholds.items():
@@ -189,7 +200,7 @@ def run_learn(args: argparse.Namespace) -> int:
                         exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
     print_notes("calibrate", rec.notes)
     model = learn_from(rec, args.rows, settings)
-    model.save(args.out)
+    model.save(args.out, overwrite=args.overwrite)
     s = model.settings
     print(f"learned reference on {model.source['rows']} healthy rows of {args.learn}: {len(model.channels)} channels, "
           f"{s.form} form, {s.lags} own lags + the other channels (ridge), {s.wavelet} level {s.level}, "
@@ -216,7 +227,7 @@ def run_estimator(args: argparse.Namespace) -> int:
         print_notes("calibrate", r.notes)
     with plant_runs_on(", ".join(args.estimator)):
         model = fit_estimator(records, start)
-    model.save(args.out)
+    model.save(args.out, overwrite=args.overwrite)
     ref = model.reference
     kind = "open-loop simulation" if args.open_loop else "estimator"
     print(f"{kind} reference on {len(records)} healthy runs ({model.source['rows']} rows), "

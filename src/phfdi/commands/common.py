@@ -67,6 +67,12 @@ class Progress:
 
 
 # ---- measured records (phfdi.records) -------------------------------------------------------
+def add_overwrite_arg(p: argparse.ArgumentParser) -> None:
+    """--overwrite: without it an existing output file is kept and the command stops with one line, before
+    any work (outputs are written atomically either way: docs/records.md, "Writing files")."""
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output file (default: refuse)")
+
+
 def add_record_args(p: argparse.ArgumentParser, units: bool = True) -> None:
     """--map, --column, --unit and --encoding: how to read a user's record (see docs/records.md)."""
     g = p.add_argument_group("reading the file")

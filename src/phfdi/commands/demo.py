@@ -174,7 +174,10 @@ def _replay_and_compare(run_, received, out: Path, no_ros: bool):
     det = _offline(run_, record_trace=True)
     _say(f"      {len(run_)} samples in {time.perf_counter() - t0:.1f} s")
     _say("      " + format_alarms(det.alarms, det.diagnostics()).replace("\n", "\n      "))
-    (out / "alarms.json").write_text(json.dumps([a.summary() for a in det.alarms], indent=2) + "\n")
+    from phfdi_base.outputs import write_text
+
+    # the demo's own folder: each run replaces its outputs (the README's command is idempotent)
+    write_text(out / "alarms.json", json.dumps([a.summary() for a in det.alarms], indent=2) + "\n", overwrite=True)
     if received is None:
         return True, det
     differences = _differences(det.alarms, received)

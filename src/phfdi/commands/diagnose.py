@@ -148,6 +148,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("no data: give --data FILE ... or --fit FILE ... [--validate FILE ...]")
     if args.validate and not args.fit:
         raise UserError("--validate needs --fit")
+    from phfdi_base.outputs import check_writable_folder
+
+    check_writable_folder(args.out)  # before minutes of fitting, not after them
     cmap = _map(args)
     fit_records = _records(args.data or args.fit, cmap, args.dt, args.encoding)
     val_records = _records(args.validate or [], cmap, args.dt, args.encoding)
@@ -207,8 +210,9 @@ def _calibrate(args, fit_records, val_records, nominal, opts) -> int:
                  "nrmse_calibrated": cal.calibrated,
                  "initial_ph": [s.ph for s in cal.starts] if args.initial == "fit" else None,
                  "data": [r.name for r in cal.records], "notes": [n for r in cal.records for n in r.notes]})
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "calibration.json").write_text(json.dumps(rep, indent=2), encoding="utf-8")
+    from phfdi_base.outputs import write_text
+
+    write_text(out / "calibration.json", json.dumps(rep, indent=2), overwrite=True)
     if args.json:
         print(json.dumps(rep, indent=2))
     else:

@@ -41,8 +41,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.study.evaluation import EvalConfig, run_evaluation
+    from phfdi_base.outputs import check_writable_folder
 
     settings = settings_from_args(args)
+    check_writable_folder(args.out)  # before the evaluation's runs, not after them
     common = dict(scenario=args.scenario, onset_s=args.onset, settings=settings, jobs=args.jobs)
     if args.quick:
         cfg = EvalConfig.quick(**common)

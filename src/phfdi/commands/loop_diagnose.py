@@ -82,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.loopdiag.report import format_report, format_summary, to_json
     from phfdi.loopdiag.vocabulary import ACTUATOR_CAUSES
     from phfdi_base.errors import UserError
+    from phfdi_base.outputs import check_writable_folder, write_text
 
     columns = ColumnMap.parse(args.columns) if args.columns else None
     settings = Settings(baselines=not args.no_baselines,
@@ -101,6 +102,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
     if args.top < 1:
         raise UserError(f"--top must be at least 1, got {args.top}")
+    for folder in (args.out, args.figure):  # before the work, not after it
+        if folder:
+            check_writable_folder(folder)
     jobs = expand(args.files, columns)
     reports = diagnose_jobs(jobs, settings, args.figure, args.scheduler, args.workers, _progress(len(jobs)),
                             each_segment=args.segments == "each")
@@ -113,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         pq_path, csv_path = write_table(reports, args.out)
         worst = format_worst(reports, args.top) if ok else "no loop could be diagnosed"
-        (pq_path.parent / "worst_loops.txt").write_text(worst + "\n", encoding="utf-8")
+        write_text(pq_path.parent / "worst_loops.txt", worst + "\n", overwrite=True)
         print(f"phfdi loop-diagnose: {len(reports)} loop records -> {pq_path}, {csv_path}", file=sys.stderr)
     if args.json:
         print(to_json(reports))

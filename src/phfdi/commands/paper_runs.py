@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from .common import EPILOG_FORMAT, Progress
 
@@ -39,9 +38,9 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.loop import simulate
     from phfdi.scenario import load_scenario
     from phfdi.summary import format_summary, summarize
+    from phfdi_base.outputs import check_writable_folder, write_text
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_writable_folder(args.out)
     runs, labels, summaries = [], [], {}
     progress = Progress("paper-runs", enabled=True)
     for i, fault in enumerate(PAPER_FAULTS):
@@ -55,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         progress((i + 1) / len(PAPER_FAULTS))
     plot_overview(runs, labels, out / "overview.png")
     plot_overview_3d(runs, labels, out / "overview_3d.png")
-    (out / "summary.json").write_text(json.dumps(summaries, indent=2))
+    write_text(out / "summary.json", json.dumps(summaries, indent=2), overwrite=True)
     if args.json:
         print(json.dumps(summaries, indent=2))
     else:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .common import EPILOG_FORMAT, Progress, add_scenario_args, scenario_from_args
+from .common import EPILOG_FORMAT, Progress, add_overwrite_arg, add_scenario_args, scenario_from_args
 
 EXAMPLES = """examples:
   phfdi simulate --scenario paper --fault backlash --out runs/backlash.csv
@@ -23,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_scenario_args(p)
     p.add_argument("--out", default=None, help="run file to write (.csv or .parquet)")
     p.add_argument("--figure", default=None, help="PNG figure of the run (pH, controller effort, level)")
+    add_overwrite_arg(p)
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")
     p.add_argument("--inputs", default=None, metavar="RUN",
                    help="open loop: drive plant, valve and sensors from this run file's time_s and "
@@ -57,7 +58,11 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.loop import simulate, simulate_open_loop
     from phfdi.summary import format_summary, summarize
     from phfdi_base.errors import UserError
+    from phfdi_base.outputs import refuse_existing
 
+    for path in (args.out, args.figure):  # an existing output is kept unless --overwrite, said before any work
+        if path:
+            refuse_existing(path, args.overwrite)
     spec = scenario_from_args(args)
     if args.inputs:
         inputs = read_inputs(args.inputs)
@@ -69,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         result = simulate(spec, progress=Progress(f"simulate {spec.name}"))
     summary = summarize(result)
     if args.out:
-        summary["run_file"] = str(result.save(args.out))
+        summary["run_file"] = str(result.save(args.out, overwrite=args.overwrite))
     if args.figure:
         from phfdi.figures import plot_run
 

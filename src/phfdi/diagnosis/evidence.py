@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from phfdi_base.outputs import save_figure
+
 BANDS = (("acidic pH < 5", -np.inf, 5.0), ("transition pH 5-9", 5.0, 9.0), ("basic pH > 9", 9.0, np.inf))
 MIN_BAND_SAMPLES = 10
 
@@ -254,5 +256,5 @@ def figure(folds: list[dict], evs: list[RunEvidence], path, models=("nominal", "
         if row == 0:
             bx.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path, dpi=90)
     plt.close(fig)

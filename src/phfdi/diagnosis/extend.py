@@ -17,6 +17,7 @@ from pathlib import Path
 import yaml
 
 from phfdi.scenario import raw_scenario
+from phfdi_base.outputs import write_text
 
 from .model import inline_plant
 
@@ -50,12 +51,9 @@ def write_model(path: str | Path, model: str, raw: dict, header: str, name: str)
     """Write ``raw`` (a full scenario mapping) as a file extending ``model``."""
     doc = {"extends": _parent(model), "name": name}
     doc.update(changed_keys(model, raw))
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     text = "".join(f"# {line}\n" for line in header.strip().splitlines())
     text += yaml.safe_dump(_plain(doc), sort_keys=False, default_flow_style=None, width=110)
-    path.write_text(text, encoding="utf-8")
-    return path
+    return write_text(path, text, overwrite=True)
 
 
 def _plain(o):

@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pywt  # noqa: E402
 
+from phfdi_base.outputs import save_figure
 from phfdi_base.signals import label  # noqa: E402
 
 from .data import Record  # noqa: E402
@@ -54,7 +55,7 @@ def plot_fit(rec: Record, nominal: Prediction, extended: Prediction | None, val:
     axes[-1].set_xlabel("time (s)")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -84,7 +85,7 @@ def plot_scalogram(rec: Record, residual: np.ndarray, output: str, path: Path, t
     cbar = fig.colorbar(mesh, ax=[ax0, ax], shrink=0.9, pad=0.01)
     cbar.set_label(f"|W| ({label(output).split('(')[-1].rstrip(')')})")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -112,6 +113,6 @@ def plot_ranking(report: dict, path: Path) -> Path:
     ax.grid(alpha=0.3, axis="x")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path

@@ -12,6 +12,7 @@ from phfdi.faults import EXTENDED_MARK
 from phfdi.loop import build_parts
 from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
+from phfdi_base.outputs import write_text
 
 from .extend import load_model_file, write_model
 from .figures import plot_fit, plot_ranking, plot_scalogram
@@ -118,8 +119,8 @@ def write_all(d: Diagnosis, out_dir: str | Path, model: str, command: str = "") 
     write_extended(d, out, model)
     write_structure(d, out, model)
     write_figures(d, out)
-    (out / "report.json").write_text(to_json(d.report), encoding="utf-8")
-    (out / "REPORT.md").write_text(report_markdown(d.report, command), encoding="utf-8")
+    write_text(out / "report.json", to_json(d.report), overwrite=True)
+    write_text(out / "REPORT.md", report_markdown(d.report, command), overwrite=True)
     d.report["report_dir"] = str(out)
     return d.report
 

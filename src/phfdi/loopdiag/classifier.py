@@ -36,6 +36,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
+from phfdi_base.outputs import write_text
+
 L2_GRID = (0.01, 0.1, 1.0)
 SYNTHETIC_RATIO_GRID = (0.5, 1.0, 2.0, 4.0)
 #: folds of the synthetic loops' cross-validation inside the hyper-parameter choice
@@ -85,8 +87,7 @@ class LogisticModel:
                    d.get("signs"))
 
     def save(self, path: str | Path) -> None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+        write_text(path, json.dumps(self.to_dict(), indent=1) + "\n", overwrite=True)
 
 
 def load_model(path: str | Path | None = None) -> LogisticModel:

@@ -21,6 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from phfdi.run import Run  # noqa: E402
+from phfdi_base.outputs import save_figure
 
 from .bicoherence import ellipse_points  # noqa: E402
 from .diagnose import Evidence  # noqa: E402
@@ -58,7 +59,7 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
     fig.suptitle(_title(rep), fontsize=10)
     fig.tight_layout()
     path = out_dir / f"{_file_stem(rep)}.png"
-    fig.savefig(path, dpi=80)
+    save_figure(fig, path, dpi=80)
     plt.close(fig)
     return path
 

@@ -23,6 +23,7 @@ from typing import Callable
 
 from phfdi.records.formats import firsts, historian_suffixes, is_format
 from phfdi_base.errors import UserError
+from phfdi_base.outputs import staged, write_text
 
 from .diagnose import Settings
 from .readers import ColumnMap, read_loop
@@ -191,12 +192,14 @@ def write_table(reports: list[dict], out_dir: str | Path) -> tuple[Path, Path]:
              "oscillating": pa.bool_(), "period_s": pa.float64(), "regularity": pa.float64(),
              "gain_percent": pa.float64()}
     table = pa.table({c: pa.array(v, type=types.get(c, pa.string())) for c, v in cols.items()})
-    pq.write_table(table, out / "loops.parquet")
-    with open(out / "loops.csv", "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=COLUMNS)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+    with staged(out / "loops.parquet", overwrite=True) as tmp:
+        pq.write_table(table, tmp)
+    text = io.StringIO(newline="")
+    w = csv.DictWriter(text, fieldnames=COLUMNS)
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+    write_text(out / "loops.csv", text.getvalue(), overwrite=True)
     return out / "loops.parquet", out / "loops.csv"
 
 

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from phfdi_base.outputs import save_figure
 from wavelet_fdi.config import DetectorSettings
 from wavelet_fdi.filterbank import coefficient_residuals
 from wavelet_fdi.isolation import classes
@@ -22,7 +23,7 @@ COLORS = {"wavelet": "tab:blue", "wavelet_bands": "tab:cyan", "cusum": "tab:oran
 
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 

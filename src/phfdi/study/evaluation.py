@@ -30,6 +30,7 @@ from phfdi.replay import run_chunks
 from phfdi.scenario import load_scenario
 from phfdi.study.detector_figures import plot_evaluation
 from phfdi_base.errors import UserError
+from phfdi_base.outputs import write_text
 from wavelet_fdi.calibration import calibrate_from_traces, statistic_increments, tail_probability, window_maxima
 from wavelet_fdi.config import Calibration, DetectorSettings
 from wavelet_fdi.detector import StreamingDetector
@@ -333,9 +334,9 @@ def run_evaluation(cfg: EvalConfig, out_dir: str | Path, progress: Callable[[str
             say(f"  [{i + 1}/{len(todo)}] {rec['fault']} {rec['params']} seed {rec['seed']}")
     signals = next((r.pop("signals") for r in records if "signals" in r), None)
     summary = summarise(records, cfg, cal, peers)
-    (out / "results.json").write_text(json.dumps({"config": _config_dict(cfg), "summary": summary,
-                                                  "runs": records}, indent=1, default=_json_default))
-    (out / "evaluation.md").write_text(markdown(summary, cfg, cal, peers))
+    write_text(out / "results.json", json.dumps({"config": _config_dict(cfg), "summary": summary,
+                                                 "runs": records}, indent=1, default=_json_default), overwrite=True)
+    write_text(out / "evaluation.md", markdown(summary, cfg, cal, peers), overwrite=True)
 
     plot_evaluation(summary, records, out, signals, cfg.settings)
     say(f"wrote {out / 'evaluation.md'}, results.json and figures")

@@ -12,6 +12,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pywt  # noqa: E402
 
+from phfdi_base.outputs import save_figure
+
 from .multisignal import Multisignal  # noqa: E402
 from .residuals import moving_rms
 
@@ -30,7 +32,7 @@ def colour(label: str, classes: Sequence[str] = ()) -> str:
 def _save(fig, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 

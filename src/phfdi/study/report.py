@@ -17,6 +17,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from phfdi_base.outputs import write_text
+
 from . import figures
 from .analysis import Options, PairResult, analyze_multisignal
 from .multisignal import Multisignal
@@ -560,12 +562,12 @@ def write_all(ms: Multisignal, pairs_fn: Callable[[], Sequence[PairResult]] | Se
     t_fig = time.perf_counter() - t0
     timing = f"Section 6 analysis {t_s6:.2f} s, Section 7 {t_s7:.2f} s, figures {t_fig:.1f} s"
     context["timings"] = (context.get("timings", "") + "; " if context.get("timings") else "") + timing
-    (out_dir / "REPORT.md").write_text(markdown(ms, s6, pairs, opts, context, files), encoding="utf-8")
+    write_text(out_dir / "REPORT.md", markdown(ms, s6, pairs, opts, context, files), overwrite=True)
     summary = {k: v for k, v in s6.items() if k not in ("approximations", "denoised", "compressed",
                                                            "compressed_centred", "linkage")}
-    (out_dir / "results.json").write_text(json.dumps(_jsonable({
+    write_text(out_dir / "results.json", json.dumps(_jsonable({
         "section6": summary, "section7": [_pair_summary(p) for p in pairs], "timings": context["timings"],
-    }), indent=1), encoding="utf-8")
+    }), indent=1), overwrite=True)
     return {"section6": s6, "section7": pairs, "files": files, "timings": context["timings"]}
 
 
