@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import time
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -126,3 +127,22 @@ def test_progress_every_5_percent_when_loops_arrive_in_chunks(capsys):
         show(done, 1000)
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 20 and lines[0] == "loop-diagnose: 64/1000 loops" and lines[-1].endswith("1000/1000 loops")
+
+
+def test_an_empty_or_broken_file_in_a_folder_is_a_row_not_the_end(folder, tmp_path, capsys):
+    """One empty CSV (and one that is not a loop) among good loops: each failure is a row with its reason, the
+    others are diagnosed, the exit status is 1 (some failed), no traceback."""
+    import shutil
+
+    mixed = tmp_path / "mixed"
+    shutil.copytree(folder, mixed)
+    (mixed / "empty.csv").write_bytes(b"")
+    (mixed / "notes.csv").write_text("remark\nvalve serviced\n")
+    status = main(["loop-diagnose", str(mixed), "--out", str(tmp_path / "out"), "--workers", "1", *FAST])
+    out, err = capsys.readouterr()
+    assert status == 1, err
+    assert "Traceback" not in err
+    rows = {Path(r["file"]).name: r for r in pq.read_table(tmp_path / "out" / "loops.parquet").to_pylist()}
+    assert sorted(rows) == ["FIC0.csv", "FIC1.csv", "FIC2.csv", "FIC3.csv", "empty.csv", "notes.csv"]
+    assert "empty file" in rows["empty.csv"]["error"] and rows["notes.csv"]["error"]
+    assert all(rows[f"FIC{k}.csv"]["error"] is None for k in range(4))

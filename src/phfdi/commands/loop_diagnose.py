@@ -36,8 +36,9 @@ missing, gaps of up to 3 samples are filled; a MODE column (the export's .MODE t
 stretch. The longest usable stretch (at least 100 samples) is diagnosed, or each of them with
 --segments each. Every repair is a note on stderr, in the report and in --json.
 
-exit status: 0 when at least one file was diagnosed (a file that cannot be read gets one line on
-stderr and the batch goes on), 2 when every file failed or the arguments are wrong.
+exit status: 0 when every file was diagnosed; 1 when some failed (each gets one line on stderr and
+a row with its error in --out's table, and the batch goes on); 2 when every file failed or the
+arguments are wrong.
 """
 
 
@@ -132,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
             print(format_summary(reports))
             print()
             print(format_worst(reports, args.top))
-    return 0 if ok else 2
+    if not ok:
+        return 2
+    return 1 if any("error" in r for r in reports) else 0  # some failed: each is a row with its reason, said
 
 
 def _progress(total: int):

@@ -62,7 +62,7 @@ def _csv_header(path: Path) -> list[str]:
     with open(path, encoding="utf-8-sig", errors="replace") as fh:
         first = fh.readline()
     delim = max((",", ";", "\t"), key=first.count)
-    return next(csv.reader(io.StringIO(first), delimiter=delim))
+    return next(csv.reader(io.StringIO(first), delimiter=delim), [])  # an empty file: no header, one plain job
 
 
 def expand(inputs: list[str], columns: ColumnMap | None = None) -> list[Job]:
@@ -104,16 +104,19 @@ def diagnose_job(job: Job, settings: Settings | None = None, figure_dir: str | N
     (``error`` set when it cannot be read or diagnosed); runs on a worker."""
     from .single import diagnose_file_segments, diagnose_run
 
-    if each_segment:
-        reps = diagnose_file_segments(job.path, job.columns, settings, figure_dir)
-    else:
-        try:
+    try:
+        if each_segment:
+            reps = diagnose_file_segments(job.path, job.columns, settings, figure_dir)
+        else:
             run = read_loop(job.path, job.columns)
-        except UserError as exc:
-            return [{"file": job.path, "loop_tag": job.loop_tag, "error": str(exc)}]
-        if job.loop_tag:
-            run.metadata["loop_tag"] = job.loop_tag
-        reps = [diagnose_run(run, settings, figure_dir)]
+            if job.loop_tag:
+                run.metadata["loop_tag"] = job.loop_tag
+            reps = [diagnose_run(run, settings, figure_dir)]
+    except UserError as exc:
+        return [{"file": job.path, "loop_tag": job.loop_tag, "error": str(exc)}]
+    except Exception as exc:  # noqa: BLE001 - one loop's failure is its row, never the plant-wide run's end
+        return [{"file": job.path, "loop_tag": job.loop_tag,
+                 "error": f"{job.path}: cannot be diagnosed ({type(exc).__name__}: {exc})"}]
     for r in reps:
         if job.loop_tag:
             r["loop_tag"] = job.loop_tag
