@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import os
 import sys
 
@@ -63,6 +64,28 @@ def main(argv: list[str] | None = None) -> int:
         return 141  # 128 + SIGPIPE, what a shell reports for a tool ended by a closed pipe
 
 
+def _flags(parser: argparse.ArgumentParser, out: dict[str, str] | None = None) -> dict[str, str]:
+    """dest -> the option that sets it (its first long form), over every subcommand's parser."""
+    out = {} if out is None else out
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _flags(sub, out)
+        elif action.option_strings:
+            out.setdefault(action.dest, max(action.option_strings, key=lambda o: o.startswith("--")))
+    return out
+
+
+def _refuse_non_finite(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """No option takes inf or NaN: one line naming it, before any work (argparse's float() accepts both)."""
+    for name, value in vars(args).items():
+        values = value if isinstance(value, (list, tuple)) else [value]
+        bad = [v for v in values if isinstance(v, float) and not math.isfinite(v)]
+        if bad:
+            flag = _flags(parser).get(name, name)
+            raise UserError(f"{flag}: must be a finite number, got {bad[0]}")
+
+
 def _main(argv: list[str] | None) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     parser = build_parser()
@@ -71,6 +94,7 @@ def _main(argv: list[str] | None) -> int:
         parser.print_help()
         return 2
     try:
+        _refuse_non_finite(args, parser)
         return int(args.func(args) or 0)
     except UserError as exc:
         print(f"phfdi {args.command}: error: {exc}", file=sys.stderr)

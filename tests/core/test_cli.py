@@ -126,3 +126,20 @@ def test_simulate_open_loop_from_recorded_inputs(tmp_path, capsys):
     steady = ((t > 300) & (t < 600)) | (t > 1100)
     assert np.max(np.abs(a["ph_true"][steady] - b["ph_true"][steady])) < 1e-3
     assert np.all(np.isnan(b["ph_setpoint"]))
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["simulate", "--set", "duration_s=inf"], "duration_s: Input should be a finite number"),
+    (["simulate", "--set", "sensors.ph.noise_std=nan"], "sensors.ph.noise_std: Input should be a finite number"),
+    (["simulate", "--set", "duration_s=1e12"], "at most 1e+07 per run"),
+    (["simulate", "--set", "valves.ph.max_flow_ml_s=1e308"], "valves.ph.max_flow_ml_s: Input should be less than"),
+    (["diagnose", "--data", "x.csv", "--dt", "nan"], "--dt: must be a finite number, got nan"),
+    (["replay", "x.csv", "--arl0", "inf"], "--arl0: must be a finite number, got inf"),
+])
+def test_non_finite_and_unbounded_values_are_one_line_before_any_work(argv, words, capsys):
+    """inf, NaN, a run of 1e12 samples and a flow of 1e308 (tracebacks or a run without end before): refused
+    by the scenario's schema or the option check, one line, exit 2, nothing run."""
+    code, out, err = run_cli(argv, capsys)
+    assert code == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0], err
