@@ -355,9 +355,9 @@ def bag_info(path: str | Path) -> dict:
     """Topics (type, message count), time range, chunks and metadata of a bag."""
     from mcap.records import Channel, Header, Message, Schema, Statistics
 
-    path = Path(path)
-    if not path.exists():
-        raise UserError(f"no such file: {path}")
+    from phfdi.records.errors import regular_file
+
+    path = regular_file(path)  # a folder or a FIFO: one line (a FIFO would block the read)
     info: dict = {"path": str(path), "size_bytes": path.stat().st_size}
     summary = None
     try:
@@ -421,9 +421,9 @@ def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
-    src, dst = Path(src), Path(dst)
-    if not src.exists():
-        raise UserError(f"no such file: {src}")
+    from phfdi.records.errors import regular_file
+
+    src, dst = regular_file(src), Path(dst)
     if src.resolve() == dst.resolve():
         raise UserError("recover writes a new file: give an output path other than the input")
     with open(src, "rb") as f:

@@ -31,11 +31,13 @@ def read_mapping(path: str | Path, what: str = "file", expected: str = "a mappin
     ...     print(str(exc).endswith("expected a mapping at the top level"))
     True
     """
+    raw = _small_bytes(path, what)
     try:
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
-    except (FileNotFoundError, IsADirectoryError):
-        raise UserError(f"no such {what}: {path}") from None
+        text = raw.decode("utf-8")
+        if any(isinstance(e, yaml.AliasEvent) for e in yaml.parse(text, Loader=yaml.SafeLoader)):
+            # an alias repeats a node: nine nested ones expand a 1 kB file to a gigabyte ("billion laughs")
+            raise UserError(f"{path}: YAML aliases (*name) are not accepted in this file; write the values out")
+        data = yaml.safe_load(text)
     except UnicodeDecodeError as exc:
         line = exc.object.count(b"\n", 0, exc.start) + 1
         raise UserError(f"{path}: line {line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x})") from None
@@ -48,6 +50,35 @@ def read_mapping(path: str | Path, what: str = "file", expected: str = "a mappin
         raise UserError(f"{path}: not valid YAML (a value cannot be read: {exc})") from None
     if not isinstance(data, dict):
         raise UserError(f"{path}: expected {expected}")
+    return data
+
+
+#: the largest YAML file read (scenarios, plant models and column maps are a few kB)
+MAX_YAML_BYTES = 1 << 20
+
+
+def _small_bytes(path: str | Path, what: str) -> bytes:
+    """The file's bytes: a regular file (a FIFO would block), at most MAX_YAML_BYTES."""
+    import stat
+
+    p = Path(path)
+    try:
+        mode = p.stat().st_mode
+    except FileNotFoundError:
+        raise UserError(f"no such {what}: {path}") from None
+    except OSError as exc:
+        raise UserError(f"{path}: cannot open it ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(mode):
+        raise UserError(f"no such {what}: {path} (a folder)")
+    if not stat.S_ISREG(mode):
+        raise UserError(f"{path}: not a regular file (a FIFO or a device)")
+    try:
+        with open(p, "rb") as fh:
+            data = fh.read(MAX_YAML_BYTES + 1)
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if len(data) > MAX_YAML_BYTES:
+        raise UserError(f"{path}: larger than {MAX_YAML_BYTES >> 20} MiB: not a {what}")
     return data
 
 

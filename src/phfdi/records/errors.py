@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from phfdi_base.errors import UserError
 
 
@@ -36,3 +38,31 @@ def place(path: object, line: int | None = None, column: str | None = None, wher
     if column is not None:
         parts.append(f"column {column!r}")
     return f"{path}: {', '.join(parts)}" if parts else str(path)
+
+
+def regular_file(path: str | Path) -> Path:
+    """``path`` if it is a regular file (or a link to one); else one :class:`ReadError` saying what it is: no
+    such file, a folder, a FIFO or a device (which would block or never end a read), a link loop.
+
+    >>> import tempfile
+    >>> try:
+    ...     regular_file(tempfile.mkdtemp())
+    ... except ReadError as exc:
+    ...     print(str(exc).split(": ", 1)[1])
+    a folder, not a file
+    """
+    import stat
+
+    path = Path(path)
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise ReadError(path, "no such file") from None
+    except OSError as exc:  # ELOOP (a link loop), EACCES, ...
+        raise ReadError(path, f"cannot open it ({exc.strerror or exc})") from None
+    if stat.S_ISREG(mode):
+        return path
+    what = ("a folder, not a file" if stat.S_ISDIR(mode) else
+            "a FIFO (named pipe), not a file: reading it would wait for a writer" if stat.S_ISFIFO(mode) else
+            "a device or socket, not a file")
+    raise ReadError(path, what)

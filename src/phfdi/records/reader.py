@@ -154,11 +154,17 @@ def _default_map(table: Table) -> ColumnMap:
     return ColumnMap(signals, source=DEFAULT_SOURCE)
 
 
+def _short(name: str, limit: int = 60) -> str:
+    """A column name fit for a one-line message (a wide export's header cell can run to kilobytes)."""
+    return name if len(name) <= limit else f"{name[:limit - 15]}...({len(name)} chars)"
+
+
 def _no_column(table: Table, column: str, signal: str) -> None:
     close = [c for c in table.columns if c.lower().replace(" ", "") == column.lower().replace(" ", "")] \
         or difflib.get_close_matches(column, list(table.columns), n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
-    names = ", ".join(repr(c) for c in list(table.columns)[:12])
+    hint = f" (did you mean {_short(close[0])!r}?)" if close else ""
+    cols = list(table.columns)
+    names = ", ".join(repr(_short(c)) for c in cols[:12]) + (f" and {len(cols) - 12} more" if len(cols) > 12 else "")
     raise ReadError(table.path, f"no such column (for {signal}){hint}; the file has: {names}",
                     line=1 if table.where == "line" else None, column=column)
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 
-from .errors import ReadError
+from .errors import ReadError, regular_file
 from .formats import Format, Table, format_of, register_format
 from .text import TextTable, decode, parse_csv
 
@@ -29,8 +29,7 @@ def read_table(path: Path, encoding: str | None = None) -> Table:
         if fmt.folder_marker and (path / fmt.folder_marker).exists():
             return fmt.read(path, None, encoding)
         raise ReadError(path, "a folder, not a record file (CSV, Parquet or MCAP)")
-    if not path.is_file():
-        raise ReadError(path, "no such file")
+    regular_file(path)  # a FIFO, a device or a link loop: one line, never a hang
     try:
         data = path.read_bytes()
     except OSError as exc:

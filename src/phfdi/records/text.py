@@ -97,6 +97,12 @@ def _line_of(data: bytes, offset: int) -> int:
     return data.count(b"\n", 0, offset) + 1
 
 
+#: the longest cell (or header line) read: a wide historian export's header runs past the csv module's default
+#: of 128 KiB (thousands of tags); beyond this a file is refused with one line
+MAX_CELL_CHARS = 64 << 20
+csv.field_size_limit(max(csv.field_size_limit(), MAX_CELL_CHARS))
+
+
 def sniff_delimiter(text: str) -> str:
     """The delimiter (, ; or tab) that splits the first lines into the same number of columns, most first."""
     lines = [ln for ln in text.splitlines()[:20] if ln.strip()]
@@ -104,7 +110,10 @@ def sniff_delimiter(text: str) -> str:
         return ","
     best, best_score = ",", (-1, -1)
     for d in DELIMITERS:
-        counts = [len(next(csv.reader([ln], delimiter=d), [])) for ln in lines]
+        try:
+            counts = [len(next(csv.reader([ln], delimiter=d), [])) for ln in lines]
+        except csv.Error:  # not this delimiter's file (parse_csv names the problem if none fits)
+            continue
         score = (int(counts[0] > 1 and all(c == counts[0] for c in counts)), counts[0])
         if score > best_score:
             best, best_score = d, score
