@@ -63,3 +63,22 @@ def test_a_csv_line_past_128_kib_is_read(tmp_path, run_cli):
     long_name.write_text("y" * 200_000 + ",time_s\n0,1\n")
     line = _one_line(*run_cli("replay", str(long_name))[::2])
     assert len(line) < 500 and "(200000 chars)" in line
+
+
+@pytest.mark.parametrize("first, step, what", [(1.7e12, 1000.0, "epoch milliseconds"),
+                                               (1.7e15, 1e6, "epoch microseconds"),
+                                               (45000.5, 1 / 86400, "spreadsheet serial days"),
+                                               (0.0, 1.0, None), (1.7e9, 1.0, None)])
+def test_time_columns_in_other_units_are_told_by_their_range_and_said(first, step, what, tmp_path):
+    """A backlash run stamped in epoch milliseconds was read as seconds without a word (1000 s per sample)."""
+    import numpy as np
+
+    from phfdi.records import read_run
+
+    path = tmp_path / "stamps.csv"
+    path.write_text("time,ph_measured,valve_command_pct\n"
+                    + "".join(f"{first + k * step!r},{7 + 0.1 * (k % 3)},50\n" for k in range(100)))
+    run = read_run(path)
+    assert np.allclose(np.diff(run.time_s), 1.0, atol=1e-4)  # one second per sample, whatever the unit
+    said = [n for n in run.metadata["notes"] if "column 'time'" in n]
+    assert (said == []) if what is None else (len(said) == 1 and what in said[0]), said

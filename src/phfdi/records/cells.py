@@ -84,6 +84,42 @@ def parse_stamps(cells: list | np.ndarray, fmt: str | None = None) -> tuple[np.n
     return out, used
 
 
+#: epoch stamps by magnitude (years 2001 to about 5000): (lowest value, factor to seconds, name)
+EPOCH_UNITS = ((1e17, 1e-9, "nanoseconds"), (1e14, 1e-6, "microseconds"), (1e11, 1e-3, "milliseconds"),
+               (1e9, 1.0, "seconds"))
+#: spreadsheet serial dates (days since 1899-12-30): values of the years 1954 to 2119 stepping below this
+SERIAL_DAYS = (20_000.0, 80_000.0, 1e-3)
+#: serial day of 1970-01-01: serial days become epoch seconds like the other stamps
+SERIAL_UNIX_EPOCH_DAYS = 25_569.0
+
+
+def numeric_time_unit(t: np.ndarray) -> tuple[float, str | None]:
+    """(factor to seconds, what was recognised) of a numeric time column, told by its range and steps: epoch
+    seconds, milliseconds, microseconds or nanoseconds, or spreadsheet serial days stepping by under 86 s.
+    Plain seconds (a run's own time): (1.0, None).
+
+    >>> numeric_time_unit(np.array([1.7e12, 1.7e12 + 1000.0]))
+    (0.001, 'epoch milliseconds')
+    >>> numeric_time_unit(np.array([45000.5, 45000.5 + 1 / 86400]))
+    (86400.0, 'spreadsheet serial days')
+    >>> numeric_time_unit(np.array([0.0, 1.0, 2.0]))
+    (1.0, None)
+    """
+    ok = t[np.isfinite(t)]
+    if len(ok) < 2:
+        return 1.0, None
+    first = float(np.min(ok))
+    for low, factor, name in EPOCH_UNITS:
+        if first >= low:
+            return factor, f"epoch {name}"
+    lo, hi, step = SERIAL_DAYS
+    steps = np.diff(ok)
+    if lo <= first and float(np.max(ok)) <= hi and 0 < float(np.median(steps[steps > 0]) if (steps > 0).any()
+                                                                 else 0.0) < step:
+        return 86400.0, "spreadsheet serial days"
+    return 1.0, None
+
+
 def _guess_format(texts: list[str]) -> str | None:
     sample = [s for s in texts[:50] if s]
     for fmt in ("iso", *STAMP_FORMATS):

@@ -13,7 +13,7 @@ from phfdi_base.errors import UserError
 from phfdi_base.signals import unit_of
 
 from . import policy as P
-from .cells import parse_stamps, to_numbers
+from .cells import SERIAL_UNIX_EPOCH_DAYS, numeric_time_unit, parse_stamps, to_numbers
 from .columns import PROJECT_UNIT, ColumnMap, ColumnSpec, kind_of, normal_cell
 from .errors import ReadError
 from .formats import expected, format_of, run_suffixes
@@ -219,6 +219,12 @@ def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None]:
                         column=spec.column, where=table.where)
     t = np.where(bad, np.nan, t)
     if fmt is None:
+        if spec.unit is None:  # no unit stated in the map: tell epoch stamps and serial days by their range
+            factor, what = numeric_time_unit(t)
+            if factor != 1.0:  # (epoch seconds are seconds already: read as they are, as before)
+                table.notes.append(f"{table.path}: column {spec.column!r}: read as {what}, converted to (epoch) seconds "
+                                   f"(told by its range; give the column's unit in a column map if that is wrong)")
+                t = (t - SERIAL_UNIX_EPOCH_DAYS) * factor if what and what.startswith("spreadsheet") else t * factor
         return t * spec.factor, None
     return t, [str(c).strip() for c in cells]
 
