@@ -49,6 +49,7 @@ def pytest_collection_modifyitems(config, items):
 def pytest_runtest_setup(item):
     """Fail a grouped test when --dist loadgroup does not group (a pytest/xdist pair that loses the group suffix,
     pytest-dev/pytest-xdist#1386): graph tests would run two at once and fail by chance, not by a bug."""
-    if item.config.getvalue("loadgroup") and item.get_closest_marker("xdist_group") and "@" not in item.nodeid:
+    grouping = getattr(item.config.option, "loadgroup", False)  # the option exists only under xdist
+    if grouping and item.get_closest_marker("xdist_group") and "@" not in item.nodeid:
         pytest.fail(f"--dist loadgroup is not grouping with pytest {pytest.__version__}: install the pytest "
                     "the project pins (bash scripts/setup.sh)", pytrace=False)

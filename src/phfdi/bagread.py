@@ -89,6 +89,8 @@ def load_bag(path: str | Path) -> Run:
 
     rows: dict[int, dict] = defaultdict(dict)
     measured: set[int] = set()
+    seen: dict[str, set[int]] = defaultdict(set)  # stamps taken per topic
+    repeated: dict[str, int] = defaultdict(int)
     feeds: list[str] | None = None
     try:
         with AnyReader([path]) as reader:
@@ -98,6 +100,10 @@ def load_bag(path: str | Path) -> Run:
             for conn, _t, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
                 ns = time_ns(msg.stamp)
+                if ns in seen[conn.topic]:  # the first of a stamp is what the graph's lock-step nodes took
+                    repeated[conn.topic] += 1
+                    continue
+                seen[conn.topic].add(ns)
                 _extract(conn.topic, msg, rows[ns])
                 if conn.topic == T.MEASUREMENT.name:
                     measured.add(ns)
@@ -109,6 +115,11 @@ def load_bag(path: str | Path) -> Run:
         raise UserError(f"{path}: cannot read the bag ({type(exc).__name__}: {_one_line(exc)}); if its recorder "
                         f"was killed, run: phfdi bag recover {path} FIXED.mcap") from None
     metadata = _run_metadata(path)
+    if repeated:  # before: the last message of a stamp silently replaced the first
+        metadata["notes"] = [f"{path}: {sum(repeated.values())} message(s) repeat a stamp already seen ("
+                             + ", ".join(f"{t} {n}" for t, n in repeated.items()) + "): the first of each stamp "
+                             "is kept, as the graph's nodes take it (two runs in one bag, or a stray publisher "
+                             "on the graph's domain)"]
     stamps = sorted(measured)
     time_s = times_on_grid_s(stamps, metadata.get("sample_time_s"))  # k * dt exactly as the simulation
     names = run_signal_names(feeds or [])

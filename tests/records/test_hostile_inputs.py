@@ -82,3 +82,70 @@ def test_time_columns_in_other_units_are_told_by_their_range_and_said(first, ste
     assert np.allclose(np.diff(run.time_s), 1.0, atol=1e-4)  # one second per sample, whatever the unit
     said = [n for n in run.metadata["notes"] if "column 'time'" in n]
     assert (said == []) if what is None else (len(said) == 1 and what in said[0]), said
+
+
+def _bag_with_no_samples(path):
+    from phfdi import bagio
+    from phfdi_base import topics as T
+
+    bag = bagio.BagWriter(path)
+    for topic in T.RECORDED:
+        if topic.per_sample:
+            bag.add_topic(topic.name, topic.type)
+    bag.close()
+    return path
+
+
+def test_live_replay_refuses_what_offline_replay_refuses(tmp_path, run_cli):
+    """--live played a bag with no sample as "played 0 samples", exit 0, where offline replay refuses it; the
+    refusal comes from the offline reader before any process starts (same line both ways)."""
+    bag = _bag_with_no_samples(tmp_path / "empty.mcap")
+    offline = _one_line(*run_cli("replay", str(bag))[::2])
+    live = _one_line(*run_cli("replay", "--live", str(bag))[::2])
+    assert "no sample of /plant/measurement" in offline
+    assert live.replace("replay", "") == offline.replace("replay", "")
+
+
+def test_a_bag_with_repeated_stamps_keeps_the_first_and_says_so(tmp_path):
+    """Two runs recorded into one bag (or a stray publisher): the last message of a stamp silently replaced the
+    first. Now the first is kept (as the graph's lock-step nodes take it) and the repeats are counted in a note."""
+    import numpy as np
+
+    from phfdi import bagio
+    from phfdi.records import read_run
+    from phfdi.run import Run
+
+    t = np.arange(20.0)
+    first = Run({"time_s": t, "ph_measured": np.full(20, 7.0)}, {"sample_time_s": 1.0})
+    second = Run({"time_s": t[:5], "ph_measured": np.full(5, 9.0)}, {"sample_time_s": 1.0})
+    a, b = bagio.write_run(first, tmp_path / "a.mcap"), bagio.write_run(second, tmp_path / "b.mcap")
+    both = tmp_path / "both.mcap"
+    _merge_bags([a, b], both)
+    run = read_run(both)
+    assert len(run) == 20 and np.all(run["ph_measured"] == 7.0)
+    (note,) = [n for n in run.metadata["notes"] if "repeat a stamp" in n]
+    assert "/plant/measurement 5" in note, note
+
+
+def _merge_bags(parts, out) -> None:
+    """One bag holding every message of ``parts`` (their channels and schemas from the first), in file order."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(out, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        ids: dict[str, int] = {}
+        for part in parts:
+            with open(part, "rb") as src:
+                reader = make_reader(src)
+                if not ids:
+                    for rec in reader.iter_metadata():
+                        w.add_metadata(rec.name, rec.metadata)
+                for schema, channel, message in reader.iter_messages():
+                    if channel.topic not in ids:
+                        sid = w.register_schema(schema.name, schema.encoding, schema.data)
+                        ids[channel.topic] = w.register_channel(channel.topic, channel.message_encoding, sid,
+                                                                channel.metadata)
+                    w.add_message(ids[channel.topic], message.log_time, message.data, message.publish_time)
+        w.finish()

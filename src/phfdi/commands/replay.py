@@ -201,6 +201,10 @@ def run_live_learned(args: argparse.Namespace) -> int:
 
     model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
     _check_live_bag(args, MEASURED_SAMPLE.name, "write the record with phfdi bag from-csv")
+    from phfdi.learned import read_measured
+
+    # the offline reader first: what offline replay refuses, --live refuses with the same line
+    print_notes("replay", read_measured(args.file, None, channels=model.channels).notes)
     say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
 
     def on_event(node: str, event: dict) -> None:
@@ -267,6 +271,11 @@ def run_live(args: argparse.Namespace) -> int:
     from .launch import alarm_event_line
 
     _check_live_bag(args, "/plant/measurement", "not a bag of the phfdi graph")
+    from phfdi.replay import load_any
+
+    # the offline reader first: what offline replay refuses, --live refuses with the same line (it played
+    # such a bag as "0 samples", exit 0); what it repairs is said the same way
+    print_notes("replay", load_any(args.file, None, None).metadata.get("notes", []))
     settings = settings_from_args(args)  # one line for bad detector settings before any process starts
     say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
 

@@ -160,7 +160,9 @@ def read_bag(path: Path, data: bytes | None = None, encoding: str | None = None)
     if len(run) == 0:
         raise ReadError(path, "the bag holds no sample of /plant/measurement")
     units = run.units()
-    return Table(str(path), dict(run.signals), np.arange(1, len(run) + 1), "sample", dict(run.metadata), units)
+    metadata = dict(run.metadata)
+    notes = metadata.pop("notes", [])
+    return Table(str(path), dict(run.signals), np.arange(1, len(run) + 1), "sample", metadata, units, notes)
 
 
 # ---- the built-in formats (matching order: a bag, Parquet, then text; see :mod:`.formats`) ------------------
