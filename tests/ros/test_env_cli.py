@@ -34,6 +34,23 @@ def test_reserved_domains_are_exclusive():
             reserve_domain_id(a.domain_id)
 
 
+def test_an_exported_domain_id_is_used_or_refused_with_one_line(monkeypatch):
+    """A ROS user's exported ROS_DOMAIN_ID was silently replaced by a free one (asked for 221, ran on 222)."""
+    monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+    with reserve_domain_id() as free, reserve_domain_id() as spare:
+        pass  # two domains nobody holds, released again
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(free.domain_id))
+    with reserve_domain_id() as taken:
+        assert taken.domain_id == free.domain_id
+        with pytest.raises(UserError, match=f"ROS domain {free.domain_id} \\(ROS_DOMAIN_ID \\(exported\\)\\) is in use"):
+            reserve_domain_id()
+        with reserve_domain_id(spare.domain_id) as other:  # --domain-id wins over the export
+            assert other.domain_id == spare.domain_id
+    monkeypatch.setenv("ROS_DOMAIN_ID", "eleven")
+    with pytest.raises(UserError, match="ROS_DOMAIN_ID=eleven \\(exported\\): not a number"):
+        reserve_domain_id()
+
+
 def test_reserved_domains_stay_in_the_range_the_machine_allows(monkeypatch):
     monkeypatch.setenv("PHFDI_ROS_DOMAINS", "70-71")
     with reserve_domain_id() as a, reserve_domain_id() as b:

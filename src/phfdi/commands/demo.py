@@ -39,6 +39,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="override a scenario key, e.g. --set duration_s=2000")
     p.add_argument("--no-ros", action="store_true",
                    help="without ROS 2: simulate the loop in this process and replay the run offline")
+    p.add_argument("--domain-id", type=int, default=None,
+                   help="ROS domain id of the graph (default: an exported ROS_DOMAIN_ID, else a free one)")
     p.set_defaults(func=run)
 
 
@@ -122,7 +124,7 @@ def _through_graph(args, spec, out: Path):
                 sys.stderr.write("\n")  # below the progress line
             _say(f"      {line}")
 
-    result = Launcher(nodes, progress=_progress("      lock-step run"), on_event=on_event,
+    result = Launcher(nodes, domain_id=args.domain_id, progress=_progress("      lock-step run"), on_event=on_event,
                       status=lambda text: print(f"      {text}", file=sys.stderr, flush=True)).run()
     if result.failure or result.status:
         print(f"phfdi demo: error: the graph failed: {result.failure or f'status {result.status}'}",

@@ -82,7 +82,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="play the bag over ROS topics into a detector node instead (.mcap only)")
     live.add_argument("--pace", type=float, default=0.0, metavar="FACTOR",
                       help="with --live: 0 as fast as the detector takes it (default), F: F times real time")
-    live.add_argument("--domain-id", type=int, default=None, help="with --live: ROS domain id (default: a free one)")
+    live.add_argument("--domain-id", type=int, default=None,
+                      help="with --live: ROS domain id (default: an exported ROS_DOMAIN_ID, else a free one)")
     live.add_argument("--log-dir", default=None, help="with --live: keep the nodes' logs here")
     p.set_defaults(func=run)
 

@@ -143,13 +143,39 @@ def _lock_dir() -> Path:
     return d
 
 
-def reserve_domain_id(requested: int | None = None) -> DomainLease:
+def exported_domain_id(environ: dict | None = None) -> int | None:
+    """The ROS_DOMAIN_ID the user exported (None when unset or empty); one line when it is not a domain id.
+
+    Examples
+    --------
+    >>> exported_domain_id({"ROS_DOMAIN_ID": "42"}), exported_domain_id({})
+    (42, None)
+    """
+    value = (os.environ if environ is None else environ).get("ROS_DOMAIN_ID", "").strip()
+    if not value:
+        return None
+    try:
+        domain_id = int(value)
+    except ValueError:
+        raise UserError(f"ROS_DOMAIN_ID={value} (exported): not a number; use 0..232 or unset it") from None
+    if domain_id != 0 and domain_id not in DOMAIN_IDS:
+        raise UserError(f"ROS_DOMAIN_ID={value} (exported): use 0..232 or unset it")
+    return domain_id
+
+
+def reserve_domain_id(requested: int | None = None, environ: dict | None = None) -> DomainLease:
     """A domain id no other phfdi graph holds and no DDS participant on this machine uses.
 
     Held by a lock file (released when this process ends), so parallel
-    launches and test workers never share a domain. ``requested`` checks and
-    holds that id instead of picking one; otherwise the id is one of :func:`allowed_domain_ids`.
+    launches and test workers never share a domain. ``requested`` (``--domain-id``) checks and holds that id
+    instead of picking one; else an exported ``ROS_DOMAIN_ID`` is the request (a ROS user's own nodes are on
+    it: silently replacing it put the graph where they could not see it); otherwise the id is one of
+    :func:`allowed_domain_ids`.
     """
+    source = "--domain-id"
+    if requested is None:
+        requested = exported_domain_id(environ)
+        source = "ROS_DOMAIN_ID (exported)"
     if requested is None:
         allowed = allowed_domain_ids()
         candidates = random.sample(allowed, len(allowed))
@@ -164,7 +190,9 @@ def reserve_domain_id(requested: int | None = None) -> DomainLease:
         except OSError:
             os.close(fd)
             if requested is not None:
-                raise UserError(f"ROS domain {d} is in use by another phfdi graph; pick another --domain-id") from None
+                raise UserError(f"ROS domain {d} ({source}) is in use by another phfdi graph; pick another "
+                                "--domain-id" + (" or unset ROS_DOMAIN_ID" if source != "--domain-id" else "")
+                                ) from None
             continue
         if requested is not None or _ports_free(_domain_ports(d)):
             return DomainLease(d, fd)
