@@ -17,6 +17,7 @@ import numpy as np
 from phfdi.records import read_record
 from phfdi_base.errors import UserError
 from phfdi_base.stamps import record_stamps_ns, stamps_seconds
+from wavelet_fdi.alarm_messages import exceedance
 from wavelet_fdi.learned_detector import LearnedEvent, LearnedModel, LearnedSettings, learn, run_record
 
 #: a channel may miss at most this fraction of the healthy rows the reference learns from
@@ -129,7 +130,7 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
         onset = "" if a.get("onset_time") is None else f", onset about {a['onset_time']:g} {unit_of_time}"
         lines.append(f"alarm {a['alarm_id']}: detected {a['detection_time']:g} {unit_of_time} "
                      f"({where}){onset}, by "
-                     f"{a['statistic']} ({a['statistic_value']:.1f} > {a['threshold']:.1f})")
+                     f"{a['statistic']} ({exceedance(a['statistic_value'], a['threshold'])})")
         lines.append(f"  channels: {top}")
         iso = a.get("isolation")
         if iso:

@@ -12,6 +12,20 @@ from phfdi_base.stamps import ns_to_seconds
 STATE_NAMES = {0: "OK", 1: "WARN", 2: "ALARM"}
 
 
+def exceedance(value: float, threshold: float, relation: str = ">") -> str:
+    """``"value > threshold"`` with as many decimals as it takes to show the difference (one decimal printed
+    an alarm at 5.04 over 5.0 as "5.0 > 5.0").
+
+    >>> exceedance(15.12, 5.0), exceedance(5.04, 5.0), exceedance(5.0004, 5.0, "> threshold")
+    ('15.1 > 5.0', '5.04 > 5.00', '5.0004 > threshold 5.0000')
+    """
+    for decimals in range(1, 7):
+        shown_value, shown_threshold = f"{value:.{decimals}f}", f"{threshold:.{decimals}f}"
+        if shown_value != shown_threshold:
+            break
+    return f"{shown_value} {relation} {shown_threshold}"
+
+
 def severity_of(summary: dict) -> tuple[float, str]:
     """An alarm's severity as /fault_alarm carries it: the fault's parameter once isolation named the
     fault (e.g. backlash width, % of span), before that the RMS pH residual from onset to detection."""

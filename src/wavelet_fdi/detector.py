@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 import numpy as np
 import numpy.typing as npt
 
+from .alarm_messages import exceedance
 from .config import Calibration, DetectorSettings
 from .filterbank import CausalSwt
 from .history import History
@@ -510,7 +511,7 @@ class StreamingDetector:
             for d in self.settings.isolation_delays_s:
                 self._due.append((gi + int(round(d / self.dt_s)), alarm.alarm_id))
         events.append(Event("alarm", t_s, gi, "ERROR",
-                            f"fault detected by {alarm.statistic} ({value:.1f} > {alarm.threshold:.1f}); "
+                            f"fault detected by {alarm.statistic} ({exceedance(value, alarm.threshold)}); "
                             f"onset estimate {onset_t:g} s", alarm.summary()))
         return events
 

@@ -357,6 +357,8 @@ def _play_live(args: argparse.Namespace, nodes: list, spec, say, on_event) -> tu
 
 def format_alarms(alarms: list, diagnostics: dict) -> str:
     """Alarms (the detector's Alarm objects, or their summaries with an alarm_id) as lines for people."""
+    from wavelet_fdi.alarm_messages import exceedance
+
     lines = []
     if not alarms:
         lines.append("no alarm")
@@ -373,7 +375,7 @@ def format_alarms(alarms: list, diagnostics: dict) -> str:
             what += f"; closest: {p['fault_class']}"
         lines.append(f"alarm {alarm_id}: {what}")
         lines.append(f"  onset {s['onset_time']:g} s, detected {s['detection_time']:g} s by {s['statistic']} "
-                     f"({s['statistic_value']:.1f} > threshold {s['threshold']:.1f}), dominant band "
+                     f"({exceedance(s['statistic_value'], s['threshold'], '> threshold')}), dominant band "
                      f"{s['dominant_level']}, severity {s['severity']:.3g} pH RMS")
         if s["cleared_time"] is not None:
             lines.append(f"  cleared {s['cleared_time']:g} s")
