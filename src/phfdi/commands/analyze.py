@@ -50,7 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fault onset of the Section 7 runs (s, default 7000)")
     p.add_argument("--scenario", default="paper", help="scenario preset or .yaml for simulated runs (default: paper)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scenario key of every simulated run, e.g. --set duration_s=4000")
+                   help="override a scenario key of every simulated run, e.g. --set sensors.ph.noise_std=0.02")
     p.add_argument("--jobs", type=int, default=1, help="simulation processes (default: 1)")
     p.add_argument("--wavelet", default="sym4", help="wavelet of the row decomposition (default: sym4)")
     p.add_argument("--level", type=int, default=7, help="decomposition level (default: 7)")

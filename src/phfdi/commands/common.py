@@ -42,7 +42,7 @@ def add_scenario_args(p: argparse.ArgumentParser) -> None:
                    help=f"fault from the library replacing the scenario's faults ({FAULT_PRESETS})")
     p.add_argument("--onset", type=float, default=None, metavar="S", help="fault onset time (s)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scenario key, e.g. --set duration_s=2000 --set sensors.ph.noise_std=0.02")
+                   help="override a scenario key, e.g. --set sensors.ph.noise_std=0.02 --set duration_s=12000")
 
 
 def scenario_from_args(args: argparse.Namespace):

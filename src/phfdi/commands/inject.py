@@ -10,12 +10,12 @@ from .common import EPILOG_FORMAT
 EXAMPLES = """examples:
   # a +0.3 pH probe bias from 60 s of record time (the file's ElapsedTime) on
   phfdi inject ../shared/data/ph_rig/2025.02.24-add_acid_pH7-3.csv --fault probe_bias --onset 60 --size 0.3 \\
-      --out faulty/add_acid_bias.csv
+      --out add_acid_bias.csv
   # the base pump delivers 20 % less than recorded from 500 s on; the truth printed as JSON
-  phfdi inject control.csv --fault pump_low --pump base --onset 500 --size 0.2 --out faulty/low.csv --json
+  phfdi inject control.csv --fault pump_low --pump base --onset 500 --size 0.2 --out faulty_low.csv --json
   # the base pump delivers nothing while the record says 2 mL/s wherever the data's base pump was off
-  phfdi inject control.csv --fault pump_stuck --pump base --onset 500 --size 2 --out faulty/stuck.csv
-  phfdi inject add_base.csv --fault probe_noise --size 0.05 --seed 7 --onset 30 --out faulty/noise.csv
+  phfdi inject control.csv --fault pump_stuck --pump base --onset 500 --size 2 --out faulty_stuck.csv
+  phfdi inject add_base.csv --fault probe_noise --size 0.05 --seed 7 --onset 30 --out faulty_noise.csv
 
 faults (--size in the unit given):
 {kinds}

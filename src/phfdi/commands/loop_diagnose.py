@@ -9,7 +9,8 @@ from .common import EPILOG_FORMAT, print_notes
 
 EXAMPLES = """examples:
   phfdi loop-diagnose ../shared/data/plant_loops/stiction/stic_2111FIC46005_0614_0003.txt
-  phfdi loop-diagnose ../shared/data/plant_loops --out plant/ --figures plant/figs
+  phfdi loop-diagnose ../shared/data/plant_loops/stiction ../shared/data/plant_loops/no_stiction \\
+      --out plant/ --figures plant/figs      # folders: every .txt/.csv/.parquet below them is a loop
   phfdi loop-diagnose historian_export.csv --out plant/           # a wide export: one job per loop tag
   phfdi loop-diagnose /data/unit2 --scheduler tcp://10.0.0.5:8786 --out unit2/
   phfdi loop-diagnose ../shared/data/plant_loops/*/*.txt --json > loops.json

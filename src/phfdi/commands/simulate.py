@@ -9,7 +9,9 @@ from .common import EPILOG_FORMAT, Progress, add_overwrite_arg, add_scenario_arg
 
 EXAMPLES = """examples:
   phfdi simulate --scenario paper --fault backlash --out runs/backlash.csv
-  phfdi simulate --fault stiction --set duration_s=3000 --out runs/stiction.parquet --figure runs/stiction.png
+  phfdi simulate --fault stiction --out runs/stiction.parquet --figure runs/stiction.png
+  phfdi simulate --fault stiction --set duration_s=2000 --set 'setpoints.ph.changes=[]' --onset 1000 \\
+      --out runs/short.csv   # 2000 s at pH 12 (no setpoint change), stiction from 1000 s
   phfdi simulate --scenario my_loop.yaml --json
   phfdi simulate --fault friction --inputs recorded.csv --out replayed.csv   # open loop from recorded inputs
 """
