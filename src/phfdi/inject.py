@@ -16,9 +16,7 @@ import hashlib
 import io
 import json
 import math
-import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -26,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from phfdi_base.errors import UserError
+from phfdi_base.outputs import refuse_existing, staged, write_bytes
 
 from .inject_kinds import KINDS, PH_CAL_POINT, PH_MAX, PH_MIN, PH_RESOLUTION, PUMPS, TRUTH_FORMAT, FaultKind
 
@@ -361,51 +360,28 @@ def sidecar_path(out: str | Path) -> Path:
     return out.with_name(out.name + ".fault.json")
 
 
-def _staged(target: Path, data: bytes) -> str:
-    """A temporary file in the target's folder holding ``data``, flushed and synced; its path."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return tmp
-
-
 def write_injected(out: str | Path, data: bytes, truth: dict, overwrite: bool = False) -> tuple[Path, Path]:
-    """Write the faulty CSV and its truth (``OUT.fault.json``) atomically; an OSError becomes one UserError.
+    """Write the faulty CSV and its truth (``OUT.fault.json``) atomically (:mod:`phfdi_base.outputs`, the one
+    way every command writes); an OSError becomes one UserError naming the file.
 
-    Both are staged in temporary files in the target folder (flushed, synced), then renamed into place;
-    an existing file is replaced only with ``overwrite``. Nothing partial is left: a failure removes the
-    staged files, and a CSV renamed into place whose truth then fails to follow is removed too.
+    The truth is placed first, then the CSV, so a faulty file never stands without its truth; an existing file
+    is replaced only with ``overwrite``; the folder is made. Nothing partial is left: a failure removes the
+    staged files, and a truth placed for a CSV that then fails to follow is removed too.
     """
     out = Path(out)
     side = sidecar_path(out)
     if str(out.resolve()) == str(Path(truth["source"]).resolve()):
         raise UserError(f"--out {out} is the input file; write the faulty copy elsewhere")
     for target in (out, side):
-        if target.exists() and not overwrite:
-            raise UserError(f"{target} exists; give --overwrite to replace it")
-    staged: list[str] = []
-    target, placed = out, False
+        refuse_existing(target, overwrite)
+    placed_truth = False
     try:
-        staged.append(_staged(out, data))
-        target = side
-        staged.append(_staged(side, (json.dumps(truth, indent=2) + "\n").encode("utf-8")))
-        target = out
-        os.replace(staged[0], out)
-        placed, target = True, side
-        os.replace(staged[1], side)
-    except OSError as exc:
-        for tmp in staged:
-            Path(tmp).unlink(missing_ok=True)
-        if placed and not side.exists():
-            out.unlink(missing_ok=True)  # no faulty file without its truth
-        raise UserError(f"cannot write {target}: {exc.strerror or exc}") from None
+        with staged(out, overwrite) as tmp:
+            tmp.write_bytes(data)
+            write_bytes(side, (json.dumps(truth, indent=2) + "\n").encode("utf-8"), overwrite)
+            placed_truth = True
+    except UserError:
+        if placed_truth:
+            side.unlink(missing_ok=True)  # no truth without its faulty file
+        raise
     return out, side

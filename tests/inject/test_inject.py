@@ -212,7 +212,8 @@ def test_a_failed_write_leaves_nothing_partial(rig_file, tmp_path, run_cli, monk
     out.parent.mkdir()
     line = one_error_line(*run_cli("inject", rig_file, "--fault", "probe_bias", "--size", "0.3", "--onset",
                                    onset_in(rig_file), "--out", out)[::2])
-    assert line == f"phfdi inject: error: cannot write {out}: No space left on device"
+    # the truth is placed first (a faulty file never stands without it): its write is the one that fails
+    assert line == f"phfdi inject: error: cannot write {sidecar_path(out)}: No space left on device"
     assert list(out.parent.iterdir()) == []
 
 
@@ -227,7 +228,7 @@ def test_sidecar_failure_removes_the_new_csv(rig_file, tmp_path, monkeypatch):
         real(src, dst)
 
     data, truth = inject_fault(rig_file, "probe_bias", onset_in(rig_file), 0.3)
-    monkeypatch.setattr(mod.os, "replace", replace)
+    monkeypatch.setattr(os, "replace", replace)  # the one writer (phfdi_base.outputs) renames with it
     with pytest.raises(UserError, match="cannot write .*a.csv.fault.json: Input/output error"):
         mod.write_injected(tmp_path / "a.csv", data, truth)
     assert {p.name for p in tmp_path.iterdir()} <= {"rig.csv"}
