@@ -26,7 +26,7 @@ from phfdi_interfaces.msg import ControllerOutput, ValveState
 
 from phfdi_base.ros.graph_node import GraphNode, ParamSpec, main
 from phfdi_base.spec_tools import load_plugins
-from phfdi_base.topics import CONTROLLER, DIAGNOSTICS, VALVE, VALVE_STATE
+from phfdi_base.topics import CONTROLLER, VALVE, VALVE_STATE
 
 from .build import build_valves, step_valves
 
@@ -66,7 +66,7 @@ class ValveNode(GraphNode):
         self._install_valves(self._build_valves(self.spec))
         self.held = {"ph": _Held(), "outlet": _Held()}
         self.pub_state = self.data_publisher(ValveState, VALVE_STATE.name)
-        self.pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
+        self.pub_diag = self.diagnostics_publisher()  # shared with the input-stamp counts (GraphNode)
         self.data_subscription(ControllerOutput, CONTROLLER.name, self._on_output)
         self._state = ValveState()  # refilled each sample
         self._last_report_k: int | None = None

@@ -12,7 +12,10 @@ publication order (in a lock-step run 29 of 1601 controller outputs arrived
 after the next measurement, though published before it; :class:`Pairing`).
 
 Outputs: /fault_alarm (phfdi_interfaces/FaultAlarm) on every state change
-(alarm raised, diagnosed, cleared, input problem, warm-up over) and as a
+(alarm raised, diagnosed, cleared, warm-up over, and an input problem that
+changes the alarm state: detection held or resumed), input problems at most
+once per ``input_problem_period_s`` of wall time (one message with the counts
+so far: stamp garbage once gave 313 messages in a second), and as a
 heartbeat every ``heartbeat_period_s`` of simulated time; /diagnostics
 (diagnostic_msgs/DiagnosticArray: the core's input counters, pairing counts,
 processing lag, calibration in use) every ``diagnostics_period_s`` and
@@ -37,6 +40,7 @@ import sys
 import time
 import traceback
 from collections import deque
+from itertools import islice
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -45,7 +49,7 @@ from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
 from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s
-from phfdi_base.topics import CONTROLLER, DIAGNOSTICS, MEASUREMENT
+from phfdi_base.topics import CONTROLLER, MEASUREMENT
 
 from .alarm_messages import severity_of
 from .config import Calibration, load_default_calibration, setting_specs, settings_from_values
@@ -71,6 +75,10 @@ PARAMS = (
     ParamSpec("diagnostics_period_s", 60.0, "publish /diagnostics every this many s of simulated time (and "
                                             "whenever an input problem is counted); 0: only then",
               range=(0.0, 1e9), runtime=True),
+    # wall time, not simulated: garbage stamps move the simulated clock, they cannot move this one
+    ParamSpec("input_problem_period_s", 1.0, "input problems on /fault_alarm at most once per this many s of "
+                                             "wall time (one message with the counts; state changes always)",
+              range=(0.05, 3600.0), runtime=True),
 )
 
 #: diagnostics counters that mean bad input (a growth is reported at once)
@@ -91,7 +99,11 @@ class Pairing:
     lost shared-memory packets wait for the reliable writer's repair). So a measurement leaves with
     its output, or without it (NaN commands) once
 
-    * an output with a later stamp has arrived (its own will not come: one writer, in order), or
+    * the last output received has a later stamp (its own will not come: one writer, in order; the last,
+      not the newest ever, so that one stray output stamped in the future does not give up every
+      measurement after it), or
+    * two of the next measurements behind it are older (a stray stamped in the future at the head of the
+      queue; one writer's measurements only go forward), or
     * ``window`` later measurements have arrived and no output has come for ``timeout_s``
       (wall, monotonic clock) since it arrived: a silent controller-output topic, or
     * ``MAX_PENDING`` measurements wait (memory and delay stay bounded whatever the stamps).
@@ -108,7 +120,7 @@ class Pairing:
         self.pending: deque[list] = deque()
         self.early: dict[int, tuple] = {}
         self.missed: deque[int] = deque(maxlen=256)  # stamps passed on without an output (late or unpaired)
-        self.newest_output_ns = -math.inf
+        self.last_output_ns = -math.inf  # stamp of the last output received
         self.last_output_at = -math.inf  # wall time of the last output received
         self.max_wait_s = 0.0  # longest a measurement waited for its output (wall)
         self.counts = {"measurements": 0, "controller_outputs": 0, "commands_missing": 0,
@@ -122,7 +134,7 @@ class Pairing:
     def output(self, ns: int, values: tuple, now: float) -> list[tuple]:
         self.counts["controller_outputs"] += 1
         self.last_output_at = now
-        self.newest_output_ns = max(self.newest_output_ns, ns)
+        self.last_output_ns = ns
         for row in reversed(self.pending):
             if row[0] == ns and row[3] is None:
                 row[3] = values
@@ -141,8 +153,10 @@ class Pairing:
         return self._ready(now)
 
     def _given_up(self, row: list, now: float) -> bool:
-        return (row[0] < self.newest_output_ns or len(self.pending) > self.MAX_PENDING
-                or (len(self.pending) > self.window and now - max(row[4], self.last_output_at) >= self.timeout_s))
+        pending = self.pending
+        return (row[0] < self.last_output_ns or len(pending) > self.MAX_PENDING
+                or (len(pending) > self.window and now - max(row[4], self.last_output_at) >= self.timeout_s)
+                or (len(pending) > 2 and sum(r[0] <= row[0] for r in islice(pending, 1, 9)) >= 2))
 
     def _ready(self, now: float, all_: bool = False) -> list[tuple]:
         out = []
@@ -202,8 +216,9 @@ class DetectorNode(DetectorNodeBase):
         self.lag = LagStats()
         self._heartbeat_s = self.param("heartbeat_period_s")
         self._diagnostics_s = self.param("diagnostics_period_s")
+        self._input_period_s = self.param("input_problem_period_s")
         self.open_alarm_output()
-        self.pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
+        self.pub_diag = self.diagnostics_publisher()
         self.data_subscription(Measurement, MEASUREMENT.name, self._on_measurement)
         self.data_subscription(ControllerOutput, CONTROLLER.name, self._on_output)
         # the worker (DetectorNodeBase) is the only thread that touches the core and the two publishers
@@ -212,6 +227,12 @@ class DetectorNode(DetectorNodeBase):
         self._last_diag_t = -math.inf
         self._reported_problems: dict[str, int] = {}
         self._last_ns = 0
+        # input problems not yet on /fault_alarm (rate limit): how many, their distinct texts, the last one's time
+        self._inputs_held = 0
+        self._inputs_texts: list[str] = []
+        self._inputs_t = math.nan
+        self._inputs_sent_at = -math.inf  # wall (monotonic) time of the last input-problem message
+        self._resets_seen = 0  # window resets (gaps, clock jumps) the heartbeat schedule has followed
         self.start_worker()
         self.start_barrier()
 
@@ -236,6 +257,7 @@ class DetectorNode(DetectorNodeBase):
         # runtime changes take effect at the next sample the worker processes
         self._heartbeat_s = self.param("heartbeat_period_s")
         self._diagnostics_s = self.param("diagnostics_period_s")
+        self._input_period_s = self.param("input_problem_period_s")
 
     # ---- executor thread: queue only ------------------------------------------------------
     def _on_measurement(self, msg: Measurement) -> None:
@@ -249,6 +271,8 @@ class DetectorNode(DetectorNodeBase):
     def after_spin(self) -> None:
         if self.pairing.pending:
             self.enqueue(self.pairing.expire(time.monotonic()))
+        if self._inputs_held and self._inputs_due():  # held-back input problems go out even if nothing follows
+            self.poke()
 
     def received(self) -> int:
         counts = self.pairing.counts
@@ -268,6 +292,10 @@ class DetectorNode(DetectorNodeBase):
 
     def process(self, rows: list[tuple], flush: bool = False) -> None:
         before = self._state
+        if not rows and not flush:  # poked: only the input problems held back by the rate limit
+            if self._inputs_held and self._inputs_due():
+                self._publish_inputs(before, self._problems())
+            return
         t0 = time.perf_counter()
         try:
             events = self.core.process(self._chunk(rows)) if rows else []
@@ -281,20 +309,70 @@ class DetectorNode(DetectorNodeBase):
         self._last_ns = max([self._last_ns] + [r[0] for r in rows if r[0] > 0])
         status = self.core.status()
         state = before
+        published = False
         for ev in events:
-            state = self._publish_event(ev, state)
+            if ev.kind == "input":  # rate-limited below
+                self._hold_input(ev)
+            else:  # alarm, diagnosis, cleared: always
+                state = self._publish_event(ev, state)
+                published = True
         self._state = STATE_OF_LEVEL[status["level"]]
+        problems = self._problems()
+        # an input problem that changes the alarm state (detection held, resumed) goes out at once
+        if self._inputs_held and (self._state != before or self._inputs_due()):
+            state = self._publish_inputs(state, problems)
+            published = True
         core_state = status["state"]
-        changed = core_state != self._core_state and not events
+        changed = core_state != self._core_state and not published
         self._core_state = core_state
         t_now = self._t_last()
+        self._follow_clock(t_now, problems)
         if changed or (self._heartbeat_s > 0 and t_now >= _next_multiple(self._last_heartbeat_t, self._heartbeat_s)):
             self._publish_heartbeat(status, t_now, changed)
-        problems = self._problems()
         grew = any(v > self._reported_problems.get(k, 0) for k, v in problems.items())
         if grew or events or changed or (self._diagnostics_s > 0 and t_now >= _next_multiple(self._last_diag_t,
                                                                                               self._diagnostics_s)):
             self._publish_diagnostics(t_now, problems, grew)
+
+    def _follow_clock(self, t_now: float, problems: dict[str, int]) -> None:
+        """After a window reset (a gap, a clock jump) or a clock that went back, the periodic messages go on
+        from the new time without one of their own: else a stray far-future stamp would stop heartbeats until
+        the real clock caught up with it, and every jump forward and back would bring one."""
+        resets = problems.get("gap_resets", 0) + problems.get("time_resets", 0)
+        if resets != self._resets_seen or t_now < self._last_heartbeat_t:
+            self._last_heartbeat_t = t_now
+        if resets != self._resets_seen or t_now < self._last_diag_t:
+            self._last_diag_t = t_now
+        self._resets_seen = resets
+
+    # ---- input problems on /fault_alarm: rate-limited -----------------------------------
+    def _inputs_due(self) -> bool:
+        return time.monotonic() - self._inputs_sent_at >= self._input_period_s
+
+    def _hold_input(self, ev) -> None:
+        self._inputs_held += 1
+        if ev.message not in self._inputs_texts and len(self._inputs_texts) < 3:  # bounded text
+            self._inputs_texts.append(ev.message)
+        self._inputs_t = ev.time_s
+
+    def _publish_inputs(self, state: int, problems: dict[str, int]) -> int:
+        """One /fault_alarm message for the input problems held since the last one, with the counts so far."""
+        n = self._inputs_held
+        text = "; ".join(self._inputs_texts)
+        if n > len(self._inputs_texts):
+            text += f" ({n} input problem events since the last report)"
+        counted = ", ".join(f"{k} {v}" for k, v in problems.items() if v)
+        if counted:
+            text += f"; input counts so far: {counted}"
+        if state != FaultAlarm.ALARM:  # an input problem does not hide an active alarm
+            state = FaultAlarm.WARN
+        msg = FaultAlarm(loop=self._loop, state=state, message=text)
+        msg.stamp = to_time(finite_or(self._inputs_t, self._last_ns))
+        self._alarm_fields(msg, None)
+        self.publish_alarm(msg, "input", self._inputs_t, None)
+        self._inputs_held, self._inputs_texts = 0, []
+        self._inputs_sent_at = time.monotonic()
+        return state
 
     def _t_last(self) -> float:
         """Time (s) of the last sample the core took; else of the newest stamp received."""
@@ -400,6 +478,8 @@ class DetectorNode(DetectorNodeBase):
 
     def finish(self) -> None:
         self.process([], flush=True)
+        if self._inputs_held:  # the last input problems, whatever the rate limit
+            self._publish_inputs(self._state, self._problems())
         self._publish_heartbeat(self.core.status(), self._t_last(), False)
         self._publish_diagnostics(self._t_last(), self._problems(), False)
 

@@ -50,6 +50,7 @@ class DetectorNodeBase(GraphNode):
         self._queue: list[Any] = []
         self._cond = threading.Condition()
         self._closing = False
+        self._poked = False  # the worker calls process([]) once: work that is due without new rows
         self._worker: threading.Thread | None = None
 
     def open_alarm_output(self) -> None:
@@ -63,6 +64,12 @@ class DetectorNodeBase(GraphNode):
                 self._queue.extend(rows)
                 self._cond.notify()
 
+    def poke(self) -> None:
+        """Have the worker call ``process([])`` (time-due work such as held-back messages; executor thread)."""
+        with self._cond:
+            self._poked = True
+            self._cond.notify()
+
     def received(self) -> int:
         """Messages taken from the readers so far (the end waits until it stops moving)."""
         raise NotImplementedError
@@ -75,11 +82,11 @@ class DetectorNodeBase(GraphNode):
     def _work(self) -> None:
         while True:
             with self._cond:
-                while not self._queue and not self._closing:
+                while not self._queue and not self._closing and not self._poked:
                     self._cond.wait()
                 rows, self._queue = self._queue, []
-                closing = self._closing
-            if rows:
+                closing, poked, self._poked = self._closing, self._poked, False
+            if rows or (poked and not closing):
                 self.process(rows)
             if closing and not rows:
                 return

@@ -23,6 +23,7 @@ def test_invalid_launch_parameters_are_refused_with_one_line(ros_env):
         "fault": (node_cmd("ph_plant_sim.node", fault="nonsense"), ["unknown fault 'nonsense'"]),
         "choice": (node_cmd("phfdi.ros.recorder", path="/tmp/x.mcap", compression="gzip"), ["compression"]),
         "launch": (phfdi_cmd("launch", "--pace", "-1"), ["--pace"]),
+        "unknown": (node_cmd("pi_controllers.node", ph_kpp="6.0"), ["unknown parameter ph_kpp", "ph_kp?"]),
     }
     procs = {k: subprocess.Popen(cmd, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for k, (cmd, _) in cases.items()}
@@ -34,6 +35,15 @@ def test_invalid_launch_parameters_are_refused_with_one_line(ros_env):
         for word in cases[key][1]:
             assert word in lines[0], (key, lines[0])
         assert "Traceback" not in err
+
+
+def test_a_misspelt_detector_parameter_stops_the_launch_with_its_name():
+    """--detector-param heartbeat_period=60 (no _s) was accepted and ignored without a word."""
+    out = subprocess.run(phfdi_cmd("launch", "--detector-param", "heartbeat_period=60", "--set", "duration_s=200",
+                                   "--set", "setpoints.ph.changes=[]"), capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0 and "Traceback" not in out.stderr
+    assert ("refused to start: unknown parameter heartbeat_period for node detector (did you mean "
+            "heartbeat_period_s?)") in out.stderr, out.stderr
 
 
 def test_node_help_lists_parameters_with_ranges():

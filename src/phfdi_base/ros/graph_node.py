@@ -16,13 +16,16 @@ import time
 from collections.abc import Callable
 
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
 from phfdi_base.errors import UserError
 from phfdi_base.parts import NodePart, read_part, resolve_part
 from phfdi_base.stamps import sample_index, sample_period_ns, split_ns, time_ns  # time_ns: re-exported
+from phfdi_base.topics import DIAGNOSTICS, LOOP_NODES
 
 from .barrier import DATA_QOS, READY_QOS, StartBarrierMixin
+from .input_guard import REASONS, REPORT_PERIOD_S, InputGuard
 from .params import COMMON_PARAMS, NodeStartError, ParametersMixin, ParamSpec, common_params, print_parameter_help
 from .run import main
 
@@ -50,6 +53,7 @@ class GraphNode(ParametersMixin, StartBarrierMixin, Node):
         self.exit_code = 0
         common = common_params(self.RUNTIME_COMMON)
         self._specs = {p.name: p for p in common + self.PARAMS}
+        self._refuse_unknown_parameters()
         self._declare(common, None)
         self.part = self._load_part()
         self.spec = self.part.scenario
@@ -63,6 +67,8 @@ class GraphNode(ParametersMixin, StartBarrierMixin, Node):
         self.add_post_set_parameters_callback(self._after_set_parameters)
         self._init_barrier()
         self._last_k = -1  # last input sample taken (next_sample)
+        self.input_guard = InputGuard(self.dt_ns)
+        self._pub_diag = None  # /diagnostics (diagnostics_publisher), one per node
 
     def _load_part(self) -> NodePart:
         """The part the launcher wrote (``part``), or one resolved from the scenario parameters."""
@@ -84,15 +90,53 @@ class GraphNode(ParametersMixin, StartBarrierMixin, Node):
         """Sample index of a stamp; None if it is not on the sample grid."""
         return sample_index(time_ns(stamp), self.dt_ns)
 
-    def next_sample(self, stamp: Time, what: str) -> int | None:
-        """Sample index of a new input; None (with a warning) if off the grid or not newer than the last."""
-        k = self.sample_of(stamp)
-        if k is None or k <= self._last_k:
-            self.get_logger().warning(f"ignored a {what} stamped {stamp.sec}.{stamp.nanosec:09d} s "
-                                      f"(last sample {self._last_k})")
-            return None
-        self._last_k = k
-        return k
+    def next_sample(self, stamp: Time, what: str, waiting: bool = True) -> int | None:
+        """Sample index of an input if it is the next sample (k == last + 1), and it becomes the last; else
+        None: the input is dropped, counted by reason (:class:`~phfdi_base.ros.input_guard.InputGuard`),
+        logged without flooding and reported on /diagnostics. ``waiting`` False (the plant between two
+        samples): every input is a stray."""
+        k, reason = self.input_guard.check(stamp.sec, stamp.nanosec, self._last_k, waiting)
+        if k is not None and reason is None:
+            self._last_k = k
+            return k
+        assert reason is not None
+        expecting = f"sample {self._last_k + 1}" if waiting else f"nothing (last sample {self._last_k})"
+        stamped = (f"{stamp.sec}.{stamp.nanosec:09d} s" if reason != "invalid_stamp"
+                   else f"sec {stamp.sec}, nanosec {stamp.nanosec}")
+        line = self.input_guard.drop(reason, f"a {what} stamped {stamped} while waiting for {expecting}")
+        if line is not None:
+            self.get_logger().warning(line)
+        self._report_inputs()
+        return None
+
+    def diagnostics_publisher(self):
+        """This node's /diagnostics publisher (one per node, made on the first call: before start_barrier)."""
+        if self._pub_diag is None:
+            self._pub_diag = self.data_publisher(DiagnosticArray, DIAGNOSTICS.name)
+        return self._pub_diag
+
+    def start_barrier(self) -> None:
+        if self.get_name() in LOOP_NODES:  # lock-step inputs: the stray counts go on /diagnostics
+            self.diagnostics_publisher()
+            # counts held back by the once-a-second limit go out within a second even if no stray follows
+            self.create_timer(REPORT_PERIOD_S, self._report_inputs)
+        super().start_barrier()
+
+    def _report_inputs(self, force: bool = False) -> None:
+        """The stray-input counts on /diagnostics when they changed, at most once a second of wall time."""
+        guard = self.input_guard
+        if self._pub_diag is None or not (guard.report_due() or (force and guard.pending)):
+            return
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if guard.total else DiagnosticStatus.OK,
+            name=f"{self.get_name()}: inputs", hardware_id=self.get_name(), message=guard.summary(),
+            values=[KeyValue(key=r, value=str(guard.counts[r])) for r in REASONS]
+            + [KeyValue(key="dropped", value=str(guard.total)), KeyValue(key="last_sample", value=str(self._last_k)),
+               KeyValue(key="last_dropped", value=guard.last_dropped)])
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.stamp(max(self._last_k, 0))
+        self._pub_diag.publish(array)
+        guard.reported()
 
     # ---- main loop hooks ----------------------------------------------------------------
     def spin_timeout_s(self) -> float:
@@ -121,6 +165,7 @@ class GraphNode(ParametersMixin, StartBarrierMixin, Node):
 
     def close(self) -> None:
         """Called once on the way out, before the node is destroyed: deliver what was published."""
+        self._report_inputs(force=True)  # counts the once-a-second limit still held back
         self.flush_publishers()
         self.report_published()
 

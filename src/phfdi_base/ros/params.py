@@ -145,6 +145,20 @@ class ParametersMixin(Node):
                 raise NodeStartError(f"parameter {p.name} = {self.param(p.name)!r} is not allowed: "
                                      f"{p.allowed()}")
 
+    def _refuse_unknown_parameters(self) -> None:
+        """One line for a parameter given at launch that this node does not have (a misspelt name was ignored
+        without a word, e.g. ``--detector-param clear_after=60``); rclpy's own (use_sim_time, qos_overrides.*)
+        pass."""
+        import difflib
+
+        given = getattr(self, "_parameter_overrides", {})
+        unknown = sorted(n for n in given if n not in self._specs and not self.has_parameter(n)
+                         and not n.startswith("qos_overrides."))
+        if unknown:
+            close = difflib.get_close_matches(unknown[0], list(self._specs), n=1)
+            hint = f" (did you mean {close[0]}?)" if close else f"; it takes: {', '.join(sorted(self._specs))}"
+            raise NodeStartError(f"unknown parameter {unknown[0]} for node {self.get_name()}{hint}")
+
     def param(self, name: str) -> Any:
         if self._specs[name].default == [] and not self.has_parameter(name):
             return []
