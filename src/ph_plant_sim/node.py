@@ -5,7 +5,10 @@ Each sample k: publish /plant/measurement and /clock for t_k, wait for
 call the in-process simulation makes), go on with k + 1 and publish
 /plant/state for k: as fast as the loop answers (lock-step, ``pace`` 0) or at
 ``pace`` times real time. Prints JSON lines on stdout for the launcher
-(connected, progress, done).
+(connected, progress, done): progress every twentieth of the run and, as
+the launcher's watchdog needs, whenever a sample completes at least
+``PROGRESS_PERIOD_S`` of wall time after the last report (and on a change
+of ``pace``); the connected event announces that period.
 
     python -m ph_plant_sim.node --ros-args -p scenario:=paper -p fault:=backlash
 """
@@ -28,6 +31,10 @@ from phfdi_base.topics import CLOCK, MEASUREMENT, PLANT, PLANT_STATE, VALVE_STAT
 from .build import build_plant, build_process, load_plant_model
 from .process import Measurement as PlantMeasurement
 from .process import advance_plant
+
+#: a progress event at least this often (wall s) while samples complete: the launcher's watchdog takes a
+#: silence as a stall (phfdi.ros.launcher); one clock read per sample costs well under a microsecond
+PROGRESS_PERIOD_S = 1.0
 
 PARAMS = (
     ParamSpec("pace", 0.0, "0: lock-step as fast as the graph answers; F > 0: F times real time (demos)",
@@ -64,6 +71,7 @@ class PlantNode(GraphNode):
         self._next_due = 0.0
         self._pace = self.param("pace")
         self._report_every = max(1, self.n_samples // 20)
+        self._last_report = 0.0  # monotonic time of the last progress event
         self.start_barrier()
 
     def _emit(self, event: str, **fields) -> None:
@@ -72,8 +80,9 @@ class PlantNode(GraphNode):
 
     def on_connected(self) -> None:
         self._t0 = time.perf_counter()
-        self._wall0 = time.monotonic()
-        self._emit("connected", samples=self.n_samples, sample_time_s=self.dt_s, scenario=self.spec.name)
+        self._wall0 = self._last_report = time.monotonic()
+        self._emit("connected", samples=self.n_samples, sample_time_s=self.dt_s, scenario=self.spec.name,
+                   pace=self._pace, progress_period_s=PROGRESS_PERIOD_S)
         self.get_logger().info(f"graph connected: running {self.n_samples} samples of {self.spec.name}")
         self._schedule(0)
 
@@ -92,9 +101,9 @@ class PlantNode(GraphNode):
             self.pub_clock.publish(clock)
 
     def _on_valve_state(self, msg: ValveState) -> None:
-        k = self.sample_of(msg.stamp)
-        if k != self.k:
-            self.get_logger().warning(f"ignored a valve state stamped for sample {k} while at sample {self.k}")
+        # only the sample it waits for (self.k; -1: none, between paced samples); strays counted (GraphNode)
+        k = self.next_sample(msg.stamp, "valve state", waiting=self.k >= 0)
+        if k is None:
             return
         m = self._m
         assert m is not None  # measured when sample k was published
@@ -110,10 +119,14 @@ class PlantNode(GraphNode):
         state.feed_flows_ml_s = flows
         state.outlet_flow_ml_s, state.sensor_fault_severity = outlet_flow, m.sensor_fault_severity
         self.pub_state.publish(state)
-        if (k + 1) % self._report_every == 0:
-            self._emit("progress", sample=k + 1, of=self.n_samples)
+        if (k + 1) % self._report_every == 0 or time.monotonic() - self._last_report >= PROGRESS_PERIOD_S:
+            self._report(k + 1)
         if done:
             self._finish()
+
+    def _report(self, samples_done: int) -> None:
+        self._last_report = time.monotonic()
+        self._emit("progress", sample=samples_done, of=self.n_samples, pace=self._pace)
 
     def _schedule(self, k: int) -> None:
         pace = self._pace
@@ -154,6 +167,7 @@ class PlantNode(GraphNode):
                 elif self._next_k is not None:
                     self._next_k = None
                     self._publish_sample(k)
+                self._report(k)  # the launcher's watchdog follows the new pace at once
 
 
 def run() -> int:

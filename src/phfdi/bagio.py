@@ -12,21 +12,35 @@ the run's metadata (scenario, seed, faults) in an MCAP metadata record named
   with the run's signal names and units on the simulated time base.
 - :func:`write_run`: a Run -> bag with the graph's topics (for replay).
 - :func:`bag_info` and :func:`recover`: ``phfdi bag info`` / ``phfdi bag recover``.
+- :func:`check_not_recording`: is another process writing this bag (the writer's lock)?
+
+A :class:`BagWriter` holds an exclusive ``flock`` on its file from before the
+file is truncated until it is closed, so a second writer of the same path is
+refused (:class:`BagBusyError`) without touching the first one's data. A write
+that fails (a full disk: ENOSPC; a file size limit: EFBIG; any OSError) cuts
+the file back to the end of the last record written whole and ends the
+writer: the file then holds every chunk completed before, readable by
+:func:`bag_info` and restorable by :func:`recover`.
 
 No rclpy here: messages are decoded with rosbags from the bag's own schemas.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import io
 import json
 import math
 import os
+import stat
 import sys
+import time
 from collections import defaultdict
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -87,23 +101,133 @@ def qos_metadata(qos: dict = T.DATA_QOS) -> str:
 
 
 # ---- writing ------------------------------------------------------------------------
+class BagBusyError(UserError):
+    """Another process holds the bag's lock: it is recording that file now."""
+
+
+class BagExistsError(UserError):
+    """The bag exists and the writer was not told to replace it."""
+
+
+#: how long a writer retries a lock held by someone else before it refuses: :func:`check_not_recording` takes
+#: the lock for microseconds to test it, which must not make a recorder starting at that moment fail
+LOCK_RETRY_S = 0.5
+
+
+def _lock_holder(fd: int) -> int | None:
+    """PID of the process holding a flock on this file, from /proc/locks (Linux; None if not found)."""
+    st = os.fstat(fd)
+    dev = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    try:
+        lines = Path("/proc/locks").read_text().splitlines()
+    except OSError:
+        return None
+    for line in lines:  # "1: FLOCK  ADVISORY  WRITE 4711 00:2d:1234 0 EOF"
+        fields = line.split()
+        if "FLOCK" in fields and dev in fields and "->" not in fields:
+            try:
+                return int(fields[fields.index(dev) - 1])
+            except ValueError:
+                return None
+    return None
+
+
+def busy_message(path: str | Path, pid: int | None) -> str:
+    who = f"another process (pid {pid})" if pid else "another process"
+    return f"{path}: {who} is recording this bag now; give another name, or stop that recording first"
+
+
+def _lock(fd: int, path: str | Path, how: int = fcntl.LOCK_EX, retry_s: float = LOCK_RETRY_S) -> None:
+    """Take ``how`` (flock) on ``fd`` without blocking, retrying for ``retry_s``; :class:`BagBusyError` if
+    another process keeps it."""
+    deadline = time.monotonic() + retry_s
+    while True:
+        try:
+            fcntl.flock(fd, how | fcntl.LOCK_NB)
+            return
+        except BlockingIOError:
+            if time.monotonic() >= deadline:
+                raise BagBusyError(busy_message(path, _lock_holder(fd))) from None
+            time.sleep(0.02)
+
+
+def check_not_recording(path: str | Path) -> None:
+    """:class:`BagBusyError` (one line) if a writer holds ``path``'s lock; nothing if the file does not exist.
+
+    The test takes a shared lock for an instant and releases it (a writer retries for :data:`LOCK_RETRY_S`,
+    so the test never makes one fail)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)  # NONBLOCK: a FIFO must not hang here
+    except FileNotFoundError:
+        return
+    except OSError:
+        return  # not ours to judge here: the writer says what is wrong with the path
+    try:
+        if stat.S_ISREG(os.fstat(fd).st_mode):
+            _lock(fd, path, fcntl.LOCK_SH, retry_s=0.0)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def bag_lock(path: str | Path) -> Iterator[None]:
+    """Hold ``path``'s writer lock (exclusive) for a block: e.g. while the launcher recovers a bag in place,
+    so that it never touches a file another recorder has taken since."""
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    try:
+        _lock(fd, path)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
 class _Unbuffered(io.RawIOBase):
     """A file the MCAP writer cannot buffer: each finished chunk reaches the OS at once.
 
     (mcap wraps raw files in a BufferedWriter; a killed recorder would then
-    lose complete chunks still in that buffer.)
+    lose complete chunks still in that buffer.) Opened without O_TRUNC and
+    locked first (exclusive flock, held until closed): a second writer of the
+    same path is refused before it can truncate the first one's file.
+
+    Each ``write`` call of the MCAP writer is whole records; a call that fails
+    (ENOSPC, EFBIG, EIO...) is cut off again (``ftruncate`` to where the call
+    started), so the file ends at a record boundary, after the last complete
+    chunk and its index records.
     """
 
-    def __init__(self, path: Path) -> None:
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    def __init__(self, path: Path, overwrite: bool = True) -> None:
+        # O_EXCL when it may not replace a file: "exists?" and "create" in one step, no window for another writer
+        flags = os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK | os.O_CLOEXEC | (0 if overwrite else os.O_EXCL)
+        try:
+            fd = os.open(path, flags, 0o644)
+        except FileExistsError:
+            check_not_recording(path)  # busy: say so, it is the more useful answer
+            raise BagExistsError(f"{path} exists; give --overwrite to replace it") from None
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise UserError(f"{path}: not a regular file; give a .mcap file name to write")
+            _lock(fd, path)
+            os.ftruncate(fd, 0)  # only now: the file is ours
+        except BaseException:
+            os.close(fd)
+            raise
+        self._fd = fd
         self._pos = 0
 
     def write(self, data) -> int:
         view = memoryview(data)
-        while view:
-            n = os.write(self._fd, view)
-            view = view[n:]
-            self._pos += n
+        start = self._pos
+        try:
+            while view:
+                n = os.write(self._fd, view)
+                view = view[n:]
+                self._pos += n
+        except OSError:
+            with contextlib.suppress(OSError):  # shrinking needs no space; if it fails the scan still stops there
+                os.ftruncate(self._fd, start)
+                self._pos = start
+            raise
         return len(data)
 
     def tell(self) -> int:
@@ -117,7 +241,7 @@ class _Unbuffered(io.RawIOBase):
 
     def close(self) -> None:
         if self._fd >= 0:
-            os.close(self._fd)
+            os.close(self._fd)  # releases the lock
             self._fd = -1
         super().close()
 
@@ -134,12 +258,20 @@ class _NotRaw:
 
 @dataclass
 class BagWriter:
-    """MCAP writer with the ros2 profile: one channel per topic, cdr payloads."""
+    """MCAP writer with the ros2 profile: one channel per topic, cdr payloads.
+
+    Holds the file's lock from open to close (:class:`BagBusyError` if another
+    writer has it). After an OSError from a write, a flush or the finish, the
+    writer is spent: ``error`` holds the cause, the file ends after its last
+    complete record, and :meth:`close` only releases the file (finishing would
+    write to the same full disk)."""
 
     path: Path
     chunk_size: int = DEFAULT_CHUNK_BYTES
     compression: str = "zstd"
     counts: dict[str, int] = field(default_factory=lambda: defaultdict(int))
+    #: replace an existing file (False: :class:`BagExistsError`; a file being recorded: always :class:`BagBusyError`)
+    overwrite: bool = True
 
     def __post_init__(self) -> None:
         from mcap.writer import CompressionType, Writer
@@ -149,42 +281,79 @@ class BagWriter:
         kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
         if self.compression not in kinds:
             raise UserError(f"compression {self.compression!r}: use zstd, lz4 or none")
-        self._raw = _Unbuffered(self.path)
+        self.error: OSError | None = None
+        self.closed = False
+        self._raw = _Unbuffered(self.path, self.overwrite)
         self._writer = Writer(_NotRaw(self._raw), chunk_size=self.chunk_size, compression=kinds[self.compression])
-        self._writer.start(profile="ros2", library=f"phfdi {__version__}")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._topic_of: dict[int, str] = {}
-        self.closed = False
+        try:
+            with self._guard():
+                self._writer.start(profile="ros2", library=f"phfdi {__version__}")
+        except OSError:
+            self.discard()  # not even the header fits: leave no empty file behind
+            raise
+
+    @contextlib.contextmanager
+    def _guard(self) -> Iterator[None]:
+        """Run a write of the MCAP writer; an OSError spends the writer (see the class) and goes on up."""
+        if self.error is not None:
+            raise self.error
+        try:
+            yield
+        except OSError as exc:
+            self.error = exc
+            raise
 
     def add_topic(self, topic: str, msgtype: str, qos: dict = T.DATA_QOS) -> int:
         """Register a topic (idempotent); returns its channel id."""
         if topic in self._channels:
             return self._channels[topic]
-        if msgtype not in self._schemas:
-            self._schemas[msgtype] = self._writer.register_schema(msgtype, "ros2msg",
-                                                                  schema_text(msgtype).encode())
-        cid = self._writer.register_channel(topic, "cdr", self._schemas[msgtype],
-                                            {"offered_qos_profiles": qos_metadata(qos)})
+        with self._guard():
+            if msgtype not in self._schemas:
+                self._schemas[msgtype] = self._writer.register_schema(msgtype, "ros2msg",
+                                                                      schema_text(msgtype).encode())
+            cid = self._writer.register_channel(topic, "cdr", self._schemas[msgtype],
+                                                {"offered_qos_profiles": qos_metadata(qos)})
         self._channels[topic] = cid
         self._topic_of[cid] = topic
         return cid
 
     def write(self, channel_id: int, stamp_ns: int, cdr: bytes) -> None:
         """One message, logged (and published) at its simulated time stamp."""
-        self._writer.add_message(channel_id, log_time=stamp_ns, data=cdr, publish_time=stamp_ns)
+        with self._guard():
+            self._writer.add_message(channel_id, log_time=stamp_ns, data=cdr, publish_time=stamp_ns)
         self.counts[self._topic_of[channel_id]] += 1
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        self._writer.add_metadata(name, data)
+        with self._guard():
+            self._writer.add_metadata(name, data)
 
     def flush(self) -> None:
         """Close the chunk in progress and hand it to the OS (crash safety in slow runs)."""
-        self._writer.flush()
+        with self._guard():
+            self._writer.flush()
+
+    def discard(self) -> None:
+        """Remove the file (still holding its lock, so only ours) and release it: for a bag that could not
+        even start, which holds nothing worth keeping."""
+        if not self.closed:
+            with contextlib.suppress(FileNotFoundError):
+                self.path.unlink()
+            self._raw.close()
+            self.closed = True
 
     def close(self) -> None:
-        if not self.closed:
-            self._writer.finish()
+        """Finish the file (summary and footer) and release it; after a failed write only release it. An
+        OSError of the finish itself spends the writer and goes on up, the file released."""
+        if self.closed:
+            return
+        try:
+            if self.error is None:
+                with self._guard():
+                    self._writer.finish()
+        finally:
             self._raw.close()
             self.closed = True
 

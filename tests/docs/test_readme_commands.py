@@ -73,11 +73,7 @@ BAG_WRITERS = {"recover", "to-run", "from-csv"}
 #: repository folders a --help example may point into (checked); other relative names are the user's own files
 REPO_DIRS = ("src/", "docs/", "examples/", "benchmarks/", "scripts/", "tests/")
 #: --help examples known broken in a file this change does not own: (exact example, reason); they xfail until fixed
-KNOWN_BROKEN = {
-    "phfdi launch --fault stiction --set duration_s=2000 --onset 1000 --record bags/stiction.mcap":
-        "src/phfdi/commands/launch.py: the paper's setpoint change at 5000 s is after a 2000 s run; add "
-        "--set 'setpoints.ph.changes=[]' (then remove this entry)",
-}
+KNOWN_BROKEN: dict[str, str] = {}  # command text -> why it fails today (the test then expects it to fail)
 
 
 @dataclass

@@ -10,10 +10,16 @@ from pathlib import Path
 
 from .common import EPILOG_FORMAT, Progress, add_scenario_args, scenario_from_args
 
+#: the launcher's watchdog defaults (phfdi.ros.launcher.WATCHDOG_S, WATCHDOG_SAMPLE_PERIODS), here so that the
+#: parser is built without importing the launcher
+WATCHDOG_S = 30.0
+WATCHDOG_SAMPLE_PERIODS = 5.0
+
 EXAMPLES = """examples:
   phfdi launch --scenario paper --fault backlash --record bags/run.mcap
   phfdi launch --fault backlash --detector --record bags/run.mcap   # + the fault detector (/fault_alarm)
-  phfdi launch --fault stiction --set duration_s=2000 --onset 1000 --record bags/stiction.mcap
+  phfdi launch --fault stiction --set duration_s=2000 --set 'setpoints.ph.changes=[]' --onset 1000 \
+      --record bags/stiction.mcap
   phfdi launch --record bags/live.mcap --pace 20          # 20 x real time, for a live demo
   phfdi launch --record bags/day.mcap --pace 1 --split-s 3600   # live, a new bag file every hour
   phfdi launch --domain-id 42 --pace 1                    # real time, join with your own nodes on domain 42
@@ -43,11 +49,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(see python -m wavelet_fdi.node --help); implies --detector")
     p.add_argument("--pace", type=float, default=0.0, metavar="FACTOR",
                    help="0: lock-step as fast as possible (default); F: F times real time")
-    p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: a free one)")
+    p.add_argument("--domain-id", type=int, default=None,
+                   help="ROS domain id (default: an exported ROS_DOMAIN_ID, else a free one)")
     p.add_argument("--executor", choices=("events", "single_threaded"), default="events",
                    help="rclpy executor of the nodes (default: events, the fastest)")
     p.add_argument("--connect-timeout", type=float, default=60.0, metavar="S",
                    help="give up if the graph has not connected after S seconds (default 60)")
+    p.add_argument("--watchdog-s", type=float, default=WATCHDOG_S, metavar="S",
+                   help=f"stop the graph, naming the stall, when the connected graph makes no progress for S "
+                        f"seconds of wall time (default {WATCHDOG_S:g}; never less than "
+                        f"{WATCHDOG_SAMPLE_PERIODS:g} sample periods at the run's --pace; 0: no watchdog)")
     p.add_argument("--log-dir", default=None, help="keep the nodes' parameter files and logs here "
                                                     "(default: a temporary folder, kept only if something fails)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -61,12 +72,19 @@ def _check(args: argparse.Namespace) -> None:
         raise UserError(f"--pace {args.pace}: use 0 (lock-step, as fast as possible) or a factor up to 1e6")
     if not 0.1 <= args.connect_timeout <= 3600:
         raise UserError(f"--connect-timeout {args.connect_timeout}: use 0.1 .. 3600 s")
+    if not (args.watchdog_s == 0 or 1.0 <= args.watchdog_s <= 1e6):
+        raise UserError(f"--watchdog-s {args.watchdog_s}: use 1 .. 1e6 s, or 0 for no watchdog")
     if not (math.isfinite(args.split_s) and 0.0 <= args.split_s <= 1e12):
         raise UserError(f"--split-s {args.split_s}: use 0 (one file) or a positive number of seconds")
     if args.split_s > 0 and args.record is None:
         raise UserError("--split-s needs --record")
     if args.record is not None and not args.record.endswith(".mcap"):
         raise UserError(f"--record {args.record}: give a .mcap file name")
+    if args.record is not None:  # a bag being recorded: say so, whether or not --overwrite was given
+        from phfdi.bagio import bag_parts, check_not_recording
+
+        for part in bag_parts(args.record):
+            check_not_recording(part)
     if args.record is not None and Path(args.record).exists() and not args.overwrite:
         raise UserError(f"--record {args.record} exists: give another name, or --overwrite to replace it")
     if args.split_s > 0:
@@ -164,7 +182,8 @@ def run(args: argparse.Namespace) -> int:
     spec = scenario_from_args(args)  # one clear line for a bad scenario before any process starts
     detector = detector_params(args.detector_params) if args.detector or args.detector_params else None
     nodes = loop_graph(args.scenario, args.fault, args.onset, args.overrides, args.record, args.pace,
-                       args.executor, args.connect_timeout, detector=detector, split_after_s=args.split_s)
+                       args.executor, args.connect_timeout, detector=detector, split_after_s=args.split_s,
+                       overwrite=args.overwrite)
     say = lambda text: print(f"phfdi launch: {text}", file=sys.stderr)  # noqa: E731
 
     def on_event(node: str, event: dict) -> None:
@@ -173,7 +192,8 @@ def run(args: argparse.Namespace) -> int:
             say(line)
 
     launcher = Launcher(nodes, domain_id=args.domain_id, log_dir=args.log_dir,
-                        progress=Progress(f"launch {spec.name}"), status=say, on_event=on_event)
+                        progress=Progress(f"launch {spec.name}"), status=say, on_event=on_event,
+                        watchdog_s=args.watchdog_s)
     result = launcher.run()
     alarms, source = received_alarms(result) if detector is not None else (None, "")
     if args.json:
@@ -187,5 +207,7 @@ def run(args: argparse.Namespace) -> int:
             print(format_table(alarms))
     if result.failure:
         print(f"phfdi launch: error: {result.failure}", file=sys.stderr)
-        print("phfdi launch: stopped the other nodes" + (", bag closed" if result.bag else ""), file=sys.stderr)
+        bag = ("" if result.bag is None else ", bag closed" if result.bag["finished"]
+               else ", bag NOT finished (readable up to its last complete chunk; see the notes above)")
+        print("phfdi launch: stopped the other nodes" + bag, file=sys.stderr)
     return result.status

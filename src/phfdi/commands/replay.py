@@ -202,10 +202,6 @@ def run_live_learned(args: argparse.Namespace) -> int:
 
     model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
     _check_live_bag(args, MEASURED_SAMPLE.name, "write the record with phfdi bag from-csv")
-    from phfdi.learned import read_measured
-
-    # the offline reader first: what offline replay refuses, --live refuses with the same line
-    print_notes("replay", read_measured(args.file, None, channels=model.channels).notes)
     say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
 
     def on_event(node: str, event: dict) -> None:
@@ -322,8 +318,11 @@ def _check_live_bag(args: argparse.Namespace, topic: str, hint: str) -> None:
     info = bagio.bag_info(args.file)
     if not info["finished"]:
         raise UserError(f"{args.file}: the bag is not finished; run phfdi bag recover {args.file} FIXED.mcap")
-    if not any(t["topic"] == topic for t in info["topics"]):
+    counts = {t["topic"]: t["count"] for t in info["topics"]}
+    if topic not in counts:
         raise UserError(f"{args.file}: no {topic} topic: {hint}")
+    if counts[topic] == 0:  # it was played as "0 samples", exit 0
+        raise UserError(f"{args.file}: the bag holds no sample of {topic}")
 
 
 def _play_live(args: argparse.Namespace, nodes: list, spec, say, on_event) -> tuple:

@@ -16,11 +16,31 @@ processes what it holds and publishes its last alarms), then the recorder
 :func:`phfdi_base.ros.run.main`), a killed node's
 Fast DDS shared-memory files are removed (``fastdds shm clean``), and a bag
 whose recorder could not finish it is recovered in place.
+
+When things go wrong (docs/ros_graph.md, "When things go wrong"):
+
+- A bag another process is recording (its writer's lock) stops the launch
+  before any node starts (:func:`phfdi.bagio.check_not_recording`); should two
+  launches pass that check at once, the second recorder refuses the file and
+  its launcher fails without touching it (the launcher finishes or recovers
+  only the files its own recorder reported taking).
+- The recorder's write failure (a full disk) is named in one line
+  (``recorder: cannot write bags/x.mcap: No space left on device``), the graph
+  stopped; the in-place recovery writes through a staged file, so a disk still
+  full leaves the unfinished bag as it was (readable up to its last complete
+  chunk), never a 0-byte or half-written one.
+- Watchdog: once the graph is connected, the clock node reports progress at
+  least every ``progress_period_s`` (it says so in its ``connected`` event);
+  no progress for ``watchdog_s`` (at least :data:`WATCHDOG_SAMPLE_PERIODS`
+  sample periods of wall time at the current pace) stops the graph the
+  SIGTERM way and names the stall. Stopping sends SIGCONT after SIGTERM, so a
+  stopped (SIGSTOP) node ends cleanly too.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import signal
@@ -38,11 +58,18 @@ from phfdi import bagio
 from phfdi_base.errors import UserError
 from phfdi_base.parts import NodePart, write_part
 from phfdi_base.ros.env import LAUNCHER_PID_VAR, graph_env, reserve_domain_id
-from phfdi_base.topics import CONTROLLERS, DETECTOR, PLANT, PLANT_STATE, RECORDER, VALVE
+from phfdi_base.topics import CONTROLLER as CONTROLLER_OUTPUT
+from phfdi_base.topics import CONTROLLERS, DETECTOR, MEASUREMENT, PLANT, PLANT_STATE, RECORDER, VALVE, VALVE_STATE
 
 from .parts import make_part
 
 LOOP, OBSERVER = "loop", "observer"
+
+#: default of ``Launcher(watchdog_s=...)`` and ``phfdi launch --watchdog-s``: seconds of wall time without progress
+#: after which a connected graph counts as stalled
+WATCHDOG_S = 30.0
+#: the watchdog never fires sooner than this many sample periods of wall time (dt / pace in paced runs)
+WATCHDOG_SAMPLE_PERIODS = 5.0
 
 
 @dataclass
@@ -61,9 +88,10 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
                overrides: list[str] = (), record: str | Path | None = None, pace: float = 0.0,
                executor: str = "events", connect_timeout_s: float = 60.0,
                extra: list[NodeSpec] = (), detector: dict | None = None,
-               split_after_s: float = 0.0) -> list[NodeSpec]:
+               split_after_s: float = 0.0, overwrite: bool = False) -> list[NodeSpec]:
     """The loop graph: plant, valve, controllers (+ recorder, a new file every ``split_after_s`` of
-    simulated time if > 0, + the fault detector with these parameters, + extra nodes)."""
+    simulated time if > 0, replacing an existing ``record`` file only if ``overwrite``, + the fault detector
+    with these parameters, + extra nodes)."""
     if Path(scenario).suffix in (".yaml", ".yml"):
         scenario = str(Path(scenario).resolve())
     common = {"scenario": scenario, "fault": fault or "", "fault_onset_s": -1.0 if onset_s is None else float(onset_s),
@@ -76,7 +104,8 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
     if record is not None:
         from .recorder import graph_run_metadata
 
-        rec = {"path": str(Path(record).resolve()), "run_metadata": graph_run_metadata(part.scenario)}
+        rec = {"path": str(Path(record).resolve()), "run_metadata": graph_run_metadata(part.scenario),
+               "overwrite": bool(overwrite)}
         if split_after_s > 0:
             rec["split_after_s"] = float(split_after_s)
         nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", rec, OBSERVER))
@@ -98,7 +127,7 @@ def detector_spec(params: dict | None = None) -> NodeSpec:
 
 @dataclass
 class LaunchResult:
-    status: int  # 0 done, 1 a node failed, 128 + signal when interrupted
+    status: int  # 0 done, 1 a node failed (or the recorder could not write, or the graph stalled), 128 + signal
     samples: int  # of the scenario
     samples_done: int
     connect_s: float  # start of the processes -> graph connected (wall)
@@ -119,6 +148,8 @@ class LaunchResult:
     #: the node's CPU seconds at the same steps
     startup: dict[str, dict[str, float]] = field(default_factory=dict)
     startup_cpu: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: the watchdog stopped the graph: samples done when it fired (None: it did not)
+    stalled_at: int | None = None
 
     @property
     def simulated_s(self) -> float:
@@ -147,6 +178,23 @@ class _Proc:
         except OSError:
             return []
         return [ln for ln in lines if ln.strip()][-n:]
+
+    def events(self) -> list[dict]:
+        """Every JSON event the node printed so far (read from the start; leaves ``stdout_pos`` alone)."""
+        try:
+            data = (self.log_dir / f"{self.name}.stdout").read_bytes()
+        except OSError:
+            return []
+        lines = data[: data.rfind(b"\n") + 1].decode(errors="replace").splitlines()
+        return [e for e in map(_json_event, lines) if e is not None]
+
+    def run_state(self) -> str:
+        """The process's state letter from /proc (R, S, D, T stopped, t traced...); '' if unknown."""
+        try:
+            stat = Path(f"/proc/{self.popen.pid}/stat").read_text()
+        except OSError:
+            return ""
+        return stat[stat.rfind(")") + 2:][:1]
 
     def new_stdout_lines(self) -> list[str]:
         try:
@@ -177,9 +225,13 @@ class Launcher:
     def __init__(self, nodes: list[NodeSpec], domain_id: int | None = None, log_dir: str | Path | None = None,
                  progress: Callable[[float], None] | None = None, stop_timeout_s: float = 15.0,
                  status: Callable[[str], None] | None = None, clock_node: str = PLANT,
-                 on_event: Callable[[str, dict], None] | None = None) -> None:
+                 on_event: Callable[[str, dict], None] | None = None,
+                 watchdog_s: float | None = WATCHDOG_S) -> None:
         """``clock_node``: the node that owns simulated time (prints connected/progress/done);
-        ``on_event(node, event)`` gets the JSON lines the other nodes print, as they come."""
+        ``on_event(node, event)`` gets the JSON lines the other nodes print, as they come;
+        ``watchdog_s``: stop a connected graph whose clock node reports no progress for this long (wall s,
+        at least :data:`WATCHDOG_SAMPLE_PERIODS` sample periods; None or 0: never). It needs a clock node
+        that announces ``progress_period_s`` in its connected event (the plant does)."""
         names = [n.name for n in nodes]
         if len(set(names)) != len(names):
             raise UserError(f"node names must be unique, got {names}")
@@ -198,9 +250,17 @@ class Launcher:
         self._parts_written: dict[int, str] = {}  # one file per distinct part (loop_graph: one for the graph)
         self._signals: list[int] = []
         self.t_connected: float | None = None
+        if watchdog_s is not None and not (math.isfinite(watchdog_s) and watchdog_s >= 0):
+            raise UserError(f"watchdog_s = {watchdog_s}: use a positive number of seconds, or 0 for none")
+        self.watchdog_s = watchdog_s or 0.0
+        self._armed = False  # the clock node promised regular progress events (connected event)
+        self._last_progress = 0.0  # monotonic time of its last one
+        self._pace = 0.0  # the clock node's pace, as it last reported it (for the watchdog's sample period)
+        self._stall: dict = {}  # what the watchdog saw when it fired
 
     # ---- public ---------------------------------------------------------------------------
     def run(self) -> LaunchResult:
+        self._check_bags_free()  # before anything starts: a refusal costs nothing and touches nothing
         lease = reserve_domain_id(self.requested_domain)
         self.log_dir = Path(tempfile.mkdtemp(prefix="phfdi-launch-")) if self.log_dir is None else self.log_dir
         self.log_dir.mkdir(parents=True, exist_ok=True)
@@ -216,6 +276,16 @@ class Launcher:
             self._cleanup(result)
             lease.release()
         return result
+
+    def _recorded_paths(self) -> list[Path]:
+        return [Path(spec.params["path"]) for spec in self.nodes
+                if spec.module == "phfdi.ros.recorder" and spec.params.get("path")]
+
+    def _check_bags_free(self) -> None:
+        """:class:`phfdi.bagio.BagBusyError` (one line) if another process records a bag this graph would write."""
+        for path in self._recorded_paths():
+            for part in bagio.bag_parts(path) or [path]:  # every existing file of a split bag of that name
+                bagio.check_not_recording(part)
 
     # ---- processes ---------------------------------------------------------------------------
     def _spawn_all(self, domain_id: int) -> None:
@@ -270,12 +340,62 @@ class Launcher:
                     p.expected_exit = True
                     return
                 result.status = 1
-                tail = p.stderr_tail()
-                result.failure = (f"node {p.name} (python -m {p.spec.module}, pid {p.popen.pid}) {p.describe_exit()}"
-                                  + (" at sample " + str(result.samples_done) if result.samples else "")
-                                  + ("; last lines of its stderr:\n    " + "\n    ".join(tail) if tail else ""))
+                result.failure = self._describe_failure(p, result)
                 return
+            if self._armed and not done and self.watchdog_s > 0:
+                silent_s = time.monotonic() - self._last_progress
+                limit_s = self.watchdog_limit_s(result.sample_time_s)
+                if silent_s > limit_s:
+                    result.status = 1
+                    result.stalled_at = result.samples_done
+                    self._stall = {"silent_s": silent_s, "limit_s": limit_s, "stopped": [
+                        f"{p.name} (pid {p.popen.pid})" for p in self.procs.values()
+                        if p.popen.poll() is None and p.run_state() in ("T", "t")]}
+                    result.failure = self._describe_stall(result)  # told again with the nodes' counts after the stop
+                    return
             time.sleep(0.05)
+
+    def watchdog_limit_s(self, sample_time_s: float) -> float:
+        """Wall seconds without progress that count as a stall: ``watchdog_s``, but never less than
+        :data:`WATCHDOG_SAMPLE_PERIODS` sample periods at the pace the clock node last reported."""
+        period_s = sample_time_s / self._pace if self._pace > 0 else 0.0
+        return max(self.watchdog_s, WATCHDOG_SAMPLE_PERIODS * period_s)
+
+    def _describe_stall(self, result: LaunchResult) -> str:
+        """One line: where the graph stands and, if it can be seen, which node holds it up: a stopped
+        process (seen in /proc while it stalls), else the first node of the ring whose published count
+        (the nodes' own, reported when stopped) is behind the node before it."""
+        st = self._stall
+        k = result.published.get(PLANT_STATE.name, result.samples_done)  # exact once the nodes reported
+        text = (f"graph stalled: no progress from the {self.clock_node} for {st['silent_s']:.1f} s "
+                f"(watchdog {st['limit_s']:g} s) at sample {k} of {result.samples}")
+        if st["stopped"]:
+            text += "; stopped processes (SIGSTOP or a debugger): " + ", ".join(st["stopped"])
+        elif self.clock_node == PLANT and result.published:
+            n = [result.published.get(t.name, 0) for t in (MEASUREMENT, CONTROLLER_OUTPUT, VALVE_STATE)]
+            if n[1] < n[0]:
+                text += f"; the controllers did not answer /plant/measurement of sample {n[0] - 1}"
+            elif n[2] < n[1]:
+                text += f"; the valve did not answer /controller/output of sample {n[1] - 1}"
+            elif k < n[2]:
+                text += f"; the plant did not take /valve/state of sample {n[2] - 1}"
+        return text + "; graph stopped"
+
+    def _describe_failure(self, p: _Proc, result: LaunchResult) -> str:
+        """One line for a node that ended while the graph ran (the recorder names a write failure itself)."""
+        failed = [e for e in p.events() if e["event"] == "write_failed"]
+        if failed:
+            e = failed[-1]
+            if e.get("errno"):
+                return f"{p.name}: cannot write {_shown(e['path'])}: {e['error']}"
+            return f"{p.name}: {e.get('message') or e['error']}"
+        where = f"node {p.name} (python -m {p.spec.module}, pid {p.popen.pid})"
+        tail = p.stderr_tail()
+        if p.popen.returncode == 2 and tail and ": error: " in tail[-1]:  # a NodeStartError: its one line
+            return f"{where} refused to start: {tail[-1].split(': error: ', 1)[1]}"
+        return (f"{where} {p.describe_exit()}"
+                + (" at sample " + str(result.samples_done) if result.samples else "")
+                + ("; last lines of its stderr:\n    " + "\n    ".join(tail) if tail else ""))
 
     def _follow_others(self) -> None:
         if self.on_event is None:
@@ -300,9 +420,14 @@ class Launcher:
             result.samples = event["samples"]
             result.sample_time_s = event["sample_time_s"]
             result.scenario = event.get("scenario", "")
+            self._pace = float(event.get("pace", 0.0))
+            self._armed = bool(event.get("progress_period_s"))  # the watchdog needs a node that reports regularly
+            self._last_progress = time.monotonic()
             self.status(f"graph connected after {result.connect_s:.1f} s; running {result.samples} samples")
         elif kind == "progress":
             result.samples_done = event["sample"]
+            self._last_progress = time.monotonic()
+            self._pace = float(event.get("pace", self._pace))
             if self.progress is not None and result.samples:
                 self.progress(event["sample"] / result.samples)
         elif kind == "done":
@@ -319,6 +444,9 @@ class Launcher:
             p.expected_exit = True
             try:
                 p.popen.send_signal(signal.SIGTERM)
+                # a stopped node (SIGSTOP, a stalled graph) acts on SIGTERM only once continued (bash's kill does
+                # the same for stopped jobs); a running one ignores SIGCONT
+                p.popen.send_signal(signal.SIGCONT)
             except ProcessLookupError:
                 pass
         deadline = time.monotonic() + self.stop_timeout_s
@@ -380,6 +508,10 @@ class Launcher:
             # a clean stop too: the nodes still running write to the ports of those already stopped (the
             # recorder last), re-creating them without an owner
             remove_ownerless_ports(result.domain_id, self.wall_t0)
+        if result.stalled_at is not None and result.published:
+            result.failure = self._describe_stall(result)
+            result.notes.append("messages published per topic when the stalled graph was stopped: " + ", ".join(
+                f"{topic} {n}" for topic, n in result.published.items()))
         recorder = self.procs.get(RECORDER)
         if recorder is not None:
             path = Path(recorder.spec.params["path"])
@@ -395,18 +527,24 @@ class Launcher:
             result.log_dir = str(self.log_dir)
 
     def _finish_bag(self, path: Path, recorder: _Proc, result: LaunchResult) -> dict | None:
-        """bag_info of the recorded bag (of all its files when split), recovered if unfinished."""
+        """bag_info of the recorded bag (of all its files when split), recovered if unfinished.
+
+        Only the files the recorder reported taking (its ``recording`` events, printed once it holds a file's
+        lock): a recorder refused because another process records that path leaves that file alone."""
 
         split = recorder.spec.params.get("split_after_s", 0) > 0
-        parts = bagio.bag_parts(path) if split else [path] if path.exists() else []
+        events = recorder.events()
+        taken = [Path(e["path"]) for e in events if e["event"] == "recording"]
+        parts = [p for p in dict.fromkeys(taken) if p.exists()]
         if not parts:
             return None
-        infos = [self._finish_part(p, recorder, result) for p in parts]
+        failed = next((e for e in events if e["event"] == "write_failed"), None)
+        infos = [self._finish_part(p, recorder, result, failed) for p in parts]
         if not split:
             return infos[0]
         info = dict(infos[0], parts=[i["path"] for i in infos], size_bytes=sum(i["size_bytes"] for i in infos),
                     messages=sum(i["messages"] for i in infos), chunks=sum(i.get("chunks", 0) for i in infos),
-                    end_s=infos[-1]["end_s"])
+                    end_s=infos[-1]["end_s"], finished=all(i["finished"] for i in infos))
         counts: dict[str, int] = {}
         for i in infos:
             for t in i["topics"]:
@@ -414,17 +552,37 @@ class Launcher:
         info["topics"] = [dict(t, count=counts[t["topic"]]) for t in infos[0]["topics"]]
         return info
 
-    def _finish_part(self, path: Path, recorder: _Proc, result: LaunchResult) -> dict:
+    def _finish_part(self, path: Path, recorder: _Proc, result: LaunchResult, failed: dict | None) -> dict:
+        """The file's bag_info; an unfinished one is first recovered in place, through a staged file: if that
+        cannot be written (the disk still full) the unfinished file stays as it was, never a 0-byte one."""
         info = bagio.bag_info(path)
-        if not info["finished"]:
-            partial = path.with_name(path.stem + ".partial.mcap")
-            os.replace(path, partial)
-            rec = bagio.recover(partial, path)
-            partial.unlink()
-            result.notes.append(f"the recorder {recorder.describe_exit()} before finishing {path.name}: recovered "
-                                f"{rec['messages']} messages up to its last complete chunk")
-            info = bagio.bag_info(path)
-        return info
+        if info["finished"]:
+            return info
+        why = (f"the recorder stopped at a write failure ({failed['error']})" if failed
+               else f"the recorder {recorder.describe_exit()}")
+        try:
+            with bagio.bag_lock(path):  # a recorder that took this path since keeps it
+                unfinished = path.with_name(f".{path.stem}.{os.getpid()}.unfinished.mcap")
+                os.replace(path, unfinished)
+                try:
+                    rec = bagio.recover(unfinished, path)  # staged: all or nothing
+                except (UserError, OSError) as exc:
+                    os.replace(unfinished, path)
+                    result.notes.append(
+                        f"{why} before finishing {path.name}: it holds {info['messages']} messages up to its last "
+                        f"complete chunk (phfdi bag info reads it) but could not be recovered in place "
+                        f"({_one_line(exc)}); run phfdi bag recover {path} FIXED.mcap where there is room")
+                    return bagio.bag_info(path)
+                unfinished.unlink()
+        except bagio.BagBusyError as exc:
+            result.notes.append(f"{path.name} left unfinished, not recovered: {exc}")
+            return info
+        except OSError as exc:
+            result.notes.append(f"{path.name} left unfinished, not recovered: {_one_line(exc)}")
+            return info
+        result.notes.append(f"{why} before finishing {path.name}: recovered {rec['messages']} messages up to its "
+                            f"last complete chunk")
+        return bagio.bag_info(path)
 
     # ---- signals -----------------------------------------------------------------------------
     def _catch_signals(self):
@@ -443,6 +601,20 @@ class Launcher:
         if previous:
             for s, handler in previous.items():
                 signal.signal(s, handler)
+
+
+def _shown(path: str | Path) -> str:
+    """A path as the user likely wrote it: relative to the working folder when inside it."""
+    try:
+        return str(Path(path).relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{str(exc.filename) + ': ' if exc.filename else ''}{exc.strerror}"
+    return " ".join(str(exc).split())
 
 
 def _json_event(line: str) -> dict | None:

@@ -18,11 +18,29 @@ bounded length. A file starts with the first message stamped in its interval;
 messages of the previous interval that arrive after it (the topics are not
 ordered with each other) go to the new file.
 
+Nothing lost, nothing clobbered (docs/ros_graph.md, "When things go wrong"):
+
+- Each file is locked (exclusive ``flock``, :class:`phfdi.bagio.BagWriter`)
+  before it is truncated and until it is closed: a second recorder of the same
+  path refuses to start with one line (exit status 2) and leaves the first
+  one's file as it was; an existing file is replaced only with ``overwrite``
+  (created with O_EXCL otherwise). Once it holds a file and has started it, it
+  prints ``{"event": "recording", "path": ...}``: the launcher finishes or
+  recovers only the files its recorder took.
+- A write that fails (a full disk, a file size limit, an I/O error) ends the
+  recording at the last complete chunk: the file is cut back to it (readable by
+  ``phfdi bag info``, restorable by ``phfdi bag recover``), the recorder prints
+  ``{"event": "write_failed", "path", "error", "errno", "message"}`` and one
+  line on stderr, and exits with status 1. It does not try to finish the file:
+  the summary would go to the same full disk.
+
     python -m phfdi.ros.recorder --ros-args -p path:=bags/run.mcap -p scenario:=paper
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import importlib
 import json
 import sys
@@ -30,6 +48,7 @@ import time
 from pathlib import Path
 
 from phfdi import bagio
+from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import GraphNode, NodeStartError, ParamSpec, main
 from phfdi_base.stamps import seconds_to_ns
 from phfdi_base.topics import BY_NAME, RECORDED, RECORDER
@@ -44,6 +63,8 @@ PARAMS = (
               range=(0.05, 3600.0)),
     ParamSpec("run_metadata", "", "the run's metadata (JSON) written into the bag; phfdi launch passes it, '' "
                                    "computes it from the scenario"),
+    ParamSpec("overwrite", False, "replace an existing file (phfdi launch --overwrite); a file another process "
+                                  "records is never replaced"),
     ParamSpec("split_after_s", 0.0, "start a new file (<name>.1.mcap, <name>.2.mcap, ...) every this many s of "
                                     "simulated time; 0: one file", range=(0.0, 1e12)),
 )
@@ -83,9 +104,11 @@ class RecorderNode(GraphNode):
         self._part_end_ns: int | None = None  # stamp that starts the next file (set by the first message)
         self.parts: list[str] = []
         self.counts: dict[str, int] = {}  # all files
+        self.failure: dict | None = None  # the write_failed event, once a write failed
         self._open_part(path)
         self._stamp_of = bagio.stamp_of_cdr
         self.received = 0
+        self.unrecordable: dict[str, int] = {}  # topic -> messages with no place in a bag (_unrecordable)
         for name in self.param("topics"):
             topic = BY_NAME[name]
             self.data_subscription(_message_class(topic.type), topic.name, self._writer_for(topic.name), raw=True)
@@ -94,13 +117,23 @@ class RecorderNode(GraphNode):
         self.start_barrier()
 
     def _open_part(self, path) -> None:
+        """Take the file (locked: refused if another recorder has it, or if it exists and ``overwrite`` is
+        false) and start it."""
         try:
             self.bag = bagio.BagWriter(path, chunk_size=self.param("chunk_size_bytes"),
-                                       compression=self.param("compression"))
+                                       compression=self.param("compression"), overwrite=self.param("overwrite"))
+        except UserError as exc:  # another process records it (BagBusyError), it exists (BagExistsError), ...
+            raise NodeStartError(str(exc)) from None
         except OSError as exc:
-            raise NodeStartError(f"parameter path: cannot write {path}: {exc.strerror}") from None
-        self.bag.add_metadata(bagio.RUN_METADATA, self._meta)
-        self._channel = {name: self.bag.add_topic(name, BY_NAME[name].type) for name in self.param("topics")}
+            raise NodeStartError(f"parameter path: cannot write {path}: {exc.strerror or exc}") from None
+        try:
+            self.bag.add_metadata(bagio.RUN_METADATA, self._meta)
+            self._channel = {name: self.bag.add_topic(name, BY_NAME[name].type) for name in self.param("topics")}
+        except OSError as exc:
+            self.bag.discard()  # a bag without its topics holds nothing: leave no stub
+            raise NodeStartError(f"parameter path: cannot write {path}: {exc.strerror or exc}") from None
+        # the file is ours (locked) and started: the launcher finishes or recovers only the files so reported
+        print(json.dumps({"event": "recording", "path": str(self.bag.path)}), flush=True)
         self.parts.append(str(self.bag.path))
 
     def _next_part(self, stamp_ns: int) -> None:
@@ -111,29 +144,77 @@ class RecorderNode(GraphNode):
         self._open_part(bagio.part_path(self.param("path"), len(self.parts)))
 
     def _close_part(self) -> None:
-        self.bag.close()
-        for topic, n in self.bag.counts.items():
-            self.counts[topic] = self.counts.get(topic, 0) + n
+        try:
+            self.bag.close()
+        finally:
+            for topic, n in self.bag.counts.items():
+                self.counts[topic] = self.counts.get(topic, 0) + n
+
+    def _fail(self, exc: BaseException) -> None:
+        """Stop recording after a failed write: one JSON event and one line naming the file and the cause.
+
+        The file already ends at its last complete chunk (BagWriter cut the failed write off); it is not
+        finished, since that would write to the same full disk (the launcher recovers it if there is room)."""
+        if self.failure is not None:
+            return
+        path = self.bag.path
+        if isinstance(exc, OSError):
+            reason = exc.strerror or str(exc)
+            code = errno.errorcode.get(exc.errno or 0, "")
+            message = f"cannot write {path}: {reason}"
+        else:  # a split part another process holds (BagBusyError), a bad path (NodeStartError)
+            reason, code = str(exc), ""
+            message = str(exc).removeprefix("parameter path: ")
+        self.failure = {"event": "write_failed", "path": str(path), "error": reason, "errno": code,
+                        "message": message}
+        if not self.bag.closed:
+            with contextlib.suppress(OSError):
+                self._close_part()  # after a failed write this only releases the file (and adds up its counts)
+        print(json.dumps(self.failure), flush=True)
+        print(f"recorder: error: {message}; the bag ends at its last complete chunk", file=sys.stderr, flush=True)
+        self.finished = True  # the node's main loop ends; exit status 1
+        self.exit_code = 1
 
     def _writer_for(self, topic: str):
         stamp_of = self._stamp_of
 
         def on_message(cdr: bytes) -> None:
-            stamp = stamp_of(cdr)
-            if self._split_ns:
-                if self._part_end_ns is None:
-                    self._part_end_ns = (stamp // self._split_ns + 1) * self._split_ns
-                elif stamp >= self._part_end_ns:
-                    self._next_part(stamp)
-            self.bag.write(self._channel[topic], stamp, cdr)
+            if self.failure is not None:
+                return  # not counted as received: drain() then ends at once
+            stamp = stamp_of(cdr) if len(cdr) >= 12 else -1
+            if stamp < 0:  # a stray stamped before 0 s: MCAP log times are unsigned (it crashed the recorder)
+                self._unrecordable(topic, len(cdr))
+                self.received += 1
+                return
+            try:
+                if self._split_ns:
+                    if self._part_end_ns is None:
+                        self._part_end_ns = (stamp // self._split_ns + 1) * self._split_ns
+                    elif stamp >= self._part_end_ns:
+                        self._next_part(stamp)
+                self.bag.write(self._channel[topic], stamp, cdr)
+            except (OSError, NodeStartError) as exc:
+                self._fail(exc)
+                return
             self.received += 1
 
         return on_message
 
+    def _unrecordable(self, topic: str, size: int) -> None:
+        """Count a message that has no place in the bag (a stamp before 0 s, or too short to hold a stamp); the
+        first is logged, the count is in the closing event (``unrecordable``)."""
+        self.unrecordable[topic] = self.unrecordable.get(topic, 0) + 1
+        if sum(self.unrecordable.values()) == 1:
+            self.get_logger().warning(f"left out a message on {topic} that cannot be recorded ({size} bytes, stamp "
+                                      "before 0 s or none): a stray publisher on the graph's domain?")
+
     def after_spin(self) -> None:
         now = time.monotonic()
-        if now - self._last_flush >= self._flush_period_s:
-            self.bag.flush()
+        if now - self._last_flush >= self._flush_period_s and self.failure is None:
+            try:
+                self.bag.flush()
+            except OSError as exc:
+                self._fail(exc)
             self._last_flush = now
 
     def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
@@ -141,9 +222,13 @@ class RecorderNode(GraphNode):
         self.spin_until_idle(executor, lambda: self.received, idle_s, limit_s)
 
     def close(self) -> None:
-        self._close_part()
-        print(json.dumps({"event": "closed", "path": self.parts[0], "parts": self.parts, "counts": self.counts}),
-              flush=True)
+        if self.failure is None:
+            try:
+                self._close_part()
+            except OSError as exc:  # the summary did not fit: the file still ends at a record boundary
+                self._fail(exc)
+        print(json.dumps({"event": "closed", "path": self.parts[0], "parts": self.parts, "counts": self.counts,
+                          "finished": self.failure is None, "unrecordable": self.unrecordable}), flush=True)
 
 
 def run() -> int:
