@@ -103,7 +103,8 @@ class Pairing:
       not the newest ever, so that one stray output stamped in the future does not give up every
       measurement after it), or
     * two of the next measurements behind it are older (a stray stamped in the future at the head of the
-      queue; one writer's measurements only go forward), or
+      queue; one writer's measurements only go forward): then it is dropped and counted
+      (``stray_measurements``), never passed on to become the detector's clock, or
     * ``window`` later measurements have arrived and no output has come for ``timeout_s``
       (wall, monotonic clock) since it arrived: a silent controller-output topic, or
     * ``MAX_PENDING`` measurements wait (memory and delay stay bounded whatever the stamps).
@@ -124,7 +125,8 @@ class Pairing:
         self.last_output_at = -math.inf  # wall time of the last output received
         self.max_wait_s = 0.0  # longest a measurement waited for its output (wall)
         self.counts = {"measurements": 0, "controller_outputs": 0, "commands_missing": 0,
-                       "late_controller_outputs": 0, "unpaired_controller_outputs": 0}
+                       "late_controller_outputs": 0, "unpaired_controller_outputs": 0, "stray_measurements": 0,
+                       "invalid_stamps": 0}
 
     def measurement(self, ns: int, ph: float, level_cm: float, arrival: float) -> list[tuple]:
         self.counts["measurements"] += 1
@@ -158,10 +160,20 @@ class Pairing:
                 or (len(pending) > self.window and now - max(row[4], self.last_output_at) >= self.timeout_s)
                 or (len(pending) > 2 and sum(r[0] <= row[0] for r in islice(pending, 1, 9)) >= 2))
 
+    def _stray(self, row: list) -> bool:
+        """The head measurement is a stray from the future: two of the next ones are strictly older (one writer's
+        stamps only go forward). Passed on, its stamp would become the detector's clock: the jump reads as a gap
+        and the time after it as a reset, each restarting the warm-up (600 samples without detection)."""
+        return len(self.pending) > 2 and sum(r[0] < row[0] for r in islice(self.pending, 1, 9)) >= 2
+
     def _ready(self, now: float, all_: bool = False) -> list[tuple]:
         out = []
         pending = self.pending
         while pending and (all_ or pending[0][3] is not None or self._given_up(pending[0], now)):
+            if pending[0][3] is None and not all_ and self._stray(pending[0]):
+                pending.popleft()
+                self.counts["stray_measurements"] += 1
+                continue
             row = pending.popleft()
             if now < math.inf:
                 self.max_wait_s = max(self.max_wait_s, now - row[4])
@@ -174,6 +186,12 @@ class Pairing:
     def drain(self) -> list[tuple]:
         """Everything still waiting (the end of a stream)."""
         return self._ready(math.inf, all_=True)
+
+
+def _valid_stamp(stamp) -> bool:
+    """A stamp that can be a sample's: seconds not negative, nanoseconds below 1e9. Any other (a stray or
+    garbage) joined into a time would read as a clock that jumped back (a window reset): dropped at the input."""
+    return stamp.sec >= 0 and 0 <= stamp.nanosec < 1_000_000_000
 
 
 class LagStats:
@@ -261,9 +279,15 @@ class DetectorNode(DetectorNodeBase):
 
     # ---- executor thread: queue only ------------------------------------------------------
     def _on_measurement(self, msg: Measurement) -> None:
+        if not _valid_stamp(msg.stamp):
+            self.pairing.counts["invalid_stamps"] += 1  # reported with the pairing counts on /diagnostics
+            return
         self.enqueue(self.pairing.measurement(time_ns(msg.stamp), msg.ph, msg.level_cm, time.monotonic()))
 
     def _on_output(self, msg: ControllerOutput) -> None:
+        if not _valid_stamp(msg.stamp):
+            self.pairing.counts["invalid_stamps"] += 1  # reported with the pairing counts on /diagnostics
+            return
         self.enqueue(self.pairing.output(time_ns(msg.stamp),
                                           (msg.ph_output_pct, msg.level_output_pct, msg.ph_setpoint),
                                           time.monotonic()))
