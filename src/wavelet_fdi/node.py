@@ -103,8 +103,9 @@ class Pairing:
       not the newest ever, so that one stray output stamped in the future does not give up every
       measurement after it), or
     * two of the next measurements behind it are older (a stray stamped in the future at the head of the
-      queue; one writer's measurements only go forward): then it is dropped and counted
-      (``stray_measurements``), never passed on to become the detector's clock, or
+      queue; one writer's measurements only go forward); if it also jumps ahead of the stream by more than
+      1.5 steps it is dropped and counted (``stray_measurements``), never passed on to become the detector's
+      clock, or
     * ``window`` later measurements have arrived and no output has come for ``timeout_s``
       (wall, monotonic clock) since it arrived: a silent controller-output topic, or
     * ``MAX_PENDING`` measurements wait (memory and delay stay bounded whatever the stamps).
@@ -121,6 +122,8 @@ class Pairing:
         self.pending: deque[list] = deque()
         self.early: dict[int, tuple] = {}
         self.missed: deque[int] = deque(maxlen=256)  # stamps passed on without an output (late or unpaired)
+        self.last_passed_ns: int | None = None  # the newest stamp passed on (_passed)
+        self.last_step_ns: int | None = None  # the step to it from the one before
         self.last_output_ns = -math.inf  # stamp of the last output received
         self.last_output_at = -math.inf  # wall time of the last output received
         self.max_wait_s = 0.0  # longest a measurement waited for its output (wall)
@@ -161,10 +164,21 @@ class Pairing:
                 or (len(pending) > 2 and sum(r[0] <= row[0] for r in islice(pending, 1, 9)) >= 2))
 
     def _stray(self, row: list) -> bool:
-        """The head measurement is a stray from the future: two of the next ones are strictly older (one writer's
-        stamps only go forward). Passed on, its stamp would become the detector's clock: the jump reads as a gap
-        and the time after it as a reset, each restarting the warm-up (600 samples without detection)."""
+        """The head measurement is a stray from the future: it jumps ahead of the last one passed on by more than
+        1.5 of the last step, and two of the next ones are strictly older (one writer's stamps only go forward).
+        Passed on, its stamp would become the detector's clock: the jump reads as a gap and the time after it as
+        a reset, each restarting the warm-up (600 samples without detection). The jump condition keeps a real
+        next sample that strays from the past happen to follow."""
+        if self.last_step_ns is None or row[0] - self.last_passed_ns <= 1.5 * self.last_step_ns:
+            return False
         return len(self.pending) > 2 and sum(r[0] < row[0] for r in islice(self.pending, 1, 9)) >= 2
+
+    def _passed(self, ns: int) -> None:
+        """Follow the stream's time: the last stamp passed on and the step to it (for :meth:`_stray`)."""
+        if self.last_passed_ns is not None and ns > self.last_passed_ns:
+            self.last_step_ns = ns - self.last_passed_ns
+        if self.last_passed_ns is None or ns > self.last_passed_ns:
+            self.last_passed_ns = ns
 
     def _ready(self, now: float, all_: bool = False) -> list[tuple]:
         out = []
@@ -175,6 +189,7 @@ class Pairing:
                 self.counts["stray_measurements"] += 1
                 continue
             row = pending.popleft()
+            self._passed(row[0])
             if now < math.inf:
                 self.max_wait_s = max(self.max_wait_s, now - row[4])
             if row[3] is None:
