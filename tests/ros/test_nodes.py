@@ -44,6 +44,7 @@ def test_a_misspelt_detector_parameter_stops_the_launch_with_its_name():
     assert out.returncode != 0 and "Traceback" not in out.stderr
     assert ("refused to start: unknown parameter heartbeat_period for node detector (did you mean "
             "heartbeat_period_s?)") in out.stderr, out.stderr
+    assert "the graph did not connect; no sample ran" in out.stdout and "nan" not in out.stdout, out.stdout
 
 
 def test_node_help_lists_parameters_with_ranges():

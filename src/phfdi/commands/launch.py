@@ -152,10 +152,13 @@ def summary_dict(result, alarms: list[dict] | None = None) -> dict:
 
 
 def format_summary(result) -> str:
-    head = (f"launch {result.scenario or '?'}: {result.samples_done} of {result.samples} samples "
-            f"({result.simulated_s:g} s simulated) in {result.run_wall_s:.2f} s wall = "
-            f"{result.real_time_factor:.0f} x real time; graph connected in {result.connect_s:.1f} s "
-            f"(ROS domain {result.domain_id})")
+    if result.connect_s != result.connect_s:  # NaN: the graph never connected ("in nan s wall = nan x" before)
+        head = f"launch {result.scenario or '?'}: the graph did not connect; no sample ran (ROS domain {result.domain_id})"
+    else:
+        head = (f"launch {result.scenario or '?'}: {result.samples_done} of {result.samples} samples "
+                f"({result.simulated_s:g} s simulated) in {result.run_wall_s:.2f} s wall = "
+                f"{result.real_time_factor:.0f} x real time; graph connected in {result.connect_s:.1f} s "
+                f"(ROS domain {result.domain_id})")
     lines = [head]
     if result.interrupted_by:
         lines.append(f"  stopped by {result.interrupted_by}: all nodes stopped")
