@@ -7,6 +7,7 @@ from pathlib import Path
 import yaml
 
 from .errors import UserError
+from .files import not_a_file
 
 
 def read_mapping(path: str | Path, what: str = "file", expected: str = "a mapping at the top level") -> dict:
@@ -59,19 +60,14 @@ MAX_YAML_BYTES = 1 << 20
 
 def _small_bytes(path: str | Path, what: str) -> bytes:
     """The file's bytes: a regular file (a FIFO would block), at most MAX_YAML_BYTES."""
-    import stat
-
-    p = Path(path)
-    try:
-        mode = p.stat().st_mode
-    except FileNotFoundError:
-        raise UserError(f"no such {what}: {path}") from None
-    except OSError as exc:
-        raise UserError(f"{path}: cannot open it ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(mode):
+    why = not_a_file(path)
+    if why == "no such file":
+        raise UserError(f"no such {what}: {path}")
+    if why == "a folder, not a file":
         raise UserError(f"no such {what}: {path} (a folder)")
-    if not stat.S_ISREG(mode):
-        raise UserError(f"{path}: not a regular file (a FIFO or a device)")
+    if why is not None:
+        raise UserError(f"{path}: {why}")
+    p = Path(path)
     try:
         with open(p, "rb") as fh:
             data = fh.read(MAX_YAML_BYTES + 1)

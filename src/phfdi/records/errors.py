@@ -51,18 +51,9 @@ def regular_file(path: str | Path) -> Path:
     ...     print(str(exc).split(": ", 1)[1])
     a folder, not a file
     """
-    import stat
+    from phfdi_base.files import not_a_file
 
-    path = Path(path)
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        raise ReadError(path, "no such file") from None
-    except OSError as exc:  # ELOOP (a link loop), EACCES, ...
-        raise ReadError(path, f"cannot open it ({exc.strerror or exc})") from None
-    if stat.S_ISREG(mode):
-        return path
-    what = ("a folder, not a file" if stat.S_ISDIR(mode) else
-            "a FIFO (named pipe), not a file: reading it would wait for a writer" if stat.S_ISFIFO(mode) else
-            "a device or socket, not a file")
-    raise ReadError(path, what)
+    why = not_a_file(path)
+    if why is not None:
+        raise ReadError(path, why)
+    return Path(path)
