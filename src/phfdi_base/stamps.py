@@ -46,6 +46,16 @@ def join_ns(sec: int, nanosec: int) -> int:
     return sec * NS_PER_S + nanosec
 
 
+def valid_stamp(sec: int, nanosec: int) -> bool:
+    """A stamp that can be a sample's: seconds not negative, nanoseconds below 1e9 (joined, any other reads as a
+    clock that jumped).
+
+    >>> valid_stamp(3, 0), valid_stamp(-1, 0), valid_stamp(3, NS_PER_S)
+    (True, False, False)
+    """
+    return sec >= 0 and 0 <= nanosec < NS_PER_S
+
+
 def time_ns(stamp) -> int:
     """Nanoseconds of a ROS time, or of anything with ``sec`` and ``nanosec`` (a bag's decoded stamp)."""
     return join_ns(stamp.sec, stamp.nanosec)

@@ -48,7 +48,7 @@ from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
 
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
-from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s
+from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s, valid_stamp
 from phfdi_base.topics import CONTROLLER, MEASUREMENT
 
 from .alarm_messages import severity_of
@@ -203,12 +203,6 @@ class Pairing:
         return self._ready(math.inf, all_=True)
 
 
-def _valid_stamp(stamp) -> bool:
-    """A stamp that can be a sample's: seconds not negative, nanoseconds below 1e9. Any other (a stray or
-    garbage) joined into a time would read as a clock that jumped back (a window reset): dropped at the input."""
-    return stamp.sec >= 0 and 0 <= stamp.nanosec < 1_000_000_000
-
-
 class LagStats:
     """Processing lag (s, wall) of the last samples: arrival of a measurement to the core's result."""
 
@@ -294,13 +288,13 @@ class DetectorNode(DetectorNodeBase):
 
     # ---- executor thread: queue only ------------------------------------------------------
     def _on_measurement(self, msg: Measurement) -> None:
-        if not _valid_stamp(msg.stamp):
+        if not valid_stamp(msg.stamp.sec, msg.stamp.nanosec):  # garbage would read as a clock reset
             self.pairing.counts["invalid_stamps"] += 1  # reported with the pairing counts on /diagnostics
             return
         self.enqueue(self.pairing.measurement(time_ns(msg.stamp), msg.ph, msg.level_cm, time.monotonic()))
 
     def _on_output(self, msg: ControllerOutput) -> None:
-        if not _valid_stamp(msg.stamp):
+        if not valid_stamp(msg.stamp.sec, msg.stamp.nanosec):  # garbage would read as a clock reset
             self.pairing.counts["invalid_stamps"] += 1  # reported with the pairing counts on /diagnostics
             return
         self.enqueue(self.pairing.output(time_ns(msg.stamp),

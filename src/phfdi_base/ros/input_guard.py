@@ -33,7 +33,7 @@ import math
 import time
 from collections.abc import Callable
 
-from phfdi_base.stamps import NS_PER_S, join_ns, sample_index
+from phfdi_base.stamps import join_ns, sample_index, valid_stamp
 
 __all__ = ["REASONS", "REASON_TEXT", "InputGuard"]
 
@@ -67,7 +67,7 @@ class InputGuard:
     def check(self, sec: int, nanosec: int, last: int, waiting: bool = True) -> tuple[int | None, str | None]:
         """(k, None) when the stamp is sample ``last + 1`` and the node is ``waiting`` for it, else
         (None, reason). Not waiting (the plant between two samples): every input is a stray."""
-        if sec < 0 or not 0 <= nanosec < NS_PER_S:
+        if not valid_stamp(sec, nanosec):
             return None, "invalid_stamp"
         k = sample_index(join_ns(sec, nanosec), self.dt_ns)
         if k is None:
