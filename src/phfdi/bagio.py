@@ -51,7 +51,7 @@ from phfdi_base.outputs import staged
 from phfdi_base.stamps import join_ns, record_stamps_ns, seconds_to_ns, split_ns
 from wavelet_fdi.alarm_messages import to_dict as alarm_message_dict
 
-from . import __version__
+from . import __version__, rosbag2_meta
 from .bagread import RUN_METADATA, _feed_names, _one_line, read_metadata, run_signal_names
 
 INTERFACES_PACKAGE = "phfdi_interfaces"
@@ -89,15 +89,13 @@ def schema_text(msgtype: str) -> str:
 
 
 def qos_metadata(qos: dict = T.DATA_QOS) -> str:
-    """The offered QoS as rosbag2 (metadata version 9) stores it in a channel's metadata."""
-    import yaml
+    """A channel's ``offered_qos_profiles`` as rosbag2 (Jazzy, metadata version 9) writes it."""
+    return rosbag2_meta.qos_yaml(rosbag2_meta.offered_qos(qos))
 
-    default = {"sec": 0, "nsec": 0}  # rmw's "unspecified": the QoS the graph's nodes offer
-    profile = {"history": qos["history"], "depth": qos["depth"], "reliability": qos["reliability"],
-               "durability": qos["durability"], "deadline": default, "lifespan": default,
-               "liveliness": "automatic", "liveliness_lease_duration": default,
-               "avoid_ros_namespace_conventions": False}
-    return yaml.safe_dump([profile], default_flow_style=False, sort_keys=False).strip()
+
+def type_hash(msgtype: str) -> str:
+    """The type's RIHS01 hash (``topic_type_hash``), as rclpy's discovery reports it for the same type."""
+    return typestore().hash_rihs01(msgtype)
 
 
 # ---- writing ------------------------------------------------------------------------
@@ -288,6 +286,9 @@ class BagWriter:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._topic_of: dict[int, str] = {}
+        self._topics: dict[str, tuple[str, list[dict], str]] = {}  # topic -> type, offered QoS, type hash
+        self._first_ns: int | None = None  # log time range, for the rosbag2 metadata written at close
+        self._last_ns: int | None = None
         try:
             with self._guard():
                 self._writer.start(profile="ros2", library=f"phfdi {__version__}")
@@ -310,13 +311,18 @@ class BagWriter:
         """Register a topic (idempotent); returns its channel id."""
         if topic in self._channels:
             return self._channels[topic]
+        profiles = rosbag2_meta.offered_qos(qos)
+        digest = type_hash(msgtype)
         with self._guard():
             if msgtype not in self._schemas:
                 self._schemas[msgtype] = self._writer.register_schema(msgtype, "ros2msg",
                                                                       schema_text(msgtype).encode())
+            # the channel metadata rosbag2's MCAP plugin writes (MCAPStorage::create_topic)
             cid = self._writer.register_channel(topic, "cdr", self._schemas[msgtype],
-                                                {"offered_qos_profiles": qos_metadata(qos)})
+                                                {"offered_qos_profiles": rosbag2_meta.qos_yaml(profiles),
+                                                 "topic_type_hash": digest})
         self._channels[topic] = cid
+        self._topics[topic] = (msgtype, profiles, digest)
         self._topic_of[cid] = topic
         return cid
 
@@ -325,6 +331,16 @@ class BagWriter:
         with self._guard():
             self._writer.add_message(channel_id, log_time=stamp_ns, data=cdr, publish_time=stamp_ns)
         self.counts[self._topic_of[channel_id]] += 1
+        if self._first_ns is None or stamp_ns < self._first_ns:
+            self._first_ns = stamp_ns
+        if self._last_ns is None or stamp_ns > self._last_ns:
+            self._last_ns = stamp_ns
+
+    def rosbag2_record(self) -> dict[str, str]:
+        """The ``rosbag2`` metadata record of what was written so far (:func:`close` writes it)."""
+        topics = [rosbag2_meta.TopicStats(name, msgtype, profiles, digest, self.counts.get(name, 0))
+                  for name, (msgtype, profiles, digest) in self._topics.items()]
+        return rosbag2_meta.metadata_record(self.path.name, topics, self._first_ns, self._last_ns)
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         with self._guard():
@@ -345,13 +361,17 @@ class BagWriter:
             self.closed = True
 
     def close(self) -> None:
-        """Finish the file (summary and footer) and release it; after a failed write only release it. An
-        OSError of the finish itself spends the writer and goes on up, the file released."""
+        """Finish the file (rosbag2's metadata record, summary and footer) and release it; after a failed write
+        only release it. An OSError of the finish itself spends the writer and goes on up, the file released.
+
+        The ``rosbag2`` record is written here, as rosbag2 does (it holds the final counts): a file whose writer
+        was killed lacks it, and its summary; :func:`recover` writes both."""
         if self.closed:
             return
         try:
             if self.error is None:
                 with self._guard():
+                    self._writer.add_metadata(rosbag2_meta.RECORD_NAME, self.rosbag2_record())
                     self._writer.finish()
         finally:
             self._raw.close()
@@ -566,8 +586,24 @@ def bag_info(path: str | Path) -> dict:
                     start_s=min(times) * 1e-9 if times else math.nan, end_s=max(times) * 1e-9 if times else math.nan)
         info["topics"] = [{"topic": ch.topic, "type": schemas.get(ch.schema_id, ""), "count": counts[cid]}
                           for cid, ch in sorted(channels.items())]
-    info["metadata"] = sorted(read_metadata(path)) if info["finished"] else []
+    records = read_metadata(path) if info["finished"] else {}
+    info["metadata"] = sorted(records)
+    info["rosbag2"] = _rosbag2_summary(records.get(rosbag2_meta.RECORD_NAME))
     return info
+
+
+def _rosbag2_summary(record: dict[str, str] | None) -> dict | None:
+    """Version, distro and message count of a bag's rosbag2 metadata record (None: absent or unreadable)."""
+    import yaml
+
+    try:
+        meta = yaml.safe_load(record[rosbag2_meta.RECORD_KEY]) if record else None
+    except yaml.YAMLError:
+        meta = None
+    if not isinstance(meta, dict):
+        return None
+    return {"version": meta.get("version"), "ros_distro": meta.get("ros_distro"),
+            "message_count": meta.get("message_count")}
 
 
 def format_info(info: dict) -> str:
@@ -578,6 +614,9 @@ def format_info(info: dict) -> str:
              f"time      {info['start_s']:.3f} .. {info['end_s']:.3f} s (simulated)"]
     if info.get("truncated_by"):
         lines.append(f"stopped   at {info['truncated_by']}")
+    r2 = info.get("rosbag2")
+    lines.append(f"rosbag2   metadata version {r2['version']} ({r2['ros_distro']}), {r2['message_count']} messages"
+                 if r2 else "rosbag2   no metadata record (written at close; phfdi bag recover adds it)")
     width = max([len(t["topic"]) for t in info["topics"]] + [5])
     lines.append("topics")
     for t in info["topics"]:
@@ -585,8 +624,25 @@ def format_info(info: dict) -> str:
     return "\n".join(lines)
 
 
+def _recovered_topics(channels: dict, schemas: dict, counts: dict[int, int]) -> list[rosbag2_meta.TopicStats]:
+    """The topics of a recovered bag for its rosbag2 metadata: from the source's channels and schemas (a channel's
+    QoS and type hash as the source wrote them; the hash computed for a bag written before it was kept)."""
+    out = []
+    for cid, ch in channels.items():
+        msgtype = schemas[ch.schema_id].name if ch.schema_id in schemas else ""
+        digest = ch.metadata.get("topic_type_hash", "")
+        if not digest and msgtype:
+            with contextlib.suppress(Exception):  # a type of another package: no hash, as rosbag2 allows
+                digest = type_hash(msgtype)
+        out.append(rosbag2_meta.TopicStats(ch.topic, msgtype,
+                                           rosbag2_meta.parse_qos_yaml(ch.metadata.get("offered_qos_profiles", "")),
+                                           digest, counts.get(cid, 0), ch.message_encoding))
+    return out
+
+
 def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
-    """Copy everything up to the last complete chunk of a (truncated) bag into a new, finished bag."""
+    """Copy everything up to the last complete chunk of a (truncated) bag into a new, finished bag, with the
+    rosbag2 metadata record that a killed recorder could not write (counted from what was recovered)."""
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
@@ -601,8 +657,11 @@ def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
     records, _chunks, error = _scan(src)
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    counts: dict[int, int] = defaultdict(int)
     n = 0
-    last_ns = None
+    first_ns = last_ns = None
     with staged(dst, overwrite) as tmp, open(tmp, "wb") as out:
         w = Writer(out, chunk_size=DEFAULT_CHUNK_BYTES, compression=CompressionType.ZSTD)
         header = next((r for r in records if type(r).__name__ == "Header"), None)
@@ -610,17 +669,23 @@ def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
         for r in records:
             if isinstance(r, Schema) and r.id not in schema_ids:
                 schema_ids[r.id] = w.register_schema(r.name, r.encoding, r.data)
+                schemas[r.id] = r
             elif isinstance(r, Channel) and r.id not in channel_ids:
                 channel_ids[r.id] = w.register_channel(r.topic, r.message_encoding, schema_ids.get(r.schema_id, 0),
                                                        dict(r.metadata))
-            elif isinstance(r, Metadata):
+                channels[r.id] = r
+            elif isinstance(r, Metadata) and r.name != rosbag2_meta.RECORD_NAME:  # its counts are rewritten below
                 w.add_metadata(r.name, dict(r.metadata))
             elif isinstance(r, Message) and r.channel_id in channel_ids:
                 w.add_message(channel_ids[r.channel_id], log_time=r.log_time, data=r.data,
                               publish_time=r.publish_time, sequence=r.sequence)
                 n += 1
+                counts[r.channel_id] += 1
+                first_ns = r.log_time if first_ns is None else min(first_ns, r.log_time)
                 last_ns = r.log_time if last_ns is None else max(last_ns, r.log_time)
         w.add_metadata("phfdi_recovered", {"source": str(src), "stopped_at": error or "end of file"})
+        w.add_metadata(rosbag2_meta.RECORD_NAME, rosbag2_meta.metadata_record(
+            dst.name, _recovered_topics(channels, schemas, counts), first_ns, last_ns))
         w.finish()
     return {"path": str(dst), "messages": n, "last_s": None if last_ns is None else last_ns * 1e-9,
             "complete_input": error is None, "stopped_at": error}
