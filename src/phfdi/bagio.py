@@ -270,6 +270,8 @@ class BagWriter:
     counts: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     #: replace an existing file (False: :class:`BagExistsError`; a file being recorded: always :class:`BagBusyError`)
     overwrite: bool = True
+    #: the file's name in its rosbag2 metadata, when it is written under a staging name and renamed after
+    file_name: str | None = None
 
     def __post_init__(self) -> None:
         from mcap.writer import CompressionType, Writer
@@ -340,7 +342,7 @@ class BagWriter:
         """The ``rosbag2`` metadata record of what was written so far (:func:`close` writes it)."""
         topics = [rosbag2_meta.TopicStats(name, msgtype, profiles, digest, self.counts.get(name, 0))
                   for name, (msgtype, profiles, digest) in self._topics.items()]
-        return rosbag2_meta.metadata_record(self.path.name, topics, self._first_ns, self._last_ns)
+        return rosbag2_meta.metadata_record(self.file_name or self.path.name, topics, self._first_ns, self._last_ns)
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         with self._guard():
@@ -482,12 +484,14 @@ MAX_STAMP_S = 9.0e9
 
 
 def write_measured(time_s: np.ndarray, x: np.ndarray, channels: list[str], path: str | Path, source: str = "",
-                   metadata: dict | None = None, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
+                   metadata: dict | None = None, chunk_size: int = DEFAULT_CHUNK_BYTES,
+                   file_name: str | None = None) -> Path:
     """A measured record as a bag: one phfdi_interfaces/MeasuredSample per row on /measured/sample,
     stamped with the row's own time to the ns (:func:`phfdi_base.stamps.record_stamps_ns`: the learned node
     then gives the detector the times the offline replay does), schemas embedded (ros2 profile). A record
     whose own time does not fit a stamp (below 0, or beyond ``MAX_STAMP_S``) is stamped from its first row
-    (the metadata's ``time_origin_s`` says from which time)."""
+    (the metadata's ``time_origin_s`` says from which time). ``file_name``: the bag's final name, for its rosbag2
+    metadata, when ``path`` is a staging file renamed after."""
     store = typestore()
     msg_type = store.types[T.MEASURED_SAMPLE.type]
     t = np.asarray(time_s, dtype=float)
@@ -500,7 +504,7 @@ def write_measured(time_s: np.ndarray, x: np.ndarray, channels: list[str], path:
     if len(t) > 1 and np.any(np.diff(stamps) <= 0):
         raise UserError("measured record: time stamps must increase")
     names = [str(c) for c in channels]
-    bag = BagWriter(Path(path), chunk_size=chunk_size)
+    bag = BagWriter(Path(path), chunk_size=chunk_size, file_name=file_name)
     try:
         cid = bag.add_topic(T.MEASURED_SAMPLE.name, T.MEASURED_SAMPLE.type)
         bag.add_metadata(RUN_METADATA, {"json": json.dumps({"kind": "measured", "source": source,

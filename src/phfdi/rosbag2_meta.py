@@ -111,7 +111,3 @@ def metadata_record(file_name: str, topics: list[TopicStats], start_ns: int | No
     """The ``rosbag2`` MCAP metadata record's content: ``{"serialized_metadata": YAML}``."""
     return {RECORD_KEY: _dump(bag_metadata(file_name, topics, start_ns, end_ns))}
 
-
-def folder_metadata_yaml(serialized: str) -> str:
-    """A rosbag2 folder's metadata.yaml for a bag whose ``rosbag2`` record holds ``serialized``."""
-    return _dump({"rosbag2_bagfile_information": yaml.safe_load(serialized)}) + "\n"

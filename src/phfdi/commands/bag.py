@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from .common import EPILOG_FORMAT, add_overwrite_arg
 
@@ -115,7 +116,8 @@ def run_from_csv(args: argparse.Namespace) -> int:
                         exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
     print_notes("bag from-csv", rec.notes)
     with staged(args.output, args.overwrite) as tmp:
-        write_measured(rec.time_s, rec.x, list(rec.channels), tmp, source=str(args.input))
+        write_measured(rec.time_s, rec.x, list(rec.channels), tmp, source=str(args.input),
+                       file_name=Path(args.output).name)  # the rosbag2 metadata names the final file
     path = args.output
     print(f"wrote {len(rec.x)} rows x {len(rec.channels)} channels ({', '.join(rec.channels)}) to {path} "
           f"on /measured/sample")
