@@ -15,6 +15,7 @@ from phfdi.scenario import load_scenario
 from phfdi_base import topics as T
 
 from .conftest import SHORT_OVERRIDES, SHORT_RUN, phfdi_cmd, processes_with, stale_shm_files
+from .rosbag2_check import as_rosbag2_folder, read_with_rosbags, rosbag2_record
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 
@@ -101,7 +102,7 @@ def test_bag_is_readable_by_the_ros_tools(graph_run):
         n_any = sum(1 for _ in reader.messages())
         qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
     assert qos[T.MEASUREMENT.name][0].reliability.name == "RELIABLE"
-    assert qos[T.MEASUREMENT.name][0].history.name == "KEEP_ALL"
+    assert qos[T.MEASUREMENT.name][0].history.name == "UNKNOWN"  # as rosbag2 stores it: discovery has no history
     with open(bag, "rb") as f:
         decoded = [(ch.topic, msg) for _s, ch, _m, msg in make_reader(f, decoder_factories=[DecoderFactory()])
                    .iter_decoded_messages()]
@@ -110,8 +111,33 @@ def test_bag_is_readable_by_the_ros_tools(graph_run):
     assert valve[0].stamp.sec == 0 and valve[-1].stamp.sec == 600
 
 
+def test_rosbag2_readers_take_the_recorded_bag_with_the_recorder_counts(graph_run, tmp_path):
+    """Acceptance (issue 23 item 5): rosbags' rosbag2 reader, on the bare .mcap and on a rosbag2 folder made of
+    the bag's 'rosbag2' metadata record, sees every recorded topic with its type and the count the launcher's
+    summary reports (from the recorder), reads that many messages, and parses each channel's QoS."""
+    assert graph_run["proc"].returncode == 0, graph_run["proc"].stderr
+    summary = json.loads(graph_run["proc"].stdout)["bag"]["counts"]
+    assert summary[T.MEASUREMENT.name] == 601 and summary[T.DIAGNOSTICS.name] == 11
+    bag = graph_run["bag"]
+    meta = rosbag2_record(bag)
+    assert {t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]} == summary
+    assert meta["message_count"] == sum(summary.values())
+    assert (meta["version"], meta["ros_distro"], meta["duration"]) == (9, "jazzy", {"nanoseconds": 600 * 10**9})
+    for where in (bag, as_rosbag2_folder(bag, tmp_path / "run")):
+        seen = read_with_rosbags(where)
+        assert seen["message_count"] == sum(summary.values()), where
+        assert {t: v["count"] for t, v in seen["topics"].items()} == summary, where
+        assert {t: v["read"] for t, v in seen["topics"].items()} == summary, where
+        assert {t: v["type"] for t, v in seen["topics"].items()} == {t.name: t.type for t in T.RECORDED}, where
+        for topic, v in seen["topics"].items():
+            (qos,) = v["qos"]
+            assert (qos.reliability.name, qos.durability.name, qos.liveliness.name) == \
+                ("RELIABLE", "VOLATILE", "AUTOMATIC"), (where, topic)
+
+
 def test_bag_info_command(graph_run):
     out = subprocess.run(phfdi_cmd("bag", "info", str(graph_run["bag"])), capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 0, out.stderr
     assert "/valve/state" in out.stdout and "601" in out.stdout and "complete" in out.stdout
+    assert "rosbag2   metadata version 9 (jazzy)" in out.stdout

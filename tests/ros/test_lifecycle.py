@@ -26,6 +26,7 @@ from .conftest import (
     shm_files_used,
     stale_shm_files,
 )
+from .rosbag2_check import rosbag2_record
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 
@@ -106,6 +107,11 @@ def test_a_killed_recorder_leaves_a_bag_the_launcher_recovers(tmp_path):
     assert _wait_gone(logs) == []
     info = bagio.bag_info(bag)
     assert info["finished"] and info["messages"] > 0
+    # the killed recorder never wrote rosbag2's metadata record (it is written at close): the recovery did
+    meta = rosbag2_record(bag)
+    assert meta["message_count"] == info["messages"]
+    assert {t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]} == \
+        {t["topic"]: t["count"] for t in info["topics"]}
     assert stale_shm_files(*domain) == []
 
 

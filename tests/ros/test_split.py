@@ -14,6 +14,7 @@ from phfdi import bagio
 from phfdi_base import topics as T
 
 from .conftest import SHORT_RUN, phfdi_cmd
+from .rosbag2_check import rosbag2_record
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 PER_SAMPLE = [t.name for t in T.RECORDED if t.per_sample]
@@ -42,6 +43,10 @@ def test_split_run_is_complete_bags_that_together_hold_every_sample_once(tmp_pat
         info = bagio.bag_info(part)
         assert info["finished"], part
         assert bagio.load_run(part).metadata["scenario"] == summary["scenario"]  # each file: the run's metadata
+        meta = rosbag2_record(part)  # and rosbag2's metadata of that file alone
+        assert meta["relative_file_paths"] == [part.name] and meta["message_count"] == info["messages"]
+        assert {t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]} == \
+            {t["topic"]: t["count"] for t in info["topics"]}
         for topic, s in _stamps_s(part).items():
             assert len(s) > 0, (part, topic)
             # a file takes its interval; at most a few late messages of the previous one
