@@ -1,10 +1,13 @@
 """Bags (MCAP files, ros2 profile) and runs: write, read, inspect, recover.
 
 A bag of the graph holds one channel per topic of :mod:`phfdi_base.topics`
-(cdr messages, ``ros2msg`` schemas, the offered QoS in the channel metadata
-as rosbag2 writes it), every message logged at its simulated time stamp, and
-the run's metadata (scenario, seed, faults) in an MCAP metadata record named
-``phfdi_run``. rosbags (AnyReader), mcap-ros2-support and Foxglove read it.
+(cdr messages, ``ros2msg`` schemas, the offered QoS and type hash in the
+channel metadata as rosbag2 writes them), every message logged at its
+simulated time stamp, the run's metadata (scenario, seed, faults) in an MCAP
+metadata record named ``phfdi_run`` and, written at close, rosbag2's own
+metadata record ``rosbag2`` (:mod:`phfdi.rosbag2_meta`; what ``ros2 bag
+info``/``play`` read from a bare .mcap). rosbags (AnyReader and its rosbag2
+Reader), mcap-ros2-support and Foxglove read it.
 
 - :class:`BagWriter`: what the recorder node and :func:`write_run` write with;
   small chunks (16 KB) so that a killed writer leaves recoverable chunks.

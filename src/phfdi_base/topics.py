@@ -69,8 +69,9 @@ BY_NAME = {t.name: t for t in RECORDABLE}
 #: where nodes announce that their endpoints are up and matched (not recorded)
 GRAPH_READY = "/graph/ready"
 
-#: QoS of every data topic, as written to the bag's channel metadata. Reliable and
-#: keep-all: nothing is lost, a slow reliable reader slows the writer down.
+#: QoS every publisher of a data topic offers. Reliable and keep-all: nothing is lost, a slow
+#: reliable reader slows the writer down. Bags store it as discovery reports it, which is what
+#: ``ros2 bag record`` stores (no history, infinite durations: :func:`phfdi.rosbag2_meta.offered_qos`).
 DATA_QOS = {"history": "keep_all", "depth": 0, "reliability": "reliable", "durability": "volatile"}
 
 

@@ -6,7 +6,10 @@ as raw CDR and writes each message at its simulated time stamp with
 the chunk in progress is flushed every ``flush_period_s`` of wall time, so a
 killed recorder leaves a bag whose complete chunks ``phfdi bag recover``
 restores. On SIGINT/SIGTERM it first takes every message its readers already
-acknowledged, then finishes the file.
+acknowledged, then finishes the file: rosbag2's metadata record (it holds the
+final counts, so it is written at close, as rosbag2 does), summary, footer. A
+killed recorder's file lacks those; ``phfdi bag recover`` (and the launcher's
+in-place recovery) writes them.
 
 ``split_after_s`` > 0 starts a new file every that many seconds of simulated
 time (``run.mcap``, ``run.1.mcap``, ``run.2.mcap``, ...; :func:`phfdi.bagio.bag_parts`),
