@@ -600,16 +600,14 @@ def bag_info(path: str | Path) -> dict:
 
 
 def _rosbag2_summary(record: dict[str, str] | None) -> dict | None:
-    """Version, distro and message count of a bag's rosbag2 metadata record (None: absent or unreadable)."""
-    import yaml
-
-    try:
-        meta = yaml.safe_load(record[rosbag2_meta.RECORD_KEY]) if record else None
-    except yaml.YAMLError:
-        meta = None
-    if not isinstance(meta, dict):
+    """Version, distro and message count of a bag's rosbag2 metadata record (None: absent; ``readable`` False:
+    not a YAML mapping we read)."""
+    if record is None:
         return None
-    return {"version": meta.get("version"), "ros_distro": meta.get("ros_distro"),
+    meta = rosbag2_meta.load_from_bag(record.get(rosbag2_meta.RECORD_KEY, ""))
+    if not isinstance(meta, dict):
+        return {"readable": False}
+    return {"readable": True, "version": meta.get("version"), "ros_distro": meta.get("ros_distro"),
             "message_count": meta.get("message_count")}
 
 
@@ -622,8 +620,13 @@ def format_info(info: dict) -> str:
     if info.get("truncated_by"):
         lines.append(f"stopped   at {info['truncated_by']}")
     r2 = info.get("rosbag2")
-    lines.append(f"rosbag2   metadata version {r2['version']} ({r2['ros_distro']}), {r2['message_count']} messages"
-                 if r2 else "rosbag2   no metadata record (written at close; phfdi bag recover adds it)")
+    if r2 is None:
+        lines.append("rosbag2   no metadata record (written at close; phfdi bag recover adds it)")
+    elif not r2["readable"]:
+        lines.append("rosbag2   metadata record not readable (not a YAML mapping, too long or with aliases)")
+    else:
+        lines.append(f"rosbag2   metadata version {r2['version']} ({r2['ros_distro']}), {r2['message_count']} "
+                     "messages")
     width = max([len(t["topic"]) for t in info["topics"]] + [5])
     lines.append("topics")
     for t in info["topics"]:

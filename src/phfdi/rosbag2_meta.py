@@ -56,12 +56,26 @@ def qos_yaml(profiles: list[dict]) -> str:
     return _dump(profiles)
 
 
-def parse_qos_yaml(text: str) -> list[dict]:
-    """A channel's ``offered_qos_profiles`` back as a list ([] when it is empty or not a YAML list)."""
+#: the longest metadata text parsed from a bag (ours are a few kB for the graph's six topics)
+MAX_YAML_CHARS = 1 << 20
+
+
+def load_from_bag(text: str) -> object | None:
+    """YAML text of a bag's metadata, parsed; None if it is not readable YAML, is longer than MAX_YAML_CHARS or
+    uses aliases (a bag is input from anywhere: nine nested aliases expand a kilobyte into gigabytes)."""
+    if not text or len(text) > MAX_YAML_CHARS:
+        return None
     try:
-        profiles = yaml.safe_load(text) if text else []
-    except yaml.YAMLError:
-        return []
+        if any(isinstance(e, yaml.AliasEvent) for e in yaml.parse(text, Loader=yaml.SafeLoader)):
+            return None
+        return yaml.safe_load(text)
+    except (yaml.YAMLError, ValueError, OverflowError):  # ValueError: a typed scalar that cannot be built
+        return None
+
+
+def parse_qos_yaml(text: str) -> list[dict]:
+    """A channel's ``offered_qos_profiles`` back as a list ([] when it is empty or not a readable YAML list)."""
+    profiles = load_from_bag(text)
     return profiles if isinstance(profiles, list) else []
 
 

@@ -171,3 +171,30 @@ def test_bag_topics_carry_the_graph_types(bag):
     info = bagio.bag_info(bag)
     types = {t["topic"]: t["type"] for t in info["topics"]}
     assert types == {t.name: t.type for t in T.RECORDED if t.per_sample}
+
+
+def test_a_hostile_rosbag2_record_is_not_expanded(tmp_path):
+    """A bag is input from anywhere: a 'rosbag2' record or a channel QoS with nested YAML aliases (a kilobyte that
+    anything walking the parsed value expands into gigabytes) is reported unreadable, and recover takes no QoS
+    from such a channel."""
+    from mcap.writer import Writer
+
+    laughs = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{n}: &{n} [*{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}]\n"
+        for p, n in zip("abcdefgh", "bcdefghi"))
+    path = tmp_path / "hostile.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(T.MEASUREMENT.type, "ros2msg", bagio.schema_text(T.MEASUREMENT.type).encode())
+        as_list = "".join(f"- {line.split(': ', 1)[1]}\n" for line in laughs.splitlines())  # a list, like QoS
+        w.register_channel(T.MEASUREMENT.name, "cdr", sid, {"offered_qos_profiles": as_list})
+        w.add_metadata("rosbag2", {"serialized_metadata": laughs})
+        w.finish()
+    assert bagio.bag_info(path)["rosbag2"] == {"readable": False}
+    out = subprocess.run(phfdi_cmd("bag", "info", str(path)), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "metadata record not readable" in out.stdout, out.stderr
+    fixed = tmp_path / "fixed.mcap"
+    bagio.recover(path, fixed)
+    (topic,) = rosbag2_record(fixed)["topics_with_message_count"]
+    assert topic["topic_metadata"]["offered_qos_profiles"] == [] and topic["message_count"] == 0
