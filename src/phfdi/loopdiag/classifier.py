@@ -92,11 +92,17 @@ class LogisticModel:
         """p(stiction) after Platt scaling (the model's own probability when not calibrated)."""
         return platt(self.probability(x), self.calibration)
 
+    def cuts(self) -> tuple[float, float]:
+        """(low, high) on the calibrated probability: the band, or the calibrated ``threshold`` twice."""
+        if self.band is not None:
+            return self.band
+        cut = float(platt(np.array(self.threshold), self.calibration))
+        return cut, cut
+
     def call(self, p_calibrated: np.ndarray) -> np.ndarray:
-        """"stiction", "no_stiction" or "undetermined" for calibrated probabilities (one cut at the
-        calibrated ``threshold`` when the model has no band)."""
-        low, high = self.band if self.band is not None else (platt(np.array(self.threshold), self.calibration),) * 2
-        return band_calls(np.asarray(p_calibrated, float), float(low), float(high))
+        """"stiction", "no_stiction" or "undetermined" for calibrated probabilities."""
+        low, high = self.cuts()
+        return band_calls(np.asarray(p_calibrated, float), low, high)
 
     def contributions(self, x: np.ndarray) -> np.ndarray:
         """Each feature's term w_i z_i of the log-odds (the intercept is ``bias``)."""

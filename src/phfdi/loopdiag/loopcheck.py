@@ -36,7 +36,7 @@ from scipy.stats import chi2
 ALPHA = 0.01
 #: highest autoregressive order of the prewhitening filters
 MAX_AR_ORDER = 10
-#: relative spread below which PV counts as frozen (as :data:`.readers.CONSTANT_RTOL`)
+#: relative spread below which PV counts as frozen (constant to rounding)
 FROZEN_RTOL = 1e-9
 #: OP must move by more than this share of its mean level (or 0.05 % of span) (as :mod:`.diagnose`)
 MIN_OP_MOVEMENT = 1e-3
