@@ -6,7 +6,9 @@
     .venv/bin/python benchmarks/plant_loops_eval.py --classifier    # the stiction classifier vs Horch, He, previous
 
 ``--classifier``: the combined stiction classifier under nested leave-one-loop-out against Horch,
-He et al. and this diagnosis at 10 % (from benchmarks/results/stiction_dataset.json, written by
+He et al. and this diagnosis at 10 %, then the one verdict per record (calibrated p, undetermined band
+chosen in the inner folds, structure checks) with its precision, recall, false-stiction rate and
+undetermined share (from benchmarks/results/stiction_dataset.json, written by
 benchmarks/stiction_dataset.py; the same as ``benchmarks/train_stiction_classifier.py --no-write``).
 
 Prints the table of docs/loop_diagnosis.md (accuracy, precision and recall for "stiction" of

@@ -17,6 +17,11 @@ Prints
   linear one by 10 % on held-out data);
 * the shipped model's weights (trained on all records and the synthetic training loops), and
   writes it to src/phfdi/loopdiag/models/stiction_classifier.json;
+* the one-verdict answer of the same nested procedure: calibrated p(stiction) with an undetermined
+  band chosen in the inner folds only; precision and recall of the confident "stiction" calls, the
+  share of no-stiction records called "stiction", the share left undetermined, the calibration
+  (Brier score, reliability by tenths); and the structure checks on the real records (frozen PV, not
+  a closed loop: each record as it is, with PV held constant, and OP beside another loop's PV);
 * the check on fresh synthetic loops (another seed, never trained on): accuracy, precision, recall
   and false alarms per disturbance condition.
 """
@@ -33,8 +38,18 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.loopdiag.classifier import CRITERIA, Data, nested_lolo, train
-from phfdi.loopdiag.evaluate import repeated_records
+from phfdi.loopdiag.classifier import (
+    CRITERIA,
+    MAX_FALSE_STICTION,
+    MAX_UNDETERMINED,
+    TARGET_PRECISION,
+    Data,
+    call_rates,
+    nested_lolo,
+    nested_lolo_calls,
+    train,
+)
+from phfdi.loopdiag.evaluate import frozen_copies, repeated_records, structure_checks, unrelated_pairs
 from phfdi.loopdiag.features import FEATURE_SIGNS, FEATURES
 from phfdi.loopdiag.readers import read_loop
 
@@ -44,13 +59,91 @@ MODEL = ROOT / "src" / "phfdi" / "loopdiag" / "models" / "stiction_classifier.js
 DATA = Path(os.environ.get("PHFDI_SHARED_DATA", ROOT.parent / "shared" / "data")) / "plant_loops"
 
 
-def repeats(real: list[dict]) -> dict[str, tuple[str, float]]:
-    """Real records that repeat another's samples (phfdi.loopdiag.evaluate.repeated_records); {} without the data."""
+def real_runs(real: list[dict]) -> dict:
+    """{name: (OP, PV, SP or None)} of the real records as read; {} without the data."""
     if not all((DATA / r["name"]).is_file() for r in real):
-        print(f"(no records under {DATA}: the table of distinct records is skipped)")
+        print(f"(no records under {DATA}: the tables of distinct records and of the structure checks are skipped)")
         return {}
     runs = {r["name"]: read_loop(str(DATA / r["name"])) for r in real}
-    return repeated_records({k: (v["op_pct"], v["pv"]) for k, v in runs.items()})
+    return {k: (v["op_pct"], v["pv"], v["sp"] if "sp" in v else None) for k, v in runs.items()}
+
+
+def repeats(runs: dict) -> dict[str, tuple[str, float]]:
+    """Real records that repeat another's samples (phfdi.loopdiag.evaluate.repeated_records)."""
+    return repeated_records({k: (op, pv) for k, (op, pv, _) in runs.items()}) if runs else {}
+
+
+def banded_table(rows: dict[str, dict]) -> str:
+    out = ["| records | confident stiction: precision | recall | no stiction called stiction | undetermined | "
+           "TP | FP | no-stiction calls right / all | stiction missed (called no stiction) |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for name, m in rows.items():
+        prec = "n/a" if math.isnan(m["precision"]) else f"{m['precision']:.2f}"
+        out.append(f"| {name} | **{prec}** ({m['tp']}/{m['tp'] + m['fp']}) | {m['recall']:.2f} | "
+                   f"**{100 * m['false_stiction_rate']:.1f} %** ({m['fp']}/{m['no_stiction_records']}) | "
+                   f"**{100 * m['undetermined_share']:.1f} %** ({m['undetermined']}/{m['files']}) | {m['tp']} | {m['fp']} | "
+                   f"{m['tn']}/{m['tn'] + m['fn']} | {m['fn']} |")
+    return "\n".join(out)
+
+
+def calibration_lines(p_cal: np.ndarray, p_raw: np.ndarray, y: np.ndarray) -> list[str]:
+    """Brier scores and a reliability table (tenths of the calibrated probability)."""
+    y = np.asarray(y, float)
+    lines = [f"Brier score: calibrated {np.mean((p_cal - y) ** 2):.3f}, the model's own probability "
+             f"{np.mean((p_raw - y) ** 2):.3f} (always 0.5: 0.250)",
+             "| calibrated p | records | mean p | share sticky |", "|---|---|---|---|"]
+    edges = np.linspace(0.0, 1.0, 6)
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        k = (p_cal >= lo) & ((p_cal < hi) if hi < 1 else (p_cal <= hi))
+        if k.any():
+            lines.append(f"| {lo:.1f}-{hi:.1f} | {int(k.sum())} | {np.mean(p_cal[k]):.2f} | {np.mean(y[k]):.2f} |")
+    return lines
+
+
+def verdict_tables(d: Data, real: list[dict], runs: dict, rep: dict, criterion: str) -> dict[str, dict]:
+    """One verdict per record under nested leave-one-loop-out (band chosen in the inner folds), printed;
+    the structure checks' verdicts take precedence (a record that is not a loop gets no stiction call)."""
+    t0 = time.perf_counter()
+    nested = nested_lolo_calls(d, criterion=criterion)
+    t_nested = time.perf_counter() - t0
+    ri = np.flatnonzero(d.real)
+    y, groups = d.y[ri], [d.groups[i] for i in ri]
+    calls = nested.calls[ri].copy()
+    structure = structure_checks(runs) if runs else {}
+    for k, r in enumerate(real):
+        if structure.get(r["name"]):
+            calls[k] = structure[r["name"]]
+    print(f"\none verdict per record (nested leave-one-loop-out, {t_nested:.1f} s; calibration and undetermined band "
+          f"chosen in the inner folds for precision >= {TARGET_PRECISION}, no-stiction called stiction <= "
+          f"{100 * MAX_FALSE_STICTION:.0f} %, undetermined <= {100 * MAX_UNDETERMINED:.0f} %):\n")
+    results = {"all records": call_rates(calls, y)}
+    if rep:
+        keep = [k for k, r in enumerate(real) if r["name"] not in rep]
+        results["distinct records"] = call_rates(calls[keep], y[keep])
+    print(banded_table(results))
+    if runs:
+        n_struct = sum(1 for r in real if structure.get(r["name"]))
+        print(f"\nstructure checks on the {len(runs)} real records: {n_struct} not scored (frozen PV or not a closed loop)")
+        fr = frozen_copies(runs)
+        print(f"the same records with PV held constant: {fr['pv_frozen']}/{fr['records']} called pv_frozen")
+        un = unrelated_pairs(runs, {r["name"]: r["group"] for r in real})
+        print(f"OP of one record beside the PV of another loop's record, no setpoint: {un['pairs'] - un['coupled']}/"
+              f"{un['pairs']} called not_a_closed_loop ({100 * un['coupled'] / un['pairs']:.1f} % taken for a loop; "
+              f"test level 1 %)")
+        results["structure"] = {"not_scored": n_struct, **{f"frozen_{k}": v for k, v in fr.items()},
+                                **{f"unrelated_{k}": v for k, v in un.items()}}
+    print()
+    print("\n".join(calibration_lines(nested.calibrated[ri], nested.prob[ri], y)))
+    print("\nper loop (stiction / undetermined / no stiction calls), fold's band on the calibrated p:")
+    for g in sorted(set(groups), key=lambda g: (not y[groups.index(g)], g)):
+        idx = [k for k, gg in enumerate(groups) if gg == g]
+        lab = "stiction   " if y[idx[0]] else "no stiction"
+        c = [int(np.sum(calls[idx] == v)) for v in ("stiction", "undetermined", "no_stiction")]
+        ch = nested.choices[g]
+        band = "-" if ch["band"] is None else f"{ch['band'][0]:.2f}-{ch['band'][1]:.2f}"
+        print(f"  {lab} {g:28s} {c[0]:2d} / {c[1]:2d} / {c[2]:2d}   band {band}"
+              + ("" if ch["band_met_inner"] else " (inner targets not met)"))
+    return {f"one verdict, {k}": v for k, v in results.items()}
 
 
 def metrics(y: np.ndarray, pred: np.ndarray, groups: list[str]) -> dict:
@@ -101,7 +194,8 @@ def nested_tables(d: Data, real: list[dict], rows: list[dict], fresh: list[dict]
     results["He et al. 2007 (SI >= 0.6)"] = metrics(y_real, [r["he_decision"] == "stiction" for r in real], g_real)
     results["previous: Hammerstein valve model, gain >= 10 %"] = metrics(
         y_real, [(r["hammerstein_gain_percent"] or 0.0) >= 10.0 for r in real], g_real)
-    rep = repeats(real)
+    runs = real_runs(real)
+    rep = repeats(runs)
     if rep:
         keep = [k for k, r in enumerate(real) if r["name"] not in rep]
         yk, gk = y_real[keep], [g_real[k] for k in keep]
@@ -137,6 +231,7 @@ def nested_tables(d: Data, real: list[dict], rows: list[dict], fresh: list[dict]
         c = choices[g]
         print(f"  {lab} {g:28s} " + " | ".join(cells)
               + f"   (l2 {c['l2']:g}, synthetic x{c['synthetic_ratio']:g}, threshold {c['threshold']:.2f})")
+    results.update(verdict_tables(d, real, runs, rep, criterion))
     return results
 
 

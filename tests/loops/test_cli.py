@@ -39,17 +39,18 @@ def test_batch_with_bad_files_reports_each_once_and_goes_on(tmp_path, backlash_c
     out, err = capsys.readouterr()
     assert status == 1  # some failed (exit 2: none could be diagnosed)
     doc = json.loads(out)
-    assert [f["loop_tag"] for f in doc["files"]] == ["FIC7", "gap"]
+    assert [f["loop_tag"] for f in doc["files"]] == ["FIC7", "constant", "gap"]
     assert doc["files"][0]["cause"] == "backlash"
+    # a constant PV under a moving OP is a verdict, not a reading error
+    assert doc["files"][1]["loop_verdict"]["verdict"] == "pv_frozen"
     # historian policy: the 30-sample PV gap ends a stretch; the longer one (170 samples) is diagnosed, said
-    assert doc["files"][1]["samples"] == 170
+    assert doc["files"][2]["samples"] == 170
     assert any("2 stretches" in n and "cut where OP or PV is missing for 30 samples in a row (from t = 100 s)" in n
-               for n in doc["files"][1]["reading_notes"])
-    assert len(doc["failed"]) == 3
+               for n in doc["files"][2]["reading_notes"])
+    assert len(doc["failed"]) == 2
     lines = [ln for ln in err.splitlines() if ln.startswith("phfdi loop-diagnose:") and ": note: " not in ln]
-    assert len(lines) == 3
-    for name, needle in (("constant", "PV is constant"), ("short", "too short"),
-                         ("columns", "cannot tell the OP and PV")):
+    assert len(lines) == 2
+    for name, needle in (("short", "too short"), ("columns", "cannot tell the OP and PV")):
         assert sum(str(bad[name]) in ln and needle in ln for ln in lines) == 1, (name, lines)
     assert f"phfdi loop-diagnose: note: {bad['gap']}: column 'pv': 30 cells not a number (NaN 30), first at line 102" \
         in err
@@ -58,7 +59,7 @@ def test_batch_with_bad_files_reports_each_once_and_goes_on(tmp_path, backlash_c
 
 def test_every_file_bad_exits_2(tmp_path, capsys):
     bad = bad_files(tmp_path)
-    assert main(["loop-diagnose", str(bad["constant"]), str(bad["short"]), *FAST]) == 2
+    assert main(["loop-diagnose", str(bad["columns"]), str(bad["short"]), *FAST]) == 2
     assert "Traceback" not in capsys.readouterr().err
 
 
@@ -66,7 +67,7 @@ def test_text_report_shows_linear_model_ranking_and_verdict(backlash_csv, capsys
     assert main(["loop-diagnose", str(backlash_csv), "--causes", "backlash,stiction", "--workers", "1"]) == 0
     out = capsys.readouterr().out
     for needle in ("oscillation:", "linear model:", "the linear model misses:", "valve models, held-out NRMSE",
-                   "verdict: explained, cause backlash", "baselines: horch_ccf"):
+                   "valve-model fit: explained, cause backlash", "verdict: ", "baselines: horch_ccf"):
         assert needle in out
 
 

@@ -67,8 +67,12 @@ def test_csv_columns_guessed_from_tags_and_iso_time(tmp_path):
     assert guess_columns(["a", "b"]) is None
 
 
+def test_constant_pv_is_read_and_left_to_the_diagnosis(tmp_path):
+    run = read_loop(simple_export(tmp_path / "constant.txt", pv=np.full(150, 5.0)))
+    assert np.all(run["pv"] == 5.0)  # loopcheck calls it frozen (tests/loops/test_verdicts.py)
+
+
 @pytest.mark.parametrize("problem, expected", [
-    ("constant", "PV is constant"),
     ("short", "too short"),
     ("nan", "missing for 20 samples"),
 ])

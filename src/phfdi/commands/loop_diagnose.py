@@ -20,8 +20,9 @@ EXAMPLES = """examples:
 inputs: files and folders (every .txt, .csv, .parquet below them). A CSV whose header holds several
 loops' tags (<tag>.OP or .MV, .PV, .SP or .SV) is a wide historian export: each loop tag is one job.
 Many jobs run on Dask: a local cluster of --workers processes (default 2) or, with --scheduler, a
-running one. --out DIR writes loops.parquet and loops.csv (one row per loop: the stiction verdict
-and probability with its strongest evidence, Kano S and J, oscillation, notes) and worst_loops.txt.
+running one. --out DIR writes loops.parquet and loops.csv (one row per loop: its one verdict -
+stiction, no_stiction, undetermined, pv_frozen or not_a_closed_loop - the calibrated p(stiction) with its
+strongest evidence, Kano S and J, oscillation, the valve-model fit, notes) and worst_loops.txt.
 
 file formats: the tab-separated historian export of ../shared/data/plant_loops (detected by its
 'PROCESSDATA' title line) and CSV with a header line. CSV columns are guessed from names (time_s,

@@ -21,6 +21,14 @@ loops (criterion "real+synthetic", the default) or alone ("real"); :func:`nested
 that whole procedure with one more loop level outside it, so no choice ever sees the loop it is
 scored on.
 
+**One verdict with an undetermined band** (:func:`choose_band`): the inner leave-one-loop-out
+probabilities of the real records (at the chosen hyper-parameters) calibrate the model (Platt 1999:
+p = sigmoid(a logit(p_model) + b), fitted with Platt's smoothed targets) and fix two cut points on the
+calibrated p: "stiction" at or above ``high``, "no stiction" below ``low``, "undetermined" between. The
+band is the one whose confident calls on those inner probabilities meet :data:`TARGET_PRECISION`,
+:data:`MAX_FALSE_STICTION` and :data:`MAX_UNDETERMINED` with the most correct calls; so under
+:func:`nested_lolo` the band, like every other choice, never sees the loop it is scored on.
+
 The shipped model is ``models/stiction_classifier.json`` (package data), written by
 ``benchmarks/train_stiction_classifier.py`` from ``benchmarks/results/stiction_dataset.json``.
 """
@@ -46,6 +54,14 @@ SYNTHETIC_FOLDS = 5
 #: alone ("real"), or its mean with the synthetic loops' cross-validation ("real+synthetic")
 CRITERIA = ("real", "real+synthetic")
 MODEL_RESOURCE = "models/stiction_classifier.json"
+#: confident calls must be at least this often right: "stiction" calls sticky, "no stiction" calls not
+TARGET_PRECISION = 0.9
+#: at most this share of the no-stiction records may be called "stiction"
+MAX_FALSE_STICTION = 0.10
+#: at most this share of the records may be left "undetermined"
+MAX_UNDETERMINED = 0.25
+#: the three answers of the band
+STICTION, NO_STICTION, UNDETERMINED = "stiction", "no_stiction", "undetermined"
 
 
 @dataclass
@@ -60,6 +76,10 @@ class LogisticModel:
     synthetic_ratio: float = 1.0
     info: dict = field(default_factory=dict)
     signs: list[int] | None = None
+    #: Platt scaling (a, b) of the logit; None: the model's own probability
+    calibration: tuple[float, float] | None = None
+    #: (low, high) on the calibrated probability; None: one cut at ``threshold``
+    band: tuple[float, float] | None = None
 
     def z(self, x: np.ndarray) -> np.ndarray:
         return (np.asarray(x, float) - self.mean) / self.scale
@@ -67,6 +87,22 @@ class LogisticModel:
     def probability(self, x: np.ndarray) -> np.ndarray:
         s = self.z(x) @ self.weights + self.bias
         return 1.0 / (1.0 + np.exp(-s))
+
+    def calibrated(self, x: np.ndarray) -> np.ndarray:
+        """p(stiction) after Platt scaling (the model's own probability when not calibrated)."""
+        return platt(self.probability(x), self.calibration)
+
+    def cuts(self) -> tuple[float, float]:
+        """(low, high) on the calibrated probability: the band, or the calibrated ``threshold`` twice."""
+        if self.band is not None:
+            return self.band
+        cut = float(platt(np.array(self.threshold), self.calibration))
+        return cut, cut
+
+    def call(self, p_calibrated: np.ndarray) -> np.ndarray:
+        """"stiction", "no_stiction" or "undetermined" for calibrated probabilities."""
+        low, high = self.cuts()
+        return band_calls(np.asarray(p_calibrated, float), low, high)
 
     def contributions(self, x: np.ndarray) -> np.ndarray:
         """Each feature's term w_i z_i of the log-odds (the intercept is ``bias``)."""
@@ -77,17 +113,23 @@ class LogisticModel:
                 "mean": [float(v) for v in self.mean], "scale": [float(v) for v in self.scale],
                 "weights": [float(v) for v in self.weights], "bias": float(self.bias),
                 "threshold": float(self.threshold), "l2": self.l2, "synthetic_ratio": self.synthetic_ratio,
-                "signs": self.signs, "info": self.info}
+                "signs": self.signs, "info": self.info,
+                "calibration": None if self.calibration is None else [float(v) for v in self.calibration],
+                "band": None if self.band is None else [float(v) for v in self.band]}
 
     @classmethod
     def from_dict(cls, d: dict) -> "LogisticModel":
         return cls(list(d["features"]), np.array(d["mean"], float), np.array(d["scale"], float),
                    np.array(d["weights"], float), float(d["bias"]), float(d["threshold"]),
                    float(d.get("l2", 0.1)), float(d.get("synthetic_ratio", 1.0)), dict(d.get("info", {})),
-                   d.get("signs"))
+                   d.get("signs"), _pair(d.get("calibration")), _pair(d.get("band")))
 
     def save(self, path: str | Path) -> None:
         write_text(path, json.dumps(self.to_dict(), indent=1) + "\n", overwrite=True)
+
+
+def _pair(v) -> tuple[float, float] | None:
+    return None if v is None else (float(v[0]), float(v[1]))
 
 
 def load_model(path: str | Path | None = None) -> LogisticModel:
@@ -182,6 +224,92 @@ def best_threshold_multi(sets: list[tuple[np.ndarray, np.ndarray, list[str]]]) -
     return float(th), float(acc)
 
 
+# ---- calibration and the undetermined band --------------------------------------------------
+def platt(prob: np.ndarray, calibration: tuple[float, float] | None) -> np.ndarray:
+    """sigmoid(a logit(p) + b); p itself when ``calibration`` is None."""
+    prob = np.asarray(prob, float)
+    if calibration is None:
+        return prob
+    a, b = calibration
+    logit = np.log(np.clip(prob, 1e-12, 1 - 1e-12) / np.clip(1 - prob, 1e-12, 1.0))
+    return 1.0 / (1.0 + np.exp(-(a * logit + b)))
+
+
+def fit_platt(prob: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Platt's (1999) scaling of out-of-fold probabilities: (a, b) minimising the log-loss against his
+    smoothed targets (N+ + 1) / (N+ + 2) and 1 / (N- + 2), which keep a separable set from driving a to
+    infinity; a is held >= 0 (a calibration never reverses the ranking)."""
+    prob, y = np.asarray(prob, float), np.asarray(y, bool)
+    n_pos, n_neg = int(y.sum()), int((~y).sum())
+    t = np.where(y, (n_pos + 1.0) / (n_pos + 2.0), 1.0 / (n_neg + 2.0))
+    logit = np.log(np.clip(prob, 1e-12, 1 - 1e-12) / np.clip(1 - prob, 1e-12, 1.0))
+
+    def objective(theta: np.ndarray) -> tuple[float, np.ndarray]:
+        s = theta[0] * logit + theta[1]
+        q = 1.0 / (1.0 + np.exp(-s))
+        loss = float(np.mean(np.logaddexp(0.0, s) - t * s))
+        g = (q - t) / len(t)
+        return loss, np.array([float(g @ logit), float(np.sum(g))])
+
+    res = minimize(objective, np.array([1.0, 0.0]), jac=True, method="L-BFGS-B", bounds=[(0.0, None), (None, None)])
+    return float(res.x[0]), float(res.x[1])
+
+
+def band_calls(p_calibrated: np.ndarray, low: float, high: float) -> np.ndarray:
+    """"stiction" at or above ``high``, "no_stiction" below ``low``, "undetermined" between."""
+    p = np.asarray(p_calibrated, float)
+    return np.where(p >= high, STICTION, np.where(p < low, NO_STICTION, UNDETERMINED))
+
+
+def call_rates(calls: np.ndarray, y: np.ndarray) -> dict:
+    """Counts and rates of banded calls against labels: precision of the confident "stiction" calls,
+    recall (sticky records called "stiction"), the share of no-stiction records called "stiction",
+    the precision of the "no stiction" calls and the share left undetermined."""
+    calls, y = np.asarray(calls), np.asarray(y, bool)
+    st, no, und = calls == STICTION, calls == NO_STICTION, calls == UNDETERMINED
+    tp, fp = int(np.sum(st & y)), int(np.sum(st & ~y))
+    tn, fn = int(np.sum(no & ~y)), int(np.sum(no & y))
+    n, n_pos, n_neg = len(y), int(y.sum()), int((~y).sum())
+    return {"files": n, "stiction_records": n_pos, "no_stiction_records": n_neg,
+            "tp": tp, "fp": fp, "tn": tn, "fn": fn, "undetermined": int(und.sum()),
+            "undetermined_stiction": int(np.sum(und & y)), "undetermined_no_stiction": int(np.sum(und & ~y)),
+            "precision": tp / (tp + fp) if tp + fp else math.nan,
+            "recall": tp / n_pos if n_pos else math.nan,
+            "false_stiction_rate": fp / n_neg if n_neg else math.nan,
+            "no_stiction_precision": tn / (tn + fn) if tn + fn else math.nan,
+            "undetermined_share": float(und.sum()) / n if n else math.nan}
+
+
+def _band_violation(r: dict) -> float:
+    """How far banded calls fall short of the targets (0: all met); no "stiction" call at all counts as
+    precision 0, so a band that never says stiction is not a way out."""
+    prec = 0.0 if math.isnan(r["precision"]) else r["precision"]
+    npv = 1.0 if math.isnan(r["no_stiction_precision"]) else r["no_stiction_precision"]
+    fsr = 0.0 if math.isnan(r["false_stiction_rate"]) else r["false_stiction_rate"]
+    return (max(0.0, TARGET_PRECISION - prec) + max(0.0, TARGET_PRECISION - npv)
+            + max(0.0, fsr - MAX_FALSE_STICTION) + max(0.0, r["undetermined_share"] - MAX_UNDETERMINED))
+
+
+def choose_band(p_calibrated: np.ndarray, y: np.ndarray) -> dict:
+    """(low, high) on calibrated probabilities: among the cut points between neighbouring values, the
+    band whose calls meet the targets (:data:`TARGET_PRECISION` for both confident answers,
+    :data:`MAX_FALSE_STICTION`, :data:`MAX_UNDETERMINED`) with the most correct confident calls;
+    ties: fewer undetermined, then centred nearest 0.5. When no band meets them all, the one that
+    falls least short (``met`` False)."""
+    p = np.sort(np.unique(np.asarray(p_calibrated, float)))
+    cuts = [float(p[0]) - 1e-9] + list((p[1:] + p[:-1]) / 2) + [float(p[-1]) + 1e-9]
+    best = None
+    for i, low in enumerate(cuts):
+        for high in cuts[i:]:
+            r = call_rates(band_calls(p_calibrated, low, high), y)
+            key = (_band_violation(r), -(r["tp"] + r["tn"]), r["undetermined"], abs((low + high) / 2 - 0.5))
+            if best is None or key < best[0]:
+                best = (key, low, high, r)
+    assert best is not None
+    key, low, high, r = best
+    return {"low": float(low), "high": float(high), "met": key[0] == 0.0, "inner": r}
+
+
 @dataclass
 class Data:
     x: np.ndarray
@@ -255,21 +383,46 @@ def choose_hyperparameters(d: Data, criterion: str = "real+synthetic") -> dict:
 
 
 def train(d: Data, criterion: str = "real+synthetic") -> LogisticModel:
-    """Hyper-parameters by :func:`choose_hyperparameters` on ``d``, then one fit on all of ``d``."""
+    """Hyper-parameters by :func:`choose_hyperparameters` on ``d``, then one fit on all of ``d``; the
+    calibration and the undetermined band from the leave-one-loop-out probabilities of ``d``'s real
+    records at those hyper-parameters (:func:`fit_platt`, :func:`choose_band`)."""
     hp = choose_hyperparameters(d, criterion)
     model = _fit(d, hp["l2"], hp["synthetic_ratio"])
     model.threshold = hp["threshold"]
     model.info["inner_balanced_accuracy"] = hp["inner_balanced_accuracy"]
     model.info["criterion"] = criterion
+    real = np.flatnonzero(d.real)
+    if len({bool(v) for v in d.y[real]}) == 2:
+        inner = lolo_probabilities(d, hp["l2"], hp["synthetic_ratio"])[real]
+        model.calibration = fit_platt(inner, d.y[real])
+        band = choose_band(platt(inner, model.calibration), d.y[real])
+        model.band = (band["low"], band["high"])
+        model.info["band_inner"] = {"met": band["met"], **{k: (None if isinstance(v, float) and math.isnan(v) else v)
+                                                           for k, v in band["inner"].items()}}
     return model
 
 
-def nested_lolo(d: Data, progress=None, criterion: str = "real+synthetic") -> tuple[np.ndarray, np.ndarray, dict]:
+@dataclass
+class Nested:
+    """Out-of-fold answers of :func:`nested_lolo_calls` for every record of the data (NaN, False and ""
+    where not real): the model's probability and its single-threshold prediction, the calibrated
+    probability and the banded call; the choices of each fold."""
+
+    prob: np.ndarray
+    pred: np.ndarray
+    calibrated: np.ndarray
+    calls: np.ndarray
+    choices: dict
+
+
+def nested_lolo_calls(d: Data, progress=None, criterion: str = "real+synthetic") -> Nested:
     """Nested leave-one-loop-out: for each real group, :func:`train` on everything else (which
-    chooses its hyper-parameters by an inner leave-one-loop-out) and predict the group.
-    Returns (prob, prediction) for every real record (NaN / False elsewhere) and the choices per fold."""
+    chooses its hyper-parameters, calibration and band by an inner leave-one-loop-out) and predict the
+    group."""
     prob = np.full(len(d.y), np.nan)
+    cal = np.full(len(d.y), np.nan)
     pred = np.zeros(len(d.y), bool)
+    calls = np.full(len(d.y), "", dtype=object)
     choices = {}
     real_groups = sorted({g for g, r in zip(d.groups, d.real) if r})
     for k, g in enumerate(real_groups):
@@ -277,7 +430,17 @@ def nested_lolo(d: Data, progress=None, criterion: str = "real+synthetic") -> tu
         model = train(d.take(~held), criterion)
         prob[held] = model.probability(d.x[held])
         pred[held] = prob[held] >= model.threshold
-        choices[g] = {"l2": model.l2, "synthetic_ratio": model.synthetic_ratio, "threshold": model.threshold}
+        cal[held] = model.calibrated(d.x[held])
+        calls[held] = model.call(cal[held])
+        choices[g] = {"l2": model.l2, "synthetic_ratio": model.synthetic_ratio, "threshold": model.threshold,
+                      "calibration": model.calibration, "band": model.band,
+                      "band_met_inner": (model.info.get("band_inner") or {}).get("met")}
         if progress:
             progress(k + 1, len(real_groups))
-    return prob, pred, choices
+    return Nested(prob, pred, cal, calls, choices)
+
+
+def nested_lolo(d: Data, progress=None, criterion: str = "real+synthetic") -> tuple[np.ndarray, np.ndarray, dict]:
+    """(prob, prediction at the fold's threshold, choices per fold) of :func:`nested_lolo_calls`."""
+    n = nested_lolo_calls(d, progress, criterion)
+    return n.prob, n.pred, n.choices

@@ -238,3 +238,39 @@ def format_table(results: dict) -> str:
                      f"{r['balanced_accuracy']:.2f} | {r['tp']} | {r['fp']} | {r['fn']} | {r['tn']} | "
                      f"{r['loops_right']}/{r['loops']} | {', '.join(map(str, r['thresholds']))} |")
     return "\n".join(lines)
+
+
+# ---- the structure checks (phfdi.loopdiag.loopcheck) on labelled records -------------------------
+def structure_checks(runs: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]]) -> dict[str, str | None]:
+    """{name: structure verdict} of (OP, PV, SP) records: None for a closed loop to score, else
+    ``pv_frozen`` or ``not_a_closed_loop``."""
+    from .loopcheck import check_loop
+
+    return {name: check_loop(op, pv, sp).verdict for name, (op, pv, sp) in runs.items()}
+
+
+def unrelated_pairs(runs: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]],
+                    loop_of: dict[str, str]) -> dict[str, int]:
+    """Not-a-loop records made from real ones: OP of one record beside the PV of a record of another
+    loop (both cut to the shorter length; no setpoint). Counts how many the structure check still
+    takes for a closed loop (``coupled``: its false "closed loop" answers) out of ``pairs``."""
+    from .loopcheck import check_loop
+
+    coupled = pairs = 0
+    for a, (op, _, _) in runs.items():
+        for b, (_, pv, _) in runs.items():
+            if loop_of[a] == loop_of[b]:
+                continue
+            n = min(len(op), len(pv))
+            pairs += 1
+            coupled += check_loop(op[:n], pv[:n], None).verdict is None
+    return {"pairs": pairs, "coupled": coupled}
+
+
+def frozen_copies(runs: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]]) -> dict[str, int]:
+    """Every record with PV held at its first value (a transmitter that froze, or a valve that never
+    moved): how many the structure check calls ``pv_frozen``."""
+    from .loopcheck import PV_FROZEN, check_loop
+
+    found = sum(check_loop(op, np.full_like(pv, pv[0]), sp).verdict == PV_FROZEN for op, pv, sp in runs.values())
+    return {"records": len(runs), "pv_frozen": found}

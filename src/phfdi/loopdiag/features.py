@@ -142,13 +142,16 @@ def stiction_verdict(le: LoopEvidence, model=None) -> dict:
     """The classifier's verdict on one loop and the evidence behind it: every indicator's value,
     its published decision and its contribution to the log-odds (weight x standardised value; an
     indicator that does not apply sits at its neutral value, and its contribution is that value's
-    distance from the training mean). Kano's S and J from the Hammerstein fit are listed (in OP
-    units) but are not features."""
+    distance from the training mean). ``probability`` is calibrated (Platt scaling of the model's own
+    ``model_probability``), ``verdict`` its call against the undetermined ``band``: stiction, no_stiction or
+    undetermined. Kano's S and J from the Hammerstein fit are listed (in OP units) but are not features."""
     model = model or _shipped_model()
     if model.features != list(FEATURE_NAMES):
         raise ValueError("the model's features are not this version's: retrain it "
                          "(benchmarks/train_stiction_classifier.py)")
-    p = float(model.probability(le.features))
+    p_model = float(model.probability(le.features))
+    p = float(model.calibrated(le.features))
+    call = str(model.call(np.array([p]))[0])
     contrib = model.contributions(le.features)
     evidence = []
     for f, x, c in zip(FEATURES, le.features, contrib):
@@ -160,8 +163,10 @@ def stiction_verdict(le: LoopEvidence, model=None) -> dict:
             item["reference"] = ind.reference
         evidence.append(item)
     evidence.sort(key=lambda e: -abs(e["contribution"] or 0.0))
-    out = {"verdict": "stiction" if p >= model.threshold else "no_stiction", "probability": _r4(p),
-           "threshold": _r4(model.threshold), "intercept": _r4(model.bias), "evidence": evidence,
+    low, high = model.cuts()
+    out = {"verdict": call, "probability": _r4(p), "band": [_r4(low), _r4(high)],
+           "model_probability": _r4(p_model), "threshold": _r4(model.threshold), "intercept": _r4(model.bias),
+           "evidence": evidence,
            "method": "L2 logistic regression on published indicators (docs/loop_diagnosis.md)"}
     ev = le.evidence
     st = next((c for c in ev.causes if c.cause == "stiction"), None) if ev.identifiable else None

@@ -154,12 +154,36 @@ def _plot_stem(ax, op: np.ndarray, kano, op_unit: str) -> None:
 
 
 def _title(rep: dict) -> str:
-    """The stiction classifier's and the Hammerstein diagnosis's verdicts."""
-    title = f"{rep.get('loop_tag')}: "
-    st = rep.get("stiction")
-    if st:
-        title += f"stiction classifier {st['verdict'].replace('_', ' ')} (p = {st['probability']:.2f}); "
-    return title + f"Hammerstein: {rep['verdict']}" + (f", {rep['cause']}" if rep["cause"] != "none" else "")
+    """The loop's one verdict (the valve-model fit is in the legends, as evidence)."""
+    verdict = rep.get("loop_verdict") or {}
+    return f"{rep.get('loop_tag')}: {verdict.get('summary', 'no verdict')}"
+
+
+def plot_record(run: Run, rep: dict, out_dir: str | Path) -> Path:
+    """A record with no stiction score (PV frozen, not a closed loop): PV, SP and OP against time under
+    its verdict. Written and returned as :func:`plot_loop`'s."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    op = run["op_pct"]
+    unit = (run.metadata.get("units") or {}).get("pv", "") or "PV units"
+    op_unit = "% of span" if np.min(op) >= 0 and np.max(op) <= 100 else "OP units"
+    fig, (ax_pv, ax_op) = plt.subplots(2, 1, figsize=(13, 6), sharex=True, height_ratios=[2, 1.4])
+    t_min = run.time_s / 60.0
+    ax_pv.plot(t_min, run["pv"], color="k", lw=0.7, label="PV measured")
+    if "sp" in run:
+        ax_pv.plot(t_min, run["sp"], color="0.5", ls="--", lw=0.8, label="SP")
+    ax_op.plot(t_min, op, color="tab:green", lw=0.8, label="OP (controller output)")
+    ax_pv.set_ylabel(f"PV ({unit})")
+    ax_op.set_ylabel(f"OP ({op_unit})")
+    ax_op.set_xlabel("time (min)")
+    ax_pv.legend(fontsize=7, loc="best")
+    ax_op.legend(fontsize=7, loc="best")
+    fig.suptitle(_title(rep), fontsize=10)
+    fig.tight_layout()
+    path = out_dir / f"{_file_stem(rep)}.png"
+    save_figure(fig, path, dpi=80)
+    plt.close(fig)
+    return path
 
 
 def _file_stem(rep: dict) -> str:

@@ -148,7 +148,8 @@ def diagnose_jobs(jobs: list[Job], settings: Settings | None = None, figure_dir:
 
 
 # ---- the table ---------------------------------------------------------------------------------
-COLUMNS = ("file", "loop_tag", "lines", "samples", "sample_time_s", "process_type", "stiction", "stiction_probability",
+COLUMNS = ("file", "loop_tag", "lines", "samples", "sample_time_s", "process_type", "verdict", "verdict_summary",
+           "stiction", "stiction_probability",
            "kano_s_pct", "kano_j_pct", "oscillating", "period_s", "regularity", "hammerstein_cause",
            "hammerstein_verdict", "gain_percent", "top_evidence", "notes", "error")
 
@@ -165,11 +166,13 @@ def table_row(rep: dict) -> dict:
         return row
     osc = rep.get("oscillation") or {}
     st = rep.get("stiction") or {}
+    lv = rep.get("loop_verdict") or {}
     top = [e for e in st.get("evidence", []) if e.get("measured")][:3]
     row.update({
         "samples": rep.get("samples"), "sample_time_s": rep.get("sample_time_s"),
         "process_type": rep.get("process_type"),
-        "stiction": st.get("verdict") == "stiction" if st else None,
+        "verdict": lv.get("verdict"), "verdict_summary": lv.get("summary"),
+        "stiction": lv.get("verdict") == "stiction" if lv else None,
         "stiction_probability": st.get("probability"),
         "kano_s_pct": st.get("kano_s_pct"), "kano_j_pct": st.get("kano_j_pct"),
         "oscillating": osc.get("oscillating"), "period_s": osc.get("period_s"), "regularity": osc.get("regularity"),
@@ -207,8 +210,9 @@ def write_table(reports: list[dict], out_dir: str | Path) -> tuple[Path, Path]:
 
 
 def worst_loops(reports: list[dict], n: int = 10) -> list[dict]:
-    """Rows of the n loop records most likely to have a sticky valve (ties: more regular oscillation)."""
-    rows = [table_row(r) for r in reports if "error" not in r]
+    """Rows of the n scored loop records most likely to have a sticky valve (ties: more regular oscillation);
+    records with no stiction score (PV frozen, not a closed loop) are not ranked."""
+    rows = [table_row(r) for r in reports if "error" not in r and r.get("stiction")]
     rows.sort(key=lambda r: (-(r["stiction_probability"] or 0.0), -(r["regularity"] or 0.0)))
     return rows[:n]
 
@@ -216,14 +220,26 @@ def worst_loops(reports: list[dict], n: int = 10) -> list[dict]:
 def format_worst(reports: list[dict], n: int = 10) -> str:
     rows = worst_loops(reports, n)
     failed = sum("error" in r for r in reports)
+    unscored = [r for r in reports if "error" not in r and not r.get("stiction")]
     lines = [f"worst loops ({len(rows)} of {len(reports) - failed} diagnosed"
-             + (f", {failed} failed" if failed else "") + "), most likely stiction first:",
-             f"{'rank':>4s}  {'loop':24s} {'file':34s} {'p(stiction)':>11s} {'S %':>6s} {'J %':>6s} "
+             + (f", {failed} failed" if failed else "")
+             + (f", {len(unscored)} not scored: PV frozen or not a closed loop" if unscored else "")
+             + "), most likely stiction first:",
+             f"{'rank':>4s}  {'loop':24s} {'file':34s} {'verdict':13s} {'p(stiction)':>11s} {'S %':>6s} {'J %':>6s} "
              f"{'period s':>8s}  evidence"]
     for k, r in enumerate(rows, 1):
         s = "-" if r["kano_s_pct"] is None else f"{r['kano_s_pct']:.2g}"
         j = "-" if r["kano_j_pct"] is None else f"{r['kano_j_pct']:.2g}"
         per = f"{r['period_s']:.0f}" if r["oscillating"] and r["period_s"] else "-"
         lines.append(f"{k:4d}  {str(r['loop_tag'])[:24]:24s} {Path(str(r['file'])).name[:34]:34s} "
-                     f"{r['stiction_probability']:11.2f} {s:>6s} {j:>6s} {per:>8s}  {r['top_evidence']}")
+                     f"{r['verdict']:13s} {r['stiction_probability']:11.2f} {s:>6s} {j:>6s} {per:>8s}  {r['top_evidence']}")
+    if unscored:
+        lines += ["not scored:", format_unscored(reports)]
     return "\n".join(lines)
+
+
+def format_unscored(reports: list[dict]) -> str:
+    """One line per record with no stiction score: its verdict and why."""
+    return "\n".join(f"  {str(r.get('loop_tag'))[:24]:24s} {Path(str(r['file'])).name[:34]:34s} "
+                     f"{r['loop_verdict']['summary']}"
+                     for r in reports if "error" not in r and not r.get("stiction") and r.get("loop_verdict"))

@@ -22,7 +22,8 @@ stretches, a clock reset or jump or a gap of more than ``MAX_FILLED_GAP``
 samples ends a stretch; the longest usable stretch is diagnosed
 (:func:`read_loop`) or each of them (:func:`read_loop_segments`). Every repair
 is a note in ``metadata["notes"]``. :func:`check_loop_run` rejects, with one
-message, what cannot be diagnosed.
+message, what cannot be diagnosed (too short, missing values); a constant PV is read, and diagnosed as
+frozen by :mod:`.loopcheck`.
 """
 
 from __future__ import annotations
@@ -42,8 +43,6 @@ from phfdi_base.yamlfile import read_mapping
 MIN_SAMPLES = 100
 #: gaps of up to this many missing samples are filled by linear interpolation
 MAX_FILLED_GAP = 3
-#: relative spread below which a signal counts as constant
-CONSTANT_RTOL = 1e-9
 
 
 class LoopDataError(UserError):
@@ -291,10 +290,8 @@ def check_loop_run(run: Run) -> None:
             x[bad] = np.interp(np.flatnonzero(bad), good, x[good])
             run.metadata.setdefault("notes", []).append(f"filled {int(bad.sum())} missing {name} samples "
                                                          f"(gaps of up to {MAX_FILLED_GAP}) by linear interpolation")
-    pv = run.signals["pv"]
-    if np.ptp(pv) <= CONSTANT_RTOL * max(1.0, float(np.max(np.abs(pv)))):
-        raise LoopDataError(f"{where}: PV is constant ({pv[0]:g}); a frozen or disconnected transmitter "
-                            "cannot be diagnosed")
+    # a constant PV is no reading error: it is diagnosed (PV frozen under a moving OP, or not a loop at all;
+    # phfdi.loopdiag.loopcheck)
 
 
 def _label(name: str) -> str:

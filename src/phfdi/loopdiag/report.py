@@ -43,7 +43,16 @@ def format_report(rep: dict) -> str:
     osc = rep["oscillation"]
     lines = [f"{rep['loop_tag']}  ({Path(rep['file']).name}, {rep['samples']} samples at {rep['sample_time_s']:g} s, "
              f"{rep['process_type'].replace('_', '-')})"]
-    if osc["oscillating"]:
+    lv = rep.get("loop_verdict")
+    if lv:
+        lines.append(f"  verdict: {lv['summary']}")
+        if lv.get("probability") is None:  # not scored: the reasons are the whole answer
+            lines += [f"    {r}" for r in lv["evidence"]]
+            return "\n".join(lines + [f"  note: {n}" for n in rep.get("notes") or []])
+        lines += [f"    {e}" for e in lv["evidence"]]
+    if osc is None:
+        pass
+    elif osc["oscillating"]:
         lines.append(f"  oscillation: yes, period {osc['period_s']:.0f} s, regularity {osc['regularity']:.1f} "
                      f"({osc['cycles']:.1f} cycles)")
     else:
@@ -71,7 +80,7 @@ def format_report(rep: dict) -> str:
         lines.append(f"  valve models, held-out NRMSE: {top}")
     verdict = rep["verdict"]
     cause = rep["cause"]
-    head = f"  verdict: {verdict}"
+    head = f"  valve-model fit: {verdict}"
     if cause != "none":
         head += f", cause {cause} ({rep['family']})"
         if rep.get("parameters"):
@@ -83,14 +92,11 @@ def format_report(rep: dict) -> str:
     lines.append(f"    {rep['reason']}")
     st = rep.get("stiction")
     if st:
-        line = (f"  stiction classifier: {st['verdict'].replace('_', ' ')}, p = {st['probability']:.2f} "
-                f"(threshold {st['threshold']:.2f})")
+        line = (f"  stiction classifier: calibrated p = {st['probability']:.2f}, undetermined between "
+                f"{st['band'][0]:.2f} and {st['band'][1]:.2f} (the model's own p {st['model_probability']:.2f})")
         if st.get("kano_s_pct") is not None:
             line += f"; Kano fit S = {st['kano_s_pct']:.3g}, J = {st['kano_j_pct']:.3g} (OP units)"
         lines.append(line)
-        top = [e for e in st["evidence"] if e["measured"]][:5]
-        lines.append("    evidence (value, contribution to the log-odds): "
-                     + "; ".join(f"{e['feature']} {_num(e['value'], '.3g')} ({e['contribution']:+.2f})" for e in top))
     base = rep.get("baselines") or {}
     if base:
         lines.append("  baselines: " + "; ".join(f"{k} {v['decision']}" + (f" ({v['index']:.2f})" if v.get("index")
@@ -114,7 +120,8 @@ def loop_summary(reports: list[dict]) -> list[dict]:
         out.append({"loop_tag": tag, "files": len(reps), "cause": cause,
                     "family": next(r["family"] for r in reps if r["cause"] == cause),
                     "agreement": n / len(reps), "confidence": _mean_conf(reps, cause),
-                    "causes": dict(counts)})
+                    "causes": dict(counts),
+                    "verdicts": dict(Counter((r.get("loop_verdict") or {}).get("verdict") for r in reps))})
     return sorted(out, key=lambda d: d["loop_tag"])
 
 
@@ -127,12 +134,13 @@ def format_summary(reports: list[dict]) -> str:
     """Table per file, then per loop tag; failed files last."""
     ok = [r for r in reports if "error" not in r]
     bad = [r for r in reports if "error" in r]
-    lines = [f"{'file':44s} {'loop':26s} {'osc':4s} {'cause':21s} {'conf':>5s} {'gain %':>7s}  verdict"]
+    lines = [f"{'file':44s} {'loop':26s} {'osc':4s} {'verdict':17s} {'p':>5s}  valve-model fit (cause, gain %)"]
     for r in ok:
         gain = "-" if r.get("gain_percent") is None else f"{r['gain_percent']:.0f}"
-        lines.append(f"{Path(r['file']).name[:44]:44s} {str(r['loop_tag'])[:26]:26s} "
-                     f"{'yes' if r['oscillation']['oscillating'] else 'no':4s} {r['cause']:21s} "
-                     f"{_num(r.get('confidence'), '.2f'):>5s} {gain:>7s}  {r['verdict']}")
+        lv = r.get("loop_verdict") or {}
+        osc = "-" if r.get("oscillation") is None else "yes" if r["oscillation"]["oscillating"] else "no"
+        lines.append(f"{Path(r['file']).name[:44]:44s} {str(r['loop_tag'])[:26]:26s} {osc:4s} "
+                     f"{lv.get('verdict', '-'):17s} {_num(lv.get('probability'), '.2f'):>5s}  {r['cause']}, {gain}")
     summary = loop_summary(reports)
     if summary:
         lines.append("")

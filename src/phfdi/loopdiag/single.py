@@ -6,7 +6,10 @@ from phfdi_base.errors import UserError
 
 from .diagnose import Settings, report
 from .features import loop_evidence, stiction_verdict
+from .loopcheck import PV_FROZEN, LoopCheck, check_loop
+from .oscillation import detect_oscillation
 from .readers import ColumnMap, check_loop_run, read_loop, read_loop_segments
+from .verdict import loop_verdict
 
 
 def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Settings | None = None,
@@ -48,9 +51,11 @@ def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Setting
 
 
 def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None = None) -> dict:
-    """The report of one loop run: the Hammerstein diagnosis (cause, S and J) and the stiction
-    classifier's verdict with its evidence (``report["stiction"]``), or ``{"file": ..., "error": message}``
-    when it cannot be diagnosed.
+    """The report of one loop run: its one verdict (``report["loop_verdict"]``: stiction, no_stiction,
+    undetermined, pv_frozen or not_a_closed_loop, with its evidence), the stiction classifier's answer
+    (``report["stiction"]``) and the valve-model (Hammerstein) fit (cause, S and J) it lists as evidence;
+    or ``{"file": ..., "error": message}`` when it cannot be diagnosed. A record that is not a closed loop
+    (or whose PV is frozen) is said to be one and not scored.
 
     Parameters
     ----------
@@ -66,13 +71,16 @@ def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None =
     >>> run = simulate_loop(SyntheticLoop(valve=("stiction", {"s_pct": 3.0, "j_pct": 1.0}), ti_s=30,
     ...                                   setpoint_steps=[(100, 52), (1500, 49)]))
     >>> report = diagnose_run(run, Settings(baselines=False))
-    >>> report["verdict"], report["cause"], report["stiction"]["verdict"]
-    ('explained', 'stiction', 'stiction')
+    >>> report["loop_verdict"]["verdict"], report["cause"]
+    ('stiction', 'stiction')
     >>> {name: round(value) for name, value in report["parameters"].items()}  # simulated: S 3 %, J 1 %
     {'s_pct': 3, 'j_pct': 1}
     """
+    settings = settings or Settings()
+    check = check_loop(run["op_pct"], run["pv"], run["sp"] if "sp" in run else None)
+    if check.verdict is not None:
+        return structure_report(run, check, settings, figure_dir)
     try:
-        settings = settings or Settings()
         le = loop_evidence(run, settings)
         rep = report(run, le.evidence, settings)
     except UserError as exc:
@@ -81,10 +89,32 @@ def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None =
         rep["baselines"] = {}
     rep["stiction"] = stiction_verdict(le)
     rep["indicators"] = {k: v.to_dict() for k, v in le.indicators.items()}
+    rep["loop_verdict"] = loop_verdict(check, rep)
     if figure_dir:
         from .figures import plot_loop
 
         rep["figure"] = str(plot_loop(run, le.evidence, rep, figure_dir))
+    return rep
+
+
+def structure_report(run, check: LoopCheck, settings: Settings, figure_dir: str | None = None) -> dict:
+    """The report of a record that is no closed loop to score (PV frozen, or not a loop): its verdict and
+    reasons, the oscillation test of PV (not for a frozen one), no valve model and no stiction score."""
+    sp = run["sp"] if "sp" in run else None
+    osc = None if check.verdict == PV_FROZEN else detect_oscillation(run["pv"], sp, run.dt_s).to_dict()
+    verdict = loop_verdict(check, {})
+    notes = list(run.metadata.get("notes") or [])
+    rep = {"file": run.metadata.get("file"), "loop_tag": run.metadata.get("loop_tag"),
+           "process_type": settings.process_type or run.metadata.get("process_type"), "samples": len(run),
+           "sample_time_s": run.dt_s, "oscillation": osc, "cause": "none", "family": "none", "parameters": {},
+           "confidence": None, "verdict": "not_identifiable", "reason": verdict["summary"],
+           "nrmse_nominal": None, "nrmse_extended": None, "gain_percent": None, "extended_cause": None,
+           "ranking": [], "baselines": {}, "stiction": None, "loop_verdict": verdict, "notes": notes,
+           "reading_notes": notes}
+    if figure_dir:
+        from .figures import plot_record
+
+        rep["figure"] = str(plot_record(run, rep, figure_dir))
     return rep
 
 
