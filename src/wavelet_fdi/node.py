@@ -283,6 +283,7 @@ class DetectorNode(DetectorNodeBase):
         self.pub_monitor = self.data_publisher(MeasuredSample, DETECTOR_MONITOR.name) if self.param(
             "monitor_topic") else None
         self.live: live_view.LiveView | None = None
+        self.live_errors = 0  # messages the live view could not send: counted, logged, never fatal
         if self.param("foxglove_port"):
             try:
                 self.live = live_view.LiveView(self.param("foxglove_port"), self.param("foxglove_host"),
@@ -415,10 +416,10 @@ class DetectorNode(DetectorNodeBase):
         if self.live is not None:
             for ns, ph, level_cm, outputs, _ in rows:
                 t_s = ns * 1e-9
-                self.live.log(live_view.MEASUREMENT, {"time_s": t_s, "ph": live_view.finite(ph),
+                self._to_live(live_view.MEASUREMENT, {"time_s": t_s, "ph": live_view.finite(ph),
                                                       "level_cm": live_view.finite(level_cm)}, ns)
                 if outputs is not None:  # (ph_output_pct, level_output_pct, ph_setpoint), as paired
-                    self.live.log(live_view.CONTROLLER, {
+                    self._to_live(live_view.CONTROLLER, {
                         "time_s": t_s, "ph_setpoint": live_view.finite(outputs[2]),
                         "ph_output_pct": live_view.finite(outputs[0]), "level_setpoint_cm": None,
                         "level_output_pct": live_view.finite(outputs[1])}, ns)
@@ -436,13 +437,25 @@ class DetectorNode(DetectorNodeBase):
             msg.stamp = to_time(ns)
             self.pub_monitor.publish(msg)
         if self.live is not None:
-            self.live.log(live_view.MONITOR, live_view.monitor(t_s, values), ns)
+            self._to_live(live_view.MONITOR, live_view.monitor(t_s, values), ns)
+
+    def _to_live(self, topic: str, message: dict, ns: int) -> None:
+        """One message to the detector's own live view; a failure costs the view that message, never detection
+        (this runs on the worker thread, which must not die)."""
+        assert self.live is not None
+        try:
+            self.live.log(topic, message, ns)
+        except Exception as exc:  # noqa: BLE001
+            self.live_errors += 1
+            if self.live_errors == 1 or self.live_errors % 1000 == 0:
+                self.get_logger().error(f"live view: {topic} message not sent ({self.live_errors} so far): "
+                                        f"{type(exc).__name__}: {exc}")
 
     def publish_alarm(self, msg: FaultAlarm, kind: str, time_s: float, alarm: dict | None,
                       report: bool = True) -> None:
         super().publish_alarm(msg, kind, time_s, alarm, report)
         if self.live is not None:
-            self.live.log(live_view.ALARM, live_view.fault_alarm(msg), time_ns(msg.stamp))
+            self._to_live(live_view.ALARM, live_view.fault_alarm(msg), time_ns(msg.stamp))
 
     # ---- input problems on /fault_alarm: rate-limited -----------------------------------
     def _inputs_due(self) -> bool:
