@@ -53,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a parameter of the detector node, e.g. --detector-param calibration=my.yaml "
                         "(see python -m wavelet_fdi.node --help); implies --detector")
     p.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
-                   help=f"serve the graph's signals, the detector's residuals, statistics and alarm state live "
+                   help=f"serve the graph's signals (with --detector also its residuals, statistics and alarm state) live "
                         f"over the Foxglove WebSocket protocol on PORT (default {FOXGLOVE_PORT}); open "
                         f"ws://127.0.0.1:PORT in Foxglove with config/foxglove_layout.json (docs/ros_graph.md)")
     p.add_argument("--foxglove-host", default=FOXGLOVE_HOST, metavar="ADDRESS",
