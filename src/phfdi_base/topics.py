@@ -27,6 +27,7 @@ CONTROLLERS = "controllers"
 VALVE = "valve"
 RECORDER = "recorder"
 DETECTOR = "detector"
+LIVE_VIEW = "foxglove"  # the live view's bridge (phfdi launch --foxglove)
 
 #: nodes a lock-step graph cannot run without
 LOOP_NODES = (PLANT, CONTROLLERS, VALVE)
@@ -58,6 +59,10 @@ MEASURED_SAMPLE = Topic("/measured/sample", "phfdi_interfaces/msg/MeasuredSample
                         "one row of a measured record (phfdi bag from-csv): channel names and values")
 FAULT_ALARM = Topic("/fault_alarm", "phfdi_interfaces/msg/FaultAlarm", DETECTOR, False,
                     "the fault detector's state: on every change and as a heartbeat")
+DETECTOR_MONITOR = Topic("/detector/monitor", "phfdi_interfaces/msg/MeasuredSample", DETECTOR, False,
+                         "the detector's residuals and CUSUM statistics over their thresholds, for the live view "
+                         "(detector parameter monitor_topic; names ph_residual, level_residual_cm, "
+                         "ratio:<statistic>); not recorded")
 
 #: every topic the recorder can write, in lock-step order
 RECORDABLE: tuple[Topic, ...] = (MEASUREMENT, CLOCK, CONTROLLER, VALVE_STATE, PLANT_STATE, DIAGNOSTICS, FAULT_ALARM)

@@ -318,6 +318,18 @@ class StreamingDetector:
             "samples_processed": self.samples_processed,
         }
 
+    def monitor(self) -> tuple[float, dict[str, float]]:
+        """The last sample processed, for a live view: its time (s) and ``ph_residual``, ``level_residual_cm``
+        (measured minus predicted; NaN where not measured) and every CUSUM statistic over its threshold
+        (``ratio:<name>``; 1 raises the alarm). Time NaN before the first sample."""
+        hist = self.history
+        if hist.end == 0:
+            return math.nan, {}
+        row = {k: float(hist.read(hist.end - 1, hist.end, k)[0]) for k in ("t", "ph", "ph_pred", "level", "level_pred")}
+        values = {"ph_residual": row["ph"] - row["ph_pred"], "level_residual_cm": row["level"] - row["level_pred"]}
+        values.update({f"ratio:{n}": float(s / h) for n, s, h in zip(self.names, self._s_last, self.h)})
+        return row["t"], values
+
     def diagnostics(self) -> dict:
         """Input health and internals for /diagnostics (numbers and flags only)."""
         d: dict[str, Any] = dict(self.inputs.counts)

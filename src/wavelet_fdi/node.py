@@ -44,12 +44,13 @@ from itertools import islice
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
+from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, MeasuredSample, Measurement
 
+from phfdi_base import live_view
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
 from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s, valid_stamp
-from phfdi_base.topics import CONTROLLER, MEASUREMENT
+from phfdi_base.topics import CONTROLLER, DETECTOR_MONITOR, MEASUREMENT
 
 from .alarm_messages import severity_of
 from .config import Calibration, load_default_calibration, setting_specs, settings_from_values
@@ -79,6 +80,17 @@ PARAMS = (
     ParamSpec("input_problem_period_s", 1.0, "input problems on /fault_alarm at most once per this many s of "
                                              "wall time (one message with the counts; state changes always)",
               range=(0.05, 3600.0), runtime=True),
+    # the live view (docs/ros_graph.md, "Live view in Foxglove"): off unless asked for, so a graph without it
+    # publishes and records exactly what it did before
+    ParamSpec("monitor_topic", False, "publish the residuals and the statistics over their thresholds on "
+                                      "/detector/monitor (phfdi_interfaces/MeasuredSample; phfdi launch --foxglove)"),
+    ParamSpec("monitor_period_s", 1.0, "at most one /detector/monitor message (and live-view sample) per this many "
+                                       "s of simulated time; 0: one per batch the detector processes",
+              range=(0.0, 1e9)),
+    ParamSpec("foxglove_port", 0, "serve what this detector sees (inputs, residuals, statistic ratios, alarm "
+                                  "state) over the Foxglove WebSocket protocol on this port; 0: no live view",
+              range=(0, 65535)),
+    ParamSpec("foxglove_host", live_view.LOOPBACK, "address the live view listens on (default: this machine only)"),
 )
 
 #: diagnostics counters that mean bad input (a growth is reported at once)
@@ -260,8 +272,27 @@ class DetectorNode(DetectorNodeBase):
         self._inputs_t = math.nan
         self._inputs_sent_at = -math.inf  # wall (monotonic) time of the last input-problem message
         self._resets_seen = 0  # window resets (gaps, clock jumps) the heartbeat schedule has followed
+        self._open_monitor()
         self.start_worker()
         self.start_barrier()
+
+    def _open_monitor(self) -> None:
+        """The live-view outputs asked for: the /detector/monitor topic and/or a Foxglove server of its own."""
+        self._monitor_period_s = self.param("monitor_period_s")
+        self._last_monitor_t = -math.inf
+        self.pub_monitor = self.data_publisher(MeasuredSample, DETECTOR_MONITOR.name) if self.param(
+            "monitor_topic") else None
+        self.live: live_view.LiveView | None = None
+        self.live_errors = 0  # messages the live view could not send: counted, logged, never fatal
+        if self.param("foxglove_port"):
+            try:
+                self.live = live_view.LiveView(self.param("foxglove_port"), self.param("foxglove_host"),
+                                               name="phfdi detector",
+                                               topics=(live_view.MEASUREMENT, live_view.CONTROLLER,
+                                                       live_view.MONITOR, live_view.ALARM))
+            except UserError as exc:
+                raise NodeStartError(str(exc)) from None
+            self.get_logger().info(f"live view (Foxglove): {self.live.url}")
 
     # ---- parameters -----------------------------------------------------------------------
     def _build_core(self):
@@ -360,6 +391,7 @@ class DetectorNode(DetectorNodeBase):
         self._core_state = core_state
         t_now = self._t_last()
         self._follow_clock(t_now, problems)
+        self._live_outputs(rows, t_now)
         if changed or (self._heartbeat_s > 0 and t_now >= _next_multiple(self._last_heartbeat_t, self._heartbeat_s)):
             self._publish_heartbeat(status, t_now, changed)
         grew = any(v > self._reported_problems.get(k, 0) for k, v in problems.items())
@@ -377,6 +409,53 @@ class DetectorNode(DetectorNodeBase):
         if resets != self._resets_seen or t_now < self._last_diag_t:
             self._last_diag_t = t_now
         self._resets_seen = resets
+
+    # ---- live view ---------------------------------------------------------------------------
+    def _live_outputs(self, rows: list[tuple], t_now: float) -> None:
+        """The inputs of these rows to the live view, and the monitor sample when it is due (worker thread)."""
+        if self.live is not None:
+            for ns, ph, level_cm, outputs, _ in rows:
+                t_s = ns * 1e-9
+                self._to_live(live_view.MEASUREMENT, {"time_s": t_s, "ph": live_view.finite(ph),
+                                                      "level_cm": live_view.finite(level_cm)}, ns)
+                if outputs is not None:  # (ph_output_pct, level_output_pct, ph_setpoint), as paired
+                    self._to_live(live_view.CONTROLLER, {
+                        "time_s": t_s, "ph_setpoint": live_view.finite(outputs[2]),
+                        "ph_output_pct": live_view.finite(outputs[0]), "level_setpoint_cm": None,
+                        "level_output_pct": live_view.finite(outputs[1])}, ns)
+        if (self.pub_monitor is None and self.live is None) or not rows:
+            return
+        if self._monitor_period_s > 0 and t_now < _next_multiple(self._last_monitor_t, self._monitor_period_s):
+            return
+        t_s, values = self.core.monitor()
+        if not math.isfinite(t_s):
+            return
+        self._last_monitor_t = t_s
+        ns = seconds_to_ns(t_s)
+        if self.pub_monitor is not None:
+            msg = MeasuredSample(source=DETECTOR_MONITOR.publisher, names=list(values), values=list(values.values()))
+            msg.stamp = to_time(ns)
+            self.pub_monitor.publish(msg)
+        if self.live is not None:
+            self._to_live(live_view.MONITOR, live_view.monitor(t_s, values), ns)
+
+    def _to_live(self, topic: str, message: dict, ns: int) -> None:
+        """One message to the detector's own live view; a failure costs the view that message, never detection
+        (this runs on the worker thread, which must not die)."""
+        assert self.live is not None
+        try:
+            self.live.log(topic, message, ns)
+        except Exception as exc:  # noqa: BLE001
+            self.live_errors += 1
+            if self.live_errors == 1 or self.live_errors % 1000 == 0:
+                self.get_logger().error(f"live view: {topic} message not sent ({self.live_errors} so far): "
+                                        f"{type(exc).__name__}: {exc}")
+
+    def publish_alarm(self, msg: FaultAlarm, kind: str, time_s: float, alarm: dict | None,
+                      report: bool = True) -> None:
+        super().publish_alarm(msg, kind, time_s, alarm, report)
+        if self.live is not None:
+            self._to_live(live_view.ALARM, live_view.fault_alarm(msg), time_ns(msg.stamp))
 
     # ---- input problems on /fault_alarm: rate-limited -----------------------------------
     def _inputs_due(self) -> bool:
@@ -515,6 +594,8 @@ class DetectorNode(DetectorNodeBase):
             self._publish_inputs(self._state, self._problems())
         self._publish_heartbeat(self.core.status(), self._t_last(), False)
         self._publish_diagnostics(self._t_last(), self._problems(), False)
+        if self.live is not None:
+            self.live.stop()
 
     def done_report(self) -> dict:
         alarms = [{"alarm_id": a.alarm_id, **a.summary()} for a in self.core.alarms]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import math
 import sys
@@ -14,6 +15,9 @@ from .common import EPILOG_FORMAT, Progress, add_scenario_args, scenario_from_ar
 #: parser is built without importing the launcher
 WATCHDOG_S = 30.0
 WATCHDOG_SAMPLE_PERIODS = 5.0
+#: the live view's defaults (phfdi_base.live_view.DEFAULT_PORT, LOOPBACK), here for the same reason
+FOXGLOVE_PORT = 8765
+FOXGLOVE_HOST = "127.0.0.1"
 
 EXAMPLES = """examples:
   phfdi launch --scenario paper --fault backlash --record bags/run.mcap
@@ -23,6 +27,7 @@ EXAMPLES = """examples:
   phfdi launch --record bags/live.mcap --pace 20          # 20 x real time, for a live demo
   phfdi launch --record bags/day.mcap --pace 1 --split-s 3600   # live, a new bag file every hour
   phfdi launch --domain-id 42 --pace 1                    # real time, join with your own nodes on domain 42
+  phfdi launch --fault backlash --detector --pace 20 --foxglove   # watch it live in Foxglove (ws://127.0.0.1:8765)
 
 Every node runs as its own process (python -m <package>.node) with
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST on a ROS domain of its own. Ctrl-C
@@ -47,6 +52,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detector-param", dest="detector_params", action="append", default=[], metavar="NAME=VALUE",
                    help="a parameter of the detector node, e.g. --detector-param calibration=my.yaml "
                         "(see python -m wavelet_fdi.node --help); implies --detector")
+    p.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
+                   help=f"serve the graph's signals (with --detector also its residuals, statistics and alarm state) live "
+                        f"over the Foxglove WebSocket protocol on PORT (default {FOXGLOVE_PORT}); open "
+                        f"ws://127.0.0.1:PORT in Foxglove with config/foxglove_layout.json (docs/ros_graph.md)")
+    p.add_argument("--foxglove-host", default=FOXGLOVE_HOST, metavar="ADDRESS",
+                   help=f"address the live view listens on (default {FOXGLOVE_HOST}: this machine only)")
     p.add_argument("--pace", type=float, default=0.0, metavar="FACTOR",
                    help="0: lock-step as fast as possible (default); F: F times real time")
     p.add_argument("--domain-id", type=int, default=None,
@@ -78,6 +89,8 @@ def _check(args: argparse.Namespace) -> None:
         raise UserError(f"--split-s {args.split_s}: use 0 (one file) or a positive number of seconds")
     if args.split_s > 0 and args.record is None:
         raise UserError("--split-s needs --record")
+    if args.foxglove is not None:
+        check_port_free(args.foxglove_host, args.foxglove)
     if args.record is not None and not args.record.endswith(".mcap"):
         raise UserError(f"--record {args.record}: give a .mcap file name")
     if args.record is not None:  # a bag being recorded: say so, whether or not --overwrite was given
@@ -93,6 +106,22 @@ def _check(args: argparse.Namespace) -> None:
         if part_path(args.record, 1).exists():
             raise UserError(f"--split-s: {part_path(args.record, 1)} exists (a part of an earlier split bag); "
                             f"remove those parts or give another --record name")
+
+
+def check_port_free(host: str, port: int) -> None:
+    """One line before any node starts if the live view could not listen on host:port."""
+    import socket
+
+    from phfdi_base.errors import UserError
+
+    if not 1 <= port <= 65535:
+        raise UserError(f"--foxglove {port}: use a port 1 .. 65535")
+    try:
+        with socket.create_server((host, port)):  # closed at once; the bridge binds it moments later
+            pass
+    except OSError as exc:
+        why = "already in use" if exc.errno == errno.EADDRINUSE else exc.strerror or str(exc)
+        raise UserError(f"--foxglove {port}: cannot listen on {host}:{port}: {why}") from None
 
 
 def detector_params(items: list[str]) -> dict:
@@ -113,6 +142,11 @@ def detector_params(items: list[str]) -> dict:
     if "calibration" in out and out["calibration"]:
         out["calibration"] = str(Path(out["calibration"]).resolve())
     return out
+
+
+def live_params(args: argparse.Namespace) -> dict | None:
+    """The live view's bridge parameters (None: no live view)."""
+    return None if args.foxglove is None else {"port": args.foxglove, "host": args.foxglove_host}
 
 
 def alarm_event_line(event: dict) -> str | None:
@@ -186,10 +220,13 @@ def run(args: argparse.Namespace) -> int:
     detector = detector_params(args.detector_params) if args.detector or args.detector_params else None
     nodes = loop_graph(args.scenario, args.fault, args.onset, args.overrides, args.record, args.pace,
                        args.executor, args.connect_timeout, detector=detector, split_after_s=args.split_s,
-                       overwrite=args.overwrite)
+                       overwrite=args.overwrite, live=live_params(args))
     say = lambda text: print(f"phfdi launch: {text}", file=sys.stderr)  # noqa: E731
 
     def on_event(node: str, event: dict) -> None:
+        if event.get("event") == "live_view":
+            say(f"live view: open {event['url']} in Foxglove (open connection -> Foxglove WebSocket), layout "
+                f"config/foxglove_layout.json")
         line = alarm_event_line(event)
         if line:
             say(line)

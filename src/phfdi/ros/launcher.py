@@ -59,7 +59,17 @@ from phfdi_base.errors import UserError
 from phfdi_base.parts import NodePart, write_part
 from phfdi_base.ros.env import LAUNCHER_PID_VAR, graph_env, reserve_domain_id
 from phfdi_base.topics import CONTROLLER as CONTROLLER_OUTPUT
-from phfdi_base.topics import CONTROLLERS, DETECTOR, MEASUREMENT, PLANT, PLANT_STATE, RECORDER, VALVE, VALVE_STATE
+from phfdi_base.topics import (
+    CONTROLLERS,
+    DETECTOR,
+    LIVE_VIEW,
+    MEASUREMENT,
+    PLANT,
+    PLANT_STATE,
+    RECORDER,
+    VALVE,
+    VALVE_STATE,
+)
 
 from .parts import make_part
 
@@ -88,10 +98,10 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
                overrides: list[str] = (), record: str | Path | None = None, pace: float = 0.0,
                executor: str = "events", connect_timeout_s: float = 60.0,
                extra: list[NodeSpec] = (), detector: dict | None = None,
-               split_after_s: float = 0.0, overwrite: bool = False) -> list[NodeSpec]:
+               split_after_s: float = 0.0, overwrite: bool = False, live: dict | None = None) -> list[NodeSpec]:
     """The loop graph: plant, valve, controllers (+ recorder, a new file every ``split_after_s`` of
     simulated time if > 0, replacing an existing ``record`` file only if ``overwrite``, + the fault detector
-    with these parameters, + extra nodes)."""
+    with these parameters, + the live view's bridge with these (port, host), + extra nodes)."""
     if Path(scenario).suffix in (".yaml", ".yml"):
         scenario = str(Path(scenario).resolve())
     common = {"scenario": scenario, "fault": fault or "", "fault_onset_s": -1.0 if onset_s is None else float(onset_s),
@@ -110,7 +120,10 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
             rec["split_after_s"] = float(split_after_s)
         nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", rec, OBSERVER))
     if detector is not None:
-        nodes.append(detector_spec(detector))
+        # the live view plots the detector's residuals and statistics: it asks the detector to publish them
+        nodes.append(detector_spec({**detector, "monitor_topic": True} if live is not None else detector))
+    if live is not None:
+        nodes.append(live_view_spec(live))
     nodes += list(extra)
     names = [n.name for n in nodes]
     for n in nodes:
@@ -123,6 +136,11 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
 def detector_spec(params: dict | None = None) -> NodeSpec:
     """The fault detector (wavelet_fdi.node): an observer, outside the lock-step ring."""
     return NodeSpec(DETECTOR, "wavelet_fdi.node", dict(params or {}), OBSERVER)
+
+
+def live_view_spec(params: dict | None = None) -> NodeSpec:
+    """The live view's bridge (phfdi.ros.live_bridge: the graph's signals to Foxglove): an observer."""
+    return NodeSpec(LIVE_VIEW, "phfdi.ros.live_bridge", dict(params or {}), OBSERVER)
 
 
 @dataclass

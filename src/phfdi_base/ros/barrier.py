@@ -23,7 +23,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from phfdi_base.topics import GRAPH_READY
 
-__all__ = ["DATA_QOS", "READY_QOS", "READY_READER_QOS", "StartBarrierMixin"]
+__all__ = ["DATA_QOS", "READY_QOS", "READY_READER_QOS", "VIEWER_QOS", "StartBarrierMixin"]
 
 #: every data topic: nothing lost, the writer waits for slow reliable readers
 DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -36,6 +36,11 @@ READY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=Rel
 #: came back with the writer's next 1 s heartbeat: measured 1 to 2 s more start-up)
 READY_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=64, reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: a reader that only watches (the live view): best effort, so a writer never waits for it nor keeps samples for it;
+#: matched at the start barrier all the same, so it sees the run from sample 0 when it keeps up
+VIEWER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE)
 
 
 #: libraries whose import costs a node 0.1 to 0.4 s of CPU at start-up (reported: which a node loaded)
@@ -99,8 +104,11 @@ class StartBarrierMixin(Node):
         self._data_publishers.append(pub)
         return pub
 
-    def data_subscription(self, msg_type, topic: str, callback: Callable, raw: bool = False):
-        sub = self.create_subscription(msg_type, topic, callback, DATA_QOS, raw=raw)
+    def data_subscription(self, msg_type, topic: str, callback: Callable, raw: bool = False,
+                          qos: QoSProfile = DATA_QOS):
+        """A subscription, part of the start barrier; ``qos`` other than the data QoS only for a reader that must
+        never hold a writer back (the live view's :data:`VIEWER_QOS`)."""
+        sub = self.create_subscription(msg_type, topic, callback, qos, raw=raw)
         self._data_subscriptions.append(sub)
         return sub
 
