@@ -10,19 +10,49 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 from phfdi_base.outputs import save_figure
 
 from .run import Run  # noqa: E402
+
+_SUFFIX_UNITS = (("_per_s", "1/s"), ("_ml_s", "mL/s"), ("_pct", "%"), ("_s", "s"))
+
+
+def param_text(fault_type: str, name: str, value: object) -> str:
+    """A fault parameter as an engineer writes it: ``width 0.7 % of span`` for ``width_pct = 0.7`` (the unit
+    from the fault catalogue, else from the name's suffix).
+
+    >>> param_text("no_such_block", "delay_s", 10.0), param_text("no_such_block", "s_pct", 1.5)
+    ('delay 10 s', 'S 1.5 %')
+    """
+    from phfdi_base.faults import FAULTS
+
+    unit, base = "", name
+    for suffix, suffix_unit in _SUFFIX_UNITS:
+        if name.endswith(suffix):
+            unit, base = suffix_unit, name[: -len(suffix)]
+            break
+    for fault in FAULTS.values():
+        if fault.block == fault_type and any(p.name == name for p in fault.params):
+            unit = fault.param(name).unit
+    base = base.upper() if len(base) == 1 else base.replace("_", " ")  # Kano's S and J
+    number = f"{value:g}" if isinstance(value, (int, float)) else str(value)
+    return f"{base} {number} {unit}".rstrip()
+
+
+def _fault_text(fault: dict) -> str:
+    """'backlash (width 0.7 % of span)' for a run's fault entry."""
+    params = ", ".join(param_text(fault["type"], k, v) for k, v in (fault.get("params") or {}).items())
+    name = fault["type"].replace("_", " ")
+    return f"{name} ({params})" if params else name
 
 
 def _title(run: Run) -> str:
     faults = run.metadata.get("faults") or []
     if not faults:
         return f"{run.metadata.get('scenario', 'run')}: healthy valve"
-    f = faults[0]
-    params = ", ".join(f"{k} = {v}" for k, v in (f.get("params") or {}).items())
-    return f"{run.metadata.get('scenario', 'run')}: {f['type']} ({params}) from {f['onset_s']:g} s"
+    return f"{run.metadata.get('scenario', 'run')}: {_fault_text(faults[0])} from {faults[0]['onset_s']:g} s"
 
 
 def _mark_onset(ax, run: Run) -> None:
@@ -104,37 +134,90 @@ def plot_run(run: Run, path: str | Path) -> Path:
     return path
 
 
+def _run_label(run: Run, name: str) -> str:
+    """A run's fault and size for a panel or row title, e.g. 'backlash (width 0.7 % of span)' (else its name)."""
+    faults = run.metadata.get("faults") or []
+    return _fault_text(faults[0]) if faults else name.replace("_", " ")
+
+
+#: the overview's numbers are over the run's last stretch of this length (s), after the setpoint change settled
+SETTLED_S = 2000.0
+
+
+def _settled_range(run: Run) -> str:
+    """pH minus setpoint over the run's last SETTLED_S seconds, as 'min..max pH' (the limit cycle or offset)."""
+    keep = run.time_s >= run.time_s[-1] - SETTLED_S
+    dev = run["ph_true"][keep] - run["ph_setpoint"][keep]
+    return f"pH - setpoint {np.min(dev):+.2f} to {np.max(dev):+.2f} over the last {SETTLED_S:g} s"
+
+
 def plot_overview(runs: Sequence[Run], labels: Sequence[str], path: str | Path) -> Path:
-    """pH of every run on one axis (the paper's Figure 27)."""
-    fig, ax = plt.subplots(figsize=(10, 5))
-    for run, lab in zip(runs, labels):
-        ax.plot(run.time_s, run["ph_true"], lw=0.9, label=lab)
-    ax.plot(runs[0].time_s, runs[0]["ph_setpoint"], color="k", ls="--", lw=0.8, label="setpoint")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("pH (-)")
-    ax.set_title("Impact of the valve nonlinearities on the closed-loop pH")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
-    fig.tight_layout()
+    """The pH of every run in its own panel, all on the same axes, each over the healthy run (the paper's
+    Figure 27 as small multiples: seven overlaid traces hide one another)."""
+    n_cols = 2
+    n_rows = (len(runs) + n_cols - 1) // n_cols
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(12, 2.3 * n_rows + 0.8), sharex=True, sharey=True,
+                             squeeze=False, layout="constrained")
+    healthy = next((r for r, lab in zip(runs, labels) if lab == "healthy"), None)
+    for ax, run, lab in zip(axes.flat, runs, labels):
+        if healthy is not None and run is not healthy:
+            ax.plot(healthy.time_s, healthy["ph_true"], color="0.6", lw=0.8, label="healthy run")
+        ax.plot(run.time_s, run["ph_true"], color="tab:blue", lw=0.8, label="pH in tank")
+        ax.plot(run.time_s, run["ph_setpoint"], color="k", ls="--", lw=0.8, label="setpoint")
+        ax.set_title(f"{_run_label(run, lab)}\n{_settled_range(run)}", fontsize=8)
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[len(runs):]:
+        ax.axis("off")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("pH (-)")
+    for ax in axes.flat[len(runs) - n_cols:len(runs)]:  # the lowest panel of each column carries the time axis
+        ax.set_xlabel("time (s)")
+        ax.tick_params(labelbottom=True)
+    handles, names = axes.flat[min(1, len(runs) - 1)].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncol=3, fontsize=8)
+    fig.suptitle("Impact of the valve nonlinearities on the closed-loop pH (one panel per run, shared axes)",
+                 fontsize=10)
     path = Path(path)
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
 
-def plot_overview_3d(runs: Sequence[Run], labels: Sequence[str], path: str | Path) -> Path:
-    """Waterfall of the runs' pH (the paper's Figure 28)."""
-    fig = plt.figure(figsize=(10, 6))
-    ax = fig.add_subplot(projection="3d")
-    for i, (run, lab) in enumerate(zip(runs, labels)):
-        ax.plot(run.time_s, np.full(len(run), i), run["ph_true"], lw=0.8, label=lab)
+#: the map's time bins per run: each cell is the largest deviation in its bin (100 s of the paper's 10000 s run,
+#: about one limit cycle), so a cycle shows as its amplitude instead of aliasing into stripes
+MAP_BINS = 100
+MAP_FLOOR_PH = 0.01  # the colour scale's bottom: the probe's noise is about this size
+
+
+def _peak_deviation(run: Run, edges: np.ndarray) -> np.ndarray:
+    """Largest |pH in tank - setpoint| in each time bin [edges[i], edges[i+1])."""
+    dev = np.abs(run["ph_true"] - run["ph_setpoint"])
+    idx = np.clip(np.searchsorted(run.time_s, edges[:-1]), 0, len(dev) - 1)
+    return np.maximum.reduceat(dev, idx)
+
+
+def plot_overview_map(runs: Sequence[Run], labels: Sequence[str], path: str | Path) -> Path:
+    """How far each run's pH strays from its setpoint, one row per run against time, on a log colour scale
+    (the paper's Figure 28, a 3-D waterfall, as a map that reads at a glance: where each run leaves its
+    setpoint and by how much)."""
+    from matplotlib.colors import LogNorm
+
+    t = runs[0].time_s
+    bin_s = float(t[-1] - t[0]) / MAP_BINS
+    edges = float(t[0]) + bin_s * np.arange(MAP_BINS + 1)
+    rows = np.maximum(np.vstack([_peak_deviation(r, edges) for r in runs]), MAP_FLOOR_PH)
+    fig, ax = plt.subplots(figsize=(12, 0.45 * len(runs) + 2.2), layout="constrained")
+    image = ax.imshow(rows, aspect="auto", cmap="magma_r", interpolation="nearest",
+                      norm=LogNorm(MAP_FLOOR_PH, max(1.0, float(rows.max()))),
+                      extent=(float(edges[0]), float(edges[-1]), len(runs) - 0.5, -0.5))
+    ax.set_yticks(range(len(runs)))
+    ax.set_yticklabels([_run_label(r, lab) for r, lab in zip(runs, labels)], fontsize=8)
+    ax.set_ylabel("run (fault, size)")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("run")
-    ax.set_yticks(range(len(labels)))
-    ax.set_yticklabels(labels, fontsize=7)
-    ax.set_zlabel("pH (-)")
-    ax.set_title("Healthy and faulty pH responses")
-    fig.tight_layout()
+    bar = fig.colorbar(image, ax=ax, pad=0.01, extend="min")
+    bar.set_label(f"largest |pH in tank - setpoint|\nper {bin_s:.3g} s (pH)")
+    bar.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
+    ax.set_title("Healthy and faulty pH responses: how far the pH strays from its setpoint", fontsize=10)
     path = Path(path)
     save_figure(fig, path, dpi=110)
     plt.close(fig)
