@@ -19,22 +19,22 @@ from .run import Run  # noqa: E402
 _SUFFIX_UNITS = (("_per_s", "1/s"), ("_ml_s", "mL/s"), ("_pct", "%"), ("_s", "s"))
 
 
-def param_text(fault_type: str, name: str, value: object) -> str:
+def param_text(fault_type: str, name: str, value: object, unit: str = "") -> str:
     """A fault parameter as an engineer writes it: ``width 0.7 % of span`` for ``width_pct = 0.7`` (the unit
-    from the fault catalogue, else from the name's suffix).
+    from the fault catalogue, found by block or preset name, else ``unit``, else from the name's suffix).
 
     >>> param_text("no_such_block", "delay_s", 10.0), param_text("no_such_block", "s_pct", 1.5)
     ('delay 10 s', 'S 1.5 %')
     """
     from phfdi_base.faults import FAULTS
 
-    unit, base = "", name
+    base = name
     for suffix, suffix_unit in _SUFFIX_UNITS:
         if name.endswith(suffix):
-            unit, base = suffix_unit, name[: -len(suffix)]
+            unit, base = unit or suffix_unit, name[: -len(suffix)]
             break
     for fault in FAULTS.values():
-        if fault.block == fault_type and any(p.name == name for p in fault.params):
+        if fault_type in (fault.block, fault.name) and any(p.name == name for p in fault.params):
             unit = fault.param(name).unit
     base = base.upper() if len(base) == 1 else base.replace("_", " ")  # Kano's S and J
     number = f"{value:g}" if isinstance(value, (int, float)) else str(value)

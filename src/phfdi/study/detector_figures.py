@@ -29,32 +29,65 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
+#: units of the evaluation's own faults, which the fault catalogue does not hold
+EVALUATION_UNITS = {("probe_noise", "std"): "pH"}
+
+
+def _delay_bars(ax, mine: list[dict], width: float) -> None:
+    """One group of bars per severity, one bar per detector; a cross at the bottom where a detector missed
+    every run (its mean delay is None)."""
+    x = np.arange(len(mine))
+    for j, d in enumerate(DETECTORS):
+        offset = (j - len(DETECTORS) / 2 + 0.5) * width
+        vals = np.array([r["delay"][d] if r["delay"][d] is not None else np.nan for r in mine])
+        ax.bar(x + offset, vals, width, color=COLORS[d], label=LABELS[d])
+        missed = np.isnan(vals)
+        ax.plot(x[missed] + offset, np.full(missed.sum(), DELAY_FLOOR_S * 1.4), "x", color=COLORS[d], ms=7,
+                mew=2)
+    bounds = [r["bound_s"] if r["bound_s"] is not None else np.nan for r in mine]
+    ax.plot(x, bounds, "k_", ms=30, mew=2)
+    # legend entries drawn apart: a 30-point marker overruns its label, a cross takes one detector's colour
+    ax.plot([], [], "k-", lw=2, label="bound (oracle)")
+    ax.plot([], [], "x", color="0.3", ms=7, mew=2, label="missed in every run (cross in the detector's colour)")
+
+
+DELAY_FLOOR_S = 0.5  # the log axes' bottom: below the 1 s sample time, so a 1 s bar still shows
+
+
 def plot_delays(summary: dict, path: Path) -> Path:
+    """Mean detection delay per fault and severity, every detector, with the oracle bound: one panel per
+    fault on one shared log axis, one legend under the panels."""
+    from phfdi.figures import param_text
+
     faults = list(dict.fromkeys(r["fault"] for r in summary["rows"]))
     cols = 3
     rows = (len(faults) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(14, 4 * rows), squeeze=False)
-    width = 0.8 / len(DETECTORS)
+    fig, axes = plt.subplots(rows, cols, figsize=(14, 3.6 * rows + 0.8), squeeze=False, sharey=True,
+                             layout="constrained")
+    delays = [v for r in summary["rows"] for v in list(r["delay"].values()) + [r["bound_s"]] if v]
+    top = 2.0 * max(delays, default=10.0)
     for ax, fault in zip(axes.flat, faults):
         mine = [r for r in summary["rows"] if r["fault"] == fault]
-        x = np.arange(len(mine))
-        for j, d in enumerate(DETECTORS):
-            vals = [r["delay"][d] if r["delay"][d] is not None else np.nan for r in mine]
-            ax.bar(x + (j - len(DETECTORS) / 2 + 0.5) * width, vals, width, color=COLORS[d], label=LABELS[d])
-        bounds = [r["bound_s"] if r["bound_s"] is not None else np.nan for r in mine]
-        ax.plot(x, bounds, "k_", ms=30, mew=2, label="bound (oracle)")
-        ax.set_xticks(x)
-        ax.set_xticklabels([f"{r['param']}\n= {r['value']:g}" for r in mine], fontsize=8)
+        _delay_bars(ax, mine, 0.8 / len(DETECTORS))
+        ax.set_xticks(np.arange(len(mine)))
+        ax.set_xticklabels([param_text(fault, r["param"], r["value"], EVALUATION_UNITS.get((fault, r["param"]), ""))
+                            for r in mine], fontsize=8)
+        ax.set_xlabel("fault size", fontsize=8)
         ax.set_yscale("log")
+        ax.set_ylim(DELAY_FLOOR_S, top)
+        plain_log_ticks(ax)
+        ax.set_title(fault.replace("_", " "), fontsize=10)
+        ax.grid(alpha=0.3, axis="y", which="major")
+    for ax in axes[:, 0]:
         ax.set_ylabel("detection delay (s)")
-        ax.set_title(fault)
-        ax.grid(alpha=0.3, axis="y")
     for ax in list(axes.flat)[len(faults):]:
         ax.axis("off")
-    axes.flat[0].legend(fontsize=7)
-    fig.suptitle(f"Detection delay at equal false-alarm rate (ARL0 = {summary['arl0_samples']:g} samples); "
-                 "missing bar: missed", fontsize=10)
-    return _save(fig, path)
+    _figure_legend(fig, axes)
+    fig.suptitle(f"Detection delay after the onset at equal false-alarm rate (ARL0 = {summary['arl0_samples']:g} "
+                 "samples), mean over the seeds that detected", fontsize=10)
+    save_figure(fig, path, dpi=110)  # not _save: its tight_layout would replace the constrained layout
+    plt.close(fig)
+    return path
 
 
 def plot_false_alarms(summary: dict, path: Path) -> Path:
@@ -115,29 +148,48 @@ def plot_parameters(summary: dict, path: Path) -> Path:
     return _save(fig, path)
 
 
-def plot_coefficient_residuals(signals: dict, settings: DetectorSettings, path: Path, title: str) -> Path:
-    """Paper Figures 50-55: D1..DJ, AJ of the measured and predicted pH, and their differences."""
+def band_gain(band: str) -> float:
+    """An orthonormal DWT's gain on level j (a sine in D_j, a constant in A_J: 2^(j/2)); dividing by it makes
+    a band's coefficients read as the pH amplitude of that band's part of the signal.
+
+    >>> band_gain("D2"), round(band_gain("A3"), 3)
+    (2.0, 2.828)
+    """
+    return 2.0 ** (0.5 * int(band[1:]))
+
+
+def plot_coefficient_residuals(signals: dict, settings: DetectorSettings, path: Path, title: str,
+                               onset_s: float | None = None) -> Path:
+    """Paper Figures 50-55: D1..DJ, AJ of the measured and predicted pH, and their differences, each band
+    divided by its gain 2^(j/2) so that it reads in pH (A3 is then the local mean pH, not 2.8 times it)."""
     t = signals["time_s"]
     ok = np.isfinite(signals["ph_predicted"]) & np.isfinite(signals["ph_measured"])
     res = coefficient_residuals(signals["ph_measured"][ok], signals["ph_predicted"][ok],
                                 settings.wavelet, settings.level)
     bands = settings.bands()
-    fig, axes = plt.subplots(len(bands), 3, figsize=(14, 2.2 * len(bands)), sharex=True)
+    fig, axes = plt.subplots(len(bands), 3, figsize=(14, 2.2 * len(bands) + 0.6), sharex=True, layout="constrained")
     t0, t1 = float(t[ok][0]), float(t[ok][-1])
+    titles = {"measured": "measured pH", "predicted": "healthy model's prediction",
+              "residual": "coefficient residual (measured - predicted)"}
     for i, b in enumerate(bands):
         for j, key in enumerate(("measured", "predicted", "residual")):
-            c = res[key][b]
+            c = res[key][b] / band_gain(b)
             ax = axes[i, j]
             ax.plot(np.linspace(t0, t1, len(c)), c, lw=0.6, color="tab:red" if key == "residual" else "tab:blue")
-            ax.set_ylabel(f"{'Res' if key == 'residual' else ''}{b} (pH)", fontsize=8)
+            if onset_s is not None:
+                ax.axvline(onset_s, color="k", ls=":", lw=1.2, label="fault onset")
+            ax.set_ylabel(f"{'Res' if key == 'residual' else ''}{b} / {band_gain(b):.3g} (pH)", fontsize=8)
             if i == 0:
-                ax.set_title({"measured": "measured pH", "predicted": "healthy prediction",
-                              "residual": "coefficient residual (measured - predicted)"}[key], fontsize=9)
+                ax.set_title(titles[key], fontsize=9)
             ax.grid(alpha=0.3)
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
-    fig.suptitle(title, fontsize=10)
-    return _save(fig, path)
+    if onset_s is not None:
+        axes[0, 0].legend(fontsize=7, loc="lower left")
+    fig.suptitle(title + "\neach band divided by its gain 2^(j/2), so it reads in pH", fontsize=10)
+    save_figure(fig, path, dpi=110)  # not _save: its tight_layout would replace the constrained layout
+    plt.close(fig)
+    return path
 
 
 def plot_evaluation(summary: dict, records: list[dict], out: Path, signals: dict | None,
@@ -145,10 +197,12 @@ def plot_evaluation(summary: dict, records: list[dict], out: Path, signals: dict
     paths = [plot_delays(summary, out / "delays.png"), plot_false_alarms(summary, out / "false_alarms.png"),
              plot_isolation(summary, out / "isolation.png"), plot_parameters(summary, out / "parameters.png")]
     if signals is not None:
+        onset = next((r["onset_s"] for r in records if r["fault"] == "backlash"), None)
+        when = f" at {onset:g} s" if onset is not None else ""
         paths.append(plot_coefficient_residuals(
             signals, settings, out / "coefficient_residuals_backlash.png",
-            f"Backlash at 7000 s: {settings.wavelet} level-{settings.level} DWT (pywt.wavedec) of the measured pH, "
-            f"the healthy model's prediction and their difference (paper Figures 50-55)"))
+            f"Backlash{when}: {settings.wavelet} level-{settings.level} DWT (pywt.wavedec) of the measured pH, "
+            f"the healthy model's prediction and their difference (paper Figures 50-55)", onset))
     return paths
 
 
