@@ -27,6 +27,11 @@ def _shade(ax, time_s: np.ndarray, val: np.ndarray) -> None:
         ax.axvspan(time_s[a], time_s[b - 1], color="0.92", zorder=0)
 
 
+def _cause_text(cause: str | None) -> str:
+    """A cause's catalogue name as words: 'sensor_gain+holdup' -> 'sensor gain + holdup'."""
+    return (cause or "none").replace("+", " + ").replace("_", " ")
+
+
 def plot_fit(rec: Record, nominal: Prediction, extended: Prediction | None, val: np.ndarray, path: Path,
              cause: str | None = None) -> Path:
     """Each measured output with the nominal (and extended) simulation, and the residuals."""
@@ -42,7 +47,7 @@ def plot_fit(rec: Record, nominal: Prediction, extended: Prediction | None, val:
         ax.plot(t, nominal.outputs[o], color="tab:red", lw=1.0, label="nominal model")
         axr.plot(t, rec.outputs[o] - nominal.outputs[o], color="tab:red", lw=0.7, label="nominal")
         if extended is not None:
-            ax.plot(t, extended.outputs[o], color="tab:blue", lw=1.0, ls="--", label=f"extended ({cause})")
+            ax.plot(t, extended.outputs[o], color="tab:blue", lw=1.0, ls="--", label=f"extended ({_cause_text(cause)})")
             axr.plot(t, rec.outputs[o] - extended.outputs[o], color="tab:blue", lw=0.7, label="extended")
         ax.set_ylabel(label(o))
         axr.set_ylabel(f"residual\n{label(o)}")
@@ -123,10 +128,10 @@ def plot_ranking(report: dict, path: Path) -> Path:
     """Held-out error of every candidate (in multiples of the noise floor) against the nominal model's."""
     rows = report["ranking"] + report.get("pairs", [])[:3]
     rows = sorted(rows, key=lambda r: r["validation_rmse_over_noise"])
-    names = [r["cause"] for r in rows]
+    names = [_cause_text(r["cause"]) for r in rows]
     vals = [r["validation_rmse_over_noise"] for r in rows]
     nominal = report["nominal"]["combined_rmse_over_noise"]
-    fig, ax = plt.subplots(figsize=(9, 0.32 * len(rows) + 1.8))
+    fig, ax = plt.subplots(figsize=(9, 0.32 * len(rows) + 2.4), layout="constrained")
     colours = {"actuator": "tab:orange", "sensor": "tab:green", "process": "tab:purple"}
     ax.barh(range(len(rows)), vals, color=[colours.get(r["family"].split("+")[0], "0.5") for r in rows])
     ax.axvline(nominal, color="tab:red", lw=1.2, label=f"nominal model ({nominal:.3g})")
@@ -137,10 +142,10 @@ def plot_ranking(report: dict, path: Path) -> Path:
     ax.invert_yaxis()
     ax.set_xscale("log" if max(vals + [nominal]) / max(min(vals), 1e-9) > 30 else "linear")
     ax.set_xlabel("held-out RMS error / noise floor (1)")
+    ax.set_ylabel("candidate cause (colour: its family)")
     ax.set_title("Candidates ranked by held-out error (orange actuator, green sensor, purple process)", fontsize=10)
-    ax.legend(fontsize=8, loc="lower right")
+    fig.legend(fontsize=8, loc="outside lower center", ncol=2)  # under the axes: the longest bars end at the right
     ax.grid(alpha=0.3, axis="x")
-    fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     save_figure(fig, path, dpi=100)
     plt.close(fig)
