@@ -140,15 +140,17 @@ def _run_label(run: Run, name: str) -> str:
     return _fault_text(faults[0]) if faults else name.replace("_", " ")
 
 
-#: the overview's numbers are over the run's last stretch of this length (s), after the setpoint change settled
+#: the overview's numbers are over the run's last stretch of this length (s; at most a fifth of the run), after
+#: the paper run's setpoint change has settled
 SETTLED_S = 2000.0
 
 
 def _settled_range(run: Run) -> str:
-    """pH minus setpoint over the run's last SETTLED_S seconds, as 'min..max pH' (the limit cycle or offset)."""
-    keep = run.time_s >= run.time_s[-1] - SETTLED_S
+    """pH minus setpoint over the run's last stretch (SETTLED_S), as 'min to max' (the limit cycle or offset)."""
+    settled_s = min(SETTLED_S, 0.2 * float(run.time_s[-1] - run.time_s[0]))
+    keep = run.time_s >= run.time_s[-1] - settled_s
     dev = run["ph_true"][keep] - run["ph_setpoint"][keep]
-    return f"pH - setpoint {np.min(dev):+.2f} to {np.max(dev):+.2f} over the last {SETTLED_S:g} s"
+    return f"pH - setpoint {np.min(dev):+.2f} to {np.max(dev):+.2f} over the last {settled_s:g} s"
 
 
 def plot_overview(runs: Sequence[Run], labels: Sequence[str], path: str | Path) -> Path:

@@ -72,7 +72,7 @@ def plot_delays(summary: dict, path: Path) -> Path:
         ax.set_xticks(np.arange(len(mine)))
         ax.set_xticklabels([param_text(fault, r["param"], r["value"], EVALUATION_UNITS.get((fault, r["param"]), ""))
                             for r in mine], fontsize=8)
-        ax.set_xlabel("fault size", fontsize=8)
+        ax.set_xlabel("fault size (unit on each tick)", fontsize=8)
         ax.set_yscale("log")
         ax.set_ylim(DELAY_FLOOR_S, top)
         plain_log_ticks(ax)
