@@ -75,12 +75,15 @@ def label(name: str) -> str:
     Examples
     --------
     >>> from phfdi_base import label
-    >>> label("valve_position_pct")
-    'valve position (%)'
+    >>> label("valve_position_pct"), label("ph_measured")
+    ('valve position (%)', 'pH measured (pH)')
     """
     base = name
     for suffix in ("_ml_s", "_pct", "_cm", "_s"):
         if base.endswith(suffix):
             base = base[: -len(suffix)]
             break
-    return f"{base.replace('_', ' ')} ({unit_of(name)})"
+    words = base.split("_")
+    if words[0] == "ph":  # pH signals' names start with ph; a reader expects the quantity's own spelling
+        words[0] = "pH"
+    return f"{' '.join(words)} ({unit_of(name)})"

@@ -109,7 +109,7 @@ def test_paper_runs_writes_runs_and_labelled_figures(tmp_path, capsys):
     assert code == 0
     for f in ("healthy", "backlash", "friction", "deadzone", "saturation", "stiction", "probe_delay"):
         assert (tmp_path / "pr" / f"{f}.csv").exists() and (tmp_path / "pr" / f"{f}.png").stat().st_size > 10000
-    assert (tmp_path / "pr" / "overview.png").exists() and (tmp_path / "pr" / "overview_3d.png").exists()
+    assert (tmp_path / "pr" / "overview.png").exists() and (tmp_path / "pr" / "overview_map.png").exists()
     summary = json.loads((tmp_path / "pr" / "summary.json").read_text())
     assert set(summary) >= {"healthy", "saturation"}
 

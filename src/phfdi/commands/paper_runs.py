@@ -11,8 +11,9 @@ EXAMPLES = """examples:
   phfdi paper-runs --out out/paper
   phfdi paper-runs --out out/paper --onset 7000     # faults strike at 7000 s (the paper's Section 7)
 
-Writes DIR/<run>.csv and DIR/<run>.png per run, DIR/overview.png (Figure 27),
-DIR/overview_3d.png (Figure 28) and DIR/summary.json.
+Writes DIR/<run>.csv and DIR/<run>.png per run, DIR/overview.png (Figure 27, one panel per run),
+DIR/overview_map.png (Figure 28 as a map:
+pH minus setpoint, one row per run) and DIR/summary.json.
 """
 
 PAPER_FAULTS = ["healthy", "backlash", "friction", "deadzone", "saturation", "stiction", "probe_delay"]
@@ -34,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.figures import plot_overview, plot_overview_3d, plot_run
+    from phfdi.figures import plot_overview, plot_overview_map, plot_run
     from phfdi.loop import simulate
     from phfdi.scenario import load_scenario
     from phfdi.summary import format_summary, summarize
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         summaries[fault] = summarize(result)
         progress((i + 1) / len(PAPER_FAULTS))
     plot_overview(runs, labels, out / "overview.png")
-    plot_overview_3d(runs, labels, out / "overview_3d.png")
+    plot_overview_map(runs, labels, out / "overview_map.png")
     write_text(out / "summary.json", json.dumps(summaries, indent=2), overwrite=True)
     if args.json:
         print(json.dumps(summaries, indent=2))

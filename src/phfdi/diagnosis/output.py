@@ -13,6 +13,7 @@ from phfdi.loop import build_parts
 from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
 from phfdi_base.outputs import write_text
+from phfdi_base.signals import label
 
 from .extend import load_model_file, write_model
 from .figures import plot_fit, plot_ranking, plot_scalogram
@@ -87,8 +88,8 @@ def write_figures(d: Diagnosis, out_dir: Path) -> list[str]:
         for o in rec.outputs:
             res = rec.outputs[o] - d.nominal[i].outputs[o]
             files.append(str(plot_scalogram(rec, res, o, out_dir / f"scalogram_{i + 1}_{_slug(rec.name)}_{o}.png",
-                                            f"{rec.name}: residual of the nominal model ({o}) and its "
-                                            f"wavelet scalogram")))
+                                            f"{rec.name}: residual of the nominal model's "
+                                            f"{label(o).rsplit(' (', 1)[0]} and its wavelet scalogram")))
     if rep["ranking"]:
         files.append(str(plot_ranking(rep, out_dir / "ranking.png")))
     rep["figures"] = files

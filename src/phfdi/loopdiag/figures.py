@@ -41,8 +41,7 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     op = run["op_pct"]
-    unit = (run.metadata.get("units") or {}).get("pv", "") or "PV units"
-    op_unit = "% of span" if np.min(op) >= 0 and np.max(op) <= 100 else "OP units"
+    unit, op_unit = _units(run)
     fig = plt.figure(figsize=(13, 9))
     gs = fig.add_gridspec(3, 3, height_ratios=[2.2, 1.4, 2.4])
     ax_pv = fig.add_subplot(gs[0, :])
@@ -90,6 +89,7 @@ def _plot_trends(ax_pv, ax_op, run: Run, ev: Evidence, kano, unit: str, op_unit:
         ax.axvline(t_min[split.n_train], color="tab:green", ls=":", lw=1)
     ax_pv.text(t_min[split.n_train], ax_pv.get_ylim()[1], " held-out part", va="top", fontsize=8, color="tab:green")
     ax_pv.set_ylabel(f"PV ({unit})")
+    ax_pv.tick_params(labelbottom=False)  # the time axis is read under OP, the panel below
     ax_op.set_ylabel(f"OP, stem ({op_unit})")
     ax_op.set_xlabel("time (min)")
     ax_pv.legend(fontsize=7, loc="best")
@@ -153,6 +153,14 @@ def _plot_stem(ax, op: np.ndarray, kano, op_unit: str) -> None:
     ax.set_ylabel(f"stem position ({op_unit})")
 
 
+def _units(run: Run) -> tuple[str, str]:
+    """PV's unit as the record gives it, else 'as recorded'; OP in % of span when it stays within 0-100."""
+    op = run["op_pct"]
+    unit = (run.metadata.get("units") or {}).get("pv", "") or "as recorded"
+    op_unit = "% of span" if np.min(op) >= 0 and np.max(op) <= 100 else "as recorded"
+    return unit, op_unit
+
+
 def _title(rep: dict) -> str:
     """The loop's one verdict (the valve-model fit is in the legends, as evidence)."""
     verdict = rep.get("loop_verdict") or {}
@@ -165,8 +173,7 @@ def plot_record(run: Run, rep: dict, out_dir: str | Path) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     op = run["op_pct"]
-    unit = (run.metadata.get("units") or {}).get("pv", "") or "PV units"
-    op_unit = "% of span" if np.min(op) >= 0 and np.max(op) <= 100 else "OP units"
+    unit, op_unit = _units(run)
     fig, (ax_pv, ax_op) = plt.subplots(2, 1, figsize=(13, 6), sharex=True, height_ratios=[2, 1.4])
     t_min = run.time_s / 60.0
     ax_pv.plot(t_min, run["pv"], color="k", lw=0.7, label="PV measured")
