@@ -2,9 +2,16 @@
 
 Why a package of its own here and not a setup.py at the repository root: the root keeps its pyproject.toml for
 `pip install -e .` (scripts/setup.sh) untouched, and colcon, crawling a workspace, finds this package.xml (and
-interfaces/phfdi_interfaces) but no package at the root. The code is not copied: this setup.py builds the
-packages of ../../src, and takes the console scripts, the ``phfdi.node_parts`` entry point and the package data
-from ../../pyproject.toml, so the executables are the same entry points as `pip install` makes.
+interfaces/phfdi_interfaces) but no package at the root. The code is not copied: src and config here are
+symlinks to the repository's (git stores them), and the console scripts, the ``phfdi.node_parts`` entry point
+and the package data come from the repository's pyproject.toml, so the executables are the same entry points as
+`pip install` makes.
+
+Why symlinks and not ``package_dir={"": "../../src"}``: colcon's --symlink-install mirrors package_dir and the
+data files' paths into build/<package>/, so a path with ``..`` leaves the build folder. Tried here: it replaced
+the workspace's src/phfdi link with a link to itself. Read, not tried: over a real clone the same code
+(colcon_core/task/python/build.py, _symlinks_in_build) calls shutil.rmtree on the clone. Every path below stays
+inside this folder.
 """
 
 import tomllib
@@ -14,10 +21,10 @@ from pathlib import Path
 from setuptools import find_namespace_packages, setup
 
 NAME = "phfdi_ros"
-ROOT = "../.."  # the repository; relative, as setuptools wants (colcon runs this file from its folder)
-project = tomllib.loads(Path(ROOT, "pyproject.toml").read_text())
+# the repository (read only): resolved from this file, also when colcon runs a symlink of it in build/
+project = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())
 tool = project["tool"]["setuptools"]
-src = f"{ROOT}/{tool['packages']['find']['where'][0]}"
+src = tool["packages"]["find"]["where"][0]  # "src": the symlink to the repository's src/
 
 setup(
     name=NAME,
@@ -31,7 +38,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{NAME}"]),
         (f"share/{NAME}", ["package.xml"]),
         (f"share/{NAME}/launch", glob("launch/*.launch.py")),
-        (f"share/{NAME}/config", sorted(glob(f"{ROOT}/config/*.params.yaml"))),
+        (f"share/{NAME}/config", sorted(glob("config/*.params.yaml"))),
     ],
     # the Python libraries come from the ROS installation (package.xml) or pip, not from here
     install_requires=["setuptools"],

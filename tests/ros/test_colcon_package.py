@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -89,10 +90,18 @@ def test_install_has_the_executables_config_launch_file_and_index_marker(workspa
     assert sorted(n.removesuffix(".params.yaml") for n in installed) == sorted(launch_file_nodes())
 
 
-def installed_env(prefix: Path) -> dict[str, str]:
-    """What `source install/setup.sh` adds for this package: its site-packages first on the Python path."""
-    site = next((prefix / "lib").glob("python3.*/site-packages"))
-    return {**os.environ, "PYTHONPATH": str(site)}
+#: what `source install/setup.bash` sets that the nodes' processes use
+SOURCED = ("PYTHONPATH", "AMENT_PREFIX_PATH", "PATH", "COLCON_PREFIX_PATH")
+
+
+def sourced_env(ws: Path) -> dict[str, str]:
+    """This environment after `source install/setup.bash` of the workspace (the PYTHONPATH of this test process,
+    the repository's src/, is dropped first: only the install is on the path)."""
+    base = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    out = subprocess.run(["bash", "-c", "source install/setup.bash && env -0"], cwd=ws, env=base,
+                         capture_output=True, timeout=60, check=True).stdout.decode()
+    env = dict(item.split("=", 1) for item in out.split("\0") if "=" in item)
+    return {**base, **{k: env[k] for k in SOURCED if k in env}}
 
 
 def test_installed_code_is_the_installed_copy(workspace):
@@ -102,8 +111,8 @@ def test_installed_code_is_the_installed_copy(workspace):
     code = ("import importlib.metadata as m, ph_plant_sim.node, phfdi.ros.recorder, wavelet_fdi.node;"
             "print(ph_plant_sim.node.__file__); print(phfdi.ros.recorder.__file__); print(wavelet_fdi.node.__file__);"
             "print(sorted(e.value for e in m.entry_points(group='phfdi.node_parts'))[0])")
-    out = subprocess.run([sys.executable, "-c", code], env=installed_env(prefix), capture_output=True, text=True,
-                         timeout=60)
+    out = subprocess.run([sys.executable, "-c", code], env=sourced_env(workspace["ws"]), capture_output=True,
+                         text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     *files, resolver = out.stdout.split()
     assert all(f.startswith(str(prefix)) for f in files), files
@@ -148,7 +157,9 @@ def test_installed_executables_run_the_loop_like_phfdi_launch(workspace, tmp_pat
     nodes = loop_graph(fault=FAULT, record=bags["launch"], detector={})
     results["launch"] = Launcher(nodes, log_dir=tmp_path / "launch_logs").run()
     # the installed executables with the installed parameter files
-    monkeypatch.setenv("PYTHONPATH", installed_env(prefix)["PYTHONPATH"])
+    env = sourced_env(workspace["ws"])
+    for key in SOURCED:
+        monkeypatch.setenv(key, env[key])
     results["installed"] = InstalledLauncher(installed_graph(prefix, bags["installed"]), prefix, bags["installed"],
                                              log_dir=tmp_path / "installed_logs").run()
     monkeypatch.undo()
@@ -177,3 +188,31 @@ def test_installed_executables_run_the_loop_like_phfdi_launch(workspace, tmp_pat
     assert alarms["launch"] and alarms["launch"][-1]["fault_class"] == FAULT
     print(f"alarms (installed, launch): {len(alarms['installed'])}, {len(alarms['launch'])}; /fault_alarm messages: "
           f"{counts['installed'][T.FAULT_ALARM.name]}, {counts['launch'][T.FAULT_ALARM.name]}")
+
+
+def test_symlink_install_links_to_the_sources_and_leaves_them_alone(tmp_path):
+    """`colcon build --symlink-install` over a workspace holding a real copy of the repository: the copy is intact
+    afterwards (a package_dir with '..' would have made colcon replace it: see packages/phfdi_ros/setup.py) and
+    the sourced workspace imports the copy's files."""
+    ws = tmp_path / "ws"
+    clone = ws / "src" / "phfdi"
+    clone.mkdir(parents=True)
+    for item in ("pyproject.toml", "src", "config", "packages", "interfaces"):
+        src, dst = REPO / item, clone / item
+        if src.is_dir():
+            shutil.copytree(src, dst, symlinks=True, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(src, dst)
+    before = sorted(str(p.relative_to(clone)) for p in clone.rglob("*"))
+    colcon = Path(sys.executable).parent / "colcon"
+    build = subprocess.run([str(colcon), "build", "--symlink-install", "--packages-ignore", "phfdi_interfaces"],
+                           cwd=ws, env={**os.environ, "AMENT_PREFIX_PATH": sys.prefix}, capture_output=True, text=True,
+                           timeout=300)
+    assert build.returncode == 0, build.stdout + build.stderr
+    assert clone.is_dir() and not clone.is_symlink()
+    assert sorted(str(p.relative_to(clone)) for p in clone.rglob("*")) == before
+    out = subprocess.run([sys.executable, "-c", "import wavelet_fdi.node as m, os; print(os.path.realpath(m.__file__))"],
+                         env=sourced_env(ws), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == str((clone / "src" / "wavelet_fdi" / "node.py").resolve())
+    assert (ws / "install" / PACKAGE / "lib" / PACKAGE / "phfdi-detector-node").exists()
