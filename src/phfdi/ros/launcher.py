@@ -336,7 +336,7 @@ class Launcher:
                 self._parts_written[id(spec.part)] = str(write_part(path, spec.part))
             params["part"] = self._parts_written[id(spec.part)]
         params_file = self.log_dir / f"{spec.name}.params.yaml"
-        params_file.write_text(yaml.safe_dump({spec.name: {"ros__parameters": params}}, sort_keys=False))
+        params_file.write_text(params_document(spec.name, params))
         return [sys.executable, "-m", spec.module, "--ros-args", "--params-file", str(params_file)]
 
     def _watch(self, result: LaunchResult) -> None:
@@ -619,6 +619,12 @@ class Launcher:
         if previous:
             for s, handler in previous.items():
                 signal.signal(s, handler)
+
+
+def params_document(node: str, params: dict) -> str:
+    """A node's parameter file (rclpy's ``--params-file`` format, ``node: ros__parameters: ...``), as the launcher
+    writes it for each node (and as config/*.params.yaml ship it: :mod:`phfdi.ros.shipped_config`)."""
+    return yaml.safe_dump({node: {"ros__parameters": params}}, sort_keys=False)
 
 
 def _shown(path: str | Path) -> str:
