@@ -33,8 +33,16 @@ so its update needs no linearisation):
     x_m = x(pH_measured),                 R  = (probe_noise * beta(pH_measured))^2 + curve_std^2
     K = P- / (P- + R),   x = x- + K (x_m - x-),   P = (1 - K) P-
 
-beta = dx/dpH is the buffer capacity. The residual is the pH innovation pH_measured - pH(x-) divided
-by sqrt((P- + curve_std^2) / beta(pH-)^2 + probe_noise^2), its predicted standard deviation.
+beta = dx/dpH is the buffer capacity. The residual (``innovation: x``) is the standardised innovation
+nu / sqrt(S), nu = x_m - x-, S = P- + R (+ the timing term below): exactly the quantity whose Gaussian
+likelihood the fit maximises, so its healthy scale is what the fit promised. The first format
+(``innovation: ph``, files written before 2026-11-28) divided the pH innovation pH_measured - pH(x-) by
+a linearised standard deviation sqrt((P- + curve_std^2) / beta(pH-)^2 + probe_noise^2), with beta taken
+at the predicted pH: at the knee of a titration, where beta changes tenfold within half a pH, that
+standard deviation is too small on the steep side, and a reading landing there read as 6 to 8 sigma.
+The residual is limited to +-``clip_sigma`` (4): a one-sample outlier then moves the CUSUMs no more than
+a 4-sigma sample, while a fault that persists still adds 4 sigma a sample (the psi-function of robust
+filtering: Masreliez & Martin 1977; the Kalman update itself is not limited).
 
 Adaptation ("slowly adapted run parameters"). Day-to-day the reagents' strengths differ by tens of per
 cent (docs/diagnosis.md), which a fixed model would call a fault on every run. Each feed's factor f_i
@@ -46,6 +54,16 @@ less, any probe fault) shows in the innovations first. The flask's starting cont
 adaptation: the state starts at x(first pH) and the filter keeps it. A probe offset is not adapted:
 with one pH probe it cannot be told from the contents x (both move the reading), so the contents
 absorb a constant offset at the start, and an offset that appears later is a fault.
+
+Zones (``adapt_zones_ph``, default pH 5 and 9). The factors are kept per pH zone: the step's prediction
+uses, and its correction adapts, the factors of the zone the filter's pH is in. Why: what the filter
+adapts is a feed's *apparent* strength, the modelled change of x against the change the curve reads,
+and on the rig that depends on the pH: in the closed-loop run the acid's factor settles at 0.55 on the
+basic plateaus and climbs to 1.2-1.35 on the acid side, within one run of one reagent (a buffer the
+curve lacks, carbonate most likely, whose pKa 10.33 sits in the basic zone). One factor for every pH
+carried the basic side's value to the acid side (April's titration: 0.27 at the landing, innovations
+at -1.5 sigma for 40 s and a false alarm). The boundaries are the chemistry's, not fitted: below pH 5
+the curve's buffer capacity is carried by H+, above 9 by OH-, between them any weak buffer dominates.
 
 The noise model (probe_noise, rate_rel_std, walk, curve_std), the strengths, the volume and the buffer
 are fitted on healthy runs by maximising the innovations' Gaussian likelihood (the prediction-error
@@ -71,6 +89,15 @@ KW_MM2 = 1e-8  # water's ion product at 25 degC, (mM)^2
 PH_GRID = np.linspace(0.0, 14.0, 14001)  # 0.001 pH steps
 LADDER_PKAS = tuple(float(p) for p in range(3, 12))  # the background buffer: one weak acid per pH unit
 CARBONATE_PKAS = (6.35, 10.33)
+#: the adaptation's pH zones (the estimator's default): where a strong acid-base curve's buffer capacity is
+#: carried by H+ (below pH 5), by OH- (above 9), and the steep part between, where any weak buffer the
+#: curve lacks dominates it. Chosen from the chemistry, before any run was scored with them (module doc).
+ADAPT_ZONES_PH = (5.0, 9.0)
+#: the residual's robust limit (healthy sigmas): a standardised innovation beyond it counts as this much
+CLIP_SIGMA = 4.0
+#: what the residual is: "x", the filter's standardised innovation nu / sqrt(S) (the term of its likelihood), or
+#: "ph", the pH innovation over its linearised standard deviation (files written before 2026-11-28)
+INNOVATIONS = ("x", "ph")
 FACTOR_BOUNDS = (0.25, 4.0)  # an adapted strength factor stays within these
 MAX_BLOCK_STEP = 0.5  # relative error one block may report
 
@@ -126,6 +153,11 @@ class EstimatorReference:
     noise: NoiseModel = field(default_factory=NoiseModel)
     adapt_time_constant_s: float = 120.0  # 0: no adaptation
     block_samples: int = 32
+    #: pH boundaries of the adaptation's zones: each zone adapts its own strength factors (see the module doc)
+    adapt_zones_ph: tuple[float, ...] = ADAPT_ZONES_PH
+    innovation: str = "x"
+    #: 0: no limit
+    clip_sigma: float = CLIP_SIGMA
     #: False: the same physics run open loop from the first pH (never corrected): a simulation reference
     correct: bool = True
     fit_info: dict = field(default_factory=dict, compare=False)
@@ -142,6 +174,14 @@ class EstimatorReference:
             raise UserError("estimator: buffer and carbonate concentrations must be >= 0")
         if self.adapt_time_constant_s < 0 or self.block_samples < 1:
             raise UserError("estimator: adapt_time_constant_s must be >= 0 and block_samples >= 1")
+        zones = tuple(float(b) for b in self.adapt_zones_ph)
+        if any(not (0.0 < b < 14.0) for b in zones) or list(zones) != sorted(set(zones)):
+            raise UserError(f"estimator: adapt_zones_ph must be increasing pH values within 0..14, got {list(zones)}")
+        object.__setattr__(self, "adapt_zones_ph", zones)
+        if self.innovation not in INNOVATIONS:
+            raise UserError(f"estimator: innovation must be one of {', '.join(INNOVATIONS)}, got {self.innovation!r}")
+        if not (self.clip_sigma == 0.0 or self.clip_sigma > 0.0):  # also refuses NaN
+            raise UserError(f"estimator: clip_sigma must be 0 (no limit) or positive, got {self.clip_sigma}")
         self.noise.check()
         x, beta = titration_curve(self.buffer_mM, self.carbonate_mM)
         object.__setattr__(self, "_x_table", x)
@@ -170,7 +210,9 @@ class EstimatorReference:
         return {"kind": KIND, "feeds": [asdict(f) for f in self.feeds], "ph_channel": self.ph_channel,
                 "volume_ml": self.volume_ml, "buffer_mM": self.buffer_mM, "carbonate_mM": self.carbonate_mM,
                 "noise": asdict(self.noise), "adapt_time_constant_s": self.adapt_time_constant_s,
-                "block_samples": self.block_samples, "correct": self.correct, "fit": self.fit_info}
+                "block_samples": self.block_samples, "adapt_zones_ph": list(self.adapt_zones_ph),
+                "innovation": self.innovation, "clip_sigma": self.clip_sigma, "correct": self.correct,
+                "fit": self.fit_info}
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "EstimatorReference":
@@ -179,6 +221,9 @@ class EstimatorReference:
             return cls(feeds, str(d["ph_channel"]), float(d["volume_ml"]), float(d.get("buffer_mM", 0.0)),
                        float(d.get("carbonate_mM", 0.0)), NoiseModel(**{k: float(v) for k, v in d["noise"].items()}),
                        float(d.get("adapt_time_constant_s", 120.0)), int(d.get("block_samples", 32)),
+                       # a file written before the zones adapted one factor per feed at every pH
+                       tuple(float(b) for b in d.get("adapt_zones_ph", ())),
+                       str(d.get("innovation", "ph")), float(d.get("clip_sigma", 0.0)),
                        bool(d.get("correct", True)), dict(d.get("fit") or {}))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not an estimator reference ({exc})") from None
@@ -225,26 +270,36 @@ class EstimatorStream:
         m = len(ref.feeds)
         self.x: float | None = None
         self.p: float = 0.0
-        self.factors = [1.0] * m
+        #: each pH zone's strength factors (one zone when ``adapt_zones_ph`` is empty)
+        self.zone_factors = [[1.0] * m for _ in range(len(ref.adapt_zones_ph) + 1)]
+        self.zone = 0  # the zone of the state's pH
         self.last_flows = [0.0] * m
         self.last_t: float | None = None
         self.samples = 0
-        self._gg = [[0.0] * m for _ in range(m)]  # block sums for the strength adaptation
-        self._gy = [0.0] * m
-        self._on_s = [0.0] * m
+        zones = len(self.zone_factors)
+        # block sums for the strength adaptation, per zone
+        self._gg = [[[0.0] * m for _ in range(m)] for _ in range(zones)]
+        self._gy = [[0.0] * m for _ in range(zones)]
+        self._on_s = [[0.0] * m for _ in range(zones)]
         self.nll = 0.0  # running negative log-likelihood of the innovations (for fitting)
         self.blocks = 0  # block boundaries passed (the adaptation's clock: block_samples samples each)
-        #: set to a list to record every adaptation: (block boundary, relative errors, pump-on s, factors before)
-        self.adapt_trace: list[tuple[int, list[float], list[float], list[float]]] | None = None
+        #: set to a list to record every adaptation: (block boundary, relative errors, pump-on s, factors before,
+        #: zone)
+        self.adapt_trace: list[tuple[int, list[float], list[float], list[float], int]] | None = None
+
+    @property
+    def factors(self) -> list[float]:
+        """The strength factors in force at the state's pH (its zone's)."""
+        return self.zone_factors[self.zone]
 
     def fork(self, ref: EstimatorReference | None = None) -> "EstimatorStream":
         """A copy of this state (the same or another reference, e.g. a fault hypothesis), log-likelihood reset."""
         other = EstimatorStream(ref or self.ref)
         other.x, other.p, other.last_t, other.samples = self.x, self.p, self.last_t, self.samples
-        other.blocks = self.blocks
-        other.factors, other.last_flows = list(self.factors), list(self.last_flows)
-        other._gg = [list(r) for r in self._gg]
-        other._gy, other._on_s = list(self._gy), list(self._on_s)
+        other.blocks, other.zone = self.blocks, self.zone
+        other.zone_factors, other.last_flows = [list(f) for f in self.zone_factors], list(self.last_flows)
+        other._gg = [[list(r) for r in z] for z in self._gg]
+        other._gy, other._on_s = [list(z) for z in self._gy], [list(z) for z in self._on_s]
         return other
 
     def residuals(self, t_s: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -280,7 +335,12 @@ class EstimatorStream:
         block = ref.block_samples
         correct = ref.correct
         adapting = ref.adapt_time_constant_s > 0
-        fac = self.factors  # mutated in place by _adapt
+        bounds_ph = ref.adapt_zones_ph
+        in_x = ref.innovation == "x"
+        clip = ref.clip_sigma or math.inf
+        zf = self.zone_factors  # each zone's list is mutated in place by _adapt
+        zone = self.zone
+        fac = zf[zone]
         x, pv, last_t, qp, samples, nll = self.x, self.p, self.last_t, self.last_flows, self.samples, self.nll
         exp, sqrt, log, bisect_left = math.exp, math.sqrt, math.log, bisect.bisect_left
         out = [math.nan] * len(t)
@@ -293,6 +353,8 @@ class EstimatorStream:
                 if ok[k]:
                     x, pv, last_t, qp = xm[k], r_meas[k], t[k], q
                     out[k] = 0.0  # the start: no evidence either way
+                    zone = sum(1 for b in bounds_ph if ph[k] >= b)
+                    fac = zf[zone]
                 samples += 1
                 continue
             dt = t[k] - last_t
@@ -330,50 +392,61 @@ class EstimatorStream:
                 corr = gain * nu
                 x = xp + corr
                 pv = (1.0 - gain) * pm
-                out[k] = (ph[k] - php) / sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
+                z = nu / sqrt(sv) if in_x else (ph[k] - php) / sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
+                out[k] = -clip if z < -clip else clip if z > clip else z
                 nll += 0.5 * (log(sv) + nu * nu / sv)
                 if adapting and corr != 0.0:
-                    self._accumulate(qp, strengths, dt, corr)
+                    self._accumulate(qp, strengths, dt, corr, zone)
             else:
                 x, pv = xp, pm
+            if bounds_ph:  # the next step predicts with the factors of the zone its pH is in
+                zone = 0
+                for b in bounds_ph:
+                    if php >= b:
+                        zone += 1
+                fac = zf[zone]
             last_t, qp = t[k], q
             samples += 1
             if samples % block == 0:
                 self._adapt()
         self.x, self.p, self.last_t, self.last_flows, self.samples, self.nll = x, pv, last_t, qp, samples, nll
+        self.zone = zone
         return out
 
-    def _accumulate(self, qp: list[float], strengths: list[float], dt: float, corr: float) -> None:
-        """Block sums for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V."""
-        v, fac = self.ref.volume_ml, self.factors
+    def _accumulate(self, qp: list[float], strengths: list[float], dt: float, corr: float, zone: int) -> None:
+        """Block sums of a zone for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V."""
+        v, fac = self.ref.volume_ml, self.zone_factors[zone]
+        gy, on_s, gg = self._gy[zone], self._on_s[zone], self._gg[zone]
         g = [fac[i] * strengths[i] * qp[i] * dt / v for i in range(len(qp))]
         for i, gi in enumerate(g):
             if gi != 0.0:
-                self._gy[i] += gi * corr
-                self._on_s[i] += dt
-                row = self._gg[i]
+                gy[i] += gi * corr
+                on_s[i] += dt
+                row = gg[i]
                 for j, gj in enumerate(g):
                     row[j] += gi * gj
 
     def _adapt(self) -> None:
-        """At a block boundary: move each feed's factor toward the block's least-squares estimate, with gain
-        (seconds the feed ran in the block) / adapt_time_constant_s; then clear the block's sums (in place:
-        the recursion holds these lists)."""
+        """At a block boundary, in each zone the block's steps were in: move each feed's factor toward the
+        block's least-squares estimate, with gain (seconds the feed ran there in the block) /
+        adapt_time_constant_s; then clear the block's sums (in place: the recursion holds these lists)."""
         self.blocks += 1
         tau = self.ref.adapt_time_constant_s
-        m = len(self.factors)
-        if tau > 0 and any(self._on_s):
-            rel = _ridge_solve(self._gg, self._gy)  # relative strength error of each feed over the block
-            if self.adapt_trace is not None:
-                self.adapt_trace.append((self.blocks, list(rel), list(self._on_s), list(self.factors)))
-            lo, hi = FACTOR_BOUNDS
-            cap = MAX_BLOCK_STEP  # one block (a cliff's misfit) moves a factor little
-            self.factors[:] = [min(hi, max(lo, f * (1.0 + min(1.0, on / tau) * max(-cap, min(cap, r)))))
-                               for f, r, on in zip(self.factors, rel, self._on_s)]
-        for i in range(m):
-            self._gg[i][:] = [0.0] * m
-        self._gy[:] = [0.0] * m
-        self._on_s[:] = [0.0] * m
+        lo, hi = FACTOR_BOUNDS
+        cap = MAX_BLOCK_STEP  # one block (a cliff's misfit) moves a factor little
+        for zone, factors in enumerate(self.zone_factors):
+            gg, gy, on_s = self._gg[zone], self._gy[zone], self._on_s[zone]
+            m = len(factors)
+            if tau > 0 and any(on_s):
+                rel = _ridge_solve(gg, gy)  # relative strength error of each feed over the block
+                if self.adapt_trace is not None:
+                    self.adapt_trace.append((self.blocks, list(rel), list(on_s), list(factors), zone))
+                factors[:] = [min(hi, max(lo, f * (1.0 + min(1.0, on / tau) * max(-cap, min(cap, r)))))
+                              for f, r, on in zip(factors, rel, on_s)]
+            for i in range(m):
+                gg[i][:] = [0.0] * m
+            gy[:] = [0.0] * m
+            on_s[:] = [0.0] * m
 
 
 def _ridge_solve(gg: list[list[float]], gy: list[float]) -> list[float]:

@@ -173,3 +173,60 @@ def test_alarms_are_named_the_same_whatever_the_chunking():
         again, _, _ = run_record(model, t, rows, chunk=chunk)
         assert [(e.kind, e.index, e.message) for e in again] == [(e.kind, e.index, e.message) for e in whole]
 
+
+
+def _zoned_run(ref: EstimatorReference, n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Base pumped in 350 s bursts against a steady acid, pH swinging 2..12; the base acts at half its strength
+    while the pH is above 9 (a buffer the curve lacks takes the rest): an apparent strength that depends on pH."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * DT_S
+    qb = np.where((np.arange(n) // 1000) % 2 == 0, 4.0, 0.0)
+    qa = np.full(n, 2.0)
+    x = float(ref.x_of_ph(np.array([7.0]))[0])
+    ph = np.empty(n)
+    for k in range(n):
+        if k:
+            f = 0.5 if ref.ph_of_x(x) >= 9.0 else 1.0
+            d = (qa[k - 1] + qb[k - 1]) / ref.volume_ml
+            u = (-20.0 * qa[k - 1] + ref.feeds[1].strength_mM * f * qb[k - 1]) / ref.volume_ml
+            x = u / d + (x - u / d) * math.exp(-d * DT_S)
+        ph[k] = ref.ph_of_x(x)
+    return t, np.column_stack((qa, qb, np.round(ph + rng.normal(0.0, 0.03, n), 2)))
+
+
+def test_each_ph_zone_learns_its_own_apparent_strength():
+    """Hidden: the base's apparent strength is 0.5 above pH 9 and 1.0 below. With the zones (pH 5 and 9) the basic
+    zone's base factor learns 0.5 and the acid zone's stays at 1.0, and the innovations of the run's second half
+    have unit scale; one factor for all pH carries the basic side's 0.5 into the acid side (what happened on the
+    rig's April titration), and the same innovations spread half as wide again."""
+    ref = flask(adapt_time_constant_s=60.0)
+    t, rows = _zoned_run(ref, 8000)
+    zoned = ref.new_state()
+    z = zoned.residuals(t, rows)[:, 0]
+    acid_zone, _, basic_zone = zoned.zone_factors
+    assert basic_zone[1] == pytest.approx(0.5, abs=0.05)
+    assert acid_zone[1] == pytest.approx(1.0, abs=0.05)
+    one = ref.with_values(adapt_zones_ph=()).new_state()
+    z1 = one.residuals(t, rows)[:, 0]
+    rms = lambda r: float(np.sqrt(np.mean(r[len(r) // 2:] ** 2)))  # noqa: E731
+    assert rms(z) < 1.1
+    assert rms(z1) > 1.3 * rms(z)
+
+
+def test_the_residual_is_limited_and_files_before_the_zones_keep_their_residual():
+    """The residual is the standardised innovation in x, limited to +-clip_sigma; a reference file written before
+    2026-11-28 (no zones, innovation or clip keys) reads as what it was: one factor, the pH innovation, no limit."""
+    ref = flask()
+    t, rows = simulate(ref, 1200, lambda k: 2.0)
+    rows[600:, 2] = np.clip(rows[600:, 2] + 1.5, 0.0, 14.0)  # a probe that jumps by 1.5 pH
+    r = ref.residuals(t, rows)[:, 0]
+    assert float(np.max(np.abs(r))) == pytest.approx(4.0)
+    old = {k: v for k, v in ref.to_dict().items() if k not in ("adapt_zones_ph", "innovation", "clip_sigma")}
+    back = reference_from_dict(old)
+    assert (back.adapt_zones_ph, back.innovation, back.clip_sigma) == ((), "ph", 0.0)
+    assert float(np.max(np.abs(back.residuals(t, rows)[:, 0]))) > 4.0
+    assert reference_from_dict(ref.to_dict()).to_dict() == ref.to_dict()
+    with pytest.raises(UserError, match="adapt_zones_ph"):
+        flask(adapt_zones_ph=(9.0, 5.0))
+    with pytest.raises(UserError, match="innovation"):
+        flask(innovation="volts")
