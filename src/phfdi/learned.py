@@ -93,6 +93,11 @@ def alarm_summaries(events: list[LearnedEvent], rec: MeasuredRecord) -> list[dic
         if e.alarm is None:
             continue
         a = dict(e.alarm)
+        # an event carries the alarm as it was then: a 'cleared' event made in the same chunk as, but before, the
+        # naming lacks the name the 'named' event carries, whichever of the two comes last in sample order
+        earlier = alarms.get(a["alarm_id"], {})
+        if a.get("isolation") is None and earlier.get("isolation") is not None:
+            a["isolation"] = earlier["isolation"]
         a["detection_line"] = int(rec.lines[a["detection_index"]])
         if a.get("cleared_index") is not None:
             a["cleared_line"] = int(rec.lines[min(a["cleared_index"], len(rec.lines) - 1)])

@@ -50,6 +50,8 @@ def test_a_hidden_probe_fault_is_found_after_its_onset(fold, capsys, kind, size)
     assert alarms, f"{kind}: no alarm"
     assert alarms[0]["detection_time"] >= onset, f"{kind}: an alarm before the onset"
     assert alarms[0]["detection_time"] - onset < 120.0
+    # named, and named a sensor fault, in the summary whether the alarm cleared before the record ended or not
+    assert (alarms[0].get("isolation") or {}).get("family") == "sensor", alarms[0].get("isolation")
 
 
 def test_any_chunking_gives_the_same_alarms_to_the_last_bit(fold):
