@@ -59,11 +59,11 @@ def main() -> None:
         print(f"\n{Path(held).name} (fitted on the other four, {time.perf_counter() - t0:.0f} s)", flush=True)
         for i, feed in enumerate(ref.feeds):
             pump = feed.channel.split("_")[0]
-            rel = np.array([r[i] for _, r, on, _ in trace if on[i] > 0])
+            rel = np.array([r[i] for _, r, on, *_ in trace if on[i] > 0])
             if len(rel) == 0:
                 print(f"  {pump}: off in this run")
                 continue
-            factors = [f[i] for *_, f in trace]
+            factors = [f[i] for _, _, _, f, _ in trace]
             line = (f"  {pump}: healthy rel {rel.mean():+.2f} +- {rel.std():.2f} over {len(rel)} blocks; adapted "
                     f"factor {min(factors):.2f}..{max(factors):.2f}; after a {SIZE:g} fault, mean rel in "
                     f"{WINDOW_S:g} s:")
@@ -81,7 +81,7 @@ def main() -> None:
                         f.write_bytes(data)
                         e, tr = adaptation(ref, read_measured(f, cmap, channels=list(CHANNELS)))
                         t_on = onset - t_start
-                        v = [r[i] for end, (_, r, on, _) in zip(e, tr) if t_on <= end < t_on + WINDOW_S and on[i] > 0]
+                        v = [r[i] for end, (_, r, on, *_) in zip(e, tr) if t_on <= end < t_on + WINDOW_S and on[i] > 0]
                         got.append(f"{np.mean(v):+.2f}" if v else "pump off")
                     line += f" {kind} {', '.join(got) or 'not injectable'};"
             print(line, flush=True)

@@ -124,7 +124,9 @@ def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_fla
     info: dict = {}
     if physics:
         est = fit_estimator(train, start_from_model(model))
-        open_ref = est.reference.with_values(correct=False)  # type: ignore[attr-defined]
+        # an open-loop simulation reference compares measured with simulated pH over its spread (as diagnose does):
+        # the pH innovation, unlimited; the estimator's x-space innovation of a never-corrected state is no such thing
+        open_ref = est.reference.with_values(correct=False, innovation="ph", clip_sigma=0.0)  # type: ignore[attr-defined]
         open_model = calibrate_bands(open_ref, runs, est.settings, files)
         h = plain_cusum_h()
 
