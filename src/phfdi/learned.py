@@ -8,7 +8,7 @@ times in alarms are the record's seconds from its first row.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -33,6 +33,7 @@ class MeasuredRecord:
     lines: np.ndarray
     where: str
     notes: list[str]
+    units: dict[str, str] = field(default_factory=dict)  # channel -> unit as read
 
 
 def read_measured(path: str | Path, column_map=None, channels: Sequence[str] | None = None,
@@ -50,7 +51,7 @@ def read_measured(path: str | Path, column_map=None, channels: Sequence[str] | N
         raise UserError(f"{path}: no channel left to monitor")
     x = np.column_stack([rec.signals[n] for n in names]).astype(float)
     return MeasuredRecord(str(path), np.asarray(rec.time_s, dtype=float), x, tuple(names), np.asarray(rec.lines),
-                          rec.where, rec.note_lines())
+                          rec.where, rec.note_lines(), {n: rec.units.get(n, "") for n in names})
 
 
 def _check_healthy(rec: MeasuredRecord, rows: int) -> None:
@@ -75,7 +76,8 @@ def learn_from(rec: MeasuredRecord, rows: int | None = None, settings: LearnedSe
         raise UserError(f"{rec.path}: the healthy rows' time stamps do not increase")
     s = settings or LearnedSettings()
     s = LearnedSettings(**{**s.__dict__, "sample_time_s": dt})
-    return learn(rec.x[:n], rec.channels, s, source={"file": rec.path, "rows": n})
+    return learn(rec.x[:n], rec.channels, s, source={"file": rec.path, "rows": n,
+                                                          "units": {c: rec.units.get(c, "") for c in rec.channels}})
 
 
 def event_dict(e: LearnedEvent, rec: MeasuredRecord) -> dict:
@@ -108,7 +110,7 @@ def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | 
         raise UserError(f"{rec.path}: no column {missing[0]!r} (the reference was learned on "
                         f"{', '.join(model.channels)})")
     order = [rec.channels.index(c) for c in model.channels]
-    rec = MeasuredRecord(rec.path, rec.time_s, rec.x[:, order], model.channels, rec.lines, rec.where, rec.notes)
+    rec = replace(rec, x=rec.x[:, order], channels=model.channels)
     if refit_rows is not None:
         if getattr(model.reference, "kind", "arx") != "arx":
             raise UserError(f"--refit-rows re-fits a learned (arx) reference; this one is {model.reference.kind!r} "

@@ -12,6 +12,7 @@ from .common import (
     column_map_from_args,
     plant_runs_on,
     print_notes,
+    store_column_map,
 )
 
 EXAMPLES = """examples:
@@ -200,6 +201,7 @@ def run_learn(args: argparse.Namespace) -> int:
                         exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
     print_notes("calibrate", rec.notes)
     model = learn_from(rec, args.rows, settings)
+    store_column_map(args, model)
     model.save(args.out, overwrite=args.overwrite)
     s = model.settings
     print(f"learned reference on {model.source['rows']} healthy rows of {args.learn}: {len(model.channels)} channels, "
@@ -227,6 +229,7 @@ def run_estimator(args: argparse.Namespace) -> int:
         print_notes("calibrate", r.notes)
     with plant_runs_on(", ".join(args.estimator)):
         model = fit_estimator(records, start)
+    store_column_map(args, model)
     model.save(args.out, overwrite=args.overwrite)
     ref = model.reference
     kind = "open-loop simulation" if args.open_loop else "estimator"

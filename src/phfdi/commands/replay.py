@@ -8,7 +8,14 @@ import sys
 import time
 
 from .calibrate import add_detector_args, settings_from_args
-from .common import EPILOG_FORMAT, add_record_args, column_map_from_args, plant_runs_on, print_notes
+from .common import (
+    EPILOG_FORMAT,
+    add_record_args,
+    column_map_from_args,
+    plant_runs_on,
+    print_notes,
+    reference_column_map,
+)
 
 EXAMPLES = """examples:
   phfdi simulate --fault backlash --out runs/backlash.parquet && phfdi replay runs/backlash.parquet
@@ -170,7 +177,9 @@ def run_learned(args: argparse.Namespace) -> int:
     from wavelet_fdi.learned_detector import LearnedModel
 
     model = LearnedModel.load(args.reference)
-    rec = read_measured(args.file, column_map_from_args(args), channels=model.channels, encoding=args.encoding)
+    cmap, columns_said = reference_column_map(args, model, args.reference)
+    print(f"phfdi replay: {columns_said}", file=sys.stderr)
+    rec = read_measured(args.file, cmap, channels=model.channels, encoding=args.encoding)
     print_notes("replay", rec.notes)
     t0 = time.perf_counter()
     events, states, model = replay_measured(rec, model, args.refit_rows)
@@ -180,7 +189,7 @@ def run_learned(args: argparse.Namespace) -> int:
     inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
     if args.json:
         print(json.dumps({"file": args.file, "reference": args.reference, "samples": len(rec.x),
-                          "channels": list(model.channels), "notes": rec.notes, "input_problems": inputs,
+                          "channels": list(model.channels), "columns": columns_said, "notes": rec.notes, "input_problems": inputs,
                           "alarm_rows": int(states.sum()), "alarms": alarms}, indent=2))
         return 0
     print(format_learned(alarms))
