@@ -88,3 +88,51 @@ def test_column_units_are_stored(export, tmp_path, capsys):
     capsys.readouterr()
     _, err = _json(capsys, ["replay", str(export["faulty"]), "--reference", str(ref), "--json"])
     assert "calibrated with --column time_s=Stamp" in err
+
+
+def _reference(capsys, export, out, *window):
+    assert main(["calibrate", "--learn", str(export["faulty"]), *window, "--map", str(export["map"]),
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    return json.loads(out.read_text()), printed
+
+
+def test_training_window_by_seconds_or_stamps(export, tmp_path, capsys):
+    by_rows, _ = _reference(capsys, export, tmp_path / "rows.json", "--rows", "701")
+    by_s, _ = _reference(capsys, export, tmp_path / "s.json", "--from", "100", "--to", "800")
+    by_iso, printed = _reference(capsys, export, tmp_path / "iso.json",
+                                 "--from", "2021-05-01T00:01:40", "--to", "2021-05-01 00:13:20")
+    assert by_s["reference"] == by_iso["reference"]  # seconds 100-800 are those stamps (1 s rows from 00:00:00)
+    assert by_s["reference"] != by_rows["reference"]  # a later window than the first 701 rows: another fit
+    src = by_iso["source"]
+    assert (src["rows"], src["from_s"], src["to_s"]) == (701, 100.0, 800.0)
+    assert (src["first_row"], src["from_stamp"], src["to_stamp"]) == (102, "2021-05-01T00:01:40", "2021-05-01T00:13:20")
+    assert "100 s (2021-05-01T00:01:40) to 800 s (2021-05-01T00:13:20)" in printed
+    # a UTC offset is converted as the reader converts stamps with one (these are naive: read as UTC)
+    with_tz, _ = _reference(capsys, export, tmp_path / "tz.json",
+                            "--from", "2021-05-01T02:01:40+02:00", "--to", "800")
+    assert with_tz["reference"] == by_s["reference"]
+
+
+def _one_line(capsys, argv) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    errors = [ln for ln in err.splitlines() if ": error: " in ln]
+    assert len(errors) == 1 and "Traceback" not in err
+    return errors[0]
+
+
+def test_training_window_refusals(export, tmp_path, capsys):
+    learn = ["calibrate", "--learn", str(export["faulty"]), "--map", str(export["map"]), "--out", str(tmp_path / "r.json")]
+    line = _one_line(capsys, [*learn, "--from", "2022-01-01T00:00:00"])
+    assert "no row in that window; the record runs from 0 s (2021-05-01T00:00:00) to 2599 s" in line
+    assert "only one row" in _one_line(capsys, [*learn, "--from", "5", "--to", "5.5"])
+    assert "not both" in _one_line(capsys, [*learn, "--rows", "100", "--from", "5"])
+    assert "ISO 8601" in _one_line(capsys, [*learn, "--from", "yesterday"])
+    # a record whose time is plain seconds has no wall clock: stamps are refused, seconds work
+    plain = tmp_path / "plain.csv"
+    lines = export["faulty"].read_text().splitlines()
+    plain.write_text("\n".join([lines[0]] + [f"{i};{ln.split(';', 1)[1]}" for i, ln in enumerate(lines[1:])]) + "\n")
+    argv = ["calibrate", "--learn", str(plain), "--map", str(export["map"]), "--out", str(tmp_path / "p.json")]
+    assert "has no wall-clock time column; give seconds" in _one_line(capsys, [*argv, "--from", "2021-05-01T00:01:40"])
+    assert main([*argv, "--from", "100", "--to", "800"]) == 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
@@ -13,7 +14,7 @@ from phfdi_base.errors import UserError
 from phfdi_base.signals import unit_of
 
 from . import policy as P
-from .cells import SERIAL_UNIX_EPOCH_DAYS, numeric_time_unit, parse_stamps, to_numbers
+from .cells import EPOCH, SERIAL_UNIX_EPOCH_DAYS, first_stamp, numeric_time_unit, parse_stamps, to_numbers
 from .columns import PROJECT_UNIT, ColumnMap, ColumnSpec, kind_of, normal_cell
 from .errors import ReadError
 from .formats import expected, format_of, run_suffixes
@@ -71,7 +72,7 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
     if cmap.loop_tag:
         meta["loop_tag"] = cmap.loop_tag
     return Record(str(path), rows.time_s, rows.values, units, columns, rows.lines, table.where, policy,
-                  [*table.notes, *rows.notes], rows.automatic, rows.boundaries, meta)
+                  [*table.notes, *rows.notes], rows.automatic, rows.boundaries, meta, rows.wall_clock)
 
 
 
@@ -179,7 +180,7 @@ def _unit(name: str, spec: ColumnSpec, table: Table) -> str:
 
 # ---- cells -> rows -------------------------------------------------------------------------
 def _rows(table: Table, cmap: ColumnMap) -> P.Rows:
-    time_s, stamps = _time(table, cmap)
+    time_s, stamps, wall_clock = _time(table, cmap)
     values, numbers = {}, {}
     for name, spec in cmap.signals.items():
         if name == "time_s":
@@ -187,7 +188,7 @@ def _rows(table: Table, cmap: ColumnMap) -> P.Rows:
         numbers[spec.column] = nums = to_numbers(table.columns[spec.column])
         values[name] = nums.values * spec.factor
     _note_missing_cells(table, numbers)
-    rows = P.Rows(table.path, table.where, time_s, values, table.lines.copy(), stamps)
+    rows = P.Rows(table.path, table.where, time_s, values, table.lines.copy(), stamps, wall_clock=wall_clock)
     _apply_quality(rows, table, cmap)
     _apply_mode(rows, table, cmap)
     readable = ~np.isnan(rows.time_s)
@@ -204,11 +205,13 @@ def spans_of(table: Table, index: np.ndarray) -> list[tuple[int, int]]:
     return P.spans(table.lines, index)
 
 
-def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None]:
+def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None, datetime | None]:
+    """Seconds of each row, the stamps as written (date-time stamps) and the wall-clock time at 0 s (None when
+    the record's time is not a clock: plain seconds, or samples counted from sample_time_s)."""
     spec = cmap.time
     if spec is None:
         dt = float(cmap.sample_time_s or table.metadata["sample_time_s"])
-        return dt * np.arange(len(table)), None
+        return dt * np.arange(len(table)), None, None
     cells = table.columns[spec.column]
     t, fmt = parse_stamps(cells, cmap.time_format)
     bad = np.isnan(t) | np.isinf(t)
@@ -219,14 +222,15 @@ def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None]:
                         column=spec.column, where=table.where)
     t = np.where(bad, np.nan, t)
     if fmt is None:
+        what = None
         if spec.unit is None:  # no unit stated in the map: tell epoch stamps and serial days by their range
             factor, what = numeric_time_unit(t)
             if factor != 1.0:  # (epoch seconds are seconds already: read as they are, as before)
                 table.notes.append(f"{table.path}: column {spec.column!r}: read as {what}, converted to (epoch) seconds "
                                    f"(told by its range; give the column's unit in a column map if that is wrong)")
                 t = (t - SERIAL_UNIX_EPOCH_DAYS) * factor if what and what.startswith("spreadsheet") else t * factor
-        return t * spec.factor, None
-    return t, [str(c).strip() for c in cells]
+        return t * spec.factor, None, EPOCH if what else None  # epoch stamps are a wall clock too
+    return t, [str(c).strip() for c in cells], first_stamp(cells, fmt)
 
 
 def _note_missing_cells(table: Table, numbers: dict) -> None:
