@@ -148,8 +148,8 @@ def row_number(rec: MeasuredRecord, index: int) -> int:
 
 
 def event_dict(e: LearnedEvent, rec: MeasuredRecord) -> dict:
-    out = {"kind": e.kind, "time": e.time_s, "line": int(rec.lines[e.index]) if 0 <= e.index < len(rec.lines)
-           else None, "message": e.message}
+    out = {"kind": e.kind, "time": e.time_s, "stamp": rec.stamp(e.time_s),
+           "line": int(rec.lines[e.index]) if 0 <= e.index < len(rec.lines) else None, "message": e.message}
     if e.alarm:
         out["alarm"] = e.alarm
     return out
@@ -165,6 +165,9 @@ def alarm_summaries(events: list[LearnedEvent], rec: MeasuredRecord) -> list[dic
         a["detection_line"] = int(rec.lines[a["detection_index"]])
         if a.get("cleared_index") is not None:
             a["cleared_line"] = int(rec.lines[min(a["cleared_index"], len(rec.lines) - 1)])
+        # the historian's own time beside the seconds (None without a date-time or epoch time column)
+        for step in ("onset", "detection", "cleared"):
+            a[f"{step}_stamp"] = rec.stamp(a.get(f"{step}_time"))
         alarms[a["alarm_id"]] = a
     return [alarms[k] for k in sorted(alarms)]
 
@@ -196,7 +199,10 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
         top = ", ".join(f"{c} {v['share']:.0%} ({max(v['bands'], key=v['bands'].get)})"
                         for c, v in list(a["contributions"].items())[:4])
         where = f"line {a['detection_line']}" if "detection_line" in a else f"row {a['detection_index']}"
+        where = ", ".join(filter(None, [a.get("detection_stamp"), where]))
         onset = "" if a.get("onset_time") is None else f", onset about {a['onset_time']:g} {unit_of_time}"
+        if a.get("onset_stamp"):
+            onset += f" ({a['onset_stamp']})"
         lines.append(f"alarm {a['alarm_id']}: detected {a['detection_time']:g} {unit_of_time} "
                      f"({where}){onset}, by "
                      f"{a['statistic']} ({exceedance(a['statistic_value'], a['threshold'])})")
@@ -207,6 +213,7 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
                          f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)")
         if a.get("cleared_time") is not None:
             ep = a.get("episode_contributions") or {}
-            lines.append(f"  cleared {a['cleared_time']:g} {unit_of_time}; over the episode: "
+            stamp = f" ({a['cleared_stamp']})" if a.get("cleared_stamp") else ""
+            lines.append(f"  cleared {a['cleared_time']:g} {unit_of_time}{stamp}; over the episode: "
                          + ", ".join(f"{c} {v['share']:.0%}" for c, v in list(ep.items())[:4]))
     return "\n".join(lines)

@@ -136,3 +136,26 @@ def test_training_window_refusals(export, tmp_path, capsys):
     argv = ["calibrate", "--learn", str(plain), "--map", str(export["map"]), "--out", str(tmp_path / "p.json")]
     assert "has no wall-clock time column; give seconds" in _one_line(capsys, [*argv, "--from", "2021-05-01T00:01:40"])
     assert main([*argv, "--from", "100", "--to", "800"]) == 0
+
+
+def test_alarms_carry_the_records_stamps(export, tmp_path, capsys):
+    ref = tmp_path / "ref.json"
+    assert main(["calibrate", "--learn", str(export["faulty"]), "--rows", "800", "--map", str(export["map"]),
+                 "--out", str(ref)]) == 0
+    capsys.readouterr()
+    report, _ = _json(capsys, ["replay", str(export["faulty"]), "--reference", str(ref), "--json"])
+    (alarm,) = report["alarms"]
+    # rows are 1 s apart from 2021-05-01 00:00:00: the stamp is the seconds on that clock
+    detected = np.datetime64("2021-05-01T00:00:00") + np.timedelta64(int(alarm["detection_time"]), "s")
+    assert alarm["detection_stamp"] == str(detected)
+    assert export["onset"] <= alarm["detection_time"] <= export["onset"] + 120
+    assert alarm["onset_stamp"] is not None and alarm["onset_stamp"] <= alarm["detection_stamp"]
+    assert main(["replay", str(export["faulty"]), "--reference", str(ref)]) == 0
+    assert f"({alarm['detection_stamp']}, line {alarm['detection_line']})" in capsys.readouterr().out
+    # plain seconds: no wall clock, the stamps are null and the text is as before
+    plain = tmp_path / "plain.csv"
+    lines = export["faulty"].read_text().splitlines()
+    plain.write_text("\n".join([lines[0]] + [f"{i};{ln.split(';', 1)[1]}" for i, ln in enumerate(lines[1:])]) + "\n")
+    report, _ = _json(capsys, ["replay", str(plain), "--reference", str(ref), "--json"])
+    assert report["alarms"][0]["detection_stamp"] is None
+    assert report["alarms"][0]["detection_time"] == alarm["detection_time"]

@@ -194,7 +194,8 @@ def run_learned(args: argparse.Namespace) -> int:
         return 0
     print(format_learned(alarms))
     for e in inputs:
-        print(f"input: {e['message']} ({rec.where} {e['line']})")
+        stamp = f"{e['stamp']}, " if e["stamp"] else ""
+        print(f"input: {e['message']} ({stamp}{rec.where} {e['line']})")
     return 0
 
 
