@@ -142,6 +142,25 @@ def learn_from(rec: MeasuredRecord, rows: int | slice | None = None, settings: L
     return learn(rec.x[part], rec.channels, s, source=source)
 
 
+def line_runs(lines: np.ndarray) -> list[list[int]]:
+    """Source positions compactly: [index, line] where a run of consecutive lines starts (a bag of a record
+    carries them, so alarms from its replay name the source file's lines)."""
+    lines = np.asarray(lines, dtype=np.int64)
+    if not len(lines):
+        return []
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(lines) != 1) + 1])
+    return [[int(i), int(lines[i])] for i in starts]
+
+
+def lines_from_runs(runs: list[list[int]], n: int) -> np.ndarray:
+    """The ``n`` source positions :func:`line_runs` compacted."""
+    out = np.zeros(n, dtype=np.int64)
+    bounds = [*(int(i) for i, _ in runs), n]
+    for (i, first), end in zip(runs, bounds[1:]):
+        out[int(i):end] = int(first) + np.arange(end - int(i))
+    return out
+
+
 def row_number(rec: MeasuredRecord, index: int) -> int:
     """The number a person finds sample ``index`` by in the file: its line (text), row (Parquet) or sample (bag)."""
     return int(rec.lines[min(max(index, 0), len(rec.lines) - 1)])
@@ -159,17 +178,23 @@ def alarm_summaries(events: list[LearnedEvent], rec: MeasuredRecord) -> list[dic
     """One dict per alarm (its last state: cleared or not), with the record's time and line of each step."""
     alarms: dict[int, dict] = {}
     for e in events:
-        if e.alarm is None:
-            continue
-        a = dict(e.alarm)
-        a["detection_line"] = int(rec.lines[a["detection_index"]])
-        if a.get("cleared_index") is not None:
-            a["cleared_line"] = int(rec.lines[min(a["cleared_index"], len(rec.lines) - 1)])
-        # the historian's own time beside the seconds (None without a date-time or epoch time column)
-        for step in ("onset", "detection", "cleared"):
-            a[f"{step}_stamp"] = rec.stamp(a.get(f"{step}_time"))
-        alarms[a["alarm_id"]] = a
-    return [alarms[k] for k in sorted(alarms)]
+        if e.alarm is not None:
+            alarms[e.alarm["alarm_id"]] = e.alarm
+    return [located(alarms[k], rec.lines, rec.where, rec.wall_clock) for k in sorted(alarms)]
+
+
+def located(alarm: dict, lines: np.ndarray, where: str, wall_clock: datetime | None) -> dict:
+    """An alarm with the file positions of its detection and clearing (``detection_line``, ``cleared_line``,
+    ``where``: line, row or sample as the reader counts them) and its steps' wall-clock stamps (None without a
+    date-time or epoch time column). One numbering for offline and live replay: the source file's own."""
+    a = dict(alarm)
+    a["where"] = where
+    a["detection_line"] = int(lines[min(a["detection_index"], len(lines) - 1)])
+    if a.get("cleared_index") is not None:
+        a["cleared_line"] = int(lines[min(a["cleared_index"], len(lines) - 1)])
+    for step in ("onset", "detection", "cleared"):  # the historian's own time beside the seconds
+        a[f"{step}_stamp"] = iso_stamp(wall_clock, a.get(f"{step}_time"))
+    return a
 
 
 def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | None = None
@@ -198,7 +223,10 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
     for a in alarms:
         top = ", ".join(f"{c} {v['share']:.0%} ({max(v['bands'], key=v['bands'].get)})"
                         for c, v in list(a["contributions"].items())[:4])
-        where = f"line {a['detection_line']}" if "detection_line" in a else f"row {a['detection_index']}"
+        # the file's own position (line of a text file, row of Parquet, sample of a bag; 1 = the first), never
+        # the detector's 0-based index: a spreadsheet or editor shows the same number
+        where = f"{a.get('where', 'line')} {a['detection_line']}" if "detection_line" in a \
+            else f"sample {a['detection_index'] + 1}"
         where = ", ".join(filter(None, [a.get("detection_stamp"), where]))
         onset = "" if a.get("onset_time") is None else f", onset about {a['onset_time']:g} {unit_of_time}"
         if a.get("onset_stamp"):

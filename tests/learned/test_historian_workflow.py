@@ -159,3 +159,28 @@ def test_alarms_carry_the_records_stamps(export, tmp_path, capsys):
     report, _ = _json(capsys, ["replay", str(plain), "--reference", str(ref), "--json"])
     assert report["alarms"][0]["detection_stamp"] is None
     assert report["alarms"][0]["detection_time"] == alarm["detection_time"]
+
+
+def test_offline_and_live_name_the_same_line(export, tmp_path, capsys):
+    """One numbering: the node counts samples from 0; what it reports is mapped to the source file's line (the
+    number an editor and a spreadsheet show, header = line 1) and stamp, as the offline replay gives them."""
+    from phfdi.commands.replay import _located_live
+    from phfdi.learned import format_alarms
+
+    ref = tmp_path / "ref.json"
+    assert main(["calibrate", "--learn", str(export["faulty"]), "--rows", "800", "--map", str(export["map"]),
+                 "--out", str(ref)]) == 0
+    bag = tmp_path / "export.mcap"
+    assert main(["bag", "from-csv", str(export["faulty"]), str(bag), "--map", str(export["map"])]) == 0
+    capsys.readouterr()
+    offline, _ = _json(capsys, ["replay", str(export["faulty"]), "--reference", str(ref), "--json"])
+    (alarm,) = offline["alarms"]
+    # the node's report carries only its own fields (0-based indices, seconds)
+    node = {k: v for k, v in alarm.items() if not k.endswith(("_line", "_stamp")) and k != "where"}
+    (live,) = _located_live(str(bag), [node], offline["samples"])
+    assert alarm["detection_line"] == alarm["detection_index"] + 2  # header on line 1, data from line 2
+    for key in ("where", "detection_line", "cleared_line", "detection_stamp", "onset_stamp", "cleared_stamp"):
+        assert live.get(key) == alarm.get(key), key
+    assert f"line {alarm['detection_line']}" in format_alarms([live])
+    # a bag without the source's positions (an older one): its own sample numbers, 1 = the first
+    assert f"(sample {node['detection_index'] + 1})" in format_alarms([node])

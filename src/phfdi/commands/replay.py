@@ -229,13 +229,36 @@ def run_live_learned(args: argparse.Namespace) -> int:
         return result.status or 1
     say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
         f"(ROS domain {result.domain_id})")
-    alarms = report["alarms"]
+    alarms = _located_live(args.file, report["alarms"], report["samples"])
     if args.json:
         print(json.dumps({"file": args.file, "reference": args.reference, "samples": report["samples"],
                           "channels": list(model.channels), "alarms": alarms}, indent=2))
     else:
         print(format_learned(alarms))
     return result.status
+
+
+def _located_live(bag: str, alarms: list[dict], samples: int) -> list[dict]:
+    """The node's alarms (0-based sample indices) with the positions the offline replay gives: the source
+    record's lines and stamps that ``bag from-csv`` stored in the bag, else the bag's own sample numbers."""
+    from datetime import datetime, timedelta
+    from pathlib import Path
+
+    import numpy as np
+
+    from phfdi import bagio
+    from phfdi.learned import lines_from_runs, located
+
+    meta = json.loads(bagio.read_metadata(Path(bag)).get(bagio.RUN_METADATA, {}).get("json", "{}"))
+    runs, clock = meta.get("source_lines"), meta.get("wall_clock")
+    # a record whose time does not fit a stamp is stamped from its first row (time_origin_s): add it back
+    wall_clock = datetime.fromisoformat(clock) + timedelta(seconds=float(meta.get("time_origin_s") or 0.0)) \
+        if clock else None
+    if runs:
+        lines, where = lines_from_runs(runs, samples), str(meta.get("source_where", "line"))
+    else:
+        lines, where = np.arange(1, samples + 1), "sample"
+    return [located(a, lines, where, wall_clock) for a in alarms]
 
 
 def replay_json(file: str, samples: int, notes: list[str], diagnostics: dict, alarms: list[dict]) -> dict:
