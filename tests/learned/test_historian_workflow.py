@@ -184,3 +184,18 @@ def test_offline_and_live_name_the_same_line(export, tmp_path, capsys):
     assert f"line {alarm['detection_line']}" in format_alarms([live])
     # a bag without the source's positions (an older one): its own sample numbers, 1 = the first
     assert f"(sample {node['detection_index'] + 1})" in format_alarms([node])
+
+
+def test_column_without_time_keeps_the_files_time_column(tmp_path, capsys):
+    """--column naming only the channels: the time still comes from the file's 'datetime' column (it used to be
+    refused as 'no time column'), with a note, so alarms keep their seconds and stamps."""
+    from phfdi.records import read_record
+
+    path = tmp_path / "export.csv"
+    path.write_text("datetime;pH;OP\n" + "".join(f"2021-05-01 00:00:{2 * i:02d};7.{i};5{i}\n" for i in range(10)))
+    rec = read_record(path, {"ph_measured": "pH"})
+    assert list(rec.time_s[:3]) == [0.0, 2.0, 4.0] and rec.names == ["ph_measured"]
+    assert rec.wall_clock is not None and rec.wall_clock.isoformat() == "2021-05-01T00:00:00"
+    assert any("time from column 'datetime'" in n for n in rec.notes)
+    # a column map that gives a sample time still means "no time column"
+    assert list(read_record(path, {"ph_measured": "pH", "sample_time_s": 5}).time_s[:2]) == [0.0, 5.0]

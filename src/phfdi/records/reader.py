@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 from typing import Callable
@@ -136,6 +137,7 @@ def _resolve_map(given: MapLike | Callable[[list[str], dict], MapLike], table: T
     for name, spec in cmap.signals.items():
         if spec.column not in table.columns:
             _no_column(table, spec.column, name)
+    cmap = _with_time_detected(cmap, table)
     for column in ([cmap.mode.column] if cmap.mode else []) + [q.column for q in cmap.quality]:
         if column not in table.columns:
             _no_column(table, column, "mode/quality")
@@ -145,6 +147,21 @@ def _resolve_map(given: MapLike | Callable[[list[str], dict], MapLike], table: T
     if not cmap.channels():
         raise ReadError(table.path, "no signal column besides time", line=1 if table.where == "line" else None)
     return cmap
+
+
+def _with_time_detected(cmap: ColumnMap, table: Table) -> ColumnMap:
+    """A map that names neither a time column nor a sample time (``--column ph_measured=pH`` alone) gets the
+    file's time column the way a file read without a map does (``time_s``, ``timestamp``, ...), noted: naming
+    the signals should not lose the time."""
+    if cmap.time is not None or cmap.sample_time_s is not None:
+        return cmap
+    used = set(cmap.columns_used())
+    low = {c.lower(): c for c in table.columns if c not in used}
+    found = next((low[n] for n in TIME_NAMES if n in low), None)
+    if found is None:
+        return cmap
+    table.notes.append(f"{table.path}: time from column {found!r} (the column map names none)")
+    return replace(cmap, signals={"time_s": ColumnSpec(found), **cmap.signals})  # unit told by its range
 
 
 def _default_map(table: Table) -> ColumnMap:
