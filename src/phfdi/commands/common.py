@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from contextlib import contextmanager
@@ -123,8 +124,9 @@ def map_given_as(args: argparse.Namespace) -> str | None:
     """How the command line named the columns (``--map ph_rig``, ``--column a=b --unit a=min``), or None."""
     if args.map:
         return f"--map {args.map}"
-    if args.column:
-        return " ".join([*(f"--column {c}" for c in args.column), *(f"--unit {u}" for u in getattr(args, "unit", []))])
+    if args.column:  # quoted as a shell would need it (historian tags have spaces)
+        return " ".join([*(f"--column {shlex.quote(c)}" for c in args.column),
+                         *(f"--unit {shlex.quote(u)}" for u in getattr(args, "unit", []))])
     return None
 
 
