@@ -410,7 +410,9 @@ def format_alarms(alarms: list, diagnostics: dict) -> str:
                      f"({exceedance(s['statistic_value'], s['threshold'], '> threshold')}), dominant band "
                      f"{s['dominant_level']}, severity {s['severity']:.3g} pH RMS")
         if s["cleared_time"] is not None:
-            lines.append(f"  cleared {s['cleared_time']:g} s")
+            end = s.get("episode_end_time")
+            lines.append(f"  cleared {s['cleared_time']:g} s"
+                         + (f"; episode {s['onset_time']:g} s to {end:g} s" if end is not None else ""))
     problems = input_problems(diagnostics)
     if problems:
         lines.append("input problems: " + ", ".join(f"{k} {v}" for k, v in problems.items()))
