@@ -8,13 +8,16 @@ times in alarms are the record's seconds from its first row.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field, replace
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from phfdi.records import read_record
+from phfdi.records.cells import iso_stamp
 from phfdi_base.errors import UserError
 from phfdi_base.stamps import record_stamps_ns, stamps_seconds
 from wavelet_fdi.alarm_messages import exceedance
@@ -33,6 +36,17 @@ class MeasuredRecord:
     lines: np.ndarray
     where: str
     notes: list[str]
+    units: dict[str, str] = field(default_factory=dict)  # channel -> unit as read
+    wall_clock: datetime | None = None  # the wall-clock time at 0 s (date-time or epoch stamps), else None
+
+    def stamp(self, t_s: float | None) -> str | None:
+        """The ISO 8601 stamp of ``t_s`` seconds of this record (None without a wall clock)."""
+        return iso_stamp(self.wall_clock, t_s)
+
+    def when(self, t_s: float) -> str:
+        """``t_s`` for people: seconds, and the stamp when the record has a wall clock."""
+        stamp = self.stamp(t_s)
+        return f"{t_s:g} s" + (f" ({stamp})" if stamp else "")
 
 
 def read_measured(path: str | Path, column_map=None, channels: Sequence[str] | None = None,
@@ -50,37 +64,111 @@ def read_measured(path: str | Path, column_map=None, channels: Sequence[str] | N
         raise UserError(f"{path}: no channel left to monitor")
     x = np.column_stack([rec.signals[n] for n in names]).astype(float)
     return MeasuredRecord(str(path), np.asarray(rec.time_s, dtype=float), x, tuple(names), np.asarray(rec.lines),
-                          rec.where, rec.note_lines())
+                          rec.where, rec.note_lines(), {n: rec.units.get(n, "") for n in names}, rec.wall_clock)
 
 
-def _check_healthy(rec: MeasuredRecord, rows: int) -> None:
+def _check_healthy(rec: MeasuredRecord, part: slice) -> None:
+    rows = part.stop - part.start
     for c, name in enumerate(rec.channels):
-        miss = ~np.isfinite(rec.x[:rows, c])
+        miss = ~np.isfinite(rec.x[part, c])
         if miss.mean() > MAX_MISSING_HEALTHY:
-            first = int(np.argmax(miss))
+            first = part.start + int(np.argmax(miss))
             raise UserError(f"{rec.path}: column {name!r} is missing in {int(miss.sum())} of the {rows} healthy rows "
                             f"(first at {rec.where} {rec.lines[first]}); the reference needs it in at least "
                             f"{100 * (1 - MAX_MISSING_HEALTHY):.0f} % of them")
 
 
-def learn_from(rec: MeasuredRecord, rows: int | None = None, settings: LearnedSettings | None = None
+def time_bound(text: str, rec: MeasuredRecord, flag: str) -> float:
+    """A --from/--to bound in the record's seconds: a number is the record's own time (what alarms print), an
+    ISO 8601 stamp is taken on the record's wall clock (only when its time column holds one)."""
+    try:
+        t = float(text)
+    except ValueError:
+        t = math.nan
+    else:
+        if math.isfinite(t):
+            return t
+    try:
+        when = datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise UserError(f"{flag} {text!r}: give seconds of the record's time or an ISO 8601 stamp "
+                        f"(e.g. 2020-03-09T11:20:00)") from None
+    if rec.wall_clock is None:
+        raise UserError(f"{flag} {text}: {rec.path} has no wall-clock time column; give seconds of its own time "
+                        f"({rec.time_s[0]:g} to {rec.time_s[-1]:g} s)")
+    if when.tzinfo is not None:  # the reader keeps stamps with an offset in UTC: compare in UTC
+        when = when.replace(tzinfo=None) - (when.utcoffset() or timedelta(0))
+    return (when - rec.wall_clock).total_seconds()
+
+
+def training_rows(rec: MeasuredRecord, rows: int | None = None, start: str | None = None,
+                  end: str | None = None) -> slice:
+    """The healthy rows: the first ``rows`` (None: all), or those from ``start`` to ``end`` (both included;
+    seconds or ISO 8601 stamps, see :func:`time_bound`). A window without a row is one line."""
+    if start is None and end is None:
+        n = len(rec.x) if rows is None else int(rows)
+        if n < 2 or n > len(rec.x):
+            raise UserError(f"{rec.path}: --rows {rows}: the record has {len(rec.x)} rows")
+        return slice(0, n)
+    if rows is not None:
+        raise UserError("give --rows or --from/--to, not both")
+    lo = -math.inf if start is None else time_bound(start, rec, "--from")
+    hi = math.inf if end is None else time_bound(end, rec, "--to")
+    inside = np.flatnonzero((rec.time_s >= lo) & (rec.time_s <= hi))
+    window = " ".join(f"{flag} {v}" for flag, v in (("--from", start), ("--to", end)) if v is not None)
+    if len(inside) < 2:
+        raise UserError(f"{rec.path}: {window}: {'no row' if len(inside) == 0 else 'only one row'} in that window; "
+                        f"the record runs from {rec.when(rec.time_s[0])} to {rec.when(rec.time_s[-1])}")
+    return slice(int(inside[0]), int(inside[-1]) + 1)  # time increases (the run policy): one stretch
+
+
+def learn_from(rec: MeasuredRecord, rows: int | slice | None = None, settings: LearnedSettings | None = None
                ) -> LearnedModel:
-    """Fit the learned reference on the first ``rows`` rows of a healthy record (None: all of it)."""
-    n = len(rec.x) if rows is None else int(rows)
-    if n < 2 or n > len(rec.x):
-        raise UserError(f"{rec.path}: --rows {rows}: the record has {len(rec.x)} rows")
-    _check_healthy(rec, n)
-    dt = float(np.median(np.diff(rec.time_s[:n]))) if n > 1 else 1.0
+    """Fit the learned reference on healthy rows of a record: the first ``rows`` (None: all of it) or a slice
+    (:func:`training_rows`)."""
+    part = rows if isinstance(rows, slice) else training_rows(rec, rows)
+    _check_healthy(rec, part)
+    dt = float(np.median(np.diff(rec.time_s[part])))
     if not dt > 0:
         raise UserError(f"{rec.path}: the healthy rows' time stamps do not increase")
     s = settings or LearnedSettings()
     s = LearnedSettings(**{**s.__dict__, "sample_time_s": dt})
-    return learn(rec.x[:n], rec.channels, s, source={"file": rec.path, "rows": n})
+    a, b = part.start, part.stop - 1
+    source = {"file": rec.path, "rows": b - a + 1, "first_row": row_number(rec, a), "last_row": row_number(rec, b),
+              "from_s": float(rec.time_s[a]), "to_s": float(rec.time_s[b]),
+              "units": {c: rec.units.get(c, "") for c in rec.channels}}
+    if rec.wall_clock is not None:
+        source.update(from_stamp=rec.stamp(rec.time_s[a]), to_stamp=rec.stamp(rec.time_s[b]))
+    return learn(rec.x[part], rec.channels, s, source=source)
+
+
+def line_runs(lines: np.ndarray) -> list[list[int]]:
+    """Source positions compactly: [index, line] where a run of consecutive lines starts (a bag of a record
+    carries them, so alarms from its replay name the source file's lines)."""
+    lines = np.asarray(lines, dtype=np.int64)
+    if not len(lines):
+        return []
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(lines) != 1) + 1])
+    return [[int(i), int(lines[i])] for i in starts]
+
+
+def lines_from_runs(runs: list[list[int]], n: int) -> np.ndarray:
+    """The ``n`` source positions :func:`line_runs` compacted."""
+    out = np.zeros(n, dtype=np.int64)
+    bounds = [*(int(i) for i, _ in runs), n]
+    for (i, first), end in zip(runs, bounds[1:]):
+        out[int(i):end] = int(first) + np.arange(end - int(i))
+    return out
+
+
+def row_number(rec: MeasuredRecord, index: int) -> int:
+    """The number a person finds sample ``index`` by in the file: its line (text), row (Parquet) or sample (bag)."""
+    return int(rec.lines[min(max(index, 0), len(rec.lines) - 1)])
 
 
 def event_dict(e: LearnedEvent, rec: MeasuredRecord) -> dict:
-    out = {"kind": e.kind, "time": e.time_s, "line": int(rec.lines[e.index]) if 0 <= e.index < len(rec.lines)
-           else None, "message": e.message}
+    out = {"kind": e.kind, "time": e.time_s, "stamp": rec.stamp(e.time_s),
+           "line": int(rec.lines[e.index]) if 0 <= e.index < len(rec.lines) else None, "message": e.message}
     if e.alarm:
         out["alarm"] = e.alarm
     return out
@@ -98,11 +186,22 @@ def alarm_summaries(events: list[LearnedEvent], rec: MeasuredRecord) -> list[dic
         earlier = alarms.get(a["alarm_id"], {})
         if a.get("isolation") is None and earlier.get("isolation") is not None:
             a["isolation"] = earlier["isolation"]
-        a["detection_line"] = int(rec.lines[a["detection_index"]])
-        if a.get("cleared_index") is not None:
-            a["cleared_line"] = int(rec.lines[min(a["cleared_index"], len(rec.lines) - 1)])
         alarms[a["alarm_id"]] = a
-    return [alarms[k] for k in sorted(alarms)]
+    return [located(alarms[k], rec.lines, rec.where, rec.wall_clock) for k in sorted(alarms)]
+
+
+def located(alarm: dict, lines: np.ndarray, where: str, wall_clock: datetime | None) -> dict:
+    """An alarm with the file positions of its detection and clearing (``detection_line``, ``cleared_line``,
+    ``where``: line, row or sample as the reader counts them) and its steps' wall-clock stamps (None without a
+    date-time or epoch time column). One numbering for offline and live replay: the source file's own."""
+    a = dict(alarm)
+    a["where"] = where
+    a["detection_line"] = int(lines[min(a["detection_index"], len(lines) - 1)])
+    if a.get("cleared_index") is not None:
+        a["cleared_line"] = int(lines[min(a["cleared_index"], len(lines) - 1)])
+    for step in ("onset", "detection", "cleared"):  # the historian's own time beside the seconds
+        a[f"{step}_stamp"] = iso_stamp(wall_clock, a.get(f"{step}_time"))
+    return a
 
 
 def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | None = None
@@ -113,7 +212,7 @@ def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | 
         raise UserError(f"{rec.path}: no column {missing[0]!r} (the reference was learned on "
                         f"{', '.join(model.channels)})")
     order = [rec.channels.index(c) for c in model.channels]
-    rec = MeasuredRecord(rec.path, rec.time_s, rec.x[:, order], model.channels, rec.lines, rec.where, rec.notes)
+    rec = replace(rec, x=rec.x[:, order], channels=model.channels)
     if refit_rows is not None:
         if getattr(model.reference, "kind", "arx") != "arx":
             raise UserError(f"--refit-rows re-fits a learned (arx) reference; this one is {model.reference.kind!r} "
@@ -131,8 +230,14 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
     for a in alarms:
         top = ", ".join(f"{c} {v['share']:.0%} ({max(v['bands'], key=v['bands'].get)})"
                         for c, v in list(a["contributions"].items())[:4])
-        where = f"line {a['detection_line']}" if "detection_line" in a else f"row {a['detection_index']}"
+        # the file's own position (line of a text file, row of Parquet, sample of a bag; 1 = the first), never
+        # the detector's 0-based index: a spreadsheet or editor shows the same number
+        where = f"{a.get('where', 'line')} {a['detection_line']}" if "detection_line" in a \
+            else f"sample {a['detection_index'] + 1}"
+        where = ", ".join(filter(None, [a.get("detection_stamp"), where]))
         onset = "" if a.get("onset_time") is None else f", onset about {a['onset_time']:g} {unit_of_time}"
+        if a.get("onset_stamp"):
+            onset += f" ({a['onset_stamp']})"
         lines.append(f"alarm {a['alarm_id']}: detected {a['detection_time']:g} {unit_of_time} "
                      f"({where}){onset}, by "
                      f"{a['statistic']} ({exceedance(a['statistic_value'], a['threshold'])})")
@@ -143,6 +248,7 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
                          f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)")
         if a.get("cleared_time") is not None:
             ep = a.get("episode_contributions") or {}
-            lines.append(f"  cleared {a['cleared_time']:g} {unit_of_time}; over the episode: "
+            stamp = f" ({a['cleared_stamp']})" if a.get("cleared_stamp") else ""
+            lines.append(f"  cleared {a['cleared_time']:g} {unit_of_time}{stamp}; over the episode: "
                          + ", ".join(f"{c} {v['share']:.0%}" for c, v in list(ep.items())[:4]))
     return "\n".join(lines)

@@ -79,6 +79,11 @@ class DetectorSettings:
                                              "stops trusting the reference, s", range=(0.0, 1e9))
     clear_after_s: float = setting(1800.0, "an alarm clears after this long without a statistic crossing its "
                                            "threshold, s", range=(0.0, 1e9))
+    clear_quiet_s: float = setting(120.0, "an alarm also clears once every statistic has stayed below "
+                                          "clear_fraction of its threshold this long (the statistics fell back; "
+                                          "0: off), s", range=(0.0, 1e9))
+    clear_fraction: float = setting(0.5, "the fraction of its threshold a statistic must stay below for "
+                                         "clear_quiet_s", range=(0.0, 1.0))
     isolation_delays_s: tuple[float, ...] = setting((300.0,), "isolation runs this long after a detection (and "
                                                               "again at each further delay given), s")
     isolation_retries: int = setting(2, "when the diagnosis is unsure, isolate again one isolation delay later, "

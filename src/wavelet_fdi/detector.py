@@ -76,6 +76,9 @@ class Alarm:
     #: onset fitted by isolation (more accurate than the estimate at detection)
     onset_refined_s: float | None = None
     cleared_time_s: float | None = None
+    #: when the episode ended: the first sample of the quiet stretch that cleared it (every statistic below
+    #: clear_fraction of its threshold), or the last crossing when it cleared after clear_after_s without one
+    episode_end_s: float | None = None
     onset_index: int = 0
     detection_index: int = 0
 
@@ -100,6 +103,7 @@ class Alarm:
             "alternatives": self.alternatives,
             "isolation_time": self.isolation_time_s,
             "cleared_time": self.cleared_time_s,
+            "episode_end_time": self.episode_end_s,
         }
 
 
@@ -211,6 +215,8 @@ class StreamingDetector:
         self.block = s.block_samples
         self.warmup_samples = max(int(math.ceil(s.warmup_s / self.dt_s)), self.swt["ph"].fill_samples)
         self.clear_samples = int(math.ceil(s.clear_after_s / self.dt_s))
+        # 0 switches the quiet rule off: a stretch never reaches a length beyond any record
+        self.quiet_samples = int(math.ceil(s.clear_quiet_s / self.dt_s)) if s.clear_quiet_s > 0 else 2**62
         self.holdoff_samples = int(math.ceil(s.setpoint_holdoff_s / self.dt_s))
         other = tuple(n for i, n in enumerate(self.reference.feed_names) if i != self.reference.valve_index)
         self.inputs = InputRegularizer(self.dt_s, max(1, int(round(s.max_gap_s / self.dt_s))),
@@ -232,6 +238,7 @@ class StreamingDetector:
         self._guess = 7.0
         self._acc = np.zeros(4)  # block sums: pH residual, count, level residual, count
         self._last_confirm = -1
+        self._loud_last = -1  # last sample where a statistic was at or above clear_fraction of its threshold
         self._due: list[tuple[int, int]] = []  # (global index, alarm id) isolations to run
         self._retries: dict[int, int] = {}  # alarm id -> isolations repeated because unsure
         self._isolated_at: dict[int, int] = {}  # alarm id -> last sample its isolation used
@@ -426,10 +433,7 @@ class StreamingDetector:
             events += self._clear(self._last_confirm + self.clear_samples,
                                   float(t[min(n - 1, self._last_confirm + self.clear_samples - idx0)]),
                                   "no threshold crossing for clear_after_s")
-        for due, alarm_id in list(self._due):
-            if due <= last:
-                self._due.remove((due, alarm_id))
-                events += self._isolate(alarm_id, due)
+        events += self._run_due(last)
         if (last + 1) % self.block == 0:
             self._end_block(last + 1, float(pred.ph[-1]))
         return events
@@ -474,11 +478,13 @@ class StreamingDetector:
             cols = np.flatnonzero(over.any(axis=0))
             if not len(cols):
                 self._s_last = s_val[:, -1]
+                events += self._track_quiet(s_val, idx0 + pos, t[pos:])
                 break
             c = int(cols[0])
             # redo up to the crossing so the change-time estimate sees only samples up to it
             self.cusum.c, self.cusum.m, self.cusum.last_zero = saved
             s_val = self.cusum.update(z[:, pos:pos + c + 1], idx0 + pos)
+            events += self._track_quiet(s_val, idx0 + pos, t[pos:pos + c + 1])
             col = s_val[:, -1]
             row = int(np.argmax(np.where(over[:, c], col / self.h, -np.inf)))
             gi = idx0 + pos + c
@@ -487,6 +493,37 @@ class StreamingDetector:
             self._s_last = np.zeros(len(self.names))
             pos += c + 1
         return events
+
+    def _run_due(self, last: int) -> list[Event]:
+        """Run the isolations due at or before sample ``last`` in sample order (a retry one schedules may be due
+        too): before a clear inside a chunk they must run as they would have sample by sample."""
+        events: list[Event] = []
+        while True:
+            ready = sorted(d for d in self._due if d[0] <= last)
+            if not ready:
+                return events
+            self._due.remove(ready[0])
+            events += self._isolate(ready[0][1], ready[0][0])
+
+    def _track_quiet(self, s_val: np.ndarray, first: int, t: np.ndarray) -> list[Event]:
+        """Clear the alarm where every statistic has stayed below clear_fraction of its threshold for
+        clear_quiet_s: the statistics fell back, the fault is gone (sample by sample, so any chunking clears at
+        the same sample). The episode ends at the first sample of that quiet stretch."""
+        loud = (s_val >= self.settings.clear_fraction * self.h[:, None]).any(axis=0)
+        gi = first + np.arange(s_val.shape[1])
+        last_loud = np.maximum.accumulate(np.where(loud, gi, self._loud_last))
+        self._loud_last = int(last_loud[-1])
+        if self.state != "alarm":
+            return []
+        quiet = np.flatnonzero((gi - last_loud >= self.quiet_samples) & (gi > self._last_confirm))
+        if not len(quiet):
+            return []
+        j = int(quiet[0])
+        events = self._run_due(int(gi[j]))  # isolations due before the clear, as sample by sample
+        end = self.history.read(int(last_loud[j]) + 1, int(last_loud[j]) + 2, "t")
+        end_t = float(end[0]) if len(end) and math.isfinite(end[0]) else float(t[j]) - self.quiet_samples * self.dt_s
+        return events + self._clear(int(gi[j]), float(t[j]), f"every statistic below {self.settings.clear_fraction:g} "
+                                    f"of its threshold for {self.settings.clear_quiet_s:g} s (since {end_t:g} s)", end_t)
 
     def _crossing(self, row: int, value: float, last_zero: int, gi: int, t_s: float) -> list[Event]:
         events: list[Event] = []
@@ -527,9 +564,13 @@ class StreamingDetector:
                             f"onset estimate {onset_t:g} s", alarm.summary()))
         return events
 
-    def _clear(self, gi: int, t_s: float, why: str) -> list[Event]:
+    def _clear(self, gi: int, t_s: float, why: str, episode_end_s: float | None = None) -> list[Event]:
         alarm = self.alarms[-1]
         alarm.cleared_time_s = t_s
+        if episode_end_s is None:  # cleared for want of a crossing: the episode ended at its last one
+            last = self.history.read(self._last_confirm, self._last_confirm + 1, "t")
+            episode_end_s = float(last[0]) if len(last) and math.isfinite(last[0]) else None
+        alarm.episode_end_s = episode_end_s
         self.state = "ok"
         self._due = [(d, a) for d, a in self._due if a != alarm.alarm_id]
         return [Event("cleared", t_s, gi, "OK", f"alarm {alarm.alarm_id} cleared: {why}", alarm.summary())]

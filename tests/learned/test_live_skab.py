@@ -43,7 +43,9 @@ def test_bag_of_a_skab_record_through_the_node_gives_the_offline_alarms(skab_fil
     live = json.loads(proc.stdout)
     assert live["samples"] == offline["samples"]
     keys = ("alarm_id", "detection_time", "detection_index", "onset_index", "onset_time", "statistic",
-            "statistic_value", "threshold", "channels", "contributions", "cleared_time", "episode_contributions")
+            "statistic_value", "threshold", "channels", "contributions", "cleared_time", "episode_contributions",
+            # one numbering: the node's sample indices mapped onto the CSV's lines and stamps (bag from-csv keeps them)
+            "where", "detection_line", "cleared_line", "onset_stamp", "detection_stamp", "cleared_stamp")
     assert [{k: a.get(k) for k in keys} for a in live["alarms"]] == \
         [{k: a.get(k) for k in keys} for a in offline["alarms"]]
     assert "/fault_alarm ALARM at" in proc.stderr and "learned detector node" in proc.stderr

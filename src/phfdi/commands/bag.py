@@ -103,7 +103,7 @@ def run_to_run(args: argparse.Namespace) -> int:
 
 def run_from_csv(args: argparse.Namespace) -> int:
     from phfdi.bagio import write_measured
-    from phfdi.learned import read_measured
+    from phfdi.learned import line_runs, read_measured
     from phfdi_base.errors import UserError
     from phfdi_base.outputs import refuse_existing, staged
 
@@ -116,7 +116,11 @@ def run_from_csv(args: argparse.Namespace) -> int:
                         exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
     print_notes("bag from-csv", rec.notes)
     with staged(args.output, args.overwrite) as tmp:
-        write_measured(rec.time_s, rec.x, list(rec.channels), tmp, source=str(args.input),
+        # the source's positions and wall clock go along, so a live replay of the bag names the record's own
+        # lines and stamps, as the offline replay of the record does
+        where = {"source_where": rec.where, "source_lines": line_runs(rec.lines),
+                 "wall_clock": rec.wall_clock.isoformat() if rec.wall_clock else None}
+        write_measured(rec.time_s, rec.x, list(rec.channels), tmp, source=str(args.input), metadata=where,
                        file_name=Path(args.output).name)  # the rosbag2 metadata names the final file
     path = args.output
     print(f"wrote {len(rec.x)} rows x {len(rec.channels)} channels ({', '.join(rec.channels)}) to {path} "

@@ -12,6 +12,7 @@ from .common import (
     column_map_from_args,
     plant_runs_on,
     print_notes,
+    store_column_map,
 )
 
 EXAMPLES = """examples:
@@ -21,11 +22,14 @@ EXAMPLES = """examples:
   phfdi calibrate --scenario my_loop.yaml --runs healthy1.parquet healthy2.parquet --out plant.yaml
   phfdi calibrate --scenario my_loop.yaml --runs h1.csv h2.csv --map plant_columns.yaml --out plant.yaml
   phfdi calibrate --learn healthy.csv --rows 400 --exclude anomaly,changepoint --out ref.json
+  phfdi calibrate --learn export.csv --from 2020-03-09T11:14:34 --to 2020-03-09T11:21:13 --map tags.yaml --out ref.json
   phfdi calibrate --learn healthy.csv --rows 400 --learned form=oe --learned correction_samples=100 --out ref.json
   phfdi calibrate --estimator ../shared/data/ph_rig/2025.02.24-*.csv --model rig_flask --map ph_rig --out rig.json
 
 --learn fits a learned healthy reference (no plant model needed) on the first
---rows rows of a measured record (all of them by default): every channel
+--rows rows of a measured record (all of them by default), or on the rows from
+--from to --to (seconds of the record's time, or ISO 8601 stamps when it has a
+date-time column; both ends included): every channel
 predicted from its own past and the other channels (ARX, ridge), the wavelet
 bands of the residuals and their healthy noise per band; phfdi replay FILE
 --reference ref.json then watches any record with those columns. Channels:
@@ -108,6 +112,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--learn", default=None, metavar="RECORD",
                    help="fit a learned healthy reference on this healthy record (.csv, .parquet, .mcap)")
     g.add_argument("--rows", type=int, default=None, metavar="N", help="with --learn: the first N rows only")
+    g.add_argument("--from", dest="start", default=None, metavar="T",
+                   help="with --learn: healthy rows from T on: seconds of the record's time (as replay prints "
+                        "them) or an ISO 8601 stamp (2020-03-09T11:20:00) when the record has a date-time column")
+    g.add_argument("--to", dest="end", default=None, metavar="T",
+                   help="with --learn: healthy rows up to T (included), as --from")
     g.add_argument("--exclude", default="", metavar="COLS", help="with --learn: columns that are not channels, "
                    "comma-separated (e.g. labels)")
     g.add_argument("--learned", action="append", default=[], metavar="KEY=VALUE",
@@ -137,8 +146,8 @@ def run(args: argparse.Namespace) -> int:
         return run_estimator(args)
     if args.learn:
         return run_learn(args)
-    if args.rows is not None or args.exclude or args.learned:
-        raise UserError("--rows, --exclude and --learned go with --learn")
+    if args.rows is not None or args.exclude or args.learned or args.start or args.end:
+        raise UserError("--rows, --from, --to, --exclude and --learned go with --learn")
     settings = settings_from_args(args)
     cmap = column_map_from_args(args)
     if not args.runs and (cmap is not None or args.encoding):
@@ -188,7 +197,7 @@ def learned_settings(pairs: list[str], base=None):
 
 
 def run_learn(args: argparse.Namespace) -> int:
-    from phfdi.learned import learn_from, read_measured
+    from phfdi.learned import learn_from, read_measured, training_rows
     from phfdi_base.errors import UserError
 
     if args.runs:
@@ -199,10 +208,13 @@ def run_learn(args: argparse.Namespace) -> int:
     rec = read_measured(args.learn, column_map_from_args(args),
                         exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
     print_notes("calibrate", rec.notes)
-    model = learn_from(rec, args.rows, settings)
+    part = training_rows(rec, args.rows, args.start, args.end)
+    model = learn_from(rec, part, settings)
+    store_column_map(args, model)
     model.save(args.out, overwrite=args.overwrite)
-    s = model.settings
-    print(f"learned reference on {model.source['rows']} healthy rows of {args.learn}: {len(model.channels)} channels, "
+    s, src = model.settings, model.source
+    print(f"learned reference on {src['rows']} healthy rows of {args.learn} ({rec.where}s {src['first_row']}-"
+          f"{src['last_row']}, {rec.when(src['from_s'])} to {rec.when(src['to_s'])}): {len(model.channels)} channels, "
           f"{s.form} form, {s.lags} own lags + the other channels (ridge), {s.wavelet} level {s.level}, "
           f"sample time {s.sample_time_s:g} s")
     print(f"  {'channel':28s} {'residual/std':>12s}  healthy RMS per band ({', '.join(s.bands())})")
@@ -227,6 +239,7 @@ def run_estimator(args: argparse.Namespace) -> int:
         print_notes("calibrate", r.notes)
     with plant_runs_on(", ".join(args.estimator)):
         model = fit_estimator(records, start)
+    store_column_map(args, model)
     model.save(args.out, overwrite=args.overwrite)
     ref = model.reference
     kind = "open-loop simulation" if args.open_loop else "estimator"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from contextlib import contextmanager
@@ -117,6 +118,42 @@ def column_map_from_args(args: argparse.Namespace):
     if units:
         raise UserError("--unit goes with --column")
     return None
+
+
+def map_given_as(args: argparse.Namespace) -> str | None:
+    """How the command line named the columns (``--map ph_rig``, ``--column a=b --unit a=min``), or None."""
+    if args.map:
+        return f"--map {args.map}"
+    if args.column:  # quoted as a shell would need it (historian tags have spaces)
+        return " ".join([*(f"--column {shlex.quote(c)}" for c in args.column),
+                         *(f"--unit {shlex.quote(u)}" for u in getattr(args, "unit", []))])
+    return None
+
+
+def store_column_map(args: argparse.Namespace, model) -> None:
+    """Keep the calibration's column map in the reference file (``source``), so that ``phfdi replay
+    --reference`` reads new exports of the same historian without the map given again."""
+    cmap = column_map_from_args(args)
+    if cmap is not None:
+        model.source["column_map"] = cmap.to_mapping()
+        model.source["column_map_given_as"] = map_given_as(args)
+
+
+def reference_column_map(args: argparse.Namespace, model, reference: str) -> tuple[object, str]:
+    """The column map a replay with a reference reads the record with, and a line saying which one: an explicit
+    --map/--column wins over the map stored in the reference; neither: every column under its own name."""
+    from phfdi.records import ColumnMap
+
+    given = column_map_from_args(args)
+    stored = model.source.get("column_map")
+    if given is not None:
+        also = f" (not the map stored in {reference})" if stored else ""
+        return given, f"columns: {map_given_as(args)} as given{also}"
+    if stored:
+        how = model.source.get("column_map_given_as") or "a column map"
+        return (ColumnMap.from_mapping(stored, f"{reference}: stored column map"),
+                f"columns: the map stored in {reference} (calibrated with {how})")
+    return None, "columns: the file's own column names"
 
 
 def print_notes(command: str, notes: list[str]) -> None:

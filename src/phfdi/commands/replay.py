@@ -8,7 +8,14 @@ import sys
 import time
 
 from .calibrate import add_detector_args, settings_from_args
-from .common import EPILOG_FORMAT, add_record_args, column_map_from_args, plant_runs_on, print_notes
+from .common import (
+    EPILOG_FORMAT,
+    add_record_args,
+    column_map_from_args,
+    plant_runs_on,
+    print_notes,
+    reference_column_map,
+)
 
 EXAMPLES = """examples:
   phfdi simulate --fault backlash --out runs/backlash.parquet && phfdi replay runs/backlash.parquet
@@ -170,7 +177,9 @@ def run_learned(args: argparse.Namespace) -> int:
     from wavelet_fdi.learned_detector import LearnedModel
 
     model = LearnedModel.load(args.reference)
-    rec = read_measured(args.file, column_map_from_args(args), channels=model.channels, encoding=args.encoding)
+    cmap, columns_said = reference_column_map(args, model, args.reference)
+    print(f"phfdi replay: {columns_said}", file=sys.stderr)
+    rec = read_measured(args.file, cmap, channels=model.channels, encoding=args.encoding)
     print_notes("replay", rec.notes)
     t0 = time.perf_counter()
     events, states, model = replay_measured(rec, model, args.refit_rows)
@@ -180,12 +189,13 @@ def run_learned(args: argparse.Namespace) -> int:
     inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
     if args.json:
         print(json.dumps({"file": args.file, "reference": args.reference, "samples": len(rec.x),
-                          "channels": list(model.channels), "notes": rec.notes, "input_problems": inputs,
+                          "channels": list(model.channels), "columns": columns_said, "notes": rec.notes, "input_problems": inputs,
                           "alarm_rows": int(states.sum()), "alarms": alarms}, indent=2))
         return 0
     print(format_learned(alarms))
     for e in inputs:
-        print(f"input: {e['message']} ({rec.where} {e['line']})")
+        stamp = f"{e['stamp']}, " if e["stamp"] else ""
+        print(f"input: {e['message']} ({stamp}{rec.where} {e['line']})")
     return 0
 
 
@@ -219,13 +229,36 @@ def run_live_learned(args: argparse.Namespace) -> int:
         return result.status or 1
     say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
         f"(ROS domain {result.domain_id})")
-    alarms = report["alarms"]
+    alarms = _located_live(args.file, report["alarms"], report["samples"])
     if args.json:
         print(json.dumps({"file": args.file, "reference": args.reference, "samples": report["samples"],
                           "channels": list(model.channels), "alarms": alarms}, indent=2))
     else:
         print(format_learned(alarms))
     return result.status
+
+
+def _located_live(bag: str, alarms: list[dict], samples: int) -> list[dict]:
+    """The node's alarms (0-based sample indices) with the positions the offline replay gives: the source
+    record's lines and stamps that ``bag from-csv`` stored in the bag, else the bag's own sample numbers."""
+    from datetime import datetime, timedelta
+    from pathlib import Path
+
+    import numpy as np
+
+    from phfdi import bagio
+    from phfdi.learned import lines_from_runs, located
+
+    meta = json.loads(bagio.read_metadata(Path(bag)).get(bagio.RUN_METADATA, {}).get("json", "{}"))
+    runs, clock = meta.get("source_lines"), meta.get("wall_clock")
+    # a record whose time does not fit a stamp is stamped from its first row (time_origin_s): add it back
+    wall_clock = datetime.fromisoformat(clock) + timedelta(seconds=float(meta.get("time_origin_s") or 0.0)) \
+        if clock else None
+    if runs:
+        lines, where = lines_from_runs(runs, samples), str(meta.get("source_where", "line"))
+    else:
+        lines, where = np.arange(1, samples + 1), "sample"
+    return [located(a, lines, where, wall_clock) for a in alarms]
 
 
 def replay_json(file: str, samples: int, notes: list[str], diagnostics: dict, alarms: list[dict]) -> dict:
@@ -377,7 +410,9 @@ def format_alarms(alarms: list, diagnostics: dict) -> str:
                      f"({exceedance(s['statistic_value'], s['threshold'], '> threshold')}), dominant band "
                      f"{s['dominant_level']}, severity {s['severity']:.3g} pH RMS")
         if s["cleared_time"] is not None:
-            lines.append(f"  cleared {s['cleared_time']:g} s")
+            end = s.get("episode_end_time")
+            lines.append(f"  cleared {s['cleared_time']:g} s"
+                         + (f"; episode {s['onset_time']:g} s to {end:g} s" if end is not None else ""))
     problems = input_problems(diagnostics)
     if problems:
         lines.append("input problems: " + ", ".join(f"{k} {v}" for k, v in problems.items()))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timedelta
 
 import numpy as np
 
@@ -83,6 +83,31 @@ def parse_stamps(cells: list | np.ndarray, fmt: str | None = None) -> tuple[np.n
         out[i] = (d - t0).total_seconds()
     return out, used
 
+
+def first_stamp(cells: list | np.ndarray, fmt: str) -> datetime | None:
+    """The first readable date-time stamp (what :func:`parse_stamps` counts seconds from): the record's
+    wall-clock time at 0 s. Naive; stamps with a UTC offset are converted to UTC as :func:`parse_stamps` does."""
+    for c in cells:
+        d = _parse(str(c).strip(), fmt)
+        if d is not None:
+            return d
+    return None
+
+
+def iso_stamp(wall_clock: datetime | None, t_s: float | None) -> str | None:
+    """``t_s`` seconds of a record as an ISO 8601 stamp (None when the record has no wall-clock time).
+
+    >>> iso_stamp(datetime(2020, 3, 9, 10, 14, 33), 667.0), iso_stamp(datetime(2020, 3, 9), 0.25)
+    ('2020-03-09T10:25:40', '2020-03-09T00:00:00.250')
+    """
+    if wall_clock is None or t_s is None or not math.isfinite(t_s):
+        return None
+    when = wall_clock + timedelta(seconds=float(t_s))
+    return when.isoformat(timespec="seconds" if when.microsecond == 0 else "milliseconds")
+
+
+#: the wall-clock time of epoch 0 s, for records whose time column holds epoch stamps
+EPOCH = datetime(1970, 1, 1)
 
 #: epoch stamps by magnitude (years 2001 to about 5000): (lowest value, factor to seconds, name)
 EPOCH_UNITS = ((1e17, 1e-9, "nanoseconds"), (1e14, 1e-6, "microseconds"), (1e11, 1e-3, "milliseconds"),

@@ -171,6 +171,31 @@ class ColumnMap:
         cols += [self.mode.column] if self.mode else []
         return cols + [q.column for q in self.quality]
 
+    def to_mapping(self) -> dict:
+        """The map as the dict :meth:`from_mapping` reads (stored in a reference file, so a replay reads the
+        record the way its calibration did).
+
+        >>> from phfdi.records import ColumnMap
+        >>> cmap = ColumnMap.from_args(["time_s=t", "level_cm=L"], ["level_cm=mm"])
+        >>> cmap.to_mapping()
+        {'time_s': {'column': 't', 'unit': 's'}, 'level_cm': {'column': 'L', 'unit': 'mm'}}
+        >>> ColumnMap.from_mapping(cmap.to_mapping()).signals == cmap.signals
+        True
+        """
+        out: dict = {name: {"column": spec.column, **({"unit": spec.unit} if spec.unit is not None else {})}
+                     for name, spec in self.signals.items()}
+        for key in ("sample_time_s", "time_format", "loop_tag"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        if self.mode is not None:
+            out["mode"] = {"column": self.mode.column, **({"automatic": sorted(self.mode.automatic)}
+                                                          if self.mode.automatic is not None else {})}
+        if self.quality:
+            out["quality"] = [{"column": q.column, "good": sorted(q.good),
+                               **({"signals": list(q.signals)} if q.signals is not None else {})}
+                              for q in self.quality]
+        return out
+
     # ---- constructors --------------------------------------------------------------
     @classmethod
     def load(cls, path: str | Path) -> Self:

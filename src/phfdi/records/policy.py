@@ -20,6 +20,7 @@ all of a channel missing, too few rows  refused                     refused
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from datetime import datetime
 
 import numpy as np
 
@@ -56,6 +57,7 @@ class Rows:
     automatic: np.ndarray | None = None
     boundaries: list[int] = field(default_factory=list)  # indices where a new segment starts
     notes: list[str] = field(default_factory=list)
+    wall_clock: datetime | None = None  # the wall-clock time at 0 s (date-time or epoch stamps), else None
 
     def __len__(self) -> int:
         return len(self.time_s)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import difflib
+from dataclasses import replace
+from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
@@ -13,7 +15,7 @@ from phfdi_base.errors import UserError
 from phfdi_base.signals import unit_of
 
 from . import policy as P
-from .cells import SERIAL_UNIX_EPOCH_DAYS, numeric_time_unit, parse_stamps, to_numbers
+from .cells import EPOCH, SERIAL_UNIX_EPOCH_DAYS, first_stamp, numeric_time_unit, parse_stamps, to_numbers
 from .columns import PROJECT_UNIT, ColumnMap, ColumnSpec, kind_of, normal_cell
 from .errors import ReadError
 from .formats import expected, format_of, run_suffixes
@@ -71,7 +73,7 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
     if cmap.loop_tag:
         meta["loop_tag"] = cmap.loop_tag
     return Record(str(path), rows.time_s, rows.values, units, columns, rows.lines, table.where, policy,
-                  [*table.notes, *rows.notes], rows.automatic, rows.boundaries, meta)
+                  [*table.notes, *rows.notes], rows.automatic, rows.boundaries, meta, rows.wall_clock)
 
 
 
@@ -135,6 +137,7 @@ def _resolve_map(given: MapLike | Callable[[list[str], dict], MapLike], table: T
     for name, spec in cmap.signals.items():
         if spec.column not in table.columns:
             _no_column(table, spec.column, name)
+    cmap = _with_time_detected(cmap, table)
     for column in ([cmap.mode.column] if cmap.mode else []) + [q.column for q in cmap.quality]:
         if column not in table.columns:
             _no_column(table, column, "mode/quality")
@@ -144,6 +147,21 @@ def _resolve_map(given: MapLike | Callable[[list[str], dict], MapLike], table: T
     if not cmap.channels():
         raise ReadError(table.path, "no signal column besides time", line=1 if table.where == "line" else None)
     return cmap
+
+
+def _with_time_detected(cmap: ColumnMap, table: Table) -> ColumnMap:
+    """A map that names neither a time column nor a sample time (``--column ph_measured=pH`` alone) gets the
+    file's time column the way a file read without a map does (``time_s``, ``timestamp``, ...), noted: naming
+    the signals should not lose the time."""
+    if cmap.time is not None or cmap.sample_time_s is not None:
+        return cmap
+    used = set(cmap.columns_used())
+    low = {c.lower(): c for c in table.columns if c not in used}
+    found = next((low[n] for n in TIME_NAMES if n in low), None)
+    if found is None:
+        return cmap
+    table.notes.append(f"{table.path}: time from column {found!r} (the column map names none)")
+    return replace(cmap, signals={"time_s": ColumnSpec(found), **cmap.signals})  # unit told by its range
 
 
 def _default_map(table: Table) -> ColumnMap:
@@ -179,7 +197,7 @@ def _unit(name: str, spec: ColumnSpec, table: Table) -> str:
 
 # ---- cells -> rows -------------------------------------------------------------------------
 def _rows(table: Table, cmap: ColumnMap) -> P.Rows:
-    time_s, stamps = _time(table, cmap)
+    time_s, stamps, wall_clock = _time(table, cmap)
     values, numbers = {}, {}
     for name, spec in cmap.signals.items():
         if name == "time_s":
@@ -187,7 +205,7 @@ def _rows(table: Table, cmap: ColumnMap) -> P.Rows:
         numbers[spec.column] = nums = to_numbers(table.columns[spec.column])
         values[name] = nums.values * spec.factor
     _note_missing_cells(table, numbers)
-    rows = P.Rows(table.path, table.where, time_s, values, table.lines.copy(), stamps)
+    rows = P.Rows(table.path, table.where, time_s, values, table.lines.copy(), stamps, wall_clock=wall_clock)
     _apply_quality(rows, table, cmap)
     _apply_mode(rows, table, cmap)
     readable = ~np.isnan(rows.time_s)
@@ -204,11 +222,13 @@ def spans_of(table: Table, index: np.ndarray) -> list[tuple[int, int]]:
     return P.spans(table.lines, index)
 
 
-def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None]:
+def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None, datetime | None]:
+    """Seconds of each row, the stamps as written (date-time stamps) and the wall-clock time at 0 s (None when
+    the record's time is not a clock: plain seconds, or samples counted from sample_time_s)."""
     spec = cmap.time
     if spec is None:
         dt = float(cmap.sample_time_s or table.metadata["sample_time_s"])
-        return dt * np.arange(len(table)), None
+        return dt * np.arange(len(table)), None, None
     cells = table.columns[spec.column]
     t, fmt = parse_stamps(cells, cmap.time_format)
     bad = np.isnan(t) | np.isinf(t)
@@ -219,14 +239,15 @@ def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None]:
                         column=spec.column, where=table.where)
     t = np.where(bad, np.nan, t)
     if fmt is None:
+        what = None
         if spec.unit is None:  # no unit stated in the map: tell epoch stamps and serial days by their range
             factor, what = numeric_time_unit(t)
             if factor != 1.0:  # (epoch seconds are seconds already: read as they are, as before)
                 table.notes.append(f"{table.path}: column {spec.column!r}: read as {what}, converted to (epoch) seconds "
                                    f"(told by its range; give the column's unit in a column map if that is wrong)")
                 t = (t - SERIAL_UNIX_EPOCH_DAYS) * factor if what and what.startswith("spreadsheet") else t * factor
-        return t * spec.factor, None
-    return t, [str(c).strip() for c in cells]
+        return t * spec.factor, None, EPOCH if what else None  # epoch stamps are a wall clock too
+    return t, [str(c).strip() for c in cells], first_stamp(cells, fmt)
 
 
 def _note_missing_cells(table: Table, numbers: dict) -> None:

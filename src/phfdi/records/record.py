@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from datetime import datetime
 
 import numpy as np
 
@@ -51,6 +52,9 @@ class Record:
     automatic: np.ndarray | None = None
     boundaries: list[int] = field(default_factory=list)
     metadata: dict = field(default_factory=dict)
+    #: the wall-clock time at ``time_s`` 0 when the time column holds date-time or epoch stamps (None: the
+    #: record's own seconds only); :func:`~phfdi.records.cells.iso_stamp` turns a time into its stamp
+    wall_clock: datetime | None = None
 
     def __len__(self) -> int:
         return len(self.time_s)

@@ -166,27 +166,39 @@ def bound_delay(signal: np.ndarray, t: np.ndarray, onset_s: float, arl0: float,
     return float(tt[j] - onset_s), float(np.sqrt(np.mean(s[: j + 1] ** 2)))
 
 
-def alarm_positions(z: np.ndarray, h: np.ndarray, clear_samples: int) -> list[int]:
+def alarm_positions(z: np.ndarray, h: np.ndarray, clear_samples: int, quiet_samples: int | None = None,
+                    clear_fraction: float = 0.5) -> list[int]:
     """Alarms of a union of CUSUMs on increments z (n, N): the detector's raise/confirm/clear logic
-    (a crossing within clear_samples of the previous one confirms the alarm instead of raising one)."""
+    (a crossing within clear_samples of the previous one confirms the alarm instead of raising one, unless the
+    alarm cleared before it: every statistic below clear_fraction of its threshold for quiet_samples)."""
 
-    out, pos, last = [], 0, None
+    out: list[int] = []
+    pos, last, active, loud_last = 0, -1, False, -1
     n = z.shape[1]
     bank = CusumBank(z.shape[0])
     while pos < n:
         end = min(n, pos + 65536)
         s = bank.update(z[:, pos:end], pos)
         over = np.flatnonzero((s > h[:, None]).any(axis=0))
+        stop = end if not len(over) else pos + int(over[0]) + 1  # values after a crossing are restarted
+        if quiet_samples is not None:
+            gi = np.arange(pos, stop)
+            loud = (s[:, :stop - pos] >= clear_fraction * h[:, None]).any(axis=0)
+            last_loud = np.maximum.accumulate(np.where(loud, gi, loud_last))
+            if active and ((gi - last_loud >= quiet_samples) & (gi > last)).any():
+                active = False
+            loud_last = int(last_loud[-1])
         if not len(over):
             pos = end
             continue
-        x = pos + int(over[0])
-        if last is None or x - last > clear_samples:
+        x = stop - 1
+        if not active or x - last > clear_samples:
             out.append(x)
-        last = x
+        last, active = x, True
         bank.restart(x)
         pos = x + 1
     return out
+
 
 def evaluate_run(task: RunTask) -> dict:
     """Simulate one run, run our detector and the peers on its residual, compute the bound."""
@@ -212,7 +224,8 @@ def evaluate_run(task: RunTask) -> dict:
     z = np.vstack([statistic_increments(tr, n, task.calibration.sigma, bands) for n in names])
     h = np.array([task.bands_only[n] for n in names])
     rec["alarms"]["wavelet_bands"] = [{"detection_time": float(t_mon[p])}
-                                      for p in alarm_positions(z, h, det.clear_samples)]
+                                      for p in alarm_positions(z, h, det.clear_samples, det.quiet_samples,
+                                                                 det.settings.clear_fraction)]
     for name in PEERS:
         pos = Peer(name, task.peers[name], 0.5 * task.settings.mean_shift_sigma).alarms(u)
         rec["alarms"][name] = [{"detection_time": float(t_mon[p])} for p in pos]
