@@ -321,28 +321,15 @@ class EstimatorStream:
     def _run(self, t, flows, ok, xm, r_meas, ph) -> list[float]:  # noqa: C901 - one tight loop, kept flat for speed
         """The recursion over plain floats and lists (a sample costs a few microseconds this way); the state
         lives in locals and is written back at block boundaries and at the end."""
-        ref, nz = self.ref, self.ref.noise
-        v = ref.volume_ml
-        strengths = [f.strength_mM for f in ref.feeds]
-        m = len(strengths)
-        rng_m = range(m)
-        rel2, walk2, eps2, sp2 = nz.rate_rel_std ** 2, nz.walk_ph_per_sqrt_s ** 2, nz.curve_std_mM ** 2, \
-            nz.probe_noise_ph ** 2
-        tim = nz.timing_s
-        xs: list[float] = ref._x_list  # type: ignore[attr-defined]
-        betas: list[float] = ref._beta_list  # type: ignore[attr-defined]
+        (v, strengths, rel2, walk2, eps2, sp2, tim, xs, betas, block, correct, adapting, bounds_ph, in_x,
+         clip) = self._loop_constants()
+        rng_m = range(len(strengths))
         grid_n = len(xs) - 1
-        block = ref.block_samples
-        correct = ref.correct
-        adapting = ref.adapt_time_constant_s > 0
-        bounds_ph = ref.adapt_zones_ph
-        in_x = ref.innovation == "x"
-        clip = ref.clip_sigma or math.inf
         zf = self.zone_factors  # each zone's list is mutated in place by _adapt
         zone = self.zone
         fac = zf[zone]
         x, pv, last_t, qp, samples, nll = self.x, self.p, self.last_t, self.last_flows, self.samples, self.nll
-        exp, sqrt, log, bisect_left = math.exp, math.sqrt, math.log, bisect.bisect_left
+        exp, sqrt, log, bisect_left, bisect_right = math.exp, math.sqrt, math.log, bisect.bisect_left, bisect.bisect_right
         out = [math.nan] * len(t)
         for k in range(len(t)):
             q = flows[k]
@@ -353,7 +340,7 @@ class EstimatorStream:
                 if ok[k]:
                     x, pv, last_t, qp = xm[k], r_meas[k], t[k], q
                     out[k] = 0.0  # the start: no evidence either way
-                    zone = sum(1 for b in bounds_ph if ph[k] >= b)
+                    zone = bisect_right(bounds_ph, ph[k])  # the zone: how many boundaries lie at or below the pH
                     fac = zf[zone]
                 samples += 1
                 continue
@@ -399,12 +386,8 @@ class EstimatorStream:
                     self._accumulate(qp, strengths, dt, corr, zone)
             else:
                 x, pv = xp, pm
-            if bounds_ph:  # the next step predicts with the factors of the zone its pH is in
-                zone = 0
-                for b in bounds_ph:
-                    if php >= b:
-                        zone += 1
-                fac = zf[zone]
+            zone = bisect_right(bounds_ph, php)  # the next step predicts with the factors of its pH's zone
+            fac = zf[zone]
             last_t, qp = t[k], q
             samples += 1
             if samples % block == 0:
@@ -412,6 +395,15 @@ class EstimatorStream:
         self.x, self.p, self.last_t, self.last_flows, self.samples, self.nll = x, pv, last_t, qp, samples, nll
         self.zone = zone
         return out
+
+    def _loop_constants(self) -> tuple:
+        """What the recursion reads every sample, as plain floats and lists."""
+        ref, nz = self.ref, self.ref.noise
+        return (ref.volume_ml, [f.strength_mM for f in ref.feeds], nz.rate_rel_std ** 2, nz.walk_ph_per_sqrt_s ** 2,
+                nz.curve_std_mM ** 2, nz.probe_noise_ph ** 2, nz.timing_s,
+                ref._x_list, ref._beta_list,  # type: ignore[attr-defined]
+                ref.block_samples, ref.correct, ref.adapt_time_constant_s > 0, ref.adapt_zones_ph,
+                ref.innovation == "x", ref.clip_sigma or math.inf)
 
     def _accumulate(self, qp: list[float], strengths: list[float], dt: float, corr: float, zone: int) -> None:
         """Block sums of a zone for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V."""
