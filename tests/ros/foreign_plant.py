@@ -9,7 +9,7 @@ no stamp: what a plant's driver often does), row after row: with ``pace_hz`` 0 a
 else at that many rows per second of wall time. It listens to /fault_alarm meanwhile. Prints one JSON line
 ``{"event": "published", ...}`` when every row is acknowledged, then keeps listening until SIGTERM and prints
 ``{"event": "alarms", "received": [...], "diagnostics": [...]}`` with every /fault_alarm it received and every
-``detector: channel map`` status of /diagnostics (level and message).
+``detector: channel map`` status of /diagnostics (level, message, values).
 """
 
 from __future__ import annotations
@@ -52,7 +52,8 @@ def main(domain_id: int, spec_path: str) -> int:
 
     def on_diagnostics(m: DiagnosticArray) -> None:
         diagnostics.extend({"level": int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else int(s.level),
-                            "message": s.message} for s in m.status if s.name.endswith("channel map"))
+                            "message": s.message, "values": {v.key: v.value for v in s.values}}
+                           for s in m.status if s.name.endswith("channel map"))
 
     def on_alarm(m: FaultAlarm) -> None:
         received.append({"state": int(m.state), "stamp_ns": time_ns(m.stamp), "detection_ns": time_ns(m.detection_time),

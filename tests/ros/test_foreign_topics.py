@@ -248,6 +248,8 @@ def test_a_topic_of_the_wrong_type_and_a_silent_topic_are_named_once_and_the_nod
     assert done["samples"] >= 3 and counts["b"]["missing"] == counts["c"]["missing"] == done["samples"]
     said = [d["message"] for d in heard["diagnostics"] if d["level"] == 1]
     assert any(wrong in m and silent in m for m in said), heard["diagnostics"][-3:]
+    # each channel's source and stamp rule on /diagnostics: std_msgs/Float64 has no header, the receive time
+    assert heard["diagnostics"][-1]["values"]["a"] == "/abc/a (std_msgs/msg/Float64) data, stamped by receive time"
 
 
 @pytest.mark.parametrize("channel, says", [
