@@ -120,6 +120,11 @@ class ChannelAligner:
             self._seen_top = k
             self._advances.append((k, now_s))
 
+    def off_grid(self, at_least: int = 10) -> list[int]:
+        """hold: channels whose every message (``at_least`` of them) fell outside the grid: stamps on another
+        clock than the first message's (e.g. header stamps of the plant's time beside receive times)."""
+        return [c for c, n in enumerate(self.counts) if n.received >= at_least and n.late == n.received]
+
     # ---- out -----------------------------------------------------------------------------------
     def take(self, now_s: float) -> list[tuple[float, np.ndarray]]:
         """The samples that are complete, or have waited ``max_wait_s``: (seconds from the first sample, row)."""

@@ -107,6 +107,12 @@ class MappedInputs:
         """Timer (wall time): samples whose wait is over, and the checks of topics that deliver nothing."""
         now = time.monotonic()
         self.deliver(self.aligner.take(now))
+        for c in self.aligner.off_grid():
+            source, origin = self.cmap.sources[c], self.aligner.origin_ns or 0
+            off_s = ((self.aligner.counts[c].last_stamp_ns or 0) - origin) / 1e9
+            self.say(f"grid {source.channel}", f"channel {source.channel}: every message of {source.topic} is "
+                     f"stamped off the grid ({off_s:.6g} s from its origin, {source.stamp}): "
+                     "are its stamps on another clock than the other channels'?")
         for topic in self.cmap.topics():
             last = self._last_arrival.get(topic, self._start)
             if now - last < self.silent_after_s:

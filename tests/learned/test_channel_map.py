@@ -121,6 +121,15 @@ def test_hold_waits_for_every_channel_then_goes_out_after_max_wait_without_a_sil
     assert [r.tolist() for _, r in al.flush()] == [[3.0, 7.0]]
 
 
+def test_hold_names_a_channel_whose_stamps_are_on_another_clock():
+    al = ChannelAligner(2, SEC, "hold", max_wait_s=1.0)
+    for k in range(12):  # channel 0 on the plant's clock from 0 s, channel 1 stamped by a receive time of 2026
+        al.add(0, k * SEC, float(k), now_s=k)
+        al.add(1, 1_795_000_000 * SEC + k * SEC, 1.0, now_s=k)
+        al.take(now_s=k)
+    assert al.off_grid() == [1] and al.counts[1].late == 12
+
+
 def test_sequence_goes_out_without_a_silent_channel_after_max_wait():
     al = ChannelAligner(2, SEC, "sequence", max_wait_s=1.0)
     al.add(0, 0, 1.0, now_s=0.0)

@@ -10,6 +10,10 @@ else at that many rows per second of wall time. It listens to /fault_alarm meanw
 ``{"event": "published", ...}`` when every row is acknowledged, then keeps listening until SIGTERM and prints
 ``{"event": "alarms", "received": [...], "diagnostics": [...]}`` with every /fault_alarm it received and every
 ``detector: channel map`` status of /diagnostics (level, message, values).
+
+With ``"stamped": {"t0_ns": T0, "dt_ns": DT, "topics": [{"topic", "type", "field", "columns", "names"}, ...]}`` it
+publishes stamped messages instead, row k stamped T0 + k * DT: sensor_msgs/FluidPressure or Temperature (header,
+``field`` = column ``columns[0]``) or phfdi_interfaces/MeasuredSample (its stamp; ``names`` = ``columns``).
 """
 
 from __future__ import annotations
@@ -45,8 +49,10 @@ def main(domain_id: int, spec_path: str) -> int:
     executor = rclpy.executors.SingleThreadedExecutor(context=context)
     executor.add_node(node)
     float32 = set(spec.get("float32", []))
-    types = [Float32 if topic in float32 else Float64 for topic in spec["topics"]]
-    pubs = [node.create_publisher(t, topic, DATA_QOS) for t, topic in zip(types, spec["topics"])]
+    senders = stamped_senders(node, spec["stamped"]) if "stamped" in spec else [
+        (node.create_publisher(t, topic, DATA_QOS), lambda row, k, i=i, t=t: t(data=float(row[i])))
+        for i, (topic, t) in enumerate((topic, Float32 if topic in float32 else Float64) for topic in spec["topics"])]
+    pubs = [pub for pub, _ in senders]
     received: list[dict] = []
     diagnostics: list[dict] = []
 
@@ -80,8 +86,8 @@ def main(domain_id: int, spec_path: str) -> int:
         if pace_hz > 0:
             while time.monotonic() < t0 + k / pace_hz:
                 executor.spin_once(timeout_sec=max(0.0, min(0.05, t0 + k / pace_hz - time.monotonic())))
-        for pub, t, value in zip(pubs, types, row):
-            pub.publish(t(data=float(value)))
+        for pub, build in senders:
+            pub.publish(build(row, k))
         executor.spin_once(timeout_sec=0.0)
     acked = all(p.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S)) for p in pubs)
     print(json.dumps({"event": "published", "rows": len(spec["rows"]), "topics": len(pubs), "acked": acked,
@@ -97,6 +103,34 @@ def main(domain_id: int, spec_path: str) -> int:
     rclpy.try_shutdown(context=context)
     context.destroy()
     return 0
+
+
+def stamped_senders(node, stamped: dict) -> list:
+    """(publisher, build(row, k)) of stamped messages: row k stamped t0_ns + k * dt_ns."""
+    from phfdi_interfaces.msg import MeasuredSample
+    from sensor_msgs.msg import FluidPressure, Temperature
+
+    from phfdi_base.ros.graph_node import DATA_QOS, to_time
+
+    t0_ns, dt_ns = int(stamped["t0_ns"]), int(stamped["dt_ns"])
+    senders = []
+    for t in stamped["topics"]:
+        cols = t["columns"]
+        if t["type"] == "phfdi_interfaces/msg/MeasuredSample":
+            def build(row, k, cols=cols, names=t["names"]):
+                return MeasuredSample(stamp=to_time(t0_ns + k * dt_ns), names=names,
+                                      values=[float(row[c]) for c in cols])
+            mtype = MeasuredSample
+        else:
+            mtype = {"sensor_msgs/msg/FluidPressure": FluidPressure, "sensor_msgs/msg/Temperature": Temperature}[t["type"]]
+
+            def build(row, k, cols=cols, mtype=mtype, field=t["field"]):
+                msg = mtype()
+                msg.header.stamp = to_time(t0_ns + k * dt_ns)
+                setattr(msg, field, float(row[cols[0]]))
+                return msg
+        senders.append((node.create_publisher(mtype, t["topic"], DATA_QOS), build))
+    return senders
 
 
 if __name__ == "__main__":

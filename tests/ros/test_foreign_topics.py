@@ -177,6 +177,48 @@ def test_a_skab_record_on_float64_topics_gives_the_offline_alarms(shared_data, t
     assert done["channel_map"]["align"] == "sequence" and done["channel_map"]["problems"] == []
 
 
+def test_stamped_sensor_messages_held_on_the_grid_give_the_offline_alarms(shared_data, tmp_path, capsys):
+    """The same SKAB record as sensor_msgs/FluidPressure and Temperature (header stamps) and one
+    phfdi_interfaces/MeasuredSample topic carrying the other five channels by name (its stamp), with align: hold:
+    each message goes to the sample of its stamp, whatever the order the topics arrive in."""
+    record = shared_data / "skab" / "valve1" / "3.csv"
+    if not record.exists():
+        pytest.skip(f"{record} not found")
+    ref = tmp_path / "ref.json"
+    assert main(["calibrate", "--learn", str(record), "--rows", "400", "--exclude", "anomaly,changepoint",
+                 "--out", str(ref)]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(record), "--reference", str(ref), "--json"]) == 0
+    offline = json.loads(capsys.readouterr().out)
+    model = LearnedModel.load(ref)
+    channels = list(model.channels)
+    rows = read_measured(record, channels=channels).x
+    headered = {"Pressure": "sensor_msgs/msg/FluidPressure", "Temperature": "sensor_msgs/msg/Temperature",
+                "Thermocouple": "sensor_msgs/msg/Temperature"}
+    field = {"sensor_msgs/msg/FluidPressure": "fluid_pressure", "sensor_msgs/msg/Temperature": "temperature"}
+    rest = [c for c in channels if c not in headered]
+    cmap = tmp_path / "stamped_map.yaml"
+    cmap.write_text("align: hold\nmax_wait_s: 30\nchannels:\n" + "".join(
+        f"  {c}: {{topic: /skab/{c.lower()}, type: {t}}}\n" for c, t in headered.items()) + "".join(
+        f"  {c}: {{topic: /skab/rest, type: phfdi_interfaces/msg/MeasuredSample, name: {c}}}\n" for c in rest))
+    dt_ns = grid_period_ns(model.settings.sample_time_s)
+    t0_ns = 1_583_752_474 * 1_000_000_000  # the record's first row, 2020-03-09 11:14:34 UTC
+    topics = [{"topic": f"/skab/{c.lower()}", "type": t, "field": field[t], "columns": [channels.index(c)]}
+              for c, t in headered.items()]
+    topics.append({"topic": "/skab/rest", "type": "phfdi_interfaces/msg/MeasuredSample", "names": rest,
+                   "columns": [channels.index(c) for c in rest]})
+    done, heard, err = run_foreign_plant(tmp_path, ref, cmap, rows,
+                                         plant={"stamped": {"t0_ns": t0_ns, "dt_ns": dt_ns, "topics": topics}})
+    assert done["channel_map"]["grid_origin_ns"] == t0_ns
+    check_same_alarms(done, heard["received"], offline, dt_ns)
+    counts = done["channel_map"]["counts"]
+    assert all(c["received"] == c["used"] == len(rows) and c["held"] == c["missing"] == c["late"] == 0
+               for c in counts.values()), counts
+    assert done["channel_map"]["samples_waited_out"] == 0 and done["channel_map"]["problems"] == []
+    stamps = heard["diagnostics"][-1]["values"]
+    assert stamps["Pressure"].endswith("stamped by header.stamp") and stamps[rest[0]].endswith("stamped by stamp")
+
+
 def test_a_rig_run_with_a_probe_bias_through_the_estimator_reference(shared_data, tmp_path, capsys):
     rig = shared_data / "ph_rig"
     missing = [rig / n for n in (*RIG_FIT, RIG_HELD_OUT) if not (rig / n).exists()]
