@@ -6,7 +6,8 @@ SPEC.json: ``{"topics": [...], "rows": [[...], ...], "pace_hz": 0, "float32": [.
 the rows as std_msgs/Float64 (std_msgs/Float32 on the topics listed in ``float32``) on its own topic (no header,
 no stamp: what a plant's driver often does), row after row: with ``pace_hz`` 0 as fast as its readers take them
 (reliable, keep all: a writer waits for a reader that falls behind, nothing is lost, each topic keeps its order),
-else at that many rows per second of wall time. It listens to /fault_alarm meanwhile. Prints one JSON line
+else at that many rows per second of wall time (``wait_samples``: then until the node's /diagnostics say it has
+put that many samples on its grid). It listens to /fault_alarm meanwhile. Prints one JSON line
 ``{"event": "published", ...}`` when every row is acknowledged, then keeps listening until SIGTERM and prints
 ``{"event": "alarms", "received": [...], "diagnostics": [...]}`` with every /fault_alarm it received and every
 ``detector: channel map`` status of /diagnostics (level, message, values).
@@ -90,8 +91,16 @@ def main(domain_id: int, spec_path: str) -> int:
             pub.publish(build(row, k))
         executor.spin_once(timeout_sec=0.0)
     acked = all(p.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S)) for p in pubs)
+    wall_s = time.monotonic() - t0
+    # acknowledged is in the node's reader, not yet taken: with wait_samples, wait until the node's /diagnostics
+    # says it has put that many samples on its grid (its stop then has nothing left in its readers to take)
+    deadline = time.monotonic() + ACK_TIMEOUT_S
+    while (spec.get("wait_samples") and not stop and time.monotonic() < deadline
+           and int(diagnostics[-1]["values"]["samples"] if diagnostics else 0) < spec["wait_samples"]):
+        executor.spin_once(timeout_sec=0.1)
+    node_samples = int(diagnostics[-1]["values"]["samples"]) if diagnostics else None
     print(json.dumps({"event": "published", "rows": len(spec["rows"]), "topics": len(pubs), "acked": acked,
-                      "wall_s": round(time.monotonic() - t0, 3)}), flush=True)
+                      "wall_s": round(wall_s, 3), "node_samples": node_samples}), flush=True)
     while not stop:
         executor.spin_once(timeout_sec=0.1)
     deadline = time.monotonic() + 2.0  # what the readers already hold

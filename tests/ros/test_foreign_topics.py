@@ -81,28 +81,33 @@ def wait_for_event(proc: subprocess.Popen, event: str, timeout_s: float) -> tupl
 
 
 def run_foreign_plant(tmp_path: Path, ref: Path, cmap_path: Path, rows: np.ndarray, node_params: dict | None = None,
-                      plant: dict | None = None, expect_stderr: tuple[str, ...] = ()) -> tuple[dict, dict, str]:
-    """The detector node on the map's topics and the plant publishing ``rows`` (``plant``: more of its spec);
+                      plant_spec: dict | None = None, expect_stderr: tuple[str, ...] = ()) -> tuple[dict, dict, str]:
+    """The detector node on the map's topics and the plant publishing ``rows`` (``plant_spec``: more of its spec);
     with ``expect_stderr``, once the plant is done, the node must say each of those in its log and still run.
     The node's ``detector_done`` report, what the plant received (/fault_alarm, the channel map's
     /diagnostics), the node's stderr."""
     cmap = load_channel_map(cmap_path, LearnedModel.load(ref).channels)
     spec = tmp_path / "plant.json"
+    # the plant waits until the node has taken every row but the last (hold puts it out at the end), so that the
+    # stop does not find thousands of messages left in the node's readers on a loaded machine
     spec.write_text(json.dumps({"topics": [s.topic for s in cmap.sources], "rows": rows.tolist(), "pace_hz": 0,
-                                **(plant or {})}))
+                                "wait_samples": len(rows) - 1, **(plant_spec or {})}))
     shm_before = ownerless_shm_files()
     lease = reserve_domain_id()
     env = graph_env(lease.domain_id)
     detector = plant = None
     try:
         detector = subprocess.Popen(node_cmd("wavelet_fdi.learned_node", reference=ref, channel_map_file=cmap_path,
-                                             graph_nodes="[detector]", **(node_params or {})),
+                                             graph_nodes="[detector]",
+                                             **{"diagnostics_period_s": 0.5, **(node_params or {})}),
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=tmp_path)
         started, out0 = wait_for_event(detector, "startup", START_S)  # connected
         plant = subprocess.Popen([sys.executable, "-m", "tests.ros.foreign_plant", str(lease.domain_id), str(spec)],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=ROOT)
         published, plant_out0 = wait_for_event(plant, "published", RUN_S)
         assert published.get("event") == "published" and published["acked"], published
+        if "wait_samples" not in (plant_spec or {}):
+            assert published["node_samples"] >= len(rows) - 1, published
         err0 = ""
         for line in expect_stderr:
             if line not in getattr(detector, "stderr_seen", ""):
@@ -208,7 +213,7 @@ def test_stamped_sensor_messages_held_on_the_grid_give_the_offline_alarms(shared
     topics.append({"topic": "/skab/rest", "type": "phfdi_interfaces/msg/MeasuredSample", "names": rest,
                    "columns": [channels.index(c) for c in rest]})
     done, heard, err = run_foreign_plant(tmp_path, ref, cmap, rows,
-                                         plant={"stamped": {"t0_ns": t0_ns, "dt_ns": dt_ns, "topics": topics}})
+                                         plant_spec={"stamped": {"t0_ns": t0_ns, "dt_ns": dt_ns, "topics": topics}})
     assert done["channel_map"]["grid_origin_ns"] == t0_ns
     check_same_alarms(done, heard["received"], offline, dt_ns)
     counts = done["channel_map"]["counts"]
@@ -279,7 +284,8 @@ def test_a_topic_of_the_wrong_type_and_a_silent_topic_are_named_once_and_the_nod
     silent = "/abc/c has published nothing for"
     done, heard, err = run_foreign_plant(
         tmp_path, abc_reference, cmap, rows[:, :2], node_params={"silent_after_s": 1.0, "diagnostics_period_s": 0.5},
-        plant={"topics": ["/abc/a", "/abc/b"], "float32": ["/abc/b"], "pace_hz": 25}, expect_stderr=(wrong, silent))
+        plant_spec={"topics": ["/abc/a", "/abc/b"], "float32": ["/abc/b"], "pace_hz": 25, "wait_samples": 0},
+        expect_stderr=(wrong, silent))
     assert err.count(wrong) == 1 and err.count(silent) == 1 and "Traceback" not in err
     counts = done["channel_map"]["counts"]
     # 25 values a second of /abc/a on a grid of 1 s (the reference's sample time): the latest of each second is
