@@ -136,3 +136,20 @@ def test_sequence_goes_out_without_a_silent_channel_after_max_wait():
     assert al.take(now_s=0.5) == []
     (t, row), = al.take(now_s=1.0)
     assert row[0] == 1.0 and math.isnan(row[1]) and al.counts[1].missing == 1
+
+
+def test_a_value_the_message_does_not_hold_is_nan_with_the_reason():
+    from types import SimpleNamespace
+
+    from wavelet_fdi.channel_map import value_of
+
+    cmap = parse_channel_map({"channels": {
+        "q": {"topic": "/q", "type": "std_msgs/msg/Float64MultiArray", "index": 2},
+        "pH": {"topic": "/m", "type": "phfdi_interfaces/msg/MeasuredSample", "name": "pH"}}})
+    q, ph = cmap.sources
+    assert value_of(q, SimpleNamespace(data=[1.0, 2.0, 3.0])) == (3.0, None)
+    value, why = value_of(q, SimpleNamespace(data=[1.0, 2.0]))
+    assert math.isnan(value) and why == "data[2] is past the end of 2 values"
+    assert value_of(ph, SimpleNamespace(names=["T", "pH"], values=[20.0, 7.1])) == (7.1, None)
+    value, why = value_of(ph, SimpleNamespace(names=["T"], values=[20.0]))
+    assert math.isnan(value) and why == "no value named 'pH'"
