@@ -20,7 +20,8 @@ map is checked (:func:`load_channel_map`, one line for an unknown type, field or
 ``tests/ros/test_channel_map_types.py`` checks the table against the real message classes.
 
 Stamps: a type with a ``std_msgs/Header`` is stamped with ``header.stamp``, the project's messages with their
-``stamp``; every other type (std_msgs' numbers and arrays) with the time the detector received it.
+``stamp``; every other type (std_msgs' numbers and arrays) with the time the detector received it. A channel
+with ``stamp: receive`` is stamped on receipt whatever its type (a publisher that leaves its headers at 0).
 """
 
 from __future__ import annotations
@@ -91,7 +92,7 @@ MESSAGE_TYPES: dict[str, MessageType] = _types(
                 default_field="values"),
 )
 
-_CHANNEL_KEYS = {"topic", "type", "field", "index", "name"}
+_CHANNEL_KEYS = {"topic", "type", "field", "index", "name", "stamp"}
 _TOP_KEYS = {"align", "max_wait_s", "hold_samples", "reliability", "channels"}
 
 
@@ -105,10 +106,11 @@ class ChannelSource:
     field: str
     index: int | None = None
     name: str | None = None
+    receive_stamp: bool = False  # ``stamp: receive``: stamped on receipt, whatever the type
 
     @property
     def stamp(self) -> str:
-        return self.type.stamp
+        return STAMP_RECEIVE if self.receive_stamp else self.type.stamp
 
     def describe(self) -> str:
         part = f"[{self.index}]" if self.index is not None else f"[{self.name!r}]" if self.name is not None else ""
@@ -231,7 +233,10 @@ def _source(name: str, spec: Any, where: str) -> ChannelSource:
                             f"{mtype.named[0]})")
     elif label is not None:
         raise UserError(f"{here}: name is for {', '.join(t.name for t in MESSAGE_TYPES.values() if t.named)}")
-    return ChannelSource(name, topic, mtype, fname, index, label)
+    stamp = spec.get("stamp")
+    if stamp not in (None, "receive"):
+        raise UserError(f"{here}: stamp can only be 'receive' (stamped on receipt), got {stamp!r}")
+    return ChannelSource(name, topic, mtype, fname, index, label, stamp == "receive")
 
 
 def _check_against(cmap: ChannelMap, reference_channels: Sequence[str], where: str) -> None:
@@ -243,10 +248,14 @@ def _check_against(cmap: ChannelMap, reference_channels: Sequence[str], where: s
     extra = [c for c in cmap.channels if c not in set(reference_channels)]
     if extra:
         raise UserError(f"{where}: channel {extra[0]!r} is not one of the reference's ({', '.join(reference_channels)})")
-    by_topic: dict[str, str] = {}
+    by_topic: dict[str, ChannelSource] = {}
     for s in cmap.sources:
-        if by_topic.setdefault(s.topic, s.type.name) != s.type.name:
-            raise UserError(f"{where}: topic {s.topic} is given two types ({by_topic[s.topic]} and {s.type.name})")
+        first = by_topic.setdefault(s.topic, s)
+        if first.type.name != s.type.name:
+            raise UserError(f"{where}: topic {s.topic} is given two types ({first.type.name} and {s.type.name})")
+        if first.stamp != s.stamp:
+            raise UserError(f"{where}: topic {s.topic} is stamped two ways (channel {first.channel!r} by "
+                            f"{first.stamp}, {s.channel!r} by {s.stamp}): give stamp: receive to all or none")
 
 
 def _number(value: Any, what: str) -> float:

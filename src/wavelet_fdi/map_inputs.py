@@ -6,7 +6,7 @@ taken: wall time, or /clock with ``use_sim_time``); the ROS-free :class:`~wavele
 puts them on the sample grid and the rows go to the node's worker. What cannot be read is said once, in one line,
 on the log and on /diagnostics (``detector: channel map``), and the node keeps running: a topic that publishes
 nothing, a topic published with another type than the map says (DDS then never delivers it), a QoS that does not
-match, an array index past the end, a header stamp of 0 (then the receive time is used).
+match, an array index past the end, a stamp that repeats (a publisher that does not fill it in).
 """
 
 from __future__ import annotations
@@ -25,11 +25,15 @@ from phfdi_base.ros.params import NodeStartError
 from phfdi_base.stamps import time_ns
 
 from .channel_align import ChannelAligner
-from .channel_map import STAMP_FIELD, STAMP_HEADER, ChannelMap, ChannelSource, value_of
+from .channel_map import STAMP_HEADER, STAMP_RECEIVE, ChannelMap, ChannelSource, value_of
 
 #: a best-effort reader keeps this many messages per topic until the executor takes them
 BEST_EFFORT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.VOLATILE)
+
+
+#: hold: this many messages of a topic in a row with the same stamp are said (its publisher does not stamp them)
+STAMP_REPEATS = 3
 
 
 def message_class(type_name: str) -> Any:
@@ -52,6 +56,7 @@ class MappedInputs:
         self.problems: dict[str, str] = {}  # key -> the one line said about it (each said once)
         self._start = time.monotonic()
         self._last_arrival: dict[str, float] = {}
+        self._last_stamp: dict[str, tuple[int | None, int]] = {}  # topic -> (last stamp, repeats of it in a row)
         qos = DATA_QOS if cmap.reliability == "reliable" else BEST_EFFORT_QOS
         for topic, mtype in cmap.topics().items():
             sources = [(i, s) for i, s in enumerate(cmap.sources) if s.topic == topic]
@@ -77,13 +82,19 @@ class MappedInputs:
         self.deliver(self.aligner.take(now))
 
     def _stamp_ns(self, source: ChannelSource, msg: Any) -> int:
-        if source.stamp in (STAMP_HEADER, STAMP_FIELD):
-            ns = time_ns(msg.header.stamp if source.stamp == STAMP_HEADER else msg.stamp)
-            if ns > 0 or self.aligner.origin_ns == 0:  # a record's own time starts at 0: its first stamp is 0
-                return ns
-            self.say(f"stamp {source.topic}", f"{source.topic}: {source.stamp} is 0 (not filled in by its "
-                     "publisher): its messages are stamped with the time they were received")
-        return self.node.get_clock().now().nanoseconds
+        if source.stamp == STAMP_RECEIVE:
+            return self.node.get_clock().now().nanoseconds
+        ns = time_ns(msg.header.stamp if source.stamp == STAMP_HEADER else msg.stamp)
+        # a stamp that repeats is a publisher that does not fill it in (hold would keep one value of many);
+        # sequence does not place by stamp
+        last, repeats = self._last_stamp.get(source.topic, (None, 0))
+        repeats = repeats + 1 if ns == last else 0
+        self._last_stamp[source.topic] = (ns, repeats)
+        if repeats >= STAMP_REPEATS and self.cmap.align == "hold":
+            self.say(f"stamp {source.topic}", f"{source.topic}: {repeats + 1} messages in a row stamped "
+                     f"{ns / 1e9:.9g} s by {source.stamp}: does its publisher fill it in? (stamp: receive in the "
+                     "channel map stamps them on receipt)")
+        return ns
 
     def _on_incompatible_qos(self, topic: str, event: Any) -> None:
         self.say(f"qos {topic}", f"{topic}: a publisher's QoS does not match this reader's ({self.cmap.reliability}; "

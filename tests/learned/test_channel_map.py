@@ -53,6 +53,17 @@ def test_fields_default_and_stamps_come_from_the_header_the_stamp_or_the_receive
         ("data", None, "receive time")]
 
 
+def test_stamp_receive_overrides_the_header_for_every_channel_of_its_topic():
+    spec = {"topic": "/p", "type": "sensor_msgs/msg/FluidPressure"}
+    cmap = parse_channel_map({"channels": {"p": {**spec, "stamp": "receive"}}})
+    assert cmap.sources[0].stamp == "receive time"
+    with pytest.raises(UserError, match="stamp can only be 'receive'"):
+        parse_channel_map({"channels": {"p": {**spec, "stamp": "header"}}})
+    with pytest.raises(UserError, match="topic /p is stamped two ways"):
+        parse_channel_map({"channels": {"p": {**spec, "stamp": "receive"}, "v": {**spec, "field": "variance"}}},
+                          reference_channels=["p", "v"])
+
+
 def test_a_map_must_cover_the_reference_channels_and_no_others():
     spec = {"topic": "/a", "type": "std_msgs/msg/Float64"}
     with pytest.raises(UserError, match="no source for the reference's channel 'b'"):

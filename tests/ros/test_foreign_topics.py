@@ -300,6 +300,28 @@ def test_a_topic_of_the_wrong_type_and_a_silent_topic_are_named_once_and_the_nod
     assert heard["diagnostics"][-1]["values"]["a"] == "/abc/a (std_msgs/msg/Float64) data, stamped by receive time"
 
 
+def test_a_stamp_that_repeats_is_said_and_stamp_receive_overrides_the_header(abc_reference, tmp_path):
+    """/abc/a's publisher leaves its header stamps at 0: said once, the node keeps running; /abc/b's are 0 too but
+    its channel has stamp: receive, so it is placed by the time it arrives."""
+    cmap = tmp_path / "stamps_map.yaml"
+    cmap.write_text("align: hold\nmax_wait_s: 1.0\nchannels:\n"
+                    "  a: {topic: /abc/a, type: sensor_msgs/msg/FluidPressure}\n"
+                    "  b: {topic: /abc/b, type: sensor_msgs/msg/FluidPressure, stamp: receive}\n"
+                    "  c: {topic: /abc/c, type: std_msgs/msg/Float64}\n")
+    rows = np.arange(30.0).reshape(10, 3)
+    topics = [{"topic": f"/abc/{c}", "type": "sensor_msgs/msg/FluidPressure", "field": "fluid_pressure",
+               "columns": [i]} for i, c in enumerate("ab")]
+    said = "/abc/a: 4 messages in a row stamped 0 s by header.stamp: does its publisher fill it in?"
+    done, heard, err = run_foreign_plant(
+        tmp_path, abc_reference, cmap, rows, node_params={"silent_after_s": 1.0},
+        plant_spec={"stamped": {"t0_ns": 0, "dt_ns": 0, "topics": topics}, "pace_hz": 10, "wait_samples": 0},
+        expect_stderr=(said,))
+    assert err.count(said) == 1 and "Traceback" not in err
+    assert heard["diagnostics"][-1]["values"]["b"] == "/abc/b (sensor_msgs/msg/FluidPressure) fluid_pressure, " \
+        "stamped by receive time"
+    assert done["channel_map"]["counts"]["b"]["received"] == 10
+
+
 @pytest.mark.parametrize("channel, says", [
     ("{topic: /abc/a, type: std_msgs/msg/Float65}", "unknown message type 'std_msgs/msg/Float65'"),
     ("{topic: /abc/a, type: sensor_msgs/msg/FluidPressure, field: pressure}", "has no field 'pressure'"),
