@@ -1,8 +1,14 @@
 """ROS 2 node of the learned detector (thin wrapper of wavelet_fdi.learned_detector.LearnedDetector):
-/measured/sample in, /fault_alarm out.
+/measured/sample or your plant's own topics in, /fault_alarm out.
 
-Input: /measured/sample (phfdi_interfaces/MeasuredSample: channel names and values of one row of a
-measured record, e.g. played from a bag of ``phfdi bag from-csv``). The channels are matched to the
+Input, with ``channel_map_file`` (a YAML channel map, :mod:`wavelet_fdi.channel_map`): each channel of the
+reference from the topic, message type and field the map names (std_msgs numbers and arrays, sensor_msgs
+scalars, the project's messages), stamped by its header where it has one and by the node's clock when it is
+received otherwise, put onto the reference's sample grid by :mod:`wavelet_fdi.channel_align` (the map's
+``align`` rule); the channel sources, stamp rules, counts and problems on /diagnostics (``detector: channel
+map``), the /fault_alarm stamps on the grid (its origin + k * sample time). Without it: /measured/sample
+(phfdi_interfaces/MeasuredSample: channel names and values of one row of a measured record, e.g. played from a
+bag of ``phfdi bag from-csv``). The channels are matched to the
 reference's by name (a channel a message lacks is missing for that row). Output: /fault_alarm
 (phfdi_interfaces/FaultAlarm) when an alarm is raised or cleared and when a channel goes missing,
 with the channels that carry the alarm (``channels``, ``channel_shares``, ``channel_bands``); for a
@@ -30,20 +36,33 @@ import sys
 import traceback
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from phfdi_interfaces.msg import FaultAlarm, MeasuredSample
+from rclpy.clock import Clock, ClockType
 
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
 from phfdi_base.stamps import seconds_to_ns, stamp_seconds, time_ns
 from phfdi_base.topics import MEASURED_SAMPLE
 
+from .channel_align import grid_period_ns
+from .channel_map import load_channel_map
 from .learned_detector import LearnedDetector, LearnedModel
+from .map_inputs import MappedInputs
 from .node_base import DetectorNodeBase
 
 PARAMS = (
     ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
     ParamSpec("loop", "measured", "name of the monitored plant or loop in /fault_alarm"),
+    ParamSpec("channel_map_file", "", "YAML channel map: each reference channel's topic, type and field "
+              "('' = /measured/sample; docs/ros_graph.md)"),
+    ParamSpec("silent_after_s", 10.0, "wall time after which a mapped topic that delivers nothing is reported",
+              (0.1, 3600.0)),
+    ParamSpec("diagnostics_period_s", 5.0, "wall time between the channel map's /diagnostics reports",
+              (0.1, 3600.0)),
 )
+#: wall time between the checks of a channel map's waits and silent topics
+TICK_S = 0.2
 STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
 
 
@@ -64,10 +83,42 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._index = {c: i for i, c in enumerate(self.model.channels)}
         self._t_last = 0.0
         self.open_alarm_output()
-        self.data_subscription(MeasuredSample, MEASURED_SAMPLE.name, self._on_sample)
         self._received = 0
+        self.inputs: MappedInputs | None = None
+        if self.param("channel_map_file"):
+            self._subscribe_map(self.param("channel_map_file"))
+        else:
+            self.data_subscription(MeasuredSample, MEASURED_SAMPLE.name, self._on_sample)
         self.start_worker()
         self.start_barrier()
+
+    def _subscribe_map(self, path: str) -> None:
+        """The plant's own topics, as the channel map names them, aligned onto the reference's sample grid."""
+        try:
+            cmap = load_channel_map(path, self.model.channels)
+            dt_ns = grid_period_ns(self.model.settings.sample_time_s)
+        except UserError as exc:
+            raise NodeStartError(f"parameter channel_map_file = {path!r}: {exc}") from None
+        except ValueError as exc:
+            raise NodeStartError(f"parameter reference: {exc}") from None
+        inputs = self.inputs = MappedInputs(self, cmap, dt_ns, self.enqueue, self.param("silent_after_s"))
+        self._pub_map_diag = self.diagnostics_publisher()
+        steady = Clock(clock_type=ClockType.STEADY_TIME)  # waits are wall time, also under use_sim_time
+        self.create_timer(TICK_S, inputs.tick, clock=steady)
+        self.create_timer(self.param("diagnostics_period_s"), self._report_map, clock=steady)
+        self._problems_said = 0
+
+    def _report_map(self) -> None:
+        """The channel map's status on /diagnostics (periodically; at once when a new problem is seen)."""
+        assert self.inputs is not None
+        array = DiagnosticArray(status=[self.inputs.status()])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._pub_map_diag.publish(array)
+        self._problems_said = len(self.inputs.problems)
+
+    def after_spin(self) -> None:
+        if self.inputs is not None and len(self.inputs.problems) > self._problems_said:
+            self._report_map()
 
     # ---- executor thread: queue only ----------------------------------------------------------
     def _on_sample(self, msg: MeasuredSample) -> None:
@@ -80,7 +131,14 @@ class LearnedDetectorNode(DetectorNodeBase):
         self.enqueue([(stamp_seconds(time_ns(msg.stamp)), row)])
 
     def received(self) -> int:
-        return self._received
+        return self._received + (self.inputs.received if self.inputs is not None else 0)
+
+    def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
+        """Take what the readers hold; a mapped node then hands every sample begun to the core."""
+        super().drain(executor, idle_s, limit_s)
+        if self.inputs is not None:
+            self.inputs.flush()
+            self._report_map()
 
     # ---- worker thread: the core and the publisher --------------------------------------------
     def process(self, rows: list[tuple[float, np.ndarray]]) -> None:
@@ -99,14 +157,16 @@ class LearnedDetectorNode(DetectorNodeBase):
     def _publish(self, ev) -> None:
         state = STATE_OF_KIND.get(ev.kind, self._state if self._state == FaultAlarm.ALARM else FaultAlarm.WARN)
         msg = FaultAlarm(loop=self._loop, state=state, message=ev.message, severity=math.nan, wavelet_level=-1)
-        msg.stamp = to_time(seconds_to_ns(ev.time_s))
+        msg.stamp = self._stamp(ev.time_s)
         a = ev.alarm
         if a:
             iso = a.get("isolation") or {}
             msg.fault_class = iso.get("fault_class", "unknown")  # named NAMING_AFTER samples after the detection
             if iso:
                 msg.severity, msg.severity_unit = float(iso["size"]), str(iso["unit"])
-            msg.detection_time = to_time(seconds_to_ns(a["detection_time"]))
+            msg.detection_time = self._stamp(a["detection_time"])
+            if a.get("onset_time") is not None:
+                msg.onset_time = self._stamp(a["onset_time"])
             msg.statistic, msg.threshold = float(a["statistic_value"]), float(a["threshold"])
             cont = a["contributions"] if ev.kind == "alarm" else a.get("episode_contributions") or a["contributions"]
             msg.channels = list(cont)
@@ -117,6 +177,11 @@ class LearnedDetectorNode(DetectorNodeBase):
         self.publish_alarm(msg, ev.kind, ev.time_s, a)
         self._state = state
 
+    def _stamp(self, t_s: float):
+        """A core time as a ROS time: with a channel map on the grid's origin (the first stamp taken)."""
+        origin = self.inputs.aligner.origin_ns if self.inputs is not None else None
+        return to_time((origin or 0) + seconds_to_ns(t_s))
+
     # ---- the end ---------------------------------------------------------------------------------
     def finish(self) -> None:
         """The stream ended: name the alarms still waiting for their window (as the offline replay does)."""
@@ -124,8 +189,15 @@ class LearnedDetectorNode(DetectorNodeBase):
             self._publish(ev)
 
     def done_report(self) -> dict:
-        return {"samples": self.core.samples_processed, "alarms": self.core.alarms, "core_errors": self.core_errors,
-                "reference": self.param("reference")}
+        report = {"samples": self.core.samples_processed, "alarms": self.core.alarms,
+                  "core_errors": self.core_errors, "reference": self.param("reference")}
+        if self.inputs is not None:
+            a = self.inputs.aligner
+            report["channel_map"] = {"file": self.param("channel_map_file"), "align": a.rule,
+                                     "grid_origin_ns": a.origin_ns, "samples_waited_out": a.waited_out,
+                                     "counts": {s.channel: vars(c) for s, c in zip(self.inputs.cmap.sources, a.counts)},
+                                     "problems": list(self.inputs.problems.values())}
+        return report
 
 
 def run() -> int:

@@ -1,0 +1,214 @@
+"""Channels arriving on separate topics, put onto the detector's sample grid (ROS-free: the node and any replay
+use the same code).
+
+The grid is t_k = t_0 + k * dt: dt is the reference's sample time (to the ns: :func:`grid_period_ns`), t_0 the
+stamp of the first message taken. The detector gets the times k * dt (seconds from the first sample, as the
+offline replay gets a record's times from its first row); :attr:`ChannelAligner.origin_ns` says where the grid
+starts.
+
+Two rules (the channel map's ``align``):
+
+``hold`` (default; a plant at real time, channels at any rates)
+    A message stamped s belongs to sample k = round((s - t_0) / dt) (the nearest grid point, so a stamp
+    off by less than half a period lands on its own sample). Sample k takes each channel's latest value
+    of sample k or before (zero-order hold); a value is held for at most ``hold_samples`` samples, after
+    that the channel is missing (NaN) in the sample. Sample k goes out once every channel has delivered a
+    message of a later sample (then nothing stamped k can still come in order), or ``max_wait_s`` of wall
+    time after the first message of a later sample arrived (a late or silent channel does not stop the
+    detector: it is held or missing). A message for a sample that went out already is late: dropped and
+    counted; so is one stamped before the grid or more than ``MAX_AHEAD_SAMPLES`` ahead of it.
+``sequence`` (a plant or replayer that publishes every channel once per sample, at any speed)
+    The k-th message of each channel belongs to sample k, whatever its stamp: sample k goes out once every
+    channel has delivered its k-th message, or ``max_wait_s`` of wall time after the oldest waiting message
+    arrived, without the channels that have not (missing, NaN). Faster than real time or in lock-step,
+    receive-time stamps say nothing about which row a value belongs to; the order does (reliable topics
+    keep it per topic).
+
+:func:`align_messages` runs a whole list of messages through the same code (a replay, a test).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from phfdi_base.stamps import stamp_seconds
+
+from .channel_map import ALIGN_RULES
+
+
+def grid_period_ns(sample_time_s: float) -> int:
+    """The grid's period: the reference's sample time to the nanosecond (a learned reference's sample time is
+    the median of a record's time steps, e.g. 0.34700000000202635 s, which no stamp can hit exactly).
+
+    >>> grid_period_ns(0.34700000000202635), grid_period_ns(1.0)
+    (347000000, 1000000000)
+    """
+    if not (math.isfinite(sample_time_s) and sample_time_s >= 1e-9):
+        raise ValueError(f"sample time {sample_time_s} s is not a positive number of nanoseconds")
+    return round(sample_time_s * 1e9)
+
+
+#: hold: a stamp this many samples past the next sample is taken for a clock that jumped (dropped, counted)
+MAX_AHEAD_SAMPLES = 100_000
+
+
+@dataclass
+class ChannelCounts:
+    """What happened to one channel's messages (all counts since the start)."""
+
+    received: int = 0
+    used: int = 0  # values that went into a sample
+    late: int = 0  # hold: for a sample already out, before the grid or far ahead: dropped
+    superseded: int = 0  # hold: a newer value of the same sample replaced it
+    held: int = 0  # samples that took an earlier value (zero-order hold)
+    missing: int = 0  # samples that went out without this channel (NaN)
+    last_stamp_ns: int | None = None
+
+
+@dataclass
+class ChannelAligner:
+    """Messages of ``n_channels`` channels in, rows on the grid out (:meth:`add`, then :meth:`take`)."""
+
+    n_channels: int
+    dt_ns: int
+    rule: str = "hold"
+    max_wait_s: float = 5.0
+    hold_samples: int = 5
+    origin_ns: int | None = None
+    counts: list[ChannelCounts] = field(init=False)
+    samples_out: int = 0
+    waited_out: int = 0  # samples that went out after max_wait_s without every channel
+
+    def __post_init__(self) -> None:
+        if self.rule not in ALIGN_RULES:
+            raise ValueError(f"align rule must be one of {ALIGN_RULES}, got {self.rule!r}")
+        if self.dt_ns <= 0 or self.n_channels < 1:
+            raise ValueError("dt_ns and n_channels must be positive")
+        self.counts = [ChannelCounts() for _ in range(self.n_channels)]
+        # hold: values not yet used, per channel (sample, value); the highest sample seen; the last value used
+        self._pending: list[list[tuple[int, float]]] = [[] for _ in range(self.n_channels)]
+        self._top = [-1] * self.n_channels
+        self._last: list[tuple[int, float] | None] = [None] * self.n_channels
+        self._advances: deque[tuple[int, float]] = deque()  # (sample now seen, wall time): when samples fell due
+        self._seen_top = -1
+        # sequence: per channel (value, wall time of arrival)
+        self._fifo: list[deque[tuple[float, float]]] = [deque() for _ in range(self.n_channels)]
+
+    # ---- in ------------------------------------------------------------------------------------
+    def add(self, channel: int, stamp_ns: int, value: float, now_s: float) -> None:
+        """One channel value stamped ``stamp_ns`` (header or receive time), taken at wall time ``now_s``."""
+        counts = self.counts[channel]
+        counts.received += 1
+        counts.last_stamp_ns = stamp_ns
+        if self.origin_ns is None:
+            self.origin_ns = stamp_ns
+        if self.rule == "sequence":
+            self._fifo[channel].append((value, now_s))
+            return
+        k = (stamp_ns - self.origin_ns + self.dt_ns // 2) // self.dt_ns
+        if k < self.samples_out or k > self.samples_out + MAX_AHEAD_SAMPLES:
+            counts.late += 1
+            return
+        self._pending[channel].append((k, value))
+        self._top[channel] = max(self._top[channel], k)
+        if k > self._seen_top:
+            self._seen_top = k
+            self._advances.append((k, now_s))
+
+    def off_grid(self, at_least: int = 10) -> list[int]:
+        """hold: channels whose every message (``at_least`` of them) fell outside the grid: stamps on another
+        clock than the first message's (e.g. header stamps of the plant's time beside receive times)."""
+        return [c for c, n in enumerate(self.counts) if n.received >= at_least and n.late == n.received]
+
+    # ---- out -----------------------------------------------------------------------------------
+    def take(self, now_s: float) -> list[tuple[float, np.ndarray]]:
+        """The samples that are complete, or have waited ``max_wait_s``: (seconds from the first sample, row)."""
+        return self._emit(now_s, final=False)
+
+    def flush(self) -> list[tuple[float, np.ndarray]]:
+        """At the end of the stream: every sample begun, without waiting (missing channels NaN)."""
+        return self._emit(math.inf, final=True)
+
+    def _emit(self, now_s: float, final: bool) -> list[tuple[float, np.ndarray]]:
+        out: list[tuple[float, np.ndarray]] = []
+        while True:
+            row = self._next_sequence(now_s, final) if self.rule == "sequence" else self._next_hold(now_s, final)
+            if row is None:
+                return out
+            out.append((stamp_seconds(self.samples_out * self.dt_ns), row))
+            self.samples_out += 1
+
+    def _next_sequence(self, now_s: float, final: bool) -> np.ndarray | None:
+        waiting = [q for q in self._fifo if q]
+        if not waiting:
+            return None
+        complete = len(waiting) == self.n_channels
+        if not (complete or final or now_s - min(q[0][1] for q in waiting) >= self.max_wait_s):
+            return None
+        if not complete:
+            self.waited_out += 1
+        row = np.full(self.n_channels, np.nan)
+        for c, q in enumerate(self._fifo):
+            if q:
+                row[c] = q.popleft()[0]
+                self.counts[c].used += 1
+            else:
+                self.counts[c].missing += 1
+        return row
+
+    def _next_hold(self, now_s: float, final: bool) -> np.ndarray | None:
+        k = self.samples_out
+        if self._seen_top < k + (0 if final else 1):
+            return None  # nothing of a later sample yet (at the end: nothing of this one either)
+        while self._advances and self._advances[0][0] <= k:
+            self._advances.popleft()
+        complete = all(top > k for top in self._top)
+        due_s = self._advances[0][1] if self._advances else now_s
+        if not (complete or final or now_s - due_s >= self.max_wait_s):
+            return None
+        if not complete and not final:
+            self.waited_out += 1
+        return np.array([self._value(c, k) for c in range(self.n_channels)])
+
+    def _value(self, c: int, k: int) -> float:
+        """Channel c's value in sample k: its latest of sample k or before, else the held one, else NaN."""
+        counts, pending = self.counts[c], self._pending[c]
+        mine = [p for p in pending if p[0] <= k]
+        if mine:
+            self._pending[c] = [p for p in pending if p[0] > k]
+            best = max(range(len(mine)), key=lambda i: (mine[i][0], i))  # latest sample, then latest arrival
+            counts.used += 1
+            counts.superseded += len(mine) - 1
+            self._last[c] = mine[best]
+            return mine[best][1]
+        last = self._last[c]
+        if last is not None and k - last[0] <= self.hold_samples:
+            counts.held += 1
+            return last[1]
+        counts.missing += 1
+        return math.nan
+
+
+def align_messages(messages: Iterable[tuple[int, int, float, float]], n_channels: int, dt_ns: int,
+                   rule: str = "hold", max_wait_s: float = 5.0, hold_samples: int = 5
+                   ) -> tuple[np.ndarray, np.ndarray, ChannelAligner]:
+    """Messages (channel, stamp ns, value, arrival wall time s) in arrival order through one aligner, then its
+    end: the times (s from the first sample), the rows (n, n_channels) and the aligner (its counts)."""
+    aligner = ChannelAligner(n_channels, dt_ns, rule, max_wait_s, hold_samples)
+    out: list[tuple[float, np.ndarray]] = []
+    for channel, stamp_ns, value, now_s in messages:
+        aligner.add(channel, stamp_ns, value, now_s)
+        out += aligner.take(now_s)
+    out += aligner.flush()
+    return _stack(out, n_channels) + (aligner,)
+
+
+def _stack(out: Sequence[tuple[float, np.ndarray]], m: int) -> tuple[np.ndarray, np.ndarray]:
+    if not out:
+        return np.zeros(0), np.zeros((0, m))
+    return np.array([t for t, _ in out]), np.vstack([r for _, r in out])
