@@ -199,3 +199,22 @@ def test_column_without_time_keeps_the_files_time_column(tmp_path, capsys):
     assert any("time from column 'datetime'" in n for n in rec.notes)
     # a column map that gives a sample time still means "no time column"
     assert list(read_record(path, {"ph_measured": "pH", "sample_time_s": 5}).time_s[:2]) == [0.0, 5.0]
+
+
+def test_a_record_in_the_references_own_channel_names_needs_no_stored_map(export, tmp_path, capsys):
+    """A reference with a stored map replays a record whose columns already are its channels (a gridded or
+    converted export) under those names, and says why; the same alarms as the export read through the map."""
+    ref = export["dir"] / "ref_map3.json"
+    assert main(["calibrate", "--learn", str(export["faulty"]), "--rows", "800", "--map", str(export["map"]),
+                 "--out", str(ref)]) == 0
+    own = tmp_path / "own_names.csv"
+    text = export["faulty"].read_text().replace("Stamp", "Timestamp")
+    for channel, tag in TAGS.items():
+        text = text.replace(tag, channel)
+    own.write_text(text)
+    capsys.readouterr()
+    via_map, _ = _json(capsys, ["replay", str(export["faulty"]), "--reference", str(ref), "--json"])
+    report, err = _json(capsys, ["replay", str(own), "--reference", str(ref), "--json"])
+    assert "columns: the file's own column names (they are the reference's channels" in err
+    assert [a["detection_index"] for a in report["alarms"]] == [a["detection_index"] for a in via_map["alarms"]]
+    assert report["alarms"]

@@ -170,16 +170,36 @@ def _model_as_scenario(args: argparse.Namespace) -> None:
               file=sys.stderr)
 
 
+def _read_with_stored_map(args: argparse.Namespace, model, cmap, columns_said: str):
+    """The record read with the map the replay chose; when that is the reference's stored map and the file does not
+    have its columns but names the reference's channels itself (a record already in the project's names, e.g. a
+    gridded or converted export), the file's own names, said so."""
+    from phfdi.learned import read_measured
+    from phfdi_base.errors import UserError
+
+    try:
+        return read_measured(args.file, cmap, channels=model.channels, encoding=args.encoding), columns_said
+    except UserError as exc:
+        if cmap is None or column_map_from_args(args) is not None:
+            raise
+        try:
+            rec = read_measured(args.file, None, channels=model.channels, encoding=args.encoding)
+        except UserError:
+            raise exc from None
+        return rec, (f"columns: the file's own column names (they are the reference's channels; the map stored in "
+                     f"{args.reference} does not fit this file: {exc})")
+
+
 def run_learned(args: argparse.Namespace) -> int:
     """The record through the learned reference and the multichannel detector."""
-    from phfdi.learned import alarm_summaries, event_dict, read_measured, replay_measured
+    from phfdi.learned import alarm_summaries, event_dict, replay_measured
     from phfdi.learned import format_alarms as format_learned
     from wavelet_fdi.learned_detector import LearnedModel
 
     model = LearnedModel.load(args.reference)
     cmap, columns_said = reference_column_map(args, model, args.reference)
+    rec, columns_said = _read_with_stored_map(args, model, cmap, columns_said)
     print(f"phfdi replay: {columns_said}", file=sys.stderr)
-    rec = read_measured(args.file, cmap, channels=model.channels, encoding=args.encoding)
     print_notes("replay", rec.notes)
     t0 = time.perf_counter()
     events, states, model = replay_measured(rec, model, args.refit_rows)
