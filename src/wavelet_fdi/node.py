@@ -16,7 +16,8 @@ Outputs: /fault_alarm (phfdi_interfaces/FaultAlarm) on every state change
 changes the alarm state: detection held or resumed), input problems at most
 once per ``input_problem_period_s`` of wall time (one message with the counts
 so far: stamp garbage once gave 313 messages in a second), and as a
-heartbeat every ``heartbeat_period_s`` of simulated time; /diagnostics
+heartbeat every ``heartbeat_period_s`` of simulated time (at most one per batch
+the worker takes: a backlog worked off at once gives one); /diagnostics
 (diagnostic_msgs/DiagnosticArray: the core's input counters, pairing counts,
 processing lag, calibration in use) every ``diagnostics_period_s`` and
 whenever a problem counter grows.
