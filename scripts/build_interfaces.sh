@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Build the ROS 2 message package interfaces/phfdi_interfaces and install it into
-# the venv (C type supports and Python bindings only: the graph is Python).
+# the venv (C type supports and Python bindings only, PHFDI_PYTHON_ONLY=ON: the graph is Python;
+# a ROS workspace build of the package generates C++ as well).
 # Idempotent: skipped when its sources are unchanged and it imports.
 # Called by scripts/setup.sh; see docs/ros_graph.md for why the graph has its own messages.
 set -euo pipefail
@@ -37,7 +38,7 @@ if ! {
   AMENT_PREFIX_PATH="$VENV" cmake -S "$PKG" -B "$build" -G "$generator" \
     -DCMAKE_PREFIX_PATH="$VENV" -DCMAKE_INSTALL_PREFIX="$VENV" -DCMAKE_BUILD_TYPE=Release \
     -DPython3_EXECUTABLE="$PY" -DPython3_FIND_VIRTUALENV=ONLY -DBUILD_TESTING=OFF \
-    -DPHFDI_PYTHON_INCLUDE="$py_include" -DPHFDI_NUMPY_INCLUDE="$np_include" &&
+    -DPHFDI_PYTHON_ONLY=ON -DPHFDI_PYTHON_INCLUDE="$py_include" -DPHFDI_NUMPY_INCLUDE="$np_include" &&
   AMENT_PREFIX_PATH="$VENV" cmake --build "$build" &&
   { [ ! -f "$manifest" ] || xargs -d '\n' rm -f < "$manifest"; } &&  # files of the previous build
   cmake --install "$build" &&
