@@ -6,7 +6,12 @@ with the controller output stamped t_k. If that output is missing (an output
 with a later stamp came, or the output topic fell silent for
 ``pairing_timeout_s`` while ``pairing_window`` later measurements waited),
 the sample goes on with NaN commands, which the core counts and, if it lasts,
-answers by holding detection (see :mod:`wavelet_fdi.inputs`). Not simply "by
+answers by holding detection (see :mod:`wavelet_fdi.inputs`). With ``channel_map_file`` (a YAML channel map,
+:mod:`wavelet_fdi.channel_map`, as the learned detector node reads) the node reads your plant's own topics instead:
+the map names the topic, type and field of each of :data:`PHYSICS_CHANNELS` (a map without one is refused in one
+line), :mod:`wavelet_fdi.map_inputs` aligns them onto the scenario's sample grid and each sample goes to the core
+as a paired one (stamp k * sample time from the grid's first sample; /fault_alarm stamped so too, the grid's
+origin in the ``detector_done`` report; the map's status on /diagnostics, ``detector: channel map``). Not simply "by
 the next measurement": two topics from two writers are not delivered in
 publication order (in a lock-step run 29 of 1601 controller outputs arrived
 after the next measurement, though published before it; :class:`Pairing`).
@@ -46,6 +51,7 @@ from itertools import islice
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, MeasuredSample, Measurement
+from rclpy.clock import Clock, ClockType
 
 from phfdi_base import live_view
 from phfdi_base.errors import UserError
@@ -54,8 +60,10 @@ from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s,
 from phfdi_base.topics import CONTROLLER, DETECTOR_MONITOR, MEASUREMENT
 
 from .alarm_messages import severity_of
+from .channel_map import load_channel_map
 from .config import Calibration, load_default_calibration, setting_specs, settings_from_values
 from .detector import StreamingDetector
+from .map_inputs import MappedInputs
 from .node_base import STATE_OF_LEVEL, DetectorNodeBase
 from .reference import KnownStart
 
@@ -92,7 +100,17 @@ PARAMS = (
                                   "state) over the Foxglove WebSocket protocol on this port; 0: no live view",
               range=(0, 65535)),
     ParamSpec("foxglove_host", live_view.LOOPBACK, "address the live view listens on (default: this machine only)"),
+    ParamSpec("channel_map_file", "", "YAML channel map: the topic, type and field of each signal the detector "
+              "pairs ('' = /plant/measurement and /controller/output; docs/ros_graph.md)"),
+    ParamSpec("silent_after_s", 10.0, "channel map: wall time after which a mapped topic that delivers nothing is "
+              "reported", range=(0.1, 3600.0)),
 )
+
+#: the signals the detector pairs, as channels of a channel map (the core's input names)
+PHYSICS_CHANNELS = ("ph_measured", "level_measured_cm", "valve_command_pct", "level_controller_output_pct",
+                    "ph_setpoint")
+#: wall time between a channel map's checks of waits and silent topics, and between its /diagnostics reports
+MAP_TICK_S, MAP_REPORT_S = 0.2, 1.0
 
 #: diagnostics counters that mean bad input (a growth is reported at once)
 PROBLEM_COUNTERS = ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
@@ -259,8 +277,12 @@ class DetectorNode(DetectorNodeBase):
         self._input_period_s = self.param("input_problem_period_s")
         self.open_alarm_output()
         self.pub_diag = self.diagnostics_publisher()
-        self.data_subscription(Measurement, MEASUREMENT.name, self._on_measurement)
-        self.data_subscription(ControllerOutput, CONTROLLER.name, self._on_output)
+        self.inputs: MappedInputs | None = None
+        if self.param("channel_map_file"):
+            self._subscribe_map(self.param("channel_map_file"))
+        else:
+            self.data_subscription(Measurement, MEASUREMENT.name, self._on_measurement)
+            self.data_subscription(ControllerOutput, CONTROLLER.name, self._on_output)
         # the worker (DetectorNodeBase) is the only thread that touches the core and the two publishers
         self._core_state = "starting"
         self._last_heartbeat_t = -math.inf
@@ -294,6 +316,32 @@ class DetectorNode(DetectorNodeBase):
             except UserError as exc:
                 raise NodeStartError(str(exc)) from None
             self.get_logger().info(f"live view (Foxglove): {self.live.url}")
+
+    def _subscribe_map(self, path: str) -> None:
+        """The plant's own topics, as the channel map names them, aligned onto the scenario's sample grid."""
+        try:
+            cmap = load_channel_map(path, PHYSICS_CHANNELS)
+        except UserError as exc:
+            raise NodeStartError(f"parameter channel_map_file = {path!r}: {exc}") from None
+        self.inputs = MappedInputs(self, cmap, self.dt_ns, self._on_mapped, self.param("silent_after_s"))
+        steady = Clock(clock_type=ClockType.STEADY_TIME)  # waits are wall time, also under use_sim_time
+        self.create_timer(MAP_TICK_S, self.inputs.tick, clock=steady)
+        self.create_timer(MAP_REPORT_S, self._report_map, clock=steady)
+        self._map_problems_said = 0
+
+    def _on_mapped(self, samples: list[tuple[float, np.ndarray]]) -> None:
+        """Aligned samples (s from the grid's first, values in PHYSICS_CHANNELS order) as paired rows."""
+        now = time.monotonic()
+        self.enqueue([(seconds_to_ns(t_s), float(x[0]), float(x[1]), (float(x[2]), float(x[3]), float(x[4])), now)
+                      for t_s, x in samples])
+
+    def _report_map(self) -> None:
+        """The channel map's status on /diagnostics (periodically; at once when a new problem is seen)."""
+        assert self.inputs is not None
+        array = DiagnosticArray(status=[self.inputs.status()])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(array)  # executor thread (the worker publishes its own arrays)
+        self._map_problems_said = len(self.inputs.problems)
 
     # ---- parameters -----------------------------------------------------------------------
     def _build_core(self):
@@ -334,6 +382,8 @@ class DetectorNode(DetectorNodeBase):
                                           time.monotonic()))
 
     def after_spin(self) -> None:
+        if self.inputs is not None and len(self.inputs.problems) > self._map_problems_said:
+            self._report_map()
         if self.pairing.pending:
             self.enqueue(self.pairing.expire(time.monotonic()))
         if self._inputs_held and self._inputs_due():  # held-back input problems go out even if nothing follows
@@ -341,7 +391,14 @@ class DetectorNode(DetectorNodeBase):
 
     def received(self) -> int:
         counts = self.pairing.counts
-        return counts["measurements"] + counts["controller_outputs"]
+        return counts["measurements"] + counts["controller_outputs"] + (self.inputs.received if self.inputs else 0)
+
+    def drain(self, executor, idle_s: float = 0.3, limit_s: float = 10.0) -> None:
+        """Take what the readers hold; a mapped node then hands every sample begun to the core."""
+        super().drain(executor, idle_s, limit_s)
+        if self.inputs is not None:
+            self.inputs.flush()
+            self._report_map()
 
     # ---- worker thread: the core and the publishers ----------------------------------------
 
@@ -600,10 +657,17 @@ class DetectorNode(DetectorNodeBase):
 
     def done_report(self) -> dict:
         alarms = [{"alarm_id": a.alarm_id, **a.summary()} for a in self.core.alarms]
-        return {"samples": self.core.samples_processed, "alarms": alarms,
-                "diagnostics": self.core.diagnostics() | self.pairing.counts,
-                "lag": self.lag.summary() | {"pairing_wait_max_s": self.pairing.max_wait_s},
-                "calibration": self.calibration_source}
+        report = {"samples": self.core.samples_processed, "alarms": alarms,
+                  "diagnostics": self.core.diagnostics() | self.pairing.counts,
+                  "lag": self.lag.summary() | {"pairing_wait_max_s": self.pairing.max_wait_s},
+                  "calibration": self.calibration_source}
+        if self.inputs is not None:
+            a = self.inputs.aligner
+            report["channel_map"] = {"file": self.param("channel_map_file"), "align": a.rule,
+                                     "grid_origin_ns": a.origin_ns, "samples_waited_out": a.waited_out,
+                                     "counts": {s.channel: vars(c) for s, c in zip(self.inputs.cmap.sources, a.counts)},
+                                     "problems": list(self.inputs.problems.values())}
+        return report
 
 
 def _next_multiple(t_s: float, period_s: float) -> float:

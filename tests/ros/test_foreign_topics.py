@@ -30,12 +30,17 @@ import pytest
 from phfdi.cli import main
 from phfdi.commands.common import shipped_map
 from phfdi.learned import read_measured
+from phfdi.loop import simulate
 from phfdi.records import ColumnMap
+from phfdi.scenario import load_scenario
 from phfdi_base.ros.env import graph_env, reserve_domain_id
-from phfdi_base.stamps import stamp_seconds
+from phfdi_base.stamps import seconds_to_ns, stamp_seconds
 from wavelet_fdi.channel_align import grid_period_ns
 from wavelet_fdi.channel_map import load_channel_map
+from wavelet_fdi.config import DetectorSettings, load_default_calibration
+from wavelet_fdi.detector import StreamingDetector
 from wavelet_fdi.learned_detector import LearnedModel
+from wavelet_fdi.node import PHYSICS_CHANNELS
 
 from .conftest import node_cmd, ownerless_shm_files, read_until
 
@@ -80,13 +85,19 @@ def wait_for_event(proc: subprocess.Popen, event: str, timeout_s: float) -> tupl
     raise AssertionError(f"no {event!r} line within {timeout_s} s; stdout: {seen[-2000:]}\nstderr: {err[-4000:]}")
 
 
-def run_foreign_plant(tmp_path: Path, ref: Path, cmap_path: Path, rows: np.ndarray, node_params: dict | None = None,
-                      plant_spec: dict | None = None, expect_stderr: tuple[str, ...] = ()) -> tuple[dict, dict, str]:
+def run_foreign_plant(tmp_path: Path, ref: Path | None, cmap_path: Path, rows: np.ndarray,
+                      node_params: dict | None = None, plant_spec: dict | None = None,
+                      expect_stderr: tuple[str, ...] = ()) -> tuple[dict, dict, str]:
     """The detector node on the map's topics and the plant publishing ``rows`` (``plant_spec``: more of its spec);
     with ``expect_stderr``, once the plant is done, the node must say each of those in its log and still run.
-    The node's ``detector_done`` report, what the plant received (/fault_alarm, the channel map's
-    /diagnostics), the node's stderr."""
-    cmap = load_channel_map(cmap_path, LearnedModel.load(ref).channels)
+    ``ref`` None: the physics detector node (wavelet_fdi.node; its scenario in ``node_params``), else the learned
+    one with that reference. The node's ``detector_done`` report, what the plant received (/fault_alarm, the
+    channel map's /diagnostics), the node's stderr."""
+    if ref is None:
+        module, channels, node_args = "wavelet_fdi.node", PHYSICS_CHANNELS, {}
+    else:
+        module, channels, node_args = "wavelet_fdi.learned_node", LearnedModel.load(ref).channels, {"reference": ref}
+    cmap = load_channel_map(cmap_path, channels)
     spec = tmp_path / "plant.json"
     # the plant waits until the node has taken every row but the last (hold puts it out at the end), so that the
     # stop does not find thousands of messages left in the node's readers on a loaded machine
@@ -97,8 +108,7 @@ def run_foreign_plant(tmp_path: Path, ref: Path, cmap_path: Path, rows: np.ndarr
     env = graph_env(lease.domain_id)
     detector = plant = None
     try:
-        detector = subprocess.Popen(node_cmd("wavelet_fdi.learned_node", reference=ref, channel_map_file=cmap_path,
-                                             graph_nodes="[detector]",
+        detector = subprocess.Popen(node_cmd(module, **node_args, channel_map_file=cmap_path, graph_nodes="[detector]",
                                              **{"diagnostics_period_s": 0.5, **(node_params or {})}),
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=tmp_path)
         started, out0 = wait_for_event(detector, "startup", START_S)  # connected
@@ -253,6 +263,54 @@ def test_a_rig_run_with_a_probe_bias_through_the_estimator_reference(shared_data
     check_same_alarms(done, heard["received"], offline, dt_ns)
     assert any(m["fault_class"] not in ("", "unknown") for m in heard["received"] if m["state"] == 2), \
         "the estimator named no fault on /fault_alarm"
+
+
+def test_a_simulated_backlash_on_float64_topics_gives_the_physics_detectors_offline_alarms(tmp_path):
+    """The physics detector node (wavelet_fdi.node) on a plant's own topics: a paper run with a valve backlash from
+    700 s (phfdi simulate), each signal the detector pairs published as std_msgs/Float64 by the stand-in plant,
+    the node configured by a channel map (align: sequence). Its alarms (detection, statistic, fault class and
+    size) equal the core's run offline on the same rows, and /fault_alarm carried them."""
+    overrides = ["duration_s=1200", "setpoints.ph.changes.0.at_s=400"]
+    spec = load_scenario("paper", fault="backlash", onset_s=700.0, overrides=overrides)
+    run = simulate(spec)
+    rows = np.column_stack([np.asarray(run[c], dtype=float) for c in PHYSICS_CHANNELS])
+    settings = DetectorSettings()
+    core = StreamingDetector(spec, load_default_calibration("paper", settings), settings)
+    core.process({"time_s": np.asarray(run.time_s, dtype=float)} | {c: rows[:, i] for i, c in enumerate(PHYSICS_CHANNELS)})
+    core.flush()
+    offline = json.loads(json.dumps([{"alarm_id": a.alarm_id, **a.summary()} for a in core.alarms]))
+    assert [a["fault_class"] for a in offline] == ["backlash"], offline  # a real alarm to compare
+    cmap = tmp_path / "physics_map.yaml"
+    cmap.write_text("align: sequence\nchannels:\n" + "".join(
+        f"  {c}: {{topic: /my_plant/{c}, type: std_msgs/msg/Float64}}\n" for c in PHYSICS_CHANNELS))
+    done, heard, err = run_foreign_plant(tmp_path, None, cmap, rows, node_params={
+        "scenario": "paper", "fault": "backlash", "fault_onset_s": 700.0, "overrides": json.dumps(overrides)})
+    assert done["samples"] == len(rows) == done["channel_map"]["counts"]["ph_measured"]["used"]
+    assert all(c["received"] == c["used"] == len(rows) and c["missing"] == 0
+               for c in done["channel_map"]["counts"].values()), done["channel_map"]
+    assert done["channel_map"]["problems"] == []
+    assert not any(done["diagnostics"].get(k) for k in ("nonfinite_ph", "nonfinite_command", "missing_samples",
+                                                        "bad_time", "commands_missing")), done["diagnostics"]
+    assert done["alarms"] == offline
+    raised = [m for m in heard["received"] if m["state"] == 2 and m["detection_ns"]]
+    assert {m["detection_ns"] for m in raised} == {seconds_to_ns(a["detection_time"]) for a in offline}
+    assert any(m["fault_class"] == "backlash" for m in raised), raised
+
+
+def test_the_physics_node_refuses_a_map_without_a_signal_it_pairs_in_one_line(tmp_path):
+    cmap = tmp_path / "short_map.yaml"
+    cmap.write_text("channels:\n" + "".join(f"  {c}: {{topic: /p/{c}, type: std_msgs/msg/Float64}}\n"
+                                            for c in PHYSICS_CHANNELS if c != "ph_setpoint"))
+    lease = reserve_domain_id()
+    try:
+        proc = subprocess.run(node_cmd("wavelet_fdi.node", scenario="paper", channel_map_file=cmap,
+                                       graph_nodes="[detector]"),
+                              capture_output=True, text=True, timeout=START_S, env=graph_env(lease.domain_id))
+    finally:
+        lease.release()
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    errors = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(errors) == 1 and "channel_map_file" in errors[0] and "'ph_setpoint'" in errors[0], errors
 
 
 @pytest.fixture
