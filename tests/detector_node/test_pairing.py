@@ -96,3 +96,41 @@ def test_sample_times_equal_the_bag_readers():
     dt_ns = 100_000_000
     assert time_on_grid_s(7 * dt_ns, dt_ns, 0.1) == 7 * 0.1
     assert time_on_grid_s(7 * dt_ns + 5, dt_ns, 0.1) == (7 * dt_ns + 5) * 1e-9
+
+
+def _paired_run(pairing: Pairing, n: int) -> list[tuple]:
+    rows = []
+    for k in range(n):
+        rows += pairing.measurement(k, 7.0, 30.0, 0.1 * k)
+        rows += pairing.output(k, (float(k), 50.0, 8.0), 0.1 * k + 0.05)
+    return rows
+
+
+def test_a_future_stray_with_a_matching_stray_output_is_dropped_not_passed_on():
+    """Strays on both topics with one future stamp pair with each other; two older measurements behind the
+    measurement still show it cannot be this writer's next sample (its stamp would become the detector's clock)."""
+    pairing = Pairing(window=1, timeout_s=10.0)
+    rows = _paired_run(pairing, 5)
+    future = 10**12
+    rows += pairing.measurement(future, -77.0, -77.0, 1.0)
+    rows += pairing.output(future, (-77.0, -77.0, -77.0), 1.01)  # arrives before the older measurements
+    rows += pairing.measurement(2, -77.0, -77.0, 1.02)  # the past
+    rows += pairing.measurement(4_500, -77.0, -77.0, 1.03)  # off the grid, still behind the future one
+    rows += pairing.drain()
+    assert future not in [r[0] for r in rows]
+    assert pairing.counts["stray_measurements"] == 1
+
+
+def test_a_real_gap_is_passed_on_once_later_samples_follow_or_the_stream_pauses():
+    pairing = Pairing(window=1, timeout_s=0.5)
+    rows = _paired_run(pairing, 5)
+    gap = 10
+    rows += pairing.measurement(gap, 7.0, 30.0, 1.0)
+    rows += pairing.output(gap, (1.0, 50.0, 8.0), 1.01)
+    assert rows[-1][0] == 4  # held: is it a stray?
+    assert [r[0] for r in pairing.expire(1.6)] == [gap]  # the stream paused: passed on after the grace
+    rows = pairing.measurement(gap + 10, 7.0, 30.0, 2.0) + pairing.output(gap + 10, (1.0, 50.0, 8.0), 2.0)
+    rows += pairing.measurement(gap + 11, 7.0, 30.0, 2.1) + pairing.output(gap + 11, (1.0, 50.0, 8.0), 2.1)
+    rows += pairing.measurement(gap + 12, 7.0, 30.0, 2.2) + pairing.output(gap + 12, (1.0, 50.0, 8.0), 2.2)
+    assert [r[0] for r in rows] == [gap + 10, gap + 11, gap + 12]  # newer ones behind it: a real gap
+    assert pairing.counts["stray_measurements"] == 0
