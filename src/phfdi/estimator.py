@@ -30,7 +30,11 @@ ESTIMATOR_SETTINGS = {"observer_time_constant_s": 60.0, "observer_alarm_time_con
                       # a probe that freezes or turns sluggish loses its noise: watch the detail bands' energy
                       # for a fall to a twentieth (the likelihood-ratio CUSUM of that variance ratio; a quiet healthy
                       # plateau reads about a quarter of the pooled noise)
-                      "energy_down_variance_ratio": 0.05}
+                      "energy_down_variance_ratio": 0.05,
+                      # a probe that turns noisy: the detail bands' energy against this run's own noise (healthy rig
+                      # runs differ fourfold in it from day to day), learned with the strengths' 120 s and frozen on
+                      # a rise; the likelihood-ratio CUSUM of a fourfold variance, a sample counting at most fourfold
+                      "energy_variance_ratio": 4.0, "energy_baseline_time_constant_s": 120.0}
 
 
 def feed_strength_mM(recipe: dict[str, float]) -> float:

@@ -51,6 +51,9 @@ FORMAT = "phfdi-learned-detector/1"
 TIME_RING = 1 << 16
 NAMING_RING = 1 << 13  # rows kept for naming an alarm's fault (about 48 min at the rig's 0.35 s)
 NAMING_AFTER = 64  # samples after a detection that the naming window takes in
+#: blocks of a run the run-adapted energy scale learns from (a running mean, never frozen) before the energy
+#: CUSUMs look at it: 4 blocks of 32 samples estimate a variance to about 12 % (sqrt(2 / 128))
+ENERGY_WARMUP_BLOCKS = 4
 #: learned reference forms (LearnedSettings.form)
 LEARNED_FORMS = ("arx", "oe")  # sample times kept to date an alarm's onset
 
@@ -87,6 +90,12 @@ class LearnedSettings:
     #: energy CUSUMs on the detail bands (off: 0); designed for this variance ratio, threshold h
     energy_variance_ratio: float = 0.0
     energy_h: float = 20.0
+    #: the energy CUSUMs' scale (0: the calibrated band sigma, pooled over the healthy runs). Above 0: a scale
+    #: of this run, learned from its own detail bands (the mean of d^2 over the blocks so far, then moving
+    #: with this time constant, s), frozen while an energy statistic is above freeze_ratio of its threshold
+    #: and kept within energy_variance_ratio of the calibrated one (either way): a plant whose healthy noise differs
+    #: from day to day is compared with itself, and a fault faster than the time constant is not absorbed
+    energy_baseline_time_constant_s: float = 0.0
     #: energy-decrease CUSUMs on the detail bands (off: 0): designed for this variance ratio (below 1), e.g.
     #: a probe that freezes or turns sluggish loses its noise; threshold h
     energy_down_variance_ratio: float = 0.0
@@ -123,6 +132,8 @@ class LearnedSettings:
             raise UserError("energy_variance_ratio must be 0 (off) or above 1")
         if self.energy_down_variance_ratio and not 0.0 < self.energy_down_variance_ratio < 1.0:
             raise UserError("energy_down_variance_ratio must be 0 (off) or between 0 and 1")
+        if self.energy_baseline_time_constant_s < 0:
+            raise UserError("energy_baseline_time_constant_s must be >= 0 (0: the calibrated scale)")
         if not (self.energy_h > 0 and self.energy_down_h > 0):
             raise UserError("energy_h and energy_down_h must be positive")
         if self.block_samples < 1:
@@ -363,6 +374,12 @@ class LearnedDetector:
         self.bias = np.zeros(m)
         self._acc = np.zeros(m)
         self._acc_n = 0
+        # the energy CUSUMs' run-adapted scale per (channel, detail band), in calibrated variances (1: as calibrated)
+        self.energy_adapted = self.energy and s.energy_baseline_time_constant_s > 0
+        self.energy_scale = np.ones(m * s.level)  # (channel, detail band), channel-major as the statistics
+        self._e2_acc = np.zeros(m * s.level)
+        self._e2_n = np.zeros(m * s.level, dtype=int)
+        self._energy_blocks = 0  # blocks the scale has learned from
         self.in_alarm = False
         self._last_crossing = -1
         self._holdoff = False  # an alarm cleared in this block: no new one before the next block boundary
@@ -468,6 +485,30 @@ class LearnedDetector:
             raise RuntimeError("the detector was built without record_trace")
         return {k: (np.concatenate(v) if v else np.empty(0)) for k, v in self._trace.items()}
 
+    def _adapt_energy_scale(self, ratio: np.ndarray) -> None:
+        """At a block boundary: move each band's energy scale toward the block's mean d^2 (the running mean
+        over the first blocks, then gain block time / time constant), unless an energy statistic is high
+        (a fault is not learned as the run's noise). Kept within the design variance ratio rho of the
+        calibrated scale (1/rho..rho): a probe noisy from the start is still compared with the healthy runs,
+        and a quantised plateau, whose detail bands read zero, does not make the next healthy sample a
+        variance ratio without bound."""
+        s = self.settings
+        e_ratio = ratio[2 * self.m:2 * self.m + len(self.energy_scale), -1]
+        ok = self._e2_n >= max(1, s.block_samples // 2)
+        learning = self._energy_blocks < ENERGY_WARMUP_BLOCKS
+        if not learning and (self.in_alarm or bool((e_ratio > s.freeze_ratio).any())):
+            ok[:] = False
+        if ok.any():
+            self._energy_blocks += 1
+            mean = np.where(ok, self._e2_acc / np.maximum(self._e2_n, 1), self.energy_scale)
+            gain = max(1.0 / self._energy_blocks,
+                       min(1.0, s.block_samples * s.sample_time_s / s.energy_baseline_time_constant_s))
+            new = self.energy_scale + gain * (mean - self.energy_scale)
+            rho = s.energy_variance_ratio
+            self.energy_scale = np.clip(np.where(ok, new, self.energy_scale), 1.0 / rho, rho)
+        self._e2_acc[:] = 0.0
+        self._e2_n[:] = 0
+
     # ---- one block (observer constant inside) -------------------------------------------
     def _block(self, t, i0, i1, a_raw, d_norm, missing, states) -> list[LearnedEvent]:
         s = self.settings
@@ -488,7 +529,17 @@ class LearnedDetector:
             miss = np.repeat(missing[i0:i1].T, s.level, axis=0)  # (m*J, nb): a missing sample is healthy
             row = nm
             if self.energy:
-                vals[row:row + ne] = np.where(miss, 0.0, e2)
+                e2_up = e2
+                if self.energy_adapted:
+                    used = ~miss & (g0 + np.arange(nb) >= self.fill_samples)
+                    self._e2_acc = _running_sum(self._e2_acc, np.where(used, e2_up, 0.0), axis=1)  # chunking-proof
+                    self._e2_n += used.sum(axis=1)
+                    # against the run's own scale, and robust: a sample counts at most as the design variance
+                    # ratio rho (one outlier moves the CUSUM by at most rho - k; a noisier probe keeps adding)
+                    e2_up = np.minimum(e2_up / self.energy_scale[:, None], s.energy_variance_ratio)
+                    if self._energy_blocks < ENERGY_WARMUP_BLOCKS:  # the run's scale is still being learned
+                        e2_up = np.full_like(e2_up, self.k[nm])  # no evidence either way
+                vals[row:row + ne] = np.where(miss, 0.0, e2_up)
                 row += ne
             if self.energy_down:
                 vals[row:row + ne] = np.where(miss, -1.0, -e2)
@@ -498,7 +549,9 @@ class LearnedDetector:
             cut = min(nb, self.fill_samples - g0)
             z[:, :cut] = -self.k[:, None]
         events: list[LearnedEvent] = []
+        self._last_zero_before = self.cusum.last_zero.copy()  # for the onset of an alarm raised inside this call
         S = self.cusum.update(z, g0)
+        self._call_S, self._call_g0 = S, g0
         ratio = S / self.h[:, None]
         cross = (ratio > 1.0).any(axis=0)
         if self._trace is not None:
@@ -528,6 +581,8 @@ class LearnedDetector:
                 self.bias = self.bias + gain * self._acc / self._acc_n
             self._acc[:] = 0.0
             self._acc_n = 0
+            if self.energy_adapted:
+                self._adapt_energy_scale(ratio)
             if self.in_alarm or self._holdoff:
                 self.cusum.restart(g0 + nb - 1)
                 self._holdoff = False
@@ -613,10 +668,18 @@ class LearnedDetector:
         return {ch: {"share": round(v["share"], 4), "bands": {b: round(x, 4) for b, x in v["bands"].items() if x > 0}}
                 for ch, v in ranked if v["share"] > 0}
 
+    def _last_zero_at(self, row: int, index: int) -> int:
+        """The last sample up to ``index`` where statistic ``row`` was 0: from this call's values when it has
+        one, else the last before the call. (The bank's own last_zero is the call's end: with a call of a
+        whole block it could lie after the detection, and the onset then depended on the chunking.)"""
+        j = index - self._call_g0
+        zero = np.flatnonzero(self._call_S[row, :j + 1] <= 0.0)
+        return int(self._call_g0 + zero[-1]) if zero.size else int(self._last_zero_before[row])
+
     def _raise(self, t_s: float, index: int, ratio: np.ndarray) -> dict:
         top = int(np.argmax(ratio))
         cont = self._contributions(ratio)
-        onset = min(int(self.cusum.last_zero[top]) + 1, int(index))
+        onset = min(self._last_zero_at(top, int(index)) + 1, int(index))
         onset_t = float(self._times[onset % TIME_RING]) if index - onset < TIME_RING else math.nan
         alarm = {"alarm_id": len(self.alarms) + 1, "detection_time": float(t_s), "detection_index": int(index),
                  "onset_index": onset, "onset_time": onset_t if math.isfinite(onset_t) else None,
