@@ -39,7 +39,7 @@ def test_the_held_out_healthy_run_raises_no_alarm(fold, capsys):
     assert _alarms(capsys, record, ref) == []
 
 
-@pytest.mark.parametrize("kind,size", [("probe_bias", "1.0"), ("probe_frozen", "0")])
+@pytest.mark.parametrize("kind,size", [("probe_bias", "1.0"), ("probe_frozen", "0"), ("probe_noise", "0.15")])
 def test_a_hidden_probe_fault_is_found_after_its_onset(fold, capsys, kind, size):
     record, ref, out = fold
     onset = 503.0  # the middle of the run's 1004 s
