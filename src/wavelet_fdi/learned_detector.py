@@ -485,6 +485,18 @@ class LearnedDetector:
             raise RuntimeError("the detector was built without record_trace")
         return {k: (np.concatenate(v) if v else np.empty(0)) for k, v in self._trace.items()}
 
+    def _against_run_scale(self, e2: np.ndarray, miss: np.ndarray, g0: int) -> np.ndarray:
+        """The detail bands' d^2 (channel-major rows) against the run's own scale, and robust: a sample counts at
+        most as the design variance ratio rho (one outlier moves the CUSUM by at most rho - k; a noisier probe
+        keeps adding). Adds the samples to the block's sums the scale learns from."""
+        s = self.settings
+        used = ~miss & (g0 + np.arange(e2.shape[1]) >= self.fill_samples)
+        self._e2_acc = _running_sum(self._e2_acc, np.where(used, e2, 0.0), axis=1)  # chunking-proof
+        self._e2_n += used.sum(axis=1)
+        if self._energy_blocks < ENERGY_WARMUP_BLOCKS:  # the run's scale is still being learned
+            return np.full_like(e2, self.k[2 * self.m])  # no evidence either way
+        return np.minimum(e2 / self.energy_scale[:, None], s.energy_variance_ratio)
+
     def _adapt_energy_scale(self, ratio: np.ndarray) -> None:
         """At a block boundary: move each band's energy scale toward the block's mean d^2 (the running mean
         over the first blocks, then gain block time / time constant), unless an energy statistic is high
@@ -529,16 +541,7 @@ class LearnedDetector:
             miss = np.repeat(missing[i0:i1].T, s.level, axis=0)  # (m*J, nb): a missing sample is healthy
             row = nm
             if self.energy:
-                e2_up = e2
-                if self.energy_adapted:
-                    used = ~miss & (g0 + np.arange(nb) >= self.fill_samples)
-                    self._e2_acc = _running_sum(self._e2_acc, np.where(used, e2_up, 0.0), axis=1)  # chunking-proof
-                    self._e2_n += used.sum(axis=1)
-                    # against the run's own scale, and robust: a sample counts at most as the design variance
-                    # ratio rho (one outlier moves the CUSUM by at most rho - k; a noisier probe keeps adding)
-                    e2_up = np.minimum(e2_up / self.energy_scale[:, None], s.energy_variance_ratio)
-                    if self._energy_blocks < ENERGY_WARMUP_BLOCKS:  # the run's scale is still being learned
-                        e2_up = np.full_like(e2_up, self.k[nm])  # no evidence either way
+                e2_up = self._against_run_scale(e2, miss, g0) if self.energy_adapted else e2
                 vals[row:row + ne] = np.where(miss, 0.0, e2_up)
                 row += ne
             if self.energy_down:
