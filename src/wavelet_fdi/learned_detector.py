@@ -374,12 +374,7 @@ class LearnedDetector:
         self.bias = np.zeros(m)
         self._acc = np.zeros(m)
         self._acc_n = 0
-        # the energy CUSUMs' run-adapted scale per (channel, detail band), in calibrated variances (1: as calibrated)
-        self.energy_adapted = self.energy and s.energy_baseline_time_constant_s > 0
-        self.energy_scale = np.ones(m * s.level)  # (channel, detail band), channel-major as the statistics
-        self._e2_acc = np.zeros(m * s.level)
-        self._e2_n = np.zeros(m * s.level, dtype=int)
-        self._energy_blocks = 0  # blocks the scale has learned from
+        self._init_energy_scale(m, s)
         self.in_alarm = False
         self._last_crossing = -1
         self._holdoff = False  # an alarm cleared in this block: no new one before the next block boundary
@@ -485,14 +480,28 @@ class LearnedDetector:
             raise RuntimeError("the detector was built without record_trace")
         return {k: (np.concatenate(v) if v else np.empty(0)) for k, v in self._trace.items()}
 
+    def _init_energy_scale(self, m: int, s: LearnedSettings) -> None:
+        """The energy CUSUMs' run-adapted scale per (channel, detail band), channel-major as the statistics, in
+        calibrated variances (1: as calibrated)."""
+        self.energy_adapted = self.energy and s.energy_baseline_time_constant_s > 0
+        self.energy_scale = np.ones(m * s.level)
+        # this block's d^2 (0 where not used) and which were used, by position in the block: summed once at its
+        # boundary, so any chunking sums the same numbers in the same order
+        self._e2_block = np.zeros((m * s.level, s.block_samples))
+        self._e2_used = np.zeros((m * s.level, s.block_samples))  # 1.0: used
+        self._energy_blocks = 0  # blocks the scale has learned from
+
     def _against_run_scale(self, e2: np.ndarray, miss: np.ndarray, g0: int) -> np.ndarray:
         """The detail bands' d^2 (channel-major rows) against the run's own scale, and robust: a sample counts at
         most as the design variance ratio rho (one outlier moves the CUSUM by at most rho - k; a noisier probe
         keeps adding). Adds the samples to the block's sums the scale learns from."""
         s = self.settings
-        used = ~miss & (g0 + np.arange(e2.shape[1]) >= self.fill_samples)
-        self._e2_acc = _running_sum(self._e2_acc, np.where(used, e2, 0.0), axis=1)  # chunking-proof
-        self._e2_n += used.sum(axis=1)
+        used = ~miss
+        if g0 < self.fill_samples:
+            used = used & (g0 + np.arange(e2.shape[1]) >= self.fill_samples)
+        at = g0 % s.block_samples  # a call never crosses a block boundary
+        self._e2_block[:, at:at + e2.shape[1]] = np.where(used, e2, 0.0)
+        self._e2_used[:, at:at + e2.shape[1]] = used
         if self._energy_blocks < ENERGY_WARMUP_BLOCKS:  # the run's scale is still being learned
             return np.full_like(e2, self.k[2 * self.m])  # no evidence either way
         return np.minimum(e2 / self.energy_scale[:, None], s.energy_variance_ratio)
@@ -505,21 +514,22 @@ class LearnedDetector:
         and a quantised plateau, whose detail bands read zero, does not make the next healthy sample a
         variance ratio without bound."""
         s = self.settings
-        e_ratio = ratio[2 * self.m:2 * self.m + len(self.energy_scale), -1]
-        ok = self._e2_n >= max(1, s.block_samples // 2)
-        learning = self._energy_blocks < ENERGY_WARMUP_BLOCKS
-        if not learning and (self.in_alarm or bool((e_ratio > s.freeze_ratio).any())):
-            ok[:] = False
-        if ok.any():
-            self._energy_blocks += 1
-            mean = np.where(ok, self._e2_acc / np.maximum(self._e2_n, 1), self.energy_scale)
-            gain = max(1.0 / self._energy_blocks,
-                       min(1.0, s.block_samples * s.sample_time_s / s.energy_baseline_time_constant_s))
-            new = self.energy_scale + gain * (mean - self.energy_scale)
-            rho = s.energy_variance_ratio
-            self.energy_scale = np.clip(np.where(ok, new, self.energy_scale), 1.0 / rho, rho)
-        self._e2_acc[:] = 0.0
-        self._e2_n[:] = 0
+        if self._energy_blocks >= ENERGY_WARMUP_BLOCKS and (
+                self.in_alarm or ratio[2 * self.m:2 * self.m + len(self.energy_scale), -1].max() > s.freeze_ratio):
+            return  # frozen (the block's arrays are overwritten by the next block: every position is written)
+        n_used = self._e2_used.sum(axis=1)  # few small numpy calls: this runs every block (the rig's 1e5 samples/s)
+        half = max(1, s.block_samples // 2)
+        if n_used.max() < half:
+            return
+        self._energy_blocks += 1
+        gain = max(1.0 / self._energy_blocks,
+                   min(1.0, s.block_samples * s.sample_time_s / s.energy_baseline_time_constant_s))
+        scale = self.energy_scale
+        new = scale + gain * (self._e2_block.sum(axis=1) / np.maximum(n_used, 1.0) - scale)
+        if n_used.min() < half:  # a band mostly missing in this block keeps its scale
+            new = np.where(n_used >= half, new, scale)
+        rho = s.energy_variance_ratio
+        self.energy_scale = np.minimum(np.maximum(new, 1.0 / rho), rho)
 
     # ---- one block (observer constant inside) -------------------------------------------
     def _block(self, t, i0, i1, a_raw, d_norm, missing, states) -> list[LearnedEvent]:

@@ -409,6 +409,21 @@ class EstimatorStream:
         """Block sums of a zone for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V."""
         v, fac = self.ref.volume_ml, self.zone_factors[zone]
         gy, on_s, gg = self._gy[zone], self._on_s[zone], self._gg[zone]
+        if len(qp) == 2:  # the rig's acid and base, unrolled (called every sample a pump runs; same arithmetic)
+            g0, g1 = fac[0] * strengths[0] * qp[0] * dt / v, fac[1] * strengths[1] * qp[1] * dt / v
+            if g0 != 0.0:
+                gy[0] += g0 * corr
+                on_s[0] += dt
+                row = gg[0]
+                row[0] += g0 * g0
+                row[1] += g0 * g1
+            if g1 != 0.0:
+                gy[1] += g1 * corr
+                on_s[1] += dt
+                row = gg[1]
+                row[0] += g1 * g0
+                row[1] += g1 * g1
+            return
         g = [fac[i] * strengths[i] * qp[i] * dt / v for i in range(len(qp))]
         for i, gi in enumerate(g):
             if gi != 0.0:
