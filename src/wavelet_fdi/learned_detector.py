@@ -562,9 +562,7 @@ class LearnedDetector:
             cut = min(nb, self.fill_samples - g0)
             z[:, :cut] = -self.k[:, None]
         events: list[LearnedEvent] = []
-        self._last_zero_before = self.cusum.last_zero.copy()  # for the onset of an alarm raised inside this call
         S = self.cusum.update(z, g0)
-        self._call_S, self._call_g0 = S, g0
         ratio = S / self.h[:, None]
         cross = (ratio > 1.0).any(axis=0)
         if self._trace is not None:
@@ -681,18 +679,10 @@ class LearnedDetector:
         return {ch: {"share": round(v["share"], 4), "bands": {b: round(x, 4) for b, x in v["bands"].items() if x > 0}}
                 for ch, v in ranked if v["share"] > 0}
 
-    def _last_zero_at(self, row: int, index: int) -> int:
-        """The last sample up to ``index`` where statistic ``row`` was 0: from this call's values when it has
-        one, else the last before the call. (The bank's own last_zero is the call's end: with a call of a
-        whole block it could lie after the detection, and the onset then depended on the chunking.)"""
-        j = index - self._call_g0
-        zero = np.flatnonzero(self._call_S[row, :j + 1] <= 0.0)
-        return int(self._call_g0 + zero[-1]) if zero.size else int(self._last_zero_before[row])
-
     def _raise(self, t_s: float, index: int, ratio: np.ndarray) -> dict:
         top = int(np.argmax(ratio))
         cont = self._contributions(ratio)
-        onset = min(self._last_zero_at(top, int(index)) + 1, int(index))
+        onset = min(self.cusum.last_zero_at(top, int(index)) + 1, int(index))
         onset_t = float(self._times[onset % TIME_RING]) if index - onset < TIME_RING else math.nan
         alarm = {"alarm_id": len(self.alarms) + 1, "detection_time": float(t_s), "detection_index": int(index),
                  "onset_index": onset, "onset_time": onset_t if math.isfinite(onset_t) else None,

@@ -204,6 +204,7 @@ class CusumBank:
         """Consume increments z (n, N) of samples first_index..first_index+N-1; return S (n, N)."""
         if z.shape[1] == 0:
             return np.empty((self.n, 0))
+        self._call = (first_index, self.last_zero.copy())  # for last_zero_at: the call's start and what was before
         c = np.cumsum(np.concatenate((self.c[:, None], z), axis=1), axis=1)[:, 1:]
         m = np.minimum.accumulate(np.concatenate((self.m[:, None], c), axis=1), axis=1)[:, 1:]
         s = c - m
@@ -214,4 +215,13 @@ class CusumBank:
             self.last_zero = np.where(any_zero, first_index + last, self.last_zero)
         self.c = c[:, -1].copy()
         self.m = m[:, -1].copy()
+        self._call_s = s
         return s
+
+    def last_zero_at(self, row: int, index: int) -> int:
+        """The last sample up to ``index`` (inside the last :meth:`update` call) where statistic ``row`` was 0.
+        ``last_zero`` is the call's end, which can lie after ``index``: an onset taken from it would depend on
+        how the samples were split into calls."""
+        first, before = self._call
+        zero = np.flatnonzero(self._call_s[row, :index - first + 1] <= 0.0)
+        return int(first + zero[-1]) if zero.size else int(before[row])
