@@ -34,7 +34,11 @@ ESTIMATOR_SETTINGS = {"observer_time_constant_s": 60.0, "observer_alarm_time_con
                       # a probe that turns noisy: the detail bands' energy against this run's own noise (healthy rig
                       # runs differ fourfold in it from day to day), learned with the strengths' 120 s and frozen on
                       # a rise; the likelihood-ratio CUSUM of a fourfold variance, a sample counting at most fourfold
-                      "energy_variance_ratio": 4.0, "energy_baseline_time_constant_s": 120.0}
+                      "energy_variance_ratio": 4.0, "energy_baseline_time_constant_s": 120.0,
+                      # a probe that freezes or turns sluggish stops dithering across its meter's 0.01 pH steps:
+                      # the Bernoulli CUSUM of exact repeats (wavelet_fdi.repeat_test) against the run's own share
+                      # (7-13 % on the rig), designed for a reading that repeats in 9 of 10 samples
+                      "repeat_probability": 0.9}
 
 
 def feed_strength_mM(recipe: dict[str, float]) -> float:

@@ -37,7 +37,7 @@ NOISE_RANGE = (0.02, 20.0)  # searched on its logarithm
 PUMP_RANGE = (0.0, 3.0)
 STIFFNESS = 0.1
 #: the detector's statistics that watch the reading's noise (wavelet_fdi.learned_detector)
-NOISE_STATISTICS = ("energy", "energy_down")
+NOISE_STATISTICS = ("energy", "energy_down", "repeats")
 
 
 def _window_nll(start: EstimatorStream, ref: EstimatorReference, t: np.ndarray, rows: np.ndarray) -> float:

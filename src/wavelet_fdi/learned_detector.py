@@ -45,6 +45,7 @@ from .filterbank import CausalSwt, wavelet_filters
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
 from .references import NAMERS, Reference, reference_from_dict
+from .repeat_test import RepeatTest
 from .statistics import CusumBank, energy_decrease_reference, energy_reference
 
 FORMAT = "phfdi-learned-detector/1"
@@ -54,6 +55,8 @@ NAMING_AFTER = 64  # samples after a detection that the naming window takes in
 #: blocks of a run the run-adapted energy scale learns from (a running mean, never frozen) before the energy
 #: CUSUMs look at it: 4 blocks of 32 samples estimate a variance to about 12 % (sqrt(2 / 128))
 ENERGY_WARMUP_BLOCKS = 4
+#: the repeats test's time constant for the run's repeat share when the energy test sets none (s)
+REPEAT_TIME_CONSTANT_S = 120.0
 #: learned reference forms (LearnedSettings.form)
 LEARNED_FORMS = ("arx", "oe")  # sample times kept to date an alarm's onset
 
@@ -100,6 +103,12 @@ class LearnedSettings:
     #: a probe that freezes or turns sluggish loses its noise; threshold h
     energy_down_variance_ratio: float = 0.0
     energy_down_h: float = 20.0
+    #: repeats CUSUM on each watched channel's raw reading (off: 0; wavelet_fdi.repeat_test): designed for a
+    #: stale reading that repeats its previous value in this share of the samples (a frozen or sluggish probe),
+    #: against the run's own repeat share (learned with energy_baseline_time_constant_s, 120 s when that is 0);
+    #: threshold h (an in-control run length of at least e^h samples)
+    repeat_probability: float = 0.0
+    repeat_h: float = 20.0
     #: observer on AJ: time constant (0: off); frozen above this fraction of a threshold
     observer_time_constant_s: float = 300.0
     freeze_ratio: float = 0.5
@@ -134,8 +143,10 @@ class LearnedSettings:
             raise UserError("energy_down_variance_ratio must be 0 (off) or between 0 and 1")
         if self.energy_baseline_time_constant_s < 0:
             raise UserError("energy_baseline_time_constant_s must be >= 0 (0: the calibrated scale)")
-        if not (self.energy_h > 0 and self.energy_down_h > 0):
-            raise UserError("energy_h and energy_down_h must be positive")
+        if not (self.energy_h > 0 and self.energy_down_h > 0 and self.repeat_h > 0):
+            raise UserError("energy_h, energy_down_h and repeat_h must be positive")
+        if not 0.0 <= self.repeat_probability < 1.0:
+            raise UserError("repeat_probability must be 0 (off) or between 0 and 1")
         if self.block_samples < 1:
             raise UserError("block_samples must be at least 1")
         if self.observer_time_constant_s < 0 or self.observer_alarm_time_constant_s < 0 \
@@ -332,7 +343,7 @@ class LearnedDetector:
         self.swt = CausalSwt(s.wavelet, s.level, channels=m)
         self.gain = 2.0 ** (s.level / 2.0)  # DC gain of AJ
         self.fill_samples = self.swt.fill_samples + model.reference.lags
-        self.bands = s.bands()
+        self.bands = s.bands() + ["raw"]  # "raw": a statistic on the channel's reading itself
         self.energy = s.energy_variance_ratio > 1.0
         # statistics: mean up and down per channel, then energy per channel and detail band
         names, k, h, chan, band = [], [], [], [], []
@@ -364,6 +375,7 @@ class LearnedDetector:
                     h.append(s.energy_down_h)
                     chan.append(c)
                     band.append(j)
+        self.repeats, self._rep_row, self._rep_cols = self._init_repeats(s, names, k, h, chan, band)
         self.stat_names = names
         self.k = np.array(k)
         self.h = np.array(h)
@@ -413,6 +425,7 @@ class LearnedDetector:
         g = self.samples_processed + np.arange(len(rows))
         self._times[g % TIME_RING] = t
         r = self.stream.residuals(t, rows)
+        rep = self.repeats.indicators(rows[:, self._rep_cols]) if self.repeats is not None else None
         missing = ~np.isfinite(r)
         events += self._missing_events(missing, t)
         out = self.swt.process(np.where(missing, 0.0, r))
@@ -422,11 +435,15 @@ class LearnedDetector:
         a_raw = approx / self.gain  # AJ in residual units (DC gain removed)
         b = self.settings.block_samples
         n = len(rows)
+        chunk = _Chunk(a_raw, d_norm, missing, bool(missing.any()), rep)
+        if self.energy or self.energy_down:  # the detail bands' d^2 and missing flags, channel-major, once a chunk
+            chunk.e2 = d_norm.transpose(2, 0, 1).reshape(self.m * self.settings.level, n) ** 2
+            chunk.miss = np.repeat(missing.T, self.settings.level, axis=0)
         pos = 0
         while pos < n:
             done = self.samples_processed + pos  # rows processed so far: blocks are aligned to them
             end = min(n, pos + (b - done % b))
-            ev = self._block(t, pos, end, a_raw, d_norm, missing, states)
+            ev = self._block(t, pos, end, chunk, states)
             events += ev
             pos = end
         if self.namer is not None:
@@ -480,6 +497,25 @@ class LearnedDetector:
             raise RuntimeError("the detector was built without record_trace")
         return {k: (np.concatenate(v) if v else np.empty(0)) for k, v in self._trace.items()}
 
+    def _init_repeats(self, s: LearnedSettings, names, k, h, chan, band):
+        """The repeats CUSUMs (one per watched channel that is a column of the rows), appended to the statistics'
+        lists; returns the test (None: off), its first statistic row and the rows' columns it reads."""
+        watched = [c for c, ch in enumerate(self.channels) if ch in self.inputs]
+        if not s.repeat_probability > 0.0 or not watched:
+            return None, len(names), []
+        first = len(names)
+        for c in watched:
+            names.append(f"{self.channels[c]}.raw.repeats")
+            k.append(0.0)  # the increments are the log-likelihood ratios themselves
+            h.append(s.repeat_h)
+            chan.append(c)
+            band.append(s.level + 1)  # "raw"
+        tau = s.energy_baseline_time_constant_s or REPEAT_TIME_CONSTANT_S
+        gain = min(1.0, s.block_samples * s.sample_time_s / tau)
+        test = RepeatTest(len(watched), s.repeat_probability, ENERGY_WARMUP_BLOCKS, gain,
+                          min_valid=max(1, s.block_samples // 2))
+        return test, first, [self.inputs.index(self.channels[c]) for c in watched]
+
     def _init_energy_scale(self, m: int, s: LearnedSettings) -> None:
         """The energy CUSUMs' run-adapted scale per (channel, detail band), channel-major as the statistics, in
         calibrated variances (1: as calibrated)."""
@@ -491,17 +527,22 @@ class LearnedDetector:
         self._e2_used = np.zeros((m * s.level, s.block_samples))  # 1.0: used
         self._energy_blocks = 0  # blocks the scale has learned from
 
-    def _against_run_scale(self, e2: np.ndarray, miss: np.ndarray, g0: int) -> np.ndarray:
+    def _against_run_scale(self, e2: np.ndarray, miss: np.ndarray | None, g0: int) -> np.ndarray:
         """The detail bands' d^2 (channel-major rows) against the run's own scale, and robust: a sample counts at
         most as the design variance ratio rho (one outlier moves the CUSUM by at most rho - k; a noisier probe
-        keeps adding). Adds the samples to the block's sums the scale learns from."""
+        keeps adding). Adds the samples to the block's sums the scale learns from (``miss``: None, none missing)."""
         s = self.settings
-        used = ~miss
-        if g0 < self.fill_samples:
-            used = used & (g0 + np.arange(e2.shape[1]) >= self.fill_samples)
         at = g0 % s.block_samples  # a call never crosses a block boundary
-        self._e2_block[:, at:at + e2.shape[1]] = np.where(used, e2, 0.0)
-        self._e2_used[:, at:at + e2.shape[1]] = used
+        nb = e2.shape[1]
+        if miss is None and g0 >= self.fill_samples:  # every sample used (the usual case: fewer numpy calls)
+            self._e2_block[:, at:at + nb] = e2
+            self._e2_used[:, at:at + nb] = 1.0
+        else:
+            used = np.ones_like(e2, dtype=bool) if miss is None else ~miss
+            if g0 < self.fill_samples:
+                used = used & (g0 + np.arange(nb) >= self.fill_samples)
+            self._e2_block[:, at:at + nb] = np.where(used, e2, 0.0)
+            self._e2_used[:, at:at + nb] = used
         if self._energy_blocks < ENERGY_WARMUP_BLOCKS:  # the run's scale is still being learned
             return np.full_like(e2, self.k[2 * self.m])  # no evidence either way
         return np.minimum(e2 / self.energy_scale[:, None], s.energy_variance_ratio)
@@ -532,13 +573,15 @@ class LearnedDetector:
         self.energy_scale = np.minimum(np.maximum(new, 1.0 / rho), rho)
 
     # ---- one block (observer constant inside) -------------------------------------------
-    def _block(self, t, i0, i1, a_raw, d_norm, missing, states) -> list[LearnedEvent]:
+    def _block(self, t, i0, i1, c: "_Chunk", states) -> list[LearnedEvent]:
         s = self.settings
         g0 = self.samples_processed + i0
-        dev = a_raw[i0:i1] - self.bias  # (nb, m) AJ deviation from the learned healthy level
+        d_norm, missing = c.d_norm, c.missing
+        dev = c.a_raw[i0:i1] - self.bias  # (nb, m) AJ deviation from the learned healthy level
         sig = self.model.band_sigma
         u = dev * self.gain / sig[:, -1]
-        u = np.where(missing[i0:i1], 0.0, u)
+        if c.gappy:
+            u = np.where(missing[i0:i1], 0.0, u)
         nb = i1 - i0
         vals = np.empty((len(self.stat_names), nb))
         nm = 2 * self.m
@@ -546,16 +589,17 @@ class LearnedDetector:
         vals[1:nm:2] = -u.T
         ne = self.m * s.level
         if self.energy or self.energy_down:
-            e = d_norm[:, i0:i1, :]  # (J, nb, m)
-            e2 = (e.transpose(2, 0, 1).reshape(ne, nb)) ** 2
-            miss = np.repeat(missing[i0:i1].T, s.level, axis=0)  # (m*J, nb): a missing sample is healthy
+            e2 = c.e2[:, i0:i1]  # (m*J, nb)
+            miss = c.miss[:, i0:i1]  # a missing sample is healthy
             row = nm
             if self.energy:
-                e2_up = self._against_run_scale(e2, miss, g0) if self.energy_adapted else e2
-                vals[row:row + ne] = np.where(miss, 0.0, e2_up)
+                e2_up = self._against_run_scale(e2, miss if c.gappy else None, g0) if self.energy_adapted else e2
+                vals[row:row + ne] = np.where(miss, 0.0, e2_up) if c.gappy else e2_up
                 row += ne
             if self.energy_down:
-                vals[row:row + ne] = np.where(miss, -1.0, -e2)
+                vals[row:row + ne] = np.where(miss, -1.0, -e2) if c.gappy else -e2
+        if self.repeats is not None:
+            self.repeats.increments(c.rep[:, i0:i1], out=vals[self._rep_row:])
         z = vals - self.k[:, None]
         warm = g0 < self.fill_samples
         if warm:  # filters not yet filled: no evidence either way
@@ -594,6 +638,8 @@ class LearnedDetector:
             self._acc_n = 0
             if self.energy_adapted:
                 self._adapt_energy_scale(ratio)
+            if self.repeats is not None:
+                self.repeats.adapt(self.in_alarm or max(ratio[self._rep_row:, -1].tolist()) > s.freeze_ratio)
             if self.in_alarm or self._holdoff:
                 self.cusum.restart(g0 + nb - 1)
                 self._holdoff = False
@@ -721,6 +767,19 @@ class LearnedDetector:
             self._missing_open[c] = bool(col[-1])
         out.sort(key=lambda e: e.index)
         return out
+
+
+@dataclass
+class _Chunk:
+    """What one ``process`` call computed for all its blocks."""
+
+    a_raw: np.ndarray  # (n, m) AJ in residual units
+    d_norm: np.ndarray  # (J, n, m) detail coefficients over their healthy sigma
+    missing: np.ndarray  # (n, m)
+    gappy: bool  # any sample missing
+    rep: np.ndarray | None  # (m_watched, n) repeat indicators
+    e2: np.ndarray | None = None  # (m*J, n) d^2, channel-major
+    miss: np.ndarray | None = None  # (m*J, n) missing, channel-major
 
 
 def _running_sum(total: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray:
