@@ -22,7 +22,7 @@ def main() -> None:
     ap.add_argument("--data", default=os.environ.get("PHFDI_SHARED_DATA", "../shared/data"))
     ap.add_argument("--json", default=None, help="write every case and the summary here")
     ap.add_argument("--detectors", nargs="+", default=None, metavar="NAME",
-                    help="only these (estimator, 'open loop', 'learned ARX', 'learned OE', "
+                    help="only these (estimator, 'nominal estimator', 'open loop', 'learned ARX', 'learned OE', "
                          "'plain CUSUM (estimator residual)'); without the physics ones the estimator is not fitted")
     args = ap.parse_args()
     paths = sorted(glob.glob(str(Path(args.data) / "ph_rig" / "*.csv")))
@@ -42,7 +42,8 @@ def main() -> None:
         for k, v in e["kinds"].items():
             d = "" if v["median_delay_s"] is None else f", median delay {v['median_delay_s']:.1f} s"
             d += f", alarm up {100 * v.get('median_held_share', 0.0):.0f} % of the time after the onset (median)"
-            fam = "" if e["detector"] not in ("estimator", "open loop") else f", family right {v['family_right']}"
+            fam = "" if e["detector"] not in ("estimator", "nominal estimator", "open loop") \
+                else f", family right {v['family_right']}"
             print(f"  {k:22s} detected {v['detected']:3d}/{v['cases']:<3d}{d}{fam}")
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1), encoding="utf-8")
