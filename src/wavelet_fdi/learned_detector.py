@@ -588,7 +588,7 @@ class LearnedDetector:
         vals[0:nm:2] = u.T
         vals[1:nm:2] = -u.T
         ne = self.m * s.level
-        if self.energy or self.energy_down:
+        if c.e2 is not None and c.miss is not None:  # the energy statistics are on
             e2 = c.e2[:, i0:i1]  # (m*J, nb)
             miss = c.miss[:, i0:i1]  # a missing sample is healthy
             row = nm
@@ -598,7 +598,7 @@ class LearnedDetector:
                 row += ne
             if self.energy_down:
                 vals[row:row + ne] = np.where(miss, -1.0, -e2) if c.gappy else -e2
-        if self.repeats is not None:
+        if self.repeats is not None and c.rep is not None:
             self.repeats.increments(c.rep[:, i0:i1], out=vals[self._rep_row:])
         z = vals - self.k[:, None]
         warm = g0 < self.fill_samples

@@ -77,3 +77,21 @@ def test_any_chunking_gives_the_same_alarms_to_the_last_bit(fold):
         outs.append(json.dumps(det.alarms, sort_keys=True))
     assert json.loads(outs[0]), "no alarm: nothing to compare"
     assert all(o == outs[0] for o in outs[1:])
+
+
+def test_detector_settings_go_with_the_estimator_and_row_windows_do_not(tmp_path, capsys):
+    """--learned sets a detector setting of the estimator's model file (the repeats test off, for a record whose
+    values are held between changes); --rows and the other --learn-only options are refused, not ignored."""
+    rig = SHARED_DATA / "ph_rig"
+    if not rig.is_dir():
+        pytest.skip(f"real data folder not found at {SHARED_DATA} (set PHFDI_SHARED_DATA)")
+    run = str(rig / "2025.02.24-001_add_base_pH9.5-11.5.csv")
+    out = tmp_path / "ref.json"
+    assert main(["calibrate", "--estimator", run, "--map", "ph_rig", "--rows", "100", "--out", str(out)]) != 0
+    assert "--rows, --from, --to and --exclude go with --learn" in capsys.readouterr().err
+    assert not out.exists()
+    assert main(["calibrate", "--estimator", run, "--map", "ph_rig", "--learned", "repeat_probability=0",
+                 "--out", str(out)]) == 0
+    settings = json.loads(out.read_text())["settings"]
+    assert settings["repeat_probability"] == 0.0
+    assert settings["energy_variance_ratio"] == 4.0  # the estimator's other settings kept

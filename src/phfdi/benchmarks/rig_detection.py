@@ -3,11 +3,12 @@ healthy and with faults injected by :mod:`phfdi.inject`, for each reference kind
 
 Per fold: the estimator reference (Kalman filter on the reaction invariant, :mod:`phfdi.estimator`), the
 same filter on the nominal physics (the plant model's strengths and volume, the default noise model, no buffer:
-nothing fitted; its bands calibrated on the training runs), the fitted physics open loop (simulation reference), the learned ARX reference and the learned
-output-error reference (``form=oe``, :mod:`wavelet_fdi.reference_oe`) fitted on the four training runs,
-and a plain two-sided CUSUM (k = 0.5, h for an average run length of 1e5 samples on unit-variance
-residuals, Siegmund's approximation) on the estimator's residual. Nothing is chosen on the held-out run:
-the fault sizes and onsets are fixed below, the thresholds come from the training runs.
+nothing fitted; its bands calibrated on the training runs), the fitted physics open loop (simulation
+reference), the learned ARX reference and the learned output-error reference (``form=oe``,
+:mod:`wavelet_fdi.reference_oe`) fitted on the four training runs, and a plain two-sided CUSUM (k = 0.5, h for
+an average run length of 1e5 samples on unit-variance residuals, Siegmund's approximation) on the estimator's
+residual. Nothing is chosen on the held-out run: the fault sizes and onsets are fixed below, the thresholds come
+from the training runs.
 """
 
 from __future__ import annotations

@@ -120,7 +120,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--exclude", default="", metavar="COLS", help="with --learn: columns that are not channels, "
                    "comma-separated (e.g. labels)")
     g.add_argument("--learned", action="append", default=[], metavar="KEY=VALUE",
-                   help="with --learn: a detector setting, e.g. --learned mean_h=8, or --learned form=oe for the "
+                   help="with --learn or --estimator: a detector setting, e.g. --learned mean_h=8, or --learned "
+                        "repeat_probability=0 (--estimator: no repeats test, for a record whose values are held "
+                        "between changes, such as a compressed historian export), or --learned form=oe for the "
                         "output-error reference that keeps a sensor fault in its residual (see docs/detector.md)")
     g = p.add_argument_group("estimator reference (a vessel with pumped feeds of strong acid and base)")
     g.add_argument("--estimator", nargs="+", default=None, metavar="RUN",
@@ -226,19 +228,22 @@ def run_learn(args: argparse.Namespace) -> int:
 
 
 def run_estimator(args: argparse.Namespace) -> int:
-    from phfdi.estimator import fit_estimator, read_runs, start_from_model
+    from phfdi.estimator import ESTIMATOR_SETTINGS, fit_estimator, read_runs, start_from_model
     from phfdi_base.errors import UserError
+    from wavelet_fdi.learned_detector import LearnedSettings
 
     if args.learn or args.runs:
         raise UserError("--estimator, --learn and --runs are different calibrations: give one")
     if not args.out.endswith(".json"):
         raise UserError(f"--out {args.out}: an estimator reference is written as .json")
+    if args.rows is not None or args.exclude or args.start or args.end:
+        raise UserError("--rows, --from, --to and --exclude go with --learn (--estimator fits on whole runs)")
     start = start_from_model(args.model, correct=not args.open_loop)
     records = read_runs(args.estimator, start.channels, column_map_from_args(args))
     for r in records:
         print_notes("calibrate", r.notes)
     with plant_runs_on(", ".join(args.estimator)):
-        model = fit_estimator(records, start)
+        model = fit_estimator(records, start, learned_settings(args.learned, LearnedSettings(**ESTIMATOR_SETTINGS)))
     store_column_map(args, model)
     model.save(args.out, overwrite=args.overwrite)
     ref = model.reference
