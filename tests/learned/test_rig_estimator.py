@@ -15,17 +15,21 @@ from tests.conftest import SHARED_DATA
 HELD_OUT = "2025.02.24-005_control_pH7_from_basic.csv"
 
 
-@pytest.fixture(scope="module")
-def fold(tmp_path_factory):
+def _fold(tmp_path_factory, held_out: str):
     rig = SHARED_DATA / "ph_rig"
     if not rig.is_dir():
         pytest.skip(f"real data folder not found at {SHARED_DATA} (set PHFDI_SHARED_DATA)")
-    runs = sorted(str(p) for p in rig.glob("*.csv") if p.name != HELD_OUT)
+    runs = sorted(str(p) for p in rig.glob("*.csv") if p.name != held_out)
     assert len(runs) == 4
     out = tmp_path_factory.mktemp("rig")
     ref = out / "rig.json"
     assert main(["calibrate", "--estimator", *runs, "--map", "ph_rig", "--out", str(ref)]) == 0
-    return rig / HELD_OUT, ref, out
+    return rig / held_out, ref, out
+
+
+@pytest.fixture(scope="module")
+def fold(tmp_path_factory):
+    return _fold(tmp_path_factory, HELD_OUT)
 
 
 def _alarms(capsys, record, ref) -> list[dict]:
@@ -54,6 +58,20 @@ def test_a_hidden_probe_fault_is_found_after_its_onset(fold, capsys, kind, size,
     assert alarms[0]["detection_time"] - onset < within_s
     # named, and named a sensor fault, in the summary whether the alarm cleared before the record ended or not
     assert (alarms[0].get("isolation") or {}).get("family") == "sensor", alarms[0].get("isolation")
+
+
+def test_a_probe_jump_is_named_from_where_it_began(tmp_path_factory, capsys):
+    """A 1 pH offset hidden in the open-loop acid addition (held out): named a probe offset of about 1 pH. The
+    detector's onset (its band statistic's last zero) lies 3 s after the jump, by when the filter has followed
+    part of it; named from there, this was the acid pump delivering a seventh of what is recorded."""
+    record, ref, out = _fold(tmp_path_factory, "2025.02.24-add_acid_pH7-3.csv")
+    faulty = out / "bias.csv"
+    assert main(["inject", str(record), "--map", "ph_rig", "--fault", "probe_bias", "--onset", "90", "--size", "1",
+                 "--out", str(faulty)]) == 0
+    alarms = _alarms(capsys, faulty, ref)
+    assert alarms and alarms[0]["detection_time"] >= 90.0, alarms
+    iso = alarms[0].get("isolation") or {}
+    assert iso.get("fault_class") == "probe_offset" and 0.8 < iso["size"] < 1.2, iso
 
 
 def test_any_chunking_gives_the_same_alarms_to_the_last_bit(fold):
