@@ -43,7 +43,10 @@ def main() -> None:
             d = "" if v["median_delay_s"] is None else f", median delay {v['median_delay_s']:.1f} s"
             d += f", alarm up {100 * v.get('median_held_share', 0.0):.0f} % of the time after the onset (median)"
             fam = "" if e["detector"] not in ("estimator", "nominal estimator", "open loop") \
-                else f", family right {v['family_right']}"
+                else f", family right {v['family_right']}, class right {v['class_right']}"
+            if fam and v["median_size_named"] is not None:
+                fam += f" (median size named {v['median_size_named']:.3g}"
+                fam += ")" if v["size_expected"] is None else f"; true {v['size_expected']:.3g})"
             print(f"  {k:22s} detected {v['detected']:3d}/{v['cases']:<3d}{d}{fam}")
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1), encoding="utf-8")

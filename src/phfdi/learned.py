@@ -244,7 +244,8 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
         lines.append(f"  channels: {top}")
         iso = a.get("isolation")
         if iso:
-            lines.append(f"  named: {iso['family']} fault, {iso['description']} ({iso['size']:g} {iso['unit']}; "
+            began = "" if iso.get("start_time") is None else f" from about {iso['start_time']:g} {unit_of_time}"
+            lines.append(f"  named: {iso['family']} fault, {iso['description']} ({iso['size']:g} {iso['unit']}{began}; "
                          f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)")
         if a.get("cleared_time") is not None:
             ep = a.get("episode_contributions") or {}

@@ -33,6 +33,10 @@ SIZES: dict[str, tuple[float, ...]] = {
     "probe_lag": (30.0, 10.0), "probe_gain": (0.3, 0.1), "pump_low": (0.5, 0.2), "pump_high": (0.5, 0.2),
     "pump_stuck": (3.0, 1.0)}
 ONSET_FRACTIONS = (0.35, 0.55, 0.75)
+#: the class a right name gives each injected probe kind (the hypotheses of wavelet_fdi.estimator_isolation): a
+#: bias, a drift and a slope error are locally an offset; a frozen or sluggish reading loses its noise (s < 1)
+PROBE_CLASS = {"probe_bias": "probe_offset", "probe_drift": "probe_offset", "probe_gain": "probe_offset",
+               "probe_frozen": "probe_noise", "probe_lag": "probe_noise", "probe_noise": "probe_noise"}
 PLAIN_CUSUM_K = 0.5
 
 
@@ -52,6 +56,20 @@ class Outcome:
     alarms_before: int = 0
     first_after_s: float | None = None
     family: str | None = None  # named by the first alarm after the onset (None: the detector names none)
+    fault_class: str | None = None
+    size: float | None = None  # in the class's unit (pH offset, x healthy noise, x recorded)
+
+
+def expected_class(kind: str, pump: str | None) -> str:
+    """The fault class a right name gives an injected fault of ``kind`` (on ``pump``'s flow for the pumps)."""
+    return f"pump:{pump}_flow_ml_s" if kind.startswith("pump") else PROBE_CLASS[kind]
+
+
+def expected_size(kind: str, size: float) -> float | None:
+    """The named size a right estimate gives, in the class's unit, where the injected size maps onto it: a bias's
+    pH; a pump's delivered / recorded (1 - f less, 1 + f more, 0 stuck). None for the others (a drift's or a
+    gain's offset depends on when and where it is named; added noise is not a multiple of the healthy one)."""
+    return {"probe_bias": size, "pump_low": 1.0 - size, "pump_high": 1.0 + size, "pump_stuck": 0.0}.get(kind)
 
 
 def outcome(alarms: Sequence[dict], onset_s: float | None) -> Outcome:
@@ -62,6 +80,7 @@ def outcome(alarms: Sequence[dict], onset_s: float | None) -> Outcome:
             out.alarms_before += 1
         elif out.first_after_s is None:
             out.first_after_s, out.family = float(ta), a.get("family")
+            out.fault_class, out.size = a.get("fault_class"), a.get("size")
     return out
 
 
@@ -70,12 +89,13 @@ def learned_alarms(model: LearnedModel, rec: MeasuredRecord) -> list[dict]:
     fault family named (estimator references; None for the others)."""
     events, _, _ = run_record(model, rec.time_s, rec.x)
     # the core names an alarm NAMING_AFTER samples after its detection (a "named" event)
-    families = {e.alarm["alarm_id"]: e.alarm["isolation"]["family"] for e in events if e.kind == "named" and e.alarm}
+    names = {e.alarm["alarm_id"]: e.alarm["isolation"] for e in events if e.kind == "named" and e.alarm}
     out: list[dict] = []
     for e in events:
         if e.kind == "alarm" and e.alarm:
-            out.append({"t": float(e.time_s), "until": float(rec.time_s[-1]),
-                        "family": families.get(e.alarm["alarm_id"])})
+            iso = names.get(e.alarm["alarm_id"]) or {}
+            out.append({"t": float(e.time_s), "until": float(rec.time_s[-1]), "family": iso.get("family"),
+                        "fault_class": iso.get("fault_class"), "size": iso.get("size")})
         elif e.kind == "cleared" and out:
             out[-1]["until"] = float(e.time_s)
     return out
@@ -199,9 +219,21 @@ def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] =
                                  "family": truth["family"], "size": truth["size"], "size_rank": truth["size_rank"],
                                  "pump": truth.get("pump"), "onset_s": truth["onset_s"],
                                  "alarms_before": o.alarms_before, "family_named": o.family,
+                                 "class": expected_class(truth["kind"], truth.get("pump")),
+                                 "class_named": o.fault_class, "size_named": o.size,
                                  "held_share": held_share(alarms, truth["onset_s"], float(frec.time_s[-1])),
                                  "delay_s": None if o.first_after_s is None else o.first_after_s - truth["onset_s"]})
     return {"rows": rows, "folds": folds}
+
+
+def _class_and_size(detected: list[dict], kind: str) -> dict:
+    """How many detected cases were named the right class, and the median size named for those, beside the
+    size a right estimate gives (None where the injected size does not map onto the class's unit)."""
+    right = [r for r in detected if r.get("class_named") is not None and r["class_named"] == r.get("class")]
+    sizes = sorted(r["size_named"] for r in right if r.get("size_named") is not None)
+    true = expected_size(kind, detected[0]["size"]) if detected else None
+    return {"class_right": len(right), "median_size_named": sizes[len(sizes) // 2] if sizes else None,
+            "size_expected": true}
 
 
 def summary(result: dict) -> list[dict]:
@@ -224,6 +256,7 @@ def summary(result: dict) -> list[dict]:
                 held = sorted(r["held_share"] for r in cs)
                 entry["kinds"][f"{kind} {rank}"] = {"cases": len(cs), "detected": len(ok),
                                                      "family_right": sum(1 for r in ok if r["family_named"] == r["family"]),
+                                                     **_class_and_size(ok, kind),
                                                      "median_delay_s": delays[len(delays) // 2] if delays else None,
                                                      "median_held_share": held[len(held) // 2]}
         out.append(entry)

@@ -1,0 +1,33 @@
+"""Scoring of the rig benchmark (phfdi.benchmarks.rig_detection): what counts as the right class and size."""
+
+from __future__ import annotations
+
+import pytest
+
+from phfdi.benchmarks.rig_detection import SIZES, _class_and_size, expected_class, expected_size, outcome
+
+
+def test_every_injected_kind_has_a_class_a_right_name_gives():
+    for kind in SIZES:
+        pump = "acid" if kind.startswith("pump") else None
+        c = expected_class(kind, pump)
+        assert c == "pump:acid_flow_ml_s" if pump else c in ("probe_offset", "probe_noise")
+
+
+@pytest.mark.parametrize("kind,size,true", [("probe_bias", 0.3, 0.3), ("pump_low", 0.2, 0.8), ("pump_high", 0.5, 1.5),
+                                            ("pump_stuck", 3.0, 0.0), ("probe_drift", 1.0, None)])
+def test_the_true_size_in_the_named_classs_unit(kind, size, true):
+    assert expected_size(kind, size) == true
+
+
+def test_the_first_alarm_after_the_onset_gives_the_name_and_only_right_classes_give_a_size():
+    alarms = [{"t": 5.0, "family": "sensor", "fault_class": "probe_offset", "size": 9.0},
+              {"t": 12.0, "family": "actuator", "fault_class": "pump:base_flow_ml_s", "size": 0.45},
+              {"t": 20.0, "family": "sensor", "fault_class": "probe_offset", "size": 1.0}]
+    o = outcome(alarms, 10.0)
+    assert (o.alarms_before, o.first_after_s, o.fault_class, o.size) == (1, 12.0, "pump:base_flow_ml_s", 0.45)
+    rows = [{"size": 0.5, "class": "pump:base_flow_ml_s", "class_named": "pump:base_flow_ml_s", "size_named": s}
+            for s in (0.4, 0.45, 0.7)]
+    rows.append({"size": 0.5, "class": "pump:base_flow_ml_s", "class_named": "probe_offset", "size_named": 3.0})
+    assert _class_and_size(rows, "pump_low") == {"class_right": 3, "median_size_named": 0.45, "size_expected": 0.5}
+    assert _class_and_size([], "pump_low") == {"class_right": 0, "median_size_named": None, "size_expected": None}
