@@ -9,8 +9,10 @@ raises):
 non-finite or absurd stamp    dropped (``bad_time``; absurd: 2^50 samples from the first)
 same time stamp again         dropped (``duplicate_stamps``)
 time stamp going backwards    dropped (``out_of_order``); after more than max_gap
-                              such samples in a row the stream is taken to have a new
-                              clock: re-anchored and the window reset (``time_resets``)
+                              such samples in a row, each later than the one before,
+                              the stream is taken to have a new clock: re-anchored and
+                              the window reset (``time_resets``); repeated or shuffled
+                              past stamps (strays) are no clock
 faster sample rate            samples landing in an already filled slot are dropped
                               (``extra_samples``): the stream is decimated to the grid
 gap up to max_gap samples     the missing slots are bridged: commands interpolated between
@@ -97,6 +99,7 @@ class InputRegularizer:
     _last_raw_t: float = -math.inf
     _next_index: int = 0
     _backwards_run: int = 0
+    _backwards_last_t: float = math.inf  # the last sample of that run
     _cmd_missing_run: int = 0
     _stale: bool = False
     _intervals: deque = field(default_factory=lambda: deque(maxlen=RATE_WINDOW))
@@ -231,13 +234,18 @@ class InputRegularizer:
         self._last_raw_t = t
         slot = math.floor(position + 0.5)
         if t <= self._last_t or slot <= self._last_slot:
-            if t < self._last_t and self._backwards_run >= self.max_gap_samples:
+            # a new clock runs forward: a sample behind the stream counts toward one only when it is later than
+            # the one behind it before (a burst of stray stamps from the past, repeated or shuffled, is no clock
+            # and must not restart the window while the real stream goes on)
+            ahead_of_run = self._backwards_run == 0 or t > self._backwards_last_t
+            if t < self._last_t and ahead_of_run and self._backwards_run >= self.max_gap_samples:
                 # a new clock (a restarted recording, a bag looping): start over on it
                 c["time_resets"] += 1
                 self._anchor, self._last_slot, self._last_t, reset = t, -1, -math.inf, True
                 slot = 0
             elif t < self._last_t:
-                self._backwards_run += 1
+                self._backwards_run = self._backwards_run + 1 if ahead_of_run else 1
+                self._backwards_last_t = t
                 c["out_of_order"] += 1
                 return None
             else:

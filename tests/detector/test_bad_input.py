@@ -130,6 +130,20 @@ def test_a_clock_that_restarts_is_followed_after_max_gap_samples(healthy, calibr
     assert any("window reset" in e.message for e in events)
 
 
+def test_a_burst_of_stray_past_stamps_is_no_new_clock(healthy, calibration):
+    """Fifteen copies of one old sample, then eight more shuffled, in the middle of the stream (a stray writer's
+    garbage): dropped and counted, the window never restarts, and the stream goes on as before."""
+    spec, cols = healthy
+    junk = np.r_[np.full(15, 100), [90, 80, 95, 70, 99, 60, 85, 75]]
+    again = {k: np.concatenate((v[:500], v[junk], v[500:])) for k, v in cols.items()}
+    det, events = replay(spec, calibration, again)
+    d = det.diagnostics()
+    assert d["time_resets"] == 0 and d["gap_resets"] == 0 and d["out_of_order"] == len(junk), d
+    assert not any("window reset" in e.message for e in events)
+    clean, _ = replay(spec, calibration, cols)
+    assert d["samples_used"] == clean.diagnostics()["samples_used"]
+
+
 def test_setpoint_holdoff_holds_the_statistics_after_a_setpoint_change(healthy, calibration):
     spec, cols = healthy  # pH setpoint 12 -> 8 at 200 s
     held = replace(SHORT, warmup_s=100.0, setpoint_holdoff_s=150.0)

@@ -163,3 +163,28 @@ def test_garbage_is_counted_reported_and_survived(detector, feeder):
     stop(example)
     printed = example_out.read_text()
     assert "WARN ph: valve command missing too long" in printed
+
+
+def test_window_resets_go_out_on_fault_alarm_at_most_once_a_second(detector, feeder):
+    """Thirty real gaps in the stamps in well under a second of wall time: each restarts the window (counted
+    exactly), and /fault_alarm carries them in at most one message per ``input_problem_period_s`` (1 s) of wall
+    time plus the last one on the way out, each with the counts so far."""
+    node, _, _ = detector
+    k = 0
+    for k in range(60):
+        feeder.sample(k)
+    feeder.spin_until(lambda: feeder.counter("samples_used") == 60)
+    t0 = time.monotonic()
+    for _ in range(30):  # a jump of 20 samples (over max_gap), then two samples on the new stretch
+        k += 20
+        feeder.sample(k)
+        feeder.sample(k + 1)
+        k += 1
+    # the last of them goes out when due, with nothing following (the node pokes itself)
+    feeder.spin_until(lambda: any("gap_resets 30" in a.message for a in feeder.alarms), timeout_s=30)
+    wall_s = time.monotonic() - t0
+    resets = [a for a in feeder.alarms if "window reset" in a.message]
+    assert 1 <= len(resets) <= math.ceil(wall_s / 1.0) + 1, ([a.message for a in resets], wall_s)
+    assert len(resets) < 30 and any("events since the last report" in a.message for a in resets)
+    assert all(a.state == 1 for a in resets)  # WARN: no alarm was up
+    assert feeder.counter("gap_resets") == 30 and node.poll() is None

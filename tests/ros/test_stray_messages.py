@@ -177,7 +177,7 @@ def test_fault_alarm_stays_bounded_and_the_detector_keeps_running(disturbed):
             if '"detector_done"' in ln]
     assert done, "the detector did not finish"
     d = done[0]["diagnostics"]
-    resets = d["gap_resets"] + d["time_resets"]  # printed: a far-past stray can still reset the window
+    resets = d["gap_resets"] + d["time_resets"]
     inputs = [a for a in alarms if "input counts so far" in a.message]
     # the bound: input problems at most one per input_problem_period_s of wall time (+ the last one on the way
     # out); heartbeats one per 60 s simulated (+ the first and the last); state changes (none here: no alarm in
@@ -187,15 +187,19 @@ def test_fault_alarm_stays_bounded_and_the_detector_keeps_running(disturbed):
     # strays from the future (6 rounds + the burst) are dropped by the pairing, never passed on to become the
     # detector's clock (each was a window reset before: 41 in one run); invalid stamps (3 per round on each of
     # the two inputs) are dropped at the input
-    assert d["stray_measurements"] == ROUNDS + BURST and d["invalid_stamps"] == 2 * 3 * ROUNDS, d
-    assert d["gap_resets"] == 0, d
-    # the past garbage still makes many input problems (the core's duplicates and out-of-order stamps): without
-    # the limit each would have been a message
+    assert d["stray_measurements"] == ROUNDS + BURST and d["invalid_stamps"] == 2 * 3 * ROUNDS, json.dumps(d)
+    # the burst's past stamps (11 copies of one) are no new clock: they restarted the window once or twice a run
+    # before (a time reset to the stray's clock, then a gap reset at the next real sample when the load had let
+    # the real stream run more than 10 samples ahead: 1 run in 5 beside four CPU burners)
+    assert d["gap_resets"] == 0 and d["time_resets"] == 0, json.dumps(d)
+    # the past garbage is counted (the core's duplicates and out-of-order stamps), not announced: what changes no
+    # detection raises no /fault_alarm (a window reset or held commands would; their rate limit is tested in
+    # tests/detector_node/test_node_bad_input.py)
     problems = d["duplicate_stamps"] + d["out_of_order"]
-    assert problems >= BURST and problems > len(inputs), (problems, len(inputs))
+    assert problems >= BURST, problems
     print(f"/fault_alarm {len(alarms)} messages, {len(inputs)} on input problems; detector resets {resets}; "
           f"wall {disturbed['wall_s']:.1f} s")
-    assert inputs and all(a.state in (1, 2) for a in inputs)
+    assert all(a.state in (1, 2) for a in inputs)
 
 
 def test_no_shared_memory_is_left_behind(disturbed):
