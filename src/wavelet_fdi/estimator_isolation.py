@@ -7,7 +7,8 @@ search). The start is the change time of the raw residual (:func:`change_index`,
 ``ONSET_LOOKBACK_SAMPLES`` before the alarm's onset to its detection), not the onset itself: that is the band
 statistic's last zero seen through the causal filter bank, on a probe jump 2 to 3 s late, and a window
 starting there has the filter's partial following of the jump in its state (a 1 pH offset was then named
-a pump). An alarm of a noise statistic keeps its onset (a noise change moves no mean). The hypotheses:
+a pump). An alarm of a noise statistic keeps its onset (a noise change moves no mean), as does one whose
+residual has no change point in the lookback (:func:`change_index` gives None). The hypotheses:
 
 * ``probe_offset`` (sensor): the reading is off by b pH from the onset (a bias; locally also a drift or a
   slope error);
@@ -58,7 +59,7 @@ def _window_nll(start: EstimatorStream, ref: EstimatorReference, t: np.ndarray, 
     return stream.nll
 
 
-def change_index(residual: np.ndarray, drift: float = CHANGE_DRIFT) -> int:
+def change_index(residual: np.ndarray, drift: float = CHANGE_DRIFT) -> int | None:
     """Where ``residual`` most likely began to depart from zero: the last zero before the peak of a one-sided
     CUSUM g_k = max(0, g_(k-1) + s r_k - drift), in the direction s (up or down) whose peak is larger (the
     CUSUM's change-time estimate: Page 1954; Basseville & Nikiforov 1993, sec. 2.2), moved on to the first
@@ -66,8 +67,9 @@ def change_index(residual: np.ndarray, drift: float = CHANGE_DRIFT) -> int:
     where a jump is one sample (a tracking filter's innovation: a spike, then a tail its gain shrinks), not a
     band seen through the filter bank's delay. Why the last step: the window is named by a filter that trusts
     its model, and one healthy sample taken for faulty moves its state for good (a 1 pH offset started one
-    sample early was sized 1.27, from its first faulty sample 1.05, three samples late 1.05). Missing values
-    count as 0."""
+    sample early was sized 1.27, from its first faulty sample 1.05, three samples late 1.05). None when the
+    CUSUM never returns to zero before its peak: the residual departed before the window began, or crept away
+    with no change point to place (a pump's slow mismatch). Missing values count as 0."""
     r = np.nan_to_num(np.asarray(residual, dtype=float))
     best = (0.0, 0, 0, 1.0)  # peak, its last zero, the peak's index, direction
     for sign in (1.0, -1.0):
@@ -79,6 +81,8 @@ def change_index(residual: np.ndarray, drift: float = CHANGE_DRIFT) -> int:
             elif g > best[0]:
                 best = (g, start, k, sign)
     _, start, peak, sign = best
+    if start == 0:
+        return None
     while start < peak and sign * r[start] <= 2.0 * drift:
         start += 1
     return min(start, max(len(r) - 1, 0))
@@ -100,9 +104,10 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     before = replace(ref, adapt_time_constant_s=0.0).new_state()
     before.residuals(t_s[:lo], rows[:lo])
     noise_alarm = bool(statistic) and parse_statistic(statistic)[2] in NOISE_STATISTICS
-    # the window starts where the raw residual's mean changed, not at the band statistic's onset (a noise
-    # change moves no mean: its statistic's own onset stays)
-    a = onset if noise_alarm else lo + change_index(before.fork().residuals(t_s[lo:det + 1], rows[lo:det + 1])[:, 0])
+    # the window starts where the raw residual changed, not at the band statistic's onset (a noise change moves
+    # no mean, and a residual with no change point in the lookback has none to place: the onset stays)
+    k = None if noise_alarm else change_index(before.fork().residuals(t_s[lo:det + 1], rows[lo:det + 1])[:, 0])
+    a = onset if k is None else lo + k
     b = min(n, det + AFTER_DETECTION_SAMPLES)
     start = before.fork()
     start.residuals(t_s[lo:a], rows[lo:a])

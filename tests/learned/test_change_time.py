@@ -23,7 +23,8 @@ def _errors(shape, seeds: range) -> np.ndarray:
         k = int(rng.integers(8, 40))
         r = rng.normal(0.0, 1.0, 54)
         r[k:] += shape(54 - k)
-        errors.append(change_index(r) - k)
+        found = change_index(r)
+        errors.append((0 if found is None else found) - k)  # None: not placed, counted as far off
     return np.array(errors)
 
 
@@ -42,9 +43,11 @@ def test_a_spike_that_decays_is_placed_at_the_spike():
 
 
 def test_degenerate_inputs():
-    assert change_index(np.array([])) == 0
-    assert change_index(np.zeros(10)) == 0  # nothing departs from zero
+    assert change_index(np.array([])) is None
+    assert change_index(np.zeros(10)) is None  # nothing departs from zero
     assert change_index(np.array([0.0, np.nan, 5.0, 5.0, 5.0])) == 2  # a missing value counts as 0
+    # departed before the window began: no change point in it to place
+    assert change_index(np.array([3.0, 3.5, 2.5, 3.0, 4.0])) is None
 
 
 def test_the_naming_window_starts_at_the_jump_not_at_the_detectors_onset():
