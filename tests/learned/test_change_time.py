@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.learned.test_estimator import _model, flask, simulate
+from tests.learned.test_estimator import biased_run
 from wavelet_fdi.estimator_isolation import change_index
 from wavelet_fdi.learned_detector import run_record
 
@@ -53,12 +53,8 @@ def test_degenerate_inputs():
 def test_the_naming_window_starts_at_the_jump_not_at_the_detectors_onset():
     """A 0.5 pH bias hidden in a synthetic flask run: the alarm's onset lies after the jump, the naming
     window starts at it, and the fault is named a probe offset of about 0.5 pH."""
-    ref = flask()
-    model = _model(ref, 300)
     onset = 1400
-    flow = lambda k: 2.0 if (k // 300) % 2 == 0 else 0.5  # noqa: E731
-    t, rows = simulate(ref, 2400, flow, seed=11,
-                       fault_ph=lambda t, ph: np.where(np.arange(len(ph)) >= onset, ph + 0.5, ph))
+    model, t, rows = biased_run(onset, 0.5)
     events, _, _ = run_record(model, t, rows)
     named = [e for e in events if e.kind == "named"]
     assert named, [e.message for e in events]

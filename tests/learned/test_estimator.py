@@ -156,15 +156,20 @@ def test_the_fit_recovers_the_strength_ratio_of_synthetic_runs():
     assert fitted.noise.probe_noise_ph == pytest.approx(0.03, rel=0.35)
 
 
+def biased_run(onset: int = 1400, bias_ph: float = 0.5) -> tuple[LearnedModel, np.ndarray, np.ndarray]:
+    """A detector model of the synthetic flask and a run of it whose reading is off by ``bias_ph`` from sample
+    ``onset`` on."""
+    ref = flask()
+    flow = lambda k: 2.0 if (k // 300) % 2 == 0 else 0.5  # noqa: E731
+    t, rows = simulate(ref, 2400, flow, seed=11,
+                       fault_ph=lambda t, ph: np.where(np.arange(len(ph)) >= onset, ph + bias_ph, ph))
+    return _model(ref, 300), t, rows
+
+
 def test_alarms_are_named_the_same_whatever_the_chunking():
     """The detector names an estimator alarm NAMING_AFTER samples after its detection from the rows it kept:
     the same family, class and size for any chunking of the record (the node gets rows a few at a time)."""
-    ref = flask()
-    model = _model(ref, 300)
-    onset = 1400
-    flow = lambda k: 2.0 if (k // 300) % 2 == 0 else 0.5  # noqa: E731
-    t, rows = simulate(ref, 2400, flow, seed=11,
-                       fault_ph=lambda t, ph: np.where(np.arange(len(ph)) >= onset, ph + 0.5, ph))
+    model, t, rows = biased_run()
     whole, _, _ = run_record(model, t, rows, chunk=None)
     named = [e for e in whole if e.kind == "named"]
     assert named and named[0].alarm["isolation"]["family"] == "sensor"
