@@ -8,7 +8,8 @@ search). The start is the change time of the raw residual (:func:`change_index`,
 statistic's last zero seen through the causal filter bank, on a probe jump 2 to 3 s late, and a window
 starting there has the filter's partial following of the jump in its state (a 1 pH offset was then named
 a pump). An alarm of a noise statistic keeps its onset (a noise change moves no mean), as does one whose
-residual has no change point in the lookback (:func:`change_index` gives None). The hypotheses:
+residual has no change point in the lookback (:func:`change_index` gives None). The result carries the
+start as ``start_time`` (in ``t_s``'s time). The hypotheses:
 
 * ``probe_offset`` (sensor): the reading is off by b pH from the onset (a bias; locally also a drift or a
   slope error);
@@ -85,7 +86,7 @@ def change_index(residual: np.ndarray, drift: float = CHANGE_DRIFT) -> int | Non
         return None
     while start < peak and sign * r[start] <= 2.0 * drift:
         start += 1
-    return min(start, max(len(r) - 1, 0))
+    return start
 
 
 def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_index: int,
@@ -160,4 +161,5 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     assert best is not None
     gain, name, family, what, size, unit = best
     return {"family": family, "fault_class": name, "description": what, "size": round(size, 4), "unit": unit,
-            "log_likelihood_gain": round(gain, 3), "window": [int(a), int(b)], "evidence": evidence}
+            "log_likelihood_gain": round(gain, 3), "window": [int(a), int(b)], "start_time": float(t_s[a]),
+            "evidence": evidence}

@@ -480,8 +480,6 @@ class LearnedDetector:
             k = (np.arange(first, end)) % NAMING_RING
             iso = namer(self._ring_t[k], self._ring_x[k], a["onset_index"] - first,
                              a["detection_index"] - first, a["statistic"])
-            if "window" in iso:  # where the named fault began (the namer's change time), in the record's time
-                iso["start_time"] = float(self._ring_t[(first + iso["window"][0]) % NAMING_RING])
             a["isolation"] = iso
             self._to_name.remove(a)
             self._named.append(a["alarm_id"])
