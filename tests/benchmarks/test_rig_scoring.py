@@ -31,3 +31,18 @@ def test_the_first_alarm_after_the_onset_gives_the_name_and_only_right_classes_g
     rows.append({"size": 0.5, "class": "pump:base_flow_ml_s", "class_named": "probe_offset", "size_named": 3.0})
     assert _class_and_size(rows, "pump_low") == {"class_right": 3, "median_size_named": 0.45, "size_expected": 0.5}
     assert _class_and_size([], "pump_low") == {"class_right": 0, "median_size_named": None, "size_expected": None}
+
+
+def test_every_fold_trains_without_its_held_out_runs():
+    from phfdi.benchmarks.rig_detection import held_out_sets
+
+    runs = [f"run{i}.csv" for i in range(5)]
+    for k, n_folds in ((1, 5), (2, 10), (4, 5)):
+        folds = held_out_sets(runs, k)
+        assert len(folds) == n_folds
+        for train, held in folds:
+            assert len(held) == k and not set(train) & set(held) and sorted(train + held) == runs
+        # each run is held out equally often
+        assert {r: sum(r in h for _, h in folds) for r in runs} == {r: n_folds * k // 5 for r in runs}
+    with pytest.raises(ValueError, match="leave_out"):
+        held_out_sets(runs, 5)

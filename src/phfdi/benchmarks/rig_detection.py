@@ -13,6 +13,7 @@ from the training runs.
 
 from __future__ import annotations
 
+import itertools
 import math
 import tempfile
 from dataclasses import dataclass
@@ -193,37 +194,51 @@ def injected_cases(path: str, rec: MeasuredRecord, workdir: Path, column_map) ->
     return cases
 
 
+def held_out_sets(paths: Sequence[str], leave_out: int = 1) -> list[tuple[list[str], list[str]]]:
+    """(training runs, held-out runs) of every fold: each set of ``leave_out`` runs held out once, the others
+    fitted on (1: leave-one-run-out; 2: leave-two-out, a harder test of what the calibration does not cover)."""
+    if not 1 <= leave_out < len(paths):
+        raise ValueError(f"leave_out must be 1..{len(paths) - 1} for {len(paths)} runs, got {leave_out}")
+    return [([q for q in paths if q not in held], list(held)) for held in itertools.combinations(paths, leave_out)]
+
+
 def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] = print,
-             only: Sequence[str] | None = None) -> dict:
+             only: Sequence[str] | None = None, leave_out: int = 1) -> dict:
     records = {p: read_measured(p, column_map, channels=list(CHANNELS)) for p in paths}
-    rows = []
+    rows: list[dict] = []
     folds = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for p in paths:
-            progress(f"fold: {Path(p).name} held out")
-            fold = build_fold([records[q] for q in paths if q != p], p, only=only)
-            folds[Path(p).name] = fold.info
-            rec = records[p]
-            hours = (rec.time_s[-1] - rec.time_s[0]) / 3600.0
+        for train, held in held_out_sets(paths, leave_out):
+            names = ", ".join(Path(p).name for p in held)
+            progress(f"fold: {names} held out")
+            fold = build_fold([records[q] for q in train], names, only=only)
+            folds[names] = fold.info
             if only:
                 fold.detectors = {k: v for k, v in fold.detectors.items() if k in only}
-            for name, det in fold.detectors.items():
-                o = outcome(det(rec), None)
-                rows.append({"run": Path(p).name, "detector": name, "case": "healthy", "hours": hours,
-                             "false_alarms": o.alarms_before})
-            for truth, frec in injected_cases(p, rec, Path(tmp), column_map):
-                for name, det in fold.detectors.items():
-                    alarms = det(frec)
-                    o = outcome(alarms, truth["onset_s"])
-                    rows.append({"run": Path(p).name, "detector": name, "case": truth["kind"],
-                                 "family": truth["family"], "size": truth["size"], "size_rank": truth["size_rank"],
-                                 "pump": truth.get("pump"), "onset_s": truth["onset_s"],
-                                 "alarms_before": o.alarms_before, "family_named": o.family,
-                                 "class": expected_class(truth["kind"], truth.get("pump")),
-                                 "class_named": o.fault_class, "size_named": o.size,
-                                 "held_share": held_share(alarms, truth["onset_s"], float(frec.time_s[-1])),
-                                 "delay_s": None if o.first_after_s is None else o.first_after_s - truth["onset_s"]})
-    return {"rows": rows, "folds": folds}
+            for p in held:
+                _score_run(p, records[p], fold, Path(tmp), column_map, rows)
+    return {"rows": rows, "folds": folds, "leave_out": leave_out}
+
+
+def _score_run(p: str, rec: MeasuredRecord, fold: Fold, tmp: Path, column_map, rows: list[dict]) -> None:
+    """One held-out run through the fold's detectors: healthy, then with each injected fault."""
+    hours = (rec.time_s[-1] - rec.time_s[0]) / 3600.0
+    for name, det in fold.detectors.items():
+        o = outcome(det(rec), None)
+        rows.append({"run": Path(p).name, "fold": fold.held_out, "detector": name, "case": "healthy",
+                     "hours": hours, "false_alarms": o.alarms_before})
+    for truth, frec in injected_cases(p, rec, tmp, column_map):
+        for name, det in fold.detectors.items():
+            alarms = det(frec)
+            o = outcome(alarms, truth["onset_s"])
+            rows.append({"run": Path(p).name, "fold": fold.held_out, "detector": name, "case": truth["kind"],
+                         "family": truth["family"], "size": truth["size"], "size_rank": truth["size_rank"],
+                         "pump": truth.get("pump"), "onset_s": truth["onset_s"],
+                         "alarms_before": o.alarms_before, "family_named": o.family,
+                         "class": expected_class(truth["kind"], truth.get("pump")),
+                         "class_named": o.fault_class, "size_named": o.size,
+                         "held_share": held_share(alarms, truth["onset_s"], float(frec.time_s[-1])),
+                         "delay_s": None if o.first_after_s is None else o.first_after_s - truth["onset_s"]})
 
 
 def _class_and_size(detected: list[dict], kind: str) -> dict:
@@ -244,7 +259,7 @@ def summary(result: dict) -> list[dict]:
         healthy = [r for r in rows if r["detector"] == det and r["case"] == "healthy"]
         fa = sum(r["false_alarms"] for r in healthy)
         hours = sum(r["hours"] for r in healthy)
-        entry = {"detector": det, "healthy_false_alarms": fa, "healthy_hours": hours,
+        entry = {"detector": det, "healthy_false_alarms": fa, "healthy_hours": hours, "healthy_replays": len(healthy),
                  "healthy_runs_with_alarm": sum(1 for r in healthy if r["false_alarms"]), "kinds": {}}
         for kind in SIZES:
             for rank in ("larger", "smaller"):
