@@ -44,7 +44,8 @@ def main() -> None:
     for e in result["summary"]:
         print(f"\n{e['detector']}: held-out healthy runs: {e['healthy_false_alarms']} alarms in "
               f"{e['healthy_hours'] * 60:.1f} min ({e['healthy_runs_with_alarm']} of {e['healthy_replays']} replays "
-              f"with an alarm)")
+              f"with an alarm); outside the training runs' healthy range: {e['outside_range_with_alarm']} of those "
+              f"with an alarm, {e['outside_range_without_alarm']} of the others")
         for k, v in e["kinds"].items():
             d = "" if v["median_delay_s"] is None else f", median delay {v['median_delay_s']:.1f} s"
             d += f", alarm up {100 * v.get('median_held_share', 0.0):.0f} % of the time after the onset (median)"

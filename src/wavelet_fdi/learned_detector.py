@@ -42,6 +42,7 @@ import numpy.typing as npt
 from phfdi_base.errors import UserError
 
 from .filterbank import CausalSwt, wavelet_filters
+from .healthy_range import healthy_ranges
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
 from .references import NAMERS, Reference, reference_from_dict
@@ -282,7 +283,9 @@ def calibrate_bands(reference: Reference, runs: Sequence[tuple[np.ndarray, np.nd
 
     Every run (time_s, rows in ``reference.channels`` order) goes through a fresh detector; the bands
     after each run's warm-up are pooled. Works for every reference kind (:mod:`wavelet_fdi.references`).
+    The source keeps each channel's healthy range (``healthy_ranges``, :mod:`wavelet_fdi.healthy_range`).
     """
+    source = {**(source or {}), "healthy_ranges": healthy_ranges([rows for _, rows in runs], reference.channels)}
     s = settings.check()
     m = len(reference.residual_channels)
     provisional = LearnedModel(reference, s, np.ones((m, s.level + 1)), dict(source or {}))

@@ -46,3 +46,14 @@ def test_every_fold_trains_without_its_held_out_runs():
         assert {r: sum(r in h for _, h in folds) for r in runs} == {r: n_folds * k // 5 for r in runs}
     with pytest.raises(ValueError, match="leave_out"):
         held_out_sets(runs, 5)
+
+
+def test_the_summary_counts_replays_outside_the_healthy_range():
+    from phfdi.benchmarks.rig_detection import summary
+
+    rows = [{"detector": "estimator", "case": "healthy", "hours": 0.1, "false_alarms": fa,
+             "outside_healthy_range": out} for fa, out in ((1, ["acid_flow_ml_s"]), (0, ["base_flow_ml_s"]), (0, []),
+                                                           (2, []))]
+    (e,) = summary({"rows": rows})
+    assert (e["healthy_false_alarms"], e["healthy_runs_with_alarm"], e["healthy_replays"]) == (3, 2, 4)
+    assert (e["outside_range_with_alarm"], e["outside_range_without_alarm"]) == (1, 1)

@@ -25,6 +25,7 @@ import numpy as np
 from phfdi.estimator import fit_estimator, start_from_model
 from phfdi.inject import inject_fault
 from phfdi.learned import MeasuredRecord, read_measured
+from wavelet_fdi.healthy_range import healthy_ranges, outside_ranges
 from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, fit_reference, run_record
 
 CHANNELS = ("acid_flow_ml_s", "base_flow_ml_s", "ph_measured")
@@ -215,8 +216,13 @@ def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] =
             folds[names] = fold.info
             if only:
                 fold.detectors = {k: v for k, v in fold.detectors.items() if k in only}
+            ranges = healthy_ranges([records[q].x for q in train], CHANNELS)
             for p in held:
                 _score_run(p, records[p], fold, Path(tmp), column_map, rows)
+                outside = [o["channel"] for o in outside_ranges(ranges, records[p].x, CHANNELS)]
+                for r in rows:
+                    if r["fold"] == names and r["run"] == Path(p).name and r["case"] == "healthy":
+                        r["outside_healthy_range"] = outside
     return {"rows": rows, "folds": folds, "leave_out": leave_out}
 
 
@@ -260,7 +266,12 @@ def summary(result: dict) -> list[dict]:
         fa = sum(r["false_alarms"] for r in healthy)
         hours = sum(r["hours"] for r in healthy)
         entry = {"detector": det, "healthy_false_alarms": fa, "healthy_hours": hours, "healthy_replays": len(healthy),
-                 "healthy_runs_with_alarm": sum(1 for r in healthy if r["false_alarms"]), "kinds": {}}
+                 "healthy_runs_with_alarm": sum(1 for r in healthy if r["false_alarms"]),
+                 # replays that leave the training runs' healthy range (phfdi replay's note), with and without alarm
+                 "outside_range_with_alarm": sum(1 for r in healthy if r["false_alarms"] and r.get("outside_healthy_range")),
+                 "outside_range_without_alarm": sum(1 for r in healthy
+                                                    if not r["false_alarms"] and r.get("outside_healthy_range")),
+                 "kinds": {}}
         for kind in SIZES:
             for rank in ("larger", "smaller"):
                 cs = [r for r in rows if r["detector"] == det and r["case"] == kind and r["size_rank"] == rank]

@@ -194,6 +194,7 @@ def run_learned(args: argparse.Namespace) -> int:
     """The record through the learned reference and the multichannel detector."""
     from phfdi.learned import alarm_summaries, event_dict, replay_measured
     from phfdi.learned import format_alarms as format_learned
+    from wavelet_fdi.healthy_range import describe, outside_ranges
     from wavelet_fdi.learned_detector import LearnedModel
 
     model = LearnedModel.load(args.reference)
@@ -205,12 +206,14 @@ def run_learned(args: argparse.Namespace) -> int:
     events, states, model = replay_measured(rec, model, args.refit_rows)
     elapsed = time.perf_counter() - t0
     print(f"replayed {len(rec.x)} rows x {len(model.channels)} channels in {elapsed:.2f} s", file=sys.stderr)
+    outside = outside_ranges(model.source.get("healthy_ranges") or {}, rec.x, rec.channels)
+    print_notes("replay", [describe(o) for o in outside])
     alarms = alarm_summaries(events, rec)
     inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
     if args.json:
         print(json.dumps({"file": args.file, "reference": args.reference, "samples": len(rec.x),
                           "channels": list(model.channels), "columns": columns_said, "notes": rec.notes, "input_problems": inputs,
-                          "alarm_rows": int(states.sum()), "alarms": alarms}, indent=2))
+                          "outside_healthy_range": outside, "alarm_rows": int(states.sum()), "alarms": alarms}, indent=2))
         return 0
     print(format_learned(alarms))
     for e in inputs:

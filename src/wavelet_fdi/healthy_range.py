@@ -1,0 +1,85 @@
+"""What a reference's healthy runs covered, channel by channel, and where a record leaves it.
+
+A reference, learned or physical, is fitted where its healthy runs went; beyond that it extrapolates, and a
+residual there says as much about the reference as about the plant. On the pH rig every false alarm of a
+reference calibrated on three runs fell where a pump ran at a setting none of them had (docs/detector.md,
+"leave-two-out"). :func:`healthy_ranges` keeps, per channel, the range of the healthy values (exact zeros apart:
+a pump or valve that is off is a state of its own, not the bottom of its range) and :func:`outside_ranges`
+reports the share of a record's rows beyond it, so that ``phfdi replay`` can say so beside the alarms.
+
+Examples
+--------
+>>> import numpy as np
+>>> healthy = [np.array([[0.0, 7.0], [3.6, 6.5], [3.6, 4.0]])]
+>>> ranges = healthy_ranges(healthy, ["acid_flow_ml_s", "ph"])
+>>> ranges["acid_flow_ml_s"]
+{'min': 3.6, 'max': 3.6, 'zero': True}
+>>> watched = np.array([[0.0, 7.0], [4.3, 5.0], [4.3, 3.9]])
+>>> [(o["channel"], round(o["share"], 2), o["max"]) for o in outside_ranges(ranges, watched, ["acid_flow_ml_s", "ph"])]
+[('acid_flow_ml_s', 0.67, 4.3)]
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+#: a value counts as outside when it lies beyond the healthy range by more than this share of the range's width,
+#: or of a tenth of its magnitude where the range is narrow (a pump with one setting): readings' own jitter and
+#: a setting's rounding stay inside
+TOLERANCE = 0.05
+
+
+def healthy_ranges(runs: Sequence[np.ndarray], channels: Sequence[str]) -> dict[str, dict]:
+    """Per channel: ``min`` and ``max`` of the finite non-zero healthy values (None when there are none) and
+    ``zero``, whether any healthy value was exactly 0. ``runs``: arrays (rows, len(channels))."""
+    rows = [np.asarray(r, dtype=float).reshape(len(r), len(channels)) for r in runs if len(r)]
+    x = np.vstack(rows) if rows else np.empty((0, len(channels)))
+    out: dict[str, dict] = {}
+    for i, name in enumerate(channels):
+        v = x[:, i][np.isfinite(x[:, i])]
+        nonzero = v[v != 0.0]
+        out[name] = {"min": float(nonzero.min()) if len(nonzero) else None,
+                     "max": float(nonzero.max()) if len(nonzero) else None, "zero": bool(np.any(v == 0.0))}
+    return out
+
+
+def _tolerance(lo: float, hi: float) -> float:
+    return TOLERANCE * max(hi - lo, 0.1 * max(abs(lo), abs(hi)))
+
+
+def outside_ranges(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[str]) -> list[dict]:
+    """The channels of ``x`` (rows, len(channels)) whose finite values leave their healthy range: each as
+    ``channel``, ``share`` of the rows outside, the record's ``min`` and ``max`` there and the ``healthy`` range.
+    Channels the ranges do not know are skipped (a reference file from before they were kept has none)."""
+    x = np.asarray(x, dtype=float)
+    out = []
+    for i, name in enumerate(channels):
+        r = ranges.get(name)
+        if r is None or len(x) == 0:
+            continue
+        v = x[:, i]
+        zero = v == 0.0
+        if r["min"] is None:  # only zeros (or nothing) were healthy
+            beyond = ~zero
+        else:
+            tol = _tolerance(r["min"], r["max"])
+            beyond = (v < r["min"] - tol) | (v > r["max"] + tol)
+        bad = np.isfinite(v) & beyond & ~(zero & r["zero"])
+        if bad.any():
+            out.append({"channel": name, "share": float(bad.mean()), "min": float(v[bad].min()),
+                        "max": float(v[bad].max()), "healthy": dict(r)})
+    return out
+
+
+def describe(o: dict) -> str:
+    """One line for a channel outside its healthy range."""
+    h = o["healthy"]
+    seen = [] if not h["zero"] else ["0"]
+    if h["min"] is not None:
+        seen.append(f"{h['min']:.4g}" if h["min"] == h["max"] else f"{h['min']:.4g} to {h['max']:.4g}")
+    span = f"{o['min']:.4g}" if o["min"] == o["max"] else f"{o['min']:.4g} to {o['max']:.4g}"
+    return (f"{o['channel']} is outside what the reference's healthy runs had in {100 * o['share']:.0f} % of the "
+            f"rows ({span}; healthy: {' or '.join(seen) or 'none'}): the reference extrapolates there, and an "
+            f"alarm there may be the reference's, not the plant's")

@@ -1,0 +1,94 @@
+"""A record that leaves what the reference's healthy runs covered is said to (wavelet_fdi.healthy_range, replay)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from phfdi.cli import main
+from wavelet_fdi.healthy_range import describe, healthy_ranges, outside_ranges
+from wavelet_fdi.learned_detector import LearnedModel, learn
+
+from .test_learned_cli import write_csv
+from .test_learned_detector import CHANNELS, plant
+
+PUMP_CHANNELS = ["acid_flow_ml_s", "base_flow_ml_s", "ph"]
+
+
+def pump_run(rng: np.random.Generator, n: int, acid_settings: list[float], base_settings: list[float]) -> np.ndarray:
+    """Pumps switching between their settings (0 = off) in stretches, a pH anywhere between 3 and 11."""
+    acid = rng.choice(acid_settings, size=n // 50 + 1).repeat(50)[:n]
+    base = rng.choice(base_settings, size=n // 50 + 1).repeat(50)[:n]
+    ph = rng.uniform(3.0, 11.0, n)
+    return np.column_stack([acid, base, ph])
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_pump_setting_no_healthy_run_had_is_found_and_nothing_else(seed):
+    rng = np.random.default_rng(seed)
+    ranges = healthy_ranges([pump_run(rng, 2000, [0.0, 3.59], [0.0, 1.29, 3.87]) for _ in range(3)], PUMP_CHANNELS)
+    watched = pump_run(rng, 3000, [0.0, 3.59], [0.0, 1.29, 3.87])
+    # hidden: from a drawn row on, for a drawn stretch, the base pump runs at a setting beyond its healthy ones
+    start, length = int(rng.integers(0, 2500)), int(rng.integers(1, 500))
+    setting = float(rng.uniform(4.2, 8.0))
+    watched[start:start + length, 1] = setting
+    watched[:, 2] += rng.normal(0, 0.01, len(watched))  # the pH's own jitter stays inside its range
+    (o,) = outside_ranges(ranges, watched, PUMP_CHANNELS)
+    assert o["channel"] == "base_flow_ml_s" and o["share"] == pytest.approx(length / len(watched))
+    assert o["min"] == o["max"] == pytest.approx(setting)
+    assert "base_flow_ml_s" in describe(o) and "0 or 1.29 to 3.87" in describe(o)
+
+
+def test_off_is_a_state_of_its_own_and_a_setting_between_is_not_outside():
+    healthy = np.array([[3.59, 1.29], [3.59, 3.87], [3.59, 0.0]])
+    ranges = healthy_ranges([healthy], ["acid", "base"])
+    assert ranges == {"acid": {"min": 3.59, "max": 3.59, "zero": False},
+                      "base": {"min": 1.29, "max": 3.87, "zero": True}}
+    # the acid never off while healthy: off is outside; the base between two healthy settings is not
+    (o,) = outside_ranges(ranges, np.array([[0.0, 2.5], [3.59, 0.0], [3.6, 3.9]]), ["acid", "base"])
+    assert o["channel"] == "acid" and o["share"] == pytest.approx(1 / 3) and o["max"] == 0.0
+    # a narrow range keeps a tolerance of 5 % of a tenth of its size: 3.59 +- 0.018
+    assert outside_ranges(ranges, np.array([[3.605, 2.0]]), ["acid", "base"]) == []
+    assert [o["channel"] for o in outside_ranges(ranges, np.array([[3.62, 2.0]]), ["acid", "base"])] == ["acid"]
+
+
+def test_missing_values_and_unknown_channels_are_not_outside():
+    ranges = healthy_ranges([np.array([[1.0, np.nan], [2.0, np.nan]])], ["a", "b"])
+    assert ranges["b"] == {"min": None, "max": None, "zero": False}
+    assert outside_ranges(ranges, np.array([[np.nan, np.nan], [1.5, np.nan]]), ["a", "b"]) == []
+    # a channel with no healthy value at all: any value is outside; a channel the ranges do not know: skipped
+    assert [o["channel"] for o in outside_ranges(ranges, np.array([[1.5, 4.0, 9.0]]), ["a", "b", "c"])] == ["b"]
+
+
+def test_the_model_file_keeps_the_ranges_and_an_old_file_has_none(tmp_path):
+    x = plant(1200, 5)
+    model = learn(x, CHANNELS)
+    assert model.source["healthy_ranges"] == healthy_ranges([x], CHANNELS)
+    path = tmp_path / "ref.json"
+    model.save(path)
+    assert LearnedModel.load(path).source["healthy_ranges"] == model.source["healthy_ranges"]
+    d = json.loads(path.read_text())
+    del d["source"]["healthy_ranges"]
+    path.write_text(json.dumps(d))
+    old = LearnedModel.load(path)
+    assert outside_ranges(old.source.get("healthy_ranges") or {}, x * 100, CHANNELS) == []
+
+
+def test_replay_says_where_the_record_leaves_the_healthy_range(tmp_path, capsys):
+    healthy = write_csv(tmp_path / "healthy.csv", plant(1000, 22))
+    x = plant(1500, 23)
+    hi = x[:, 1].max() - x[:, 1].min()
+    x[900:1200, 1] += 3 * hi  # a stretch far beyond the healthy pressure
+    watched = write_csv(tmp_path / "watched.csv", x)
+    ref = tmp_path / "ref.json"
+    assert main(["calibrate", "--learn", str(healthy), "--out", str(ref)]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(watched), "--reference", str(ref), "--json"]) == 0
+    out = capsys.readouterr()
+    report = json.loads(out.out)
+    names = [o["channel"] for o in report["outside_healthy_range"]]
+    assert "pressure" in names
+    assert next(o for o in report["outside_healthy_range"] if o["channel"] == "pressure")["share"] >= 300 / 1500
+    assert "note: pressure is outside what the reference's healthy runs had" in out.err
