@@ -22,6 +22,27 @@ from phfdi_base.stamps import time_ns, times_on_grid_s
 RUN_METADATA = "phfdi_run"
 
 
+# ---- source positions a bag of a measured record keeps -------------------------------------
+def line_runs(lines: np.ndarray) -> list[list[int]]:
+    """Source positions compactly: [index, line] where a run of consecutive lines starts (a bag of a record
+    carries them, so alarms from its replay name the source file's lines)."""
+    lines = np.asarray(lines, dtype=np.int64)
+    if not len(lines):
+        return []
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(lines) != 1) + 1])
+    return [[int(i), int(lines[i])] for i in starts]
+
+
+def lines_from_runs(runs: list[list[int]], n: int) -> np.ndarray:
+    """The ``n`` source positions :func:`line_runs` compacted."""
+    out = np.zeros(n, dtype=np.int64)
+    bounds = [*(int(i) for i, _ in runs), n]
+    for (i, first), end in zip(runs, bounds[1:]):
+        out[int(i):end] = int(first) + np.arange(end - int(i))
+    return out
+
+
+
 # ---- run <-> bag --------------------------------------------------------------------
 def _feed_names(names) -> list[str]:
     return [n[: -len("_flow_ml_s")] for n in names if n.endswith("_flow_ml_s") and n != "outlet_flow_ml_s"]
@@ -151,3 +172,46 @@ def _run_metadata(path: Path) -> dict:
         raise UserError(f"{path}: the bag's run metadata ({RUN_METADATA}) is not a mapping")
     metadata.update({"source": str(path), "mode": "graph"})
     return metadata
+
+
+def load_measured_bag(path: str | Path) -> tuple[dict[str, np.ndarray], np.ndarray, str, dict] | None:
+    """A measured record's bag (``phfdi bag from-csv``: one MeasuredSample per row on /measured/sample) as columns:
+    ``time_s`` (the record's own time: the stamps plus the metadata's ``time_origin_s``) and one per channel; with
+    the source record's line numbers and what they count when the bag keeps them, else the bag's sample numbers.
+    None when the bag has no /measured/sample."""
+    from rosbags.highlevel import AnyReader
+
+    path = Path(path)
+    stamps: list[int] = []
+    values: list[np.ndarray] = []
+    names: list[str] | None = None
+    try:
+        with AnyReader([path]) as reader:
+            conns = [c for c in reader.connections if c.topic == T.MEASURED_SAMPLE.name]
+            if not conns:
+                return None
+            for conn, _t, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                if names is None:
+                    names = [str(n) for n in msg.names]
+                elif list(msg.names) != names:
+                    raise UserError(f"{path}: sample {len(stamps) + 1} of {T.MEASURED_SAMPLE.name} names other "
+                                    f"channels ({', '.join(msg.names)}) than the first ({', '.join(names)})")
+                stamps.append(time_ns(msg.stamp))
+                values.append(np.asarray(msg.values, dtype=float))
+    except UserError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - rosbags, mcap and zstd raise many types on damage
+        raise UserError(f"{path}: cannot read the bag ({type(exc).__name__}: {_one_line(exc)}); if its writer "
+                        f"was killed, run: phfdi bag recover {path} FIXED.mcap") from None
+    if not stamps or names is None:
+        raise UserError(f"{path}: the bag holds no sample of {T.MEASURED_SAMPLE.name}")
+    metadata = _run_metadata(path)
+    metadata["mode"] = "measured"
+    x = np.vstack(values)
+    columns = {"time_s": np.asarray(stamps, dtype=np.int64) / 1e9 + float(metadata.get("time_origin_s") or 0.0)}
+    columns.update({n: x[:, i] for i, n in enumerate(names)})
+    runs = metadata.get("source_lines")
+    if runs:
+        return columns, lines_from_runs(runs, len(stamps)), str(metadata.get("source_where", "line")), metadata
+    return columns, np.arange(1, len(stamps) + 1), "sample", metadata

@@ -142,25 +142,6 @@ def learn_from(rec: MeasuredRecord, rows: int | slice | None = None, settings: L
     return learn(rec.x[part], rec.channels, s, source=source)
 
 
-def line_runs(lines: np.ndarray) -> list[list[int]]:
-    """Source positions compactly: [index, line] where a run of consecutive lines starts (a bag of a record
-    carries them, so alarms from its replay name the source file's lines)."""
-    lines = np.asarray(lines, dtype=np.int64)
-    if not len(lines):
-        return []
-    starts = np.concatenate([[0], np.flatnonzero(np.diff(lines) != 1) + 1])
-    return [[int(i), int(lines[i])] for i in starts]
-
-
-def lines_from_runs(runs: list[list[int]], n: int) -> np.ndarray:
-    """The ``n`` source positions :func:`line_runs` compacted."""
-    out = np.zeros(n, dtype=np.int64)
-    bounds = [*(int(i) for i, _ in runs), n]
-    for (i, first), end in zip(runs, bounds[1:]):
-        out[int(i):end] = int(first) + np.arange(end - int(i))
-    return out
-
-
 def row_number(rec: MeasuredRecord, index: int) -> int:
     """The number a person finds sample ``index`` by in the file: its line (text), row (Parquet) or sample (bag)."""
     return int(rec.lines[min(max(index, 0), len(rec.lines) - 1)])

@@ -101,3 +101,23 @@ def test_nan_stretch_in_the_monitored_part_is_reported_not_fatal(files, tmp_path
     report = json.loads(capsys.readouterr().out)
     (problem,) = report["input_problems"]
     assert "flow" in problem["message"] and problem["line"] == 902
+
+
+def test_a_measured_records_bag_replays_offline_as_its_csv(files, capsys):
+    """``bag from-csv`` then ``replay BAG --reference``: the bag's /measured/sample read back as the record (its
+    time, channels and the CSV's line numbers), the same alarms as the CSV's replay. It was refused before: "no
+    /plant/measurement topic: not a bag of the phfdi graph"."""
+    ref, bag = files["dir"] / "ref_bag.json", files["dir"] / "faulty.mcap"
+    assert main(["calibrate", "--learn", str(files["healthy"]), "--rows", "600", "--out", str(ref)]) == 0
+    assert main(["bag", "from-csv", str(files["faulty"]), str(bag), "--exclude", "label"]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(files["faulty"]), "--reference", str(ref), "--json"]) == 0
+    from_csv = json.loads(capsys.readouterr().out)
+    assert main(["replay", str(bag), "--reference", str(ref), "--json"]) == 0
+    from_bag = json.loads(capsys.readouterr().out)
+    assert from_csv["alarms"] and from_csv["alarms"][0]["detection_stamp"], "no alarm (or stamp) to compare"
+    keys = ("detection_time", "onset_time", "statistic", "channels", "detection_line", "where", "detection_stamp",
+            "onset_stamp")
+    assert [{k: a.get(k) for k in keys} for a in from_bag["alarms"]] == \
+        [{k: a.get(k) for k in keys} for a in from_csv["alarms"]]
+    assert from_bag["samples"] == from_csv["samples"] and from_bag["channels"] == from_csv["channels"]

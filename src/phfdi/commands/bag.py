@@ -103,7 +103,8 @@ def run_to_run(args: argparse.Namespace) -> int:
 
 def run_from_csv(args: argparse.Namespace) -> int:
     from phfdi.bagio import write_measured
-    from phfdi.learned import line_runs, read_measured
+    from phfdi.bagread import line_runs
+    from phfdi.learned import read_measured
     from phfdi_base.errors import UserError
     from phfdi_base.outputs import refuse_existing, staged
 

@@ -30,7 +30,10 @@ EXAMPLES = """examples:
 With --reference the record's channels go through the learned reference and the
 multichannel wavelet detector instead (any number of channels, no plant model):
 each alarm names the channels and bands that carry it; --refit-rows N re-fits
-the reference on the record's own first N rows with the file's settings.
+the reference on the record's own first N rows with the file's settings. The
+record may be a bag of phfdi bag from-csv (offline or --live: the same alarms).
+A note names each channel that leaves the range the reference's healthy runs
+had (--json: outside_healthy_range): there the reference extrapolates.
 
 --reference MODEL.yaml (a scenario file, such as the extended_model.yaml that
 phfdi diagnose writes into its --out directory) keeps the physics reference and
@@ -194,7 +197,6 @@ def run_learned(args: argparse.Namespace) -> int:
     """The record through the learned reference and the multichannel detector."""
     from phfdi.learned import alarm_summaries, event_dict, replay_measured
     from phfdi.learned import format_alarms as format_learned
-    from wavelet_fdi.healthy_range import describe, outside_ranges
     from wavelet_fdi.learned_detector import LearnedModel
 
     model = LearnedModel.load(args.reference)
@@ -206,8 +208,7 @@ def run_learned(args: argparse.Namespace) -> int:
     events, states, model = replay_measured(rec, model, args.refit_rows)
     elapsed = time.perf_counter() - t0
     print(f"replayed {len(rec.x)} rows x {len(model.channels)} channels in {elapsed:.2f} s", file=sys.stderr)
-    outside = outside_ranges(model.source.get("healthy_ranges") or {}, rec.x, rec.channels)
-    print_notes("replay", [describe(o) for o in outside])
+    outside = outside_healthy_range(model, rec)
     alarms = alarm_summaries(events, rec)
     inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
     if args.json:
@@ -220,6 +221,16 @@ def run_learned(args: argparse.Namespace) -> int:
         stamp = f"{e['stamp']}, " if e["stamp"] else ""
         print(f"input: {e['message']} ({stamp}{rec.where} {e['line']})")
     return 0
+
+
+def outside_healthy_range(model, rec) -> list[dict]:
+    """Where the record leaves the healthy range of the reference's calibration runs, each said in one note (none
+    for a reference file from before the ranges were kept)."""
+    from wavelet_fdi.healthy_range import describe, outside_ranges
+
+    outside = outside_ranges(model.source.get("healthy_ranges") or {}, rec.x, rec.channels)
+    print_notes("replay", [describe(o) for o in outside])
+    return outside
 
 
 def run_live_learned(args: argparse.Namespace) -> int:
@@ -253,9 +264,13 @@ def run_live_learned(args: argparse.Namespace) -> int:
     say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
         f"(ROS domain {result.domain_id})")
     alarms = _located_live(args.file, report["alarms"], report["samples"])
+    from phfdi.learned import read_measured
+
+    outside = outside_healthy_range(model, read_measured(args.file, None, channels=model.channels))
     if args.json:
         print(json.dumps({"file": args.file, "reference": args.reference, "samples": report["samples"],
-                          "channels": list(model.channels), "alarms": alarms}, indent=2))
+                          "channels": list(model.channels), "outside_healthy_range": outside, "alarms": alarms},
+                         indent=2))
     else:
         print(format_learned(alarms))
     return result.status
@@ -270,7 +285,8 @@ def _located_live(bag: str, alarms: list[dict], samples: int) -> list[dict]:
     import numpy as np
 
     from phfdi import bagio
-    from phfdi.learned import lines_from_runs, located
+    from phfdi.bagread import lines_from_runs
+    from phfdi.learned import located
 
     meta = json.loads(bagio.read_metadata(Path(bag)).get(bagio.RUN_METADATA, {}).get("json", "{}"))
     runs, clock = meta.get("source_lines"), meta.get("wall_clock")

@@ -246,6 +246,13 @@ def _time(table: Table, cmap: ColumnMap) -> tuple[np.ndarray, list[str] | None, 
                 table.notes.append(f"{table.path}: column {spec.column!r}: read as {what}, converted to (epoch) seconds "
                                    f"(told by its range; give the column's unit in a column map if that is wrong)")
                 t = (t - SERIAL_UNIX_EPOCH_DAYS) * factor if what and what.startswith("spreadsheet") else t * factor
+        if what is None and table.metadata.get("mode") == "measured" and table.metadata.get("wall_clock"):
+            # a measured record's bag keeps its source's wall clock at 0 s (phfdi bag from-csv)
+            try:
+                return t * spec.factor, None, datetime.fromisoformat(str(table.metadata["wall_clock"]))
+            except ValueError:
+                table.notes.append(f"{table.path}: the bag's wall clock {table.metadata['wall_clock']!r} is not a "
+                                   f"date-time: times in seconds only")
         return t * spec.factor, None, EPOCH if what else None  # epoch stamps are a wall clock too
     return t, [str(c).strip() for c in cells], first_stamp(cells, fmt)
 
