@@ -49,12 +49,8 @@ def _tolerance(lo: float, hi: float) -> float:
     return TOLERANCE * max(hi - lo, 0.1 * max(abs(lo), abs(hi)))
 
 
-def outside_ranges(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[str]) -> list[dict]:
-    """The channels of ``x`` (rows, len(channels)) whose finite values leave their healthy range: each as
-    ``channel``, ``share`` of the rows outside, the record's ``min`` and ``max`` there and the ``healthy`` range.
-    Channels the ranges do not know are skipped (a reference file from before they were kept has none)."""
-    x = np.asarray(x, dtype=float)
-    out = []
+def _beyond(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[str]):
+    """(channel, mask of its rows outside the healthy range) for each channel the ranges know."""
     for i, name in enumerate(channels):
         r = ranges.get(name)
         if r is None or len(x) == 0:
@@ -66,20 +62,76 @@ def outside_ranges(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[st
         else:
             tol = _tolerance(r["min"], r["max"])
             beyond = (v < r["min"] - tol) | (v > r["max"] + tol)
-        bad = np.isfinite(v) & beyond & ~(zero & r["zero"])
-        if bad.any():
-            out.append({"channel": name, "share": float(bad.mean()), "min": float(v[bad].min()),
-                        "max": float(v[bad].max()), "healthy": dict(r)})
-    return out
+        yield name, v, np.isfinite(v) & beyond & ~(zero & r["zero"])
+
+
+def outside_ranges(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[str]) -> list[dict]:
+    """The channels of ``x`` (rows, len(channels)) whose finite values leave their healthy range: each as
+    ``channel``, ``share`` of the rows outside, the record's ``min`` and ``max`` there and the ``healthy`` range.
+    Channels the ranges do not know are skipped (a reference file from before they were kept has none)."""
+    watch = RangeWatch(ranges, channels)
+    watch.update(x)
+    return watch.summary()
+
+
+class RangeWatch:
+    """:func:`outside_ranges` for a stream taken in chunks (the detector node): the same summary at any time.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> watch = RangeWatch({"flow": {"min": 1.0, "max": 2.0, "zero": True}}, ["flow"])
+    >>> [o["channel"] for o in watch.update(np.array([[1.5], [0.0]]))], watch.update(np.array([[3.0]]))[0]["max"]
+    ([], 3.0)
+    >>> watch.update(np.array([[4.0]])), round(watch.summary()[0]["share"], 2)  # said once: not new any more
+    ([], 0.5)
+    """
+
+    def __init__(self, ranges: dict[str, dict], channels: Sequence[str]) -> None:
+        self.ranges, self.channels = ranges, list(channels)
+        self.rows = 0
+        self._outside: dict[str, dict] = {}  # channel -> count, min, max so far
+
+    def update(self, x: np.ndarray) -> list[dict]:
+        """Take the next rows; returns the channels that left their range for the first time (summary form)."""
+        x = np.asarray(x, dtype=float).reshape(-1, len(self.channels))
+        self.rows += len(x)
+        new = []
+        for name, v, bad in _beyond(self.ranges, x, self.channels):
+            if not bad.any():
+                continue
+            o = self._outside.get(name)
+            lo, hi, n = float(v[bad].min()), float(v[bad].max()), int(bad.sum())
+            if o is None:
+                self._outside[name] = {"count": n, "min": lo, "max": hi}
+                new.append(name)
+            else:
+                o.update(count=o["count"] + n, min=min(o["min"], lo), max=max(o["max"], hi))
+        return [o for o in self.summary() if o["channel"] in new]
+
+    def summary(self) -> list[dict]:
+        """Each channel outside so far: ``channel``, ``share`` of the rows, ``min`` and ``max`` there, ``healthy``."""
+        return [{"channel": name, "share": o["count"] / self.rows, "min": o["min"], "max": o["max"],
+                 "healthy": dict(self.ranges[name])}
+                for name in self.channels if (o := self._outside.get(name)) is not None]
+
+
+def span(o: dict) -> str:
+    """The values a channel took outside its range: one number, or "lowest to highest"."""
+    return f"{o['min']:.4g}" if o["min"] == o["max"] else f"{o['min']:.4g} to {o['max']:.4g}"
+
+
+def healthy_span(o: dict) -> str:
+    """What the healthy runs had: "0 or 1.29 to 3.87" (0: a pump or valve off)."""
+    h = o["healthy"]
+    seen = ["0"] if h["zero"] else []
+    if h["min"] is not None:
+        seen.append(span(h))
+    return " or ".join(seen) or "none"
 
 
 def describe(o: dict) -> str:
     """One line for a channel outside its healthy range."""
-    h = o["healthy"]
-    seen = [] if not h["zero"] else ["0"]
-    if h["min"] is not None:
-        seen.append(f"{h['min']:.4g}" if h["min"] == h["max"] else f"{h['min']:.4g} to {h['max']:.4g}")
-    span = f"{o['min']:.4g}" if o["min"] == o["max"] else f"{o['min']:.4g} to {o['max']:.4g}"
     return (f"{o['channel']} is outside what the reference's healthy runs had in {100 * o['share']:.0f} % of the "
-            f"rows ({span}; healthy: {' or '.join(seen) or 'none'}): the reference extrapolates there, and an "
-            f"alarm there may be the reference's, not the plant's")
+            f"rows ({span(o)}; healthy: {healthy_span(o)}): the reference extrapolates there, and an alarm there "
+            f"may be the reference's, not the plant's")

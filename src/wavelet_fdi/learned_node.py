@@ -36,7 +36,7 @@ import sys
 import traceback
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from phfdi_interfaces.msg import FaultAlarm, MeasuredSample
 from rclpy.clock import Clock, ClockType
 
@@ -47,6 +47,7 @@ from phfdi_base.topics import MEASURED_SAMPLE
 
 from .channel_align import grid_period_ns
 from .channel_map import load_channel_map
+from .healthy_range import RangeWatch, describe, healthy_span, span
 from .learned_detector import LearnedDetector, LearnedModel
 from .map_inputs import MappedInputs
 from .node_base import DetectorNodeBase
@@ -80,9 +81,12 @@ class LearnedDetectorNode(DetectorNodeBase):
         except UserError as exc:
             raise NodeStartError(f"parameter reference = {path!r}: {exc}") from None
         self.core = LearnedDetector(self.model)
+        # where the inputs leave what the reference's healthy runs had (a reference file from before: nothing)
+        self.range_watch = RangeWatch(self.model.source.get("healthy_ranges") or {}, self.model.channels)
         self._index = {c: i for i, c in enumerate(self.model.channels)}
         self._t_last = 0.0
         self.open_alarm_output()
+        self._pub_range = self.diagnostics_publisher()
         self._received = 0
         self.inputs: MappedInputs | None = None
         if self.param("channel_map_file"):
@@ -153,6 +157,27 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._t_last = float(t[-1])
         for ev in events:
             self._publish(ev)
+        new = self.range_watch.update(x)
+        for o in new:  # once per channel: the reference extrapolates from here on
+            self.get_logger().warning(describe(o))
+        if new:
+            self._report_range()
+
+    def _report_range(self) -> None:
+        """'detector: healthy range' on /diagnostics: WARN with each channel outside it so far (at its first
+        leaving and at the end), OK at the end when none left it."""
+        outside = self.range_watch.summary()
+        values = [KeyValue(key=o["channel"], value=f"{100 * o['share']:.1f} % of {self.range_watch.rows} samples "
+                                                    f"outside ({span(o)}; healthy: {healthy_span(o)})")
+                  for o in outside]
+        msg = "inputs beyond the reference's healthy runs: " + ", ".join(o["channel"] for o in outside) if outside \
+            else "inputs within the reference's healthy runs"
+        status = DiagnosticStatus(level=DiagnosticStatus.WARN if outside else DiagnosticStatus.OK,
+                                  name=f"{self.get_name()}: healthy range", message=msg,
+                                  hardware_id=self.param("reference"), values=values)
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._pub_range.publish(array)
 
     def _publish(self, ev) -> None:
         state = STATE_OF_KIND.get(ev.kind, self._state if self._state == FaultAlarm.ALARM else FaultAlarm.WARN)
@@ -187,10 +212,12 @@ class LearnedDetectorNode(DetectorNodeBase):
         """The stream ended: name the alarms still waiting for their window (as the offline replay does)."""
         for ev in self.core.finish():
             self._publish(ev)
+        self._report_range()
 
     def done_report(self) -> dict:
         report = {"samples": self.core.samples_processed, "alarms": self.core.alarms,
-                  "core_errors": self.core_errors, "reference": self.param("reference")}
+                  "core_errors": self.core_errors, "reference": self.param("reference"),
+                  "outside_healthy_range": self.range_watch.summary()}
         if self.inputs is not None:
             a = self.inputs.aligner
             report["channel_map"] = {"file": self.param("channel_map_file"), "align": a.rule,

@@ -6,9 +6,11 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from phfdi.cli import main
-from wavelet_fdi.healthy_range import describe, healthy_ranges, outside_ranges
+from wavelet_fdi.healthy_range import RangeWatch, describe, healthy_ranges, outside_ranges
 from wavelet_fdi.learned_detector import LearnedModel, learn
 
 from .test_learned_cli import write_csv
@@ -92,3 +94,20 @@ def test_replay_says_where_the_record_leaves_the_healthy_range(tmp_path, capsys)
     assert "pressure" in names
     assert next(o for o in report["outside_healthy_range"] if o["channel"] == "pressure")["share"] >= 300 / 1500
     assert "note: pressure is outside what the reference's healthy runs had" in out.err
+
+
+@given(st.lists(st.integers(1, 400), min_size=1, max_size=8), st.integers(0, 2**31 - 1))
+@settings(max_examples=40, deadline=None)
+def test_a_stream_in_any_chunks_sums_up_to_the_whole_record(cuts, seed):
+    """The detector node takes rows in chunks (RangeWatch); the offline replay the whole record (outside_ranges):
+    the same channels, shares, extremes; each channel said new once, in the chunk where it first leaves."""
+    rng = np.random.default_rng(seed)
+    ranges = healthy_ranges([pump_run(rng, 1000, [0.0, 3.59], [0.0, 1.29, 3.87])], PUMP_CHANNELS)
+    x = pump_run(rng, 3000, [0.0, 3.59, 4.31], [0.0, 1.29, 3.87, 6.45])
+    watch = RangeWatch(ranges, PUMP_CHANNELS)
+    bounds = np.cumsum([0, *cuts, len(x)])
+    said = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        said += [o["channel"] for o in watch.update(x[min(a, len(x)):min(b, len(x))])]
+    assert watch.summary() == outside_ranges(ranges, x, PUMP_CHANNELS)
+    assert sorted(said) == sorted(o["channel"] for o in watch.summary())

@@ -56,11 +56,16 @@ def main(domain_id: int, spec_path: str) -> int:
     pubs = [pub for pub, _ in senders]
     received: list[dict] = []
     diagnostics: list[dict] = []
+    ranges: list[dict] = []  # the node's "healthy range" statuses
 
     def on_diagnostics(m: DiagnosticArray) -> None:
-        diagnostics.extend({"level": int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else int(s.level),
-                            "message": s.message, "values": {v.key: v.value for v in s.values}}
-                           for s in m.status if s.name.endswith("channel map"))
+        for s in m.status:
+            d = {"level": int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else int(s.level),
+                 "message": s.message, "values": {v.key: v.value for v in s.values}}
+            if s.name.endswith("channel map"):
+                diagnostics.append(d)
+            elif s.name.endswith("healthy range"):
+                ranges.append(d)
 
     def on_alarm(m: FaultAlarm) -> None:
         received.append({"state": int(m.state), "stamp_ns": time_ns(m.stamp), "detection_ns": time_ns(m.detection_time),
@@ -106,7 +111,8 @@ def main(domain_id: int, spec_path: str) -> int:
     deadline = time.monotonic() + 2.0  # what the readers already hold
     while time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
-    print(json.dumps({"event": "alarms", "received": received, "diagnostics": diagnostics}), flush=True)
+    print(json.dumps({"event": "alarms", "received": received, "diagnostics": diagnostics,
+                      "healthy_range": ranges}), flush=True)
     node.destroy_node()
     executor.shutdown()
     rclpy.try_shutdown(context=context)

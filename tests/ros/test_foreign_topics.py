@@ -263,6 +263,14 @@ def test_a_rig_run_with_a_probe_bias_through_the_estimator_reference(shared_data
     check_same_alarms(done, heard["received"], offline, dt_ns)
     assert any(m["fault_class"] not in ("", "unknown") for m in heard["received"] if m["state"] == 2), \
         "the estimator named no fault on /fault_alarm"
+    # the base pump at 6.45 mL/s, beyond the calibration runs' 3.87: said once in the log, WARN on /diagnostics
+    # when it first happens and at the end, and the same summary as the offline replay
+    assert done["outside_healthy_range"] == offline["outside_healthy_range"]
+    assert [o["channel"] for o in done["outside_healthy_range"]] == ["base_flow_ml_s"]
+    assert err.count("base_flow_ml_s is outside what the reference's healthy runs had") == 1
+    levels = [d["level"] for d in heard["healthy_range"]]
+    assert levels and set(levels) == {1}, heard["healthy_range"]  # WARN
+    assert heard["healthy_range"][-1]["values"]["base_flow_ml_s"].startswith("17.1 % of 2885 samples outside (6.45;")
 
 
 def test_a_simulated_backlash_on_float64_topics_gives_the_physics_detectors_offline_alarms(tmp_path):

@@ -241,6 +241,7 @@ def run_live_learned(args: argparse.Namespace) -> int:
     from phfdi.ros.launcher import OBSERVER, NodeSpec
     from phfdi.ros.player import PLAYER
     from phfdi_base.topics import DETECTOR, MEASURED_SAMPLE
+    from wavelet_fdi.healthy_range import describe
     from wavelet_fdi.learned_detector import LearnedModel
 
 
@@ -264,9 +265,8 @@ def run_live_learned(args: argparse.Namespace) -> int:
     say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
         f"(ROS domain {result.domain_id})")
     alarms = _located_live(args.file, report["alarms"], report["samples"])
-    from phfdi.learned import read_measured
-
-    outside = outside_healthy_range(model, read_measured(args.file, None, channels=model.channels))
+    outside = report.get("outside_healthy_range") or []  # what the node's core counted (the offline replay's)
+    print_notes("replay", [describe(o) for o in outside])
     if args.json:
         print(json.dumps({"file": args.file, "reference": args.reference, "samples": report["samples"],
                           "channels": list(model.channels), "outside_healthy_range": outside, "alarms": alarms},
