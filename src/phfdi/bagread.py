@@ -42,7 +42,6 @@ def lines_from_runs(runs: list[list[int]], n: int) -> np.ndarray:
     return out
 
 
-
 # ---- run <-> bag --------------------------------------------------------------------
 def _feed_names(names) -> list[str]:
     return [n[: -len("_flow_ml_s")] for n in names if n.endswith("_flow_ml_s") and n != "outlet_flow_ml_s"]
@@ -174,11 +173,21 @@ def _run_metadata(path: Path) -> dict:
     return metadata
 
 
-def load_measured_bag(path: str | Path) -> tuple[dict[str, np.ndarray], np.ndarray, str, dict] | None:
+def has_topic(path: str | Path, topic: str) -> bool:
+    """Whether the bag has ``topic`` (False for a bag that cannot be read: its reader says why)."""
+    from rosbags.highlevel import AnyReader
+
+    try:
+        with AnyReader([Path(path)]) as reader:
+            return any(c.topic == topic for c in reader.connections)
+    except Exception:  # noqa: BLE001 - rosbags, mcap and zstd raise many types on damage
+        return False
+
+
+def load_measured_bag(path: str | Path) -> tuple[dict[str, np.ndarray], np.ndarray, str, dict]:
     """A measured record's bag (``phfdi bag from-csv``: one MeasuredSample per row on /measured/sample) as columns:
     ``time_s`` (the record's own time: the stamps plus the metadata's ``time_origin_s``) and one per channel; with
-    the source record's line numbers and what they count when the bag keeps them, else the bag's sample numbers.
-    None when the bag has no /measured/sample."""
+    the source record's line numbers and what they count when the bag keeps them, else the bag's sample numbers."""
     from rosbags.highlevel import AnyReader
 
     path = Path(path)
@@ -188,8 +197,6 @@ def load_measured_bag(path: str | Path) -> tuple[dict[str, np.ndarray], np.ndarr
     try:
         with AnyReader([path]) as reader:
             conns = [c for c in reader.connections if c.topic == T.MEASURED_SAMPLE.name]
-            if not conns:
-                return None
             for conn, _t, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
                 if names is None:

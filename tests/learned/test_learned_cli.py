@@ -121,3 +121,14 @@ def test_a_measured_records_bag_replays_offline_as_its_csv(files, capsys):
     assert [{k: a.get(k) for k in keys} for a in from_bag["alarms"]] == \
         [{k: a.get(k) for k in keys} for a in from_csv["alarms"]]
     assert from_bag["samples"] == from_csv["samples"] and from_bag["channels"] == from_csv["channels"]
+
+
+def test_a_damaged_measured_bag_is_one_line(files, capsys):
+    ref, bag = files["dir"] / "ref_cut.json", files["dir"] / "cut.mcap"
+    assert main(["calibrate", "--learn", str(files["healthy"]), "--rows", "600", "--out", str(ref)]) == 0
+    assert main(["bag", "from-csv", str(files["faulty"]), str(bag), "--exclude", "label"]) == 0
+    data = bag.read_bytes()
+    bag.write_bytes(data[: len(data) // 2])  # its writer killed half way
+    capsys.readouterr()
+    line = one_error_line(capsys, ["replay", str(bag), "--reference", str(ref)])
+    assert str(bag) in line and "bag recover" in line, line

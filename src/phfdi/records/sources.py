@@ -147,19 +147,20 @@ def _short(exc: BaseException, limit: int = 160) -> str:
 def read_bag(path: Path, data: bytes | None = None, encoding: str | None = None) -> Table:
     """The run signals of a bag of the node graph (time from /plant/measurement's stamps), or a measured record's
     channels from a bag of ``phfdi bag from-csv`` (/measured/sample, time from its stamps)."""
-    from phfdi.bagread import load_bag, load_measured_bag
+    from phfdi.bagread import has_topic, load_bag, load_measured_bag
+    from phfdi_base.topics import MEASURED_SAMPLE
 
     try:
         run = load_bag(path)
     except ReadError:
         raise
     except UserError as exc:
+        if not has_topic(path, MEASURED_SAMPLE.name):  # not a measured record's bag either: the graph's reason
+            raise ReadError(path, str(exc).removeprefix(f"{path}: ")) from None
         try:
             measured = load_measured_bag(path)
         except UserError as inner:
             raise ReadError(path, str(inner).removeprefix(f"{path}: ")) from None
-        if measured is None:
-            raise ReadError(path, str(exc).removeprefix(f"{path}: ")) from None
         columns, lines, where, metadata = measured
         return Table(str(path), dict(columns), lines, where, metadata, {})
     except Exception as exc:  # noqa: BLE001 - rosbags/mcap raise many types on damaged bags
