@@ -111,8 +111,8 @@ class RangeWatch:
 
     def summary(self) -> list[dict]:
         """Each channel outside so far: ``channel``, ``share`` of the rows, ``min`` and ``max`` there, ``healthy``."""
-        return [{"channel": name, "share": o["count"] / self.rows, "min": o["min"], "max": o["max"],
-                 "healthy": dict(self.ranges[name])}
+        return [{"channel": name, "share": o["count"] / self.rows, "rows": o["count"], "of": self.rows,
+                 "min": o["min"], "max": o["max"], "healthy": dict(self.ranges[name])}
                 for name in self.channels if (o := self._outside.get(name)) is not None]
 
 
@@ -130,8 +130,18 @@ def healthy_span(o: dict) -> str:
     return " or ".join(seen) or "none"
 
 
+WHAT_IT_MEANS = "a fault, or an operation the calibration never saw (the reference extrapolates there; an alarm " \
+                "may be its own)"
+
+
 def describe(o: dict) -> str:
-    """One line for a channel outside its healthy range."""
-    return (f"{o['channel']} is outside what the reference's healthy runs had in {100 * o['share']:.0f} % of the "
-            f"rows ({span(o)}; healthy: {healthy_span(o)}): the reference extrapolates there, and an alarm there "
-            f"may be the reference's, not the plant's")
+    """One line for a channel outside its healthy range over a record."""
+    return (f"{o['channel']} left the range of the reference's healthy runs in {o['rows']} of {o['of']} rows "
+            f"({100 * o['share']:.2g} %; {span(o)}, healthy: {healthy_span(o)}): {WHAT_IT_MEANS}")
+
+
+def describe_first(o: dict) -> str:
+    """One line for a channel leaving its healthy range for the first time in a stream (in a chunk that ends at
+    sample ``of``)."""
+    return (f"{o['channel']} left the range of the reference's healthy runs by sample {o['of']} ({span(o)}, "
+            f"healthy: {healthy_span(o)}): {WHAT_IT_MEANS}")

@@ -47,7 +47,7 @@ from phfdi_base.topics import MEASURED_SAMPLE
 
 from .channel_align import grid_period_ns
 from .channel_map import load_channel_map
-from .healthy_range import RangeWatch, describe, healthy_span, span
+from .healthy_range import RangeWatch, describe_first, healthy_span, span
 from .learned_detector import LearnedDetector, LearnedModel
 from .map_inputs import MappedInputs
 from .node_base import DetectorNodeBase
@@ -159,7 +159,7 @@ class LearnedDetectorNode(DetectorNodeBase):
             self._publish(ev)
         new = self.range_watch.update(x)
         for o in new:  # once per channel: the reference extrapolates from here on
-            self.get_logger().warning(describe(o))
+            self.get_logger().warning(describe_first(o))
         if new:
             self._report_range()
 

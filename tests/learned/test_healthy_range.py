@@ -86,14 +86,17 @@ def test_replay_says_where_the_record_leaves_the_healthy_range(tmp_path, capsys)
     watched = write_csv(tmp_path / "watched.csv", x)
     ref = tmp_path / "ref.json"
     assert main(["calibrate", "--learn", str(healthy), "--out", str(ref)]) == 0
-    capsys.readouterr()
+    said = capsys.readouterr().out  # the calibration says what it covered, channel by channel
+    ranges = healthy_ranges([plant(1000, 22)], CHANNELS)
+    lo, hi = ranges["pressure"]["min"], ranges["pressure"]["max"]
+    assert "healthy ranges" in said and f"pressure {lo:.4g} to {hi:.4g}" in said
     assert main(["replay", str(watched), "--reference", str(ref), "--json"]) == 0
     out = capsys.readouterr()
     report = json.loads(out.out)
     names = [o["channel"] for o in report["outside_healthy_range"]]
     assert "pressure" in names
     assert next(o for o in report["outside_healthy_range"] if o["channel"] == "pressure")["share"] >= 300 / 1500
-    assert "note: pressure is outside what the reference's healthy runs had" in out.err
+    assert "note: pressure left the range of the reference's healthy runs in" in out.err
 
 
 @given(st.lists(st.integers(1, 400), min_size=1, max_size=8), st.integers(0, 2**31 - 1))

@@ -267,7 +267,7 @@ def test_a_rig_run_with_a_probe_bias_through_the_estimator_reference(shared_data
     # when it first happens and at the end, and the same summary as the offline replay
     assert done["outside_healthy_range"] == offline["outside_healthy_range"]
     assert [o["channel"] for o in done["outside_healthy_range"]] == ["base_flow_ml_s"]
-    assert err.count("base_flow_ml_s is outside what the reference's healthy runs had") == 1
+    assert err.count("base_flow_ml_s left the range of the reference's healthy runs by sample") == 1
     levels = [d["level"] for d in heard["healthy_range"]]
     assert levels and set(levels) == {1}, heard["healthy_range"]  # WARN
     assert heard["healthy_range"][-1]["values"]["base_flow_ml_s"].startswith("17.1 % of 2885 samples outside (6.45;")

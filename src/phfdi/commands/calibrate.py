@@ -223,6 +223,7 @@ def run_learn(args: argparse.Namespace) -> int:
     for c, name in enumerate(model.channels):
         print(f"  {name:28s} {model.reference.residual_sigma[c]:12.3f}  "
               + " ".join(f"{v:6.2f}" for v in model.band_sigma[c]))
+    print_healthy_ranges(model)
     print(f"wrote {args.out}")
     return 0
 
@@ -259,5 +260,16 @@ def run_estimator(args: argparse.Namespace) -> int:
           f"(every {ref.block_samples} samples)")  # type: ignore[attr-defined]
     print(f"  healthy RMS per band ({', '.join(model.settings.bands())}): "
           + " ".join(f"{v:.2f}" for v in model.band_sigma[0]))
+    print_healthy_ranges(model)
     print(f"wrote {args.out}")
     return 0
+
+
+def print_healthy_ranges(model) -> None:
+    """What the healthy runs covered per channel: beyond it, replay notes that the reference extrapolates."""
+    from wavelet_fdi.healthy_range import healthy_span
+
+    ranges = model.source.get("healthy_ranges") or {}
+    if ranges:
+        print("  healthy ranges (phfdi replay notes a record beyond them: the reference extrapolates there): "
+              + "; ".join(f"{c} {healthy_span({'healthy': r})}" for c, r in ranges.items()))
