@@ -21,9 +21,12 @@ Examples
 
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import numpy as np
+
+from phfdi_base.errors import UserError
 
 #: a value counts as outside when it lies beyond the healthy range by more than this share of the range's width,
 #: or of a tenth of its magnitude where the range is narrow (a pump with one setting): readings' own jitter and
@@ -45,12 +48,33 @@ def healthy_ranges(runs: Sequence[np.ndarray], channels: Sequence[str]) -> dict[
     return out
 
 
+def checked_ranges(obj, where: str) -> dict[str, dict]:
+    """Ranges read from a file: each channel's ``min`` and ``max`` numbers (or both None), ``zero`` true or false;
+    anything else is one UserError naming the channel."""
+    if not isinstance(obj, dict):
+        raise UserError(f"{where}: expected a mapping channel -> {{min, max, zero}}")
+    out = {}
+    for name, r in obj.items():
+        try:
+            lo, hi, zero = r["min"], r["max"], r["zero"]
+            if (lo is None) != (hi is None) or not isinstance(zero, bool):
+                raise ValueError("min and max both numbers or both null, zero true or false")
+            if lo is not None:
+                lo, hi = float(lo), float(hi)
+                if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+                    raise ValueError("min <= max, both finite")
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{where}: channel {name!r}: {exc}") from None
+        out[str(name)] = {"min": lo, "max": hi, "zero": zero}
+    return out
+
+
 def _tolerance(lo: float, hi: float) -> float:
     return TOLERANCE * max(hi - lo, 0.1 * max(abs(lo), abs(hi)))
 
 
 def _beyond(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[str]):
-    """(channel, mask of its rows outside the healthy range) for each channel the ranges know."""
+    """(channel, its values, mask of the rows outside its healthy range) for each channel the ranges know."""
     for i, name in enumerate(channels):
         r = ranges.get(name)
         if r is None or len(x) == 0:
@@ -110,7 +134,8 @@ class RangeWatch:
         return [o for o in self.summary() if o["channel"] in new]
 
     def summary(self) -> list[dict]:
-        """Each channel outside so far: ``channel``, ``share`` of the rows, ``min`` and ``max`` there, ``healthy``."""
+        """Each channel outside so far: ``channel``, ``share`` of the rows (``rows`` of ``of``), ``min`` and ``max``
+        of its values there, and its ``healthy`` range."""
         return [{"channel": name, "share": o["count"] / self.rows, "rows": o["count"], "of": self.rows,
                  "min": o["min"], "max": o["max"], "healthy": dict(self.ranges[name])}
                 for name in self.channels if (o := self._outside.get(name)) is not None]

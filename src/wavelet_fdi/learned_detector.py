@@ -42,7 +42,7 @@ import numpy.typing as npt
 from phfdi_base.errors import UserError
 
 from .filterbank import CausalSwt, wavelet_filters
-from .healthy_range import healthy_ranges
+from .healthy_range import checked_ranges, healthy_ranges
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
 from .references import NAMERS, Reference, reference_from_dict
@@ -228,7 +228,10 @@ class LearnedModel:
             raise UserError(f"{where}: band_sigma missing or incomplete ({exc})") from None
         if not (np.all(np.isfinite(sigma)) and np.all(sigma > 0)):
             raise UserError(f"{where}: band_sigma must be positive numbers")
-        return cls(ref, settings, sigma, dict(d.get("source") or {}))
+        source = dict(d.get("source") or {})
+        if "healthy_ranges" in source:  # kept since 2026-11-29; a file from before has none
+            source["healthy_ranges"] = checked_ranges(source["healthy_ranges"], f"{where}: source.healthy_ranges")
+        return cls(ref, settings, sigma, source)
 
 
 def fit_reference(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSettings) -> Reference:

@@ -114,3 +114,21 @@ def test_a_stream_in_any_chunks_sums_up_to_the_whole_record(cuts, seed):
         said += [o["channel"] for o in watch.update(x[min(a, len(x)):min(b, len(x))])]
     assert watch.summary() == outside_ranges(ranges, x, PUMP_CHANNELS)
     assert sorted(said) == sorted(o["channel"] for o in watch.summary())
+
+
+@pytest.mark.parametrize("damage, says", [
+    ({"pressure": {"min": 1.0}}, "channel 'pressure'"),
+    ({"pressure": {"min": 2.0, "max": 1.0, "zero": False}}, "min <= max"),
+    ({"pressure": {"min": None, "max": 1.0, "zero": False}}, "both numbers or both null"),
+    ([1, 2], "expected a mapping"),
+])
+def test_a_damaged_range_in_a_reference_file_is_one_line(tmp_path, capsys, damage, says):
+    path = tmp_path / "ref.json"
+    learn(plant(1200, 5), CHANNELS).save(path)
+    d = json.loads(path.read_text())
+    d["source"]["healthy_ranges"] = damage
+    path.write_text(json.dumps(d))
+    watched = write_csv(tmp_path / "watched.csv", plant(600, 6))
+    assert main(["replay", str(watched), "--reference", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "source.healthy_ranges" in err and says in err and "Traceback" not in err
