@@ -143,12 +143,15 @@ def reference_column_map(args: argparse.Namespace, model, reference: str) -> tup
     """The column map a replay with a reference reads the record with, and a line saying which one: an explicit
     --map/--column wins over the map stored in the reference; neither: every column under its own name."""
     from phfdi.records import ColumnMap
+    from phfdi.records.formats import is_format
 
     given = column_map_from_args(args)
     stored = model.source.get("column_map")
     if given is not None:
         also = f" (not the map stored in {reference})" if stored else ""
         return given, f"columns: {map_given_as(args)} as given{also}"
+    if stored and is_format(args.file, "bag"):  # a bag holds the channels under the project's names already
+        return None, "columns: the bag's own channel names"
     if stored:
         how = model.source.get("column_map_given_as") or "a column map"
         return (ColumnMap.from_mapping(stored, f"{reference}: stored column map"),
