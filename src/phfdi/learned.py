@@ -223,6 +223,9 @@ def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
                      f"({where}){onset}, by "
                      f"{a['statistic']} ({exceedance(a['statistic_value'], a['threshold'])})")
         lines.append(f"  channels: {top}")
+        if a.get("outside_healthy_range"):
+            lines.append(f"  beyond the reference's healthy runs then: {', '.join(a['outside_healthy_range'])} (a fault, "
+                         f"or an operation the calibration never saw)")
         iso = a.get("isolation")
         if iso:
             began = "" if iso.get("start_time") is None else f" from about {iso['start_time']:g} {unit_of_time}"

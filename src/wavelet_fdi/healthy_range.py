@@ -89,6 +89,11 @@ def _beyond(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[str]):
         yield name, v, np.isfinite(v) & beyond & ~(zero & r["zero"])
 
 
+def outside_masks(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[str]) -> dict[str, np.ndarray]:
+    """Per channel the ranges know, which rows of ``x`` (rows, len(channels)) leave its healthy range."""
+    return {name: bad for name, _, bad in _beyond(ranges, np.asarray(x, dtype=float), channels)}
+
+
 def outside_ranges(ranges: dict[str, dict], x: np.ndarray, channels: Sequence[str]) -> list[dict]:
     """The channels of ``x`` (rows, len(channels)) whose finite values leave their healthy range: each as
     ``channel``, ``share`` of the rows outside, the record's ``min`` and ``max`` there and the ``healthy`` range.

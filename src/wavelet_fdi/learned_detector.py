@@ -42,7 +42,7 @@ import numpy.typing as npt
 from phfdi_base.errors import UserError
 
 from .filterbank import CausalSwt, wavelet_filters
-from .healthy_range import checked_ranges, healthy_ranges
+from .healthy_range import checked_ranges, healthy_ranges, outside_masks
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
 from .references import NAMERS, Reference, reference_from_dict
@@ -413,6 +413,9 @@ class LearnedDetector:
         self._ring_x = np.full((NAMING_RING, len(self.inputs)), np.nan) if self.namer else np.empty((0, 0))
         self._to_name: list[dict] = []
         self._named: list[int] = []
+        # per channel the last sample beyond the healthy runs' range (an alarm whose window holds one says so)
+        self._ranges = model.source.get("healthy_ranges") or {}
+        self._last_outside: dict[str, int] = {}
 
     # ---- public API ------------------------------------------------------------------
     def process(self, t_s: npt.ArrayLike, x: npt.ArrayLike) -> tuple[list[LearnedEvent], np.ndarray]:
@@ -452,6 +455,8 @@ class LearnedDetector:
             ev = self._block(t, pos, end, chunk, states)
             events += ev
             pos = end
+        if self._ranges:
+            self._mark_outside(rows, events)
         if self.namer is not None:
             events += self._name_faults(t, rows, final=False)
             events.sort(key=lambda e: e.index)  # in sample order, as a chunk of one row at a time gives them
@@ -743,6 +748,30 @@ class LearnedDetector:
                  "channels": list(cont), "contributions": cont, "cleared_time": None}
         self.alarms.append(alarm)
         return alarm
+
+    def _mark_outside(self, rows: np.ndarray, events: list[LearnedEvent]) -> None:
+        """Each alarm raised in these rows lists the channels that left the healthy runs' range between its onset
+        and its detection (``outside_healthy_range``; its message says so): there the reference extrapolates, and
+        the alarm may be the reference's rather than the plant's. Any chunking gives the same lists."""
+        g0 = self.samples_processed
+        masks = outside_masks(self._ranges, rows, self.inputs)
+        for ev in events:
+            if ev.kind != "alarm" or ev.alarm is None:
+                continue
+            a = ev.alarm
+            onset = int(a["detection_index"] if a.get("onset_index") is None else a["onset_index"])
+            lo, hi = max(onset, g0) - g0, int(a["detection_index"]) - g0 + 1
+            names = [c for c, bad in masks.items() if self._last_outside.get(c, -1) >= onset or bool(bad[lo:hi].any())]
+            # the alarm as kept, and as every event of these rows carries it (a clearing in the same rows too)
+            for x in [*self.alarms, *(e.alarm for e in events if e.alarm is not None)]:
+                if x["alarm_id"] == a["alarm_id"]:
+                    x["outside_healthy_range"] = names
+            if names:
+                ev.message += f"; beyond the healthy runs' range then: {', '.join(names)}"
+        for c, bad in masks.items():
+            hit = np.flatnonzero(bad)
+            if len(hit):
+                self._last_outside[c] = g0 + int(hit[-1])
 
     def _alarm_message(self) -> str:
         a = self._alarm

@@ -132,3 +132,39 @@ def test_a_damaged_range_in_a_reference_file_is_one_line(tmp_path, capsys, damag
     assert main(["replay", str(watched), "--reference", str(path)]) == 2
     err = capsys.readouterr().err
     assert "source.healthy_ranges" in err and says in err and "Traceback" not in err
+
+
+def _alarms(model, x, chunk):
+    from wavelet_fdi.learned_detector import run_record
+
+    _, _, det = run_record(model, np.arange(len(x), dtype=float), x, chunk=chunk)
+    return [(a["alarm_id"], a["onset_index"], a["detection_index"], a["outside_healthy_range"]) for a in det.alarms]
+
+
+@pytest.mark.parametrize("seed", (31, 32, 33))
+def test_each_alarm_says_whether_its_window_left_the_healthy_range(seed):
+    """A step beyond the healthy span of one channel at a drawn row: its alarm lists exactly the channels with a row
+    outside their range between its onset and its detection (here that channel); the same alarm under ranges wide
+    enough to hold it lists none. The same lists for any chunking (the window can span chunks)."""
+    from dataclasses import replace
+
+    from wavelet_fdi.healthy_range import outside_masks
+
+    rng = np.random.default_rng(seed)
+    model = learn(plant(3000, seed), CHANNELS)
+    ranges = model.source["healthy_ranges"]
+    c = CHANNELS.index("pressure")
+    span = ranges["pressure"]["max"] - ranges["pressure"]["min"]
+    onset = int(rng.integers(1500, 2500))
+    x = plant(4000, seed + 100)
+    x[onset:, c] += float(rng.uniform(0.8, 2.0)) * span
+    got = _alarms(model, x, 4096)
+    assert got and got[0][3] == ["pressure"], got
+    for _, first, detected, names in got:
+        masks = outside_masks(ranges, x[first:detected + 1], CHANNELS)
+        assert names == [ch for ch in CHANNELS if masks[ch].any()]
+    assert _alarms(model, x, 1) == _alarms(model, x, 97) == _alarms(model, x, None) == got
+    wide = {ch: {"min": -1e9, "max": 1e9, "zero": True} for ch in CHANNELS}
+    unaware = replace(model, source={**model.source, "healthy_ranges": wide})
+    assert [(i, f, d) for i, f, d, _ in _alarms(unaware, x, 4096)] == [(i, f, d) for i, f, d, _ in got]
+    assert all(names == [] for *_, names in _alarms(unaware, x, 4096))
