@@ -36,16 +36,14 @@ def main() -> None:
     result = evaluate(paths, shipped_map("ph_rig"), progress=lambda s: print(s, flush=True),
                       only=args.detectors, leave_out=args.leave_out)
     result["summary"] = summary(result)
-    if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=1), encoding="utf-8")
-        print(f"wrote {args.json}")
     print(f"\n{len(result['folds'])} folds (leave-{args.leave_out}-out) in {time.perf_counter() - t0:.0f} s; "
           f"load average {os.getloadavg()[0]:.1f}")
     for e in result["summary"]:
         print(f"\n{e['detector']}: held-out healthy runs: {e['healthy_false_alarms']} alarms in "
               f"{e['healthy_hours'] * 60:.1f} min ({e['healthy_runs_with_alarm']} of {e['healthy_replays']} replays "
               f"with an alarm); outside the training runs' healthy range: {e['outside_range_with_alarm']} of those "
-              f"with an alarm, {e['outside_range_without_alarm']} of the others")
+              f"with an alarm, {e['outside_range_without_alarm']} of the others; alarms listing a channel beyond it "
+              f"{e['false_alarms_marked']}")
         for k, v in e["kinds"].items():
             d = "" if v["median_delay_s"] is None else f", median delay {v['median_delay_s']:.1f} s"
             d += f", alarm up {100 * v.get('median_held_share', 0.0):.0f} % of the time after the onset (median)"
@@ -54,7 +52,8 @@ def main() -> None:
             if fam and v["median_size_named"] is not None:
                 fam += f" (median size named {v['median_size_named']:.3g}"
                 fam += ")" if v["size_expected"] is None else f"; true {v['size_expected']:.3g})"
-            print(f"  {k:22s} detected {v['detected']:3d}/{v['cases']:<3d}{d}{fam}")
+            marked = f", {v['detected_marked']} of them listing a channel beyond the range" if v["detected"] else ""
+            print(f"  {k:22s} detected {v['detected']:3d}/{v['cases']:<3d}{d}{fam}{marked}")
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1), encoding="utf-8")
         print(f"wrote {args.json}")

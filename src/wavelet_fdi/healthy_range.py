@@ -151,9 +151,8 @@ def span(o: dict) -> str:
     return f"{o['min']:.4g}" if o["min"] == o["max"] else f"{o['min']:.4g} to {o['max']:.4g}"
 
 
-def healthy_span(o: dict) -> str:
-    """What the healthy runs had: "0 or 1.29 to 3.87" (0: a pump or valve off)."""
-    h = o["healthy"]
+def healthy_span(h: dict) -> str:
+    """What the healthy runs had, from a channel's range: "0 or 1.29 to 3.87" (0: a pump or valve off)."""
     seen = ["0"] if h["zero"] else []
     if h["min"] is not None:
         seen.append(span(h))
@@ -167,11 +166,11 @@ WHAT_IT_MEANS = "a fault, or an operation the calibration never saw (the referen
 def describe(o: dict) -> str:
     """One line for a channel outside its healthy range over a record."""
     return (f"{o['channel']} left the range of the reference's healthy runs in {o['rows']} of {o['of']} rows "
-            f"({100 * o['share']:.2g} %; {span(o)}, healthy: {healthy_span(o)}): {WHAT_IT_MEANS}")
+            f"({100 * o['share']:.2g} %; {span(o)}, healthy: {healthy_span(o['healthy'])}): {WHAT_IT_MEANS}")
 
 
 def describe_first(o: dict) -> str:
     """One line for a channel leaving its healthy range for the first time in a stream (in a chunk that ends at
     sample ``of``)."""
     return (f"{o['channel']} left the range of the reference's healthy runs by sample {o['of']} ({span(o)}, "
-            f"healthy: {healthy_span(o)}): {WHAT_IT_MEANS}")
+            f"healthy: {healthy_span(o['healthy'])}): {WHAT_IT_MEANS}")

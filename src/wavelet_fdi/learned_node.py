@@ -168,7 +168,7 @@ class LearnedDetectorNode(DetectorNodeBase):
         leaving and at the end), OK at the end when none left it."""
         outside = self.range_watch.summary()
         values = [KeyValue(key=o["channel"], value=f"{100 * o['share']:.1f} % of {self.range_watch.rows} samples "
-                                                    f"outside ({span(o)}; healthy: {healthy_span(o)})")
+                                                    f"outside ({span(o)}; healthy: {healthy_span(o['healthy'])})")
                   for o in outside]
         msg = "inputs beyond the reference's healthy runs: " + ", ".join(o["channel"] for o in outside) if outside \
             else "inputs within the reference's healthy runs"

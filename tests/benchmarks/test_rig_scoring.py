@@ -54,6 +54,15 @@ def test_the_summary_counts_replays_outside_the_healthy_range():
     rows = [{"detector": "estimator", "case": "healthy", "hours": 0.1, "false_alarms": fa,
              "outside_healthy_range": out} for fa, out in ((1, ["acid_flow_ml_s"]), (0, ["base_flow_ml_s"]), (0, []),
                                                            (2, []))]
+    rows[0]["false_alarms_marked"] = 1
     (e,) = summary({"rows": rows})
     assert (e["healthy_false_alarms"], e["healthy_runs_with_alarm"], e["healthy_replays"]) == (3, 2, 4)
-    assert (e["outside_range_with_alarm"], e["outside_range_without_alarm"]) == (1, 1)
+    assert (e["outside_range_with_alarm"], e["outside_range_without_alarm"], e["false_alarms_marked"]) == (1, 1, 1)
+
+
+def test_an_alarm_beyond_the_healthy_range_is_counted_before_and_at_the_detection():
+    alarms = [{"t": 5.0, "outside": ["acid_flow_ml_s"]}, {"t": 8.0, "outside": []},
+              {"t": 12.0, "outside": ["base_flow_ml_s"]}, {"t": 20.0, "outside": ["acid_flow_ml_s"]}]
+    o = outcome(alarms, 10.0)
+    assert (o.alarms_before, o.marked_before, o.first_after_s, o.outside) == (2, 1, 12.0, ["base_flow_ml_s"])
+    assert outcome([{"t": 1.0}], 0.5).outside is None  # a detector without ranges (plain CUSUM) lists none

@@ -60,6 +60,8 @@ class Outcome:
     family: str | None = None  # named by the first alarm after the onset (None: the detector names none)
     fault_class: str | None = None
     size: float | None = None  # in the class's unit (pH offset, x healthy noise, x recorded)
+    marked_before: int = 0  # alarms before the onset with a channel beyond the training runs' healthy range
+    outside: list | None = None  # the channels the first alarm after the onset lists beyond that range
 
 
 def expected_class(kind: str, pump: str | None) -> str:
@@ -80,15 +82,17 @@ def outcome(alarms: Sequence[dict], onset_s: float | None) -> Outcome:
         ta = a["t"]
         if onset_s is None or ta < onset_s:
             out.alarms_before += 1
+            out.marked_before += bool(a.get("outside"))
         elif out.first_after_s is None:
             out.first_after_s, out.family = float(ta), a.get("family")
-            out.fault_class, out.size = a.get("fault_class"), a.get("size")
+            out.fault_class, out.size, out.outside = a.get("fault_class"), a.get("size"), a.get("outside")
     return out
 
 
 def learned_alarms(model: LearnedModel, rec: MeasuredRecord) -> list[dict]:
-    """Each alarm's raise time ``t``, the time it cleared (``until``; the record's end if it did not) and the
-    fault family named (estimator references; None for the others)."""
+    """Each alarm's raise time ``t``, the time it cleared (``until``; the record's end if it did not), the
+    fault family named (estimator references; None for the others) and the channels it lists beyond the training
+    runs' healthy range (``outside``)."""
     events, _, _ = run_record(model, rec.time_s, rec.x)
     # the core names an alarm NAMING_AFTER samples after its detection (a "named" event)
     names = {e.alarm["alarm_id"]: e.alarm["isolation"] for e in events if e.kind == "named" and e.alarm}
@@ -97,7 +101,8 @@ def learned_alarms(model: LearnedModel, rec: MeasuredRecord) -> list[dict]:
         if e.kind == "alarm" and e.alarm:
             iso = names.get(e.alarm["alarm_id"]) or {}
             out.append({"t": float(e.time_s), "until": float(rec.time_s[-1]), "family": iso.get("family"),
-                        "fault_class": iso.get("fault_class"), "size": iso.get("size")})
+                        "fault_class": iso.get("fault_class"), "size": iso.get("size"),
+                        "outside": e.alarm.get("outside_healthy_range")})
         elif e.kind == "cleared" and out:
             out[-1]["until"] = float(e.time_s)
     return out
@@ -218,21 +223,21 @@ def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] =
                 fold.detectors = {k: v for k, v in fold.detectors.items() if k in only}
             ranges = healthy_ranges([records[q].x for q in train], CHANNELS)
             for p in held:
-                _score_run(p, records[p], fold, Path(tmp), column_map, rows)
                 outside = [o["channel"] for o in outside_ranges(ranges, records[p].x, CHANNELS)]
-                for r in rows:
-                    if r["fold"] == names and r["run"] == Path(p).name and r["case"] == "healthy":
-                        r["outside_healthy_range"] = outside
+                _score_run(p, records[p], fold, Path(tmp), column_map, rows, outside)
     return {"rows": rows, "folds": folds, "leave_out": leave_out}
 
 
-def _score_run(p: str, rec: MeasuredRecord, fold: Fold, tmp: Path, column_map, rows: list[dict]) -> None:
-    """One held-out run through the fold's detectors: healthy, then with each injected fault."""
+def _score_run(p: str, rec: MeasuredRecord, fold: Fold, tmp: Path, column_map, rows: list[dict],
+               outside: list[str]) -> None:
+    """One held-out run through the fold's detectors: healthy (``outside``: the channels that leave the training
+    runs' healthy range, replay's note), then with each injected fault."""
     hours = (rec.time_s[-1] - rec.time_s[0]) / 3600.0
     for name, det in fold.detectors.items():
         o = outcome(det(rec), None)
         rows.append({"run": Path(p).name, "fold": fold.held_out, "detector": name, "case": "healthy",
-                     "hours": hours, "false_alarms": o.alarms_before})
+                     "hours": hours, "false_alarms": o.alarms_before, "false_alarms_marked": o.marked_before,
+                     "outside_healthy_range": outside})
     for truth, frec in injected_cases(p, rec, tmp, column_map):
         for name, det in fold.detectors.items():
             alarms = det(frec)
@@ -244,6 +249,7 @@ def _score_run(p: str, rec: MeasuredRecord, fold: Fold, tmp: Path, column_map, r
                          "class": expected_class(truth["kind"], truth.get("pump")),
                          "class_named": o.fault_class, "size_named": o.size,
                          "held_share": held_share(alarms, truth["onset_s"], float(frec.time_s[-1])),
+                         "outside_at_detection": o.outside,
                          "delay_s": None if o.first_after_s is None else o.first_after_s - truth["onset_s"]})
 
 
@@ -271,6 +277,8 @@ def summary(result: dict) -> list[dict]:
                  "outside_range_with_alarm": sum(1 for r in healthy if r["false_alarms"] and r.get("outside_healthy_range")),
                  "outside_range_without_alarm": sum(1 for r in healthy
                                                     if not r["false_alarms"] and r.get("outside_healthy_range")),
+                 # alarms that list a channel beyond that range between their onset and detection
+                 "false_alarms_marked": sum(r.get("false_alarms_marked", 0) for r in healthy),
                  "kinds": {}}
         for kind in SIZES:
             for rank in ("larger", "smaller"):
@@ -282,6 +290,7 @@ def summary(result: dict) -> list[dict]:
                 held = sorted(r["held_share"] for r in cs)
                 entry["kinds"][f"{kind} {rank}"] = {"cases": len(cs), "detected": len(ok),
                                                      "family_right": sum(1 for r in ok if r["family_named"] == r["family"]),
+                                                     "detected_marked": sum(1 for r in ok if r.get("outside_at_detection")),
                                                      **_class_and_size(ok, kind),
                                                      "median_delay_s": delays[len(delays) // 2] if delays else None,
                                                      "median_held_share": held[len(held) // 2]}

@@ -272,4 +272,4 @@ def print_healthy_ranges(model) -> None:
     ranges = model.source.get("healthy_ranges") or {}
     if ranges:
         print("  healthy ranges (phfdi replay notes a record beyond them: the reference extrapolates there): "
-              + "; ".join(f"{c} {healthy_span({'healthy': r})}" for c, r in ranges.items()))
+              + "; ".join(f"{c} {healthy_span(r)}" for c, r in ranges.items()))
