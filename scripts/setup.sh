@@ -26,6 +26,12 @@ else
   "$VENV/bin/python" -m pip install --quiet -e ".[ros,interfaces,peers,test]" 2>&1 | { grep -v -e "is ignored: it is neither a file nor a directory" -e "BuildBackendWarning" || true; }
   echo "$want" > "$stamp"
 fi
+# The estimator's compiled filter (Numba, wavelet_fdi.estimator_kernel): compiled once into its cache (about
+# 10 s), so that the first replay or detector node does not wait for it; skipped when the cache is there.
+if ! ls src/wavelet_fdi/__pycache__/estimator_kernel._run-*.nbi >/dev/null 2>&1; then
+  echo "setup: compiling the estimator's filter (once, about 10 s) ..."
+  "$VENV/bin/python" -c "from wavelet_fdi.reference_estimator import compile_filter; compile_filter()"
+fi
 # The graph's message package (ROS 2 .msg -> C type support + Python); skipped when up to date.
 PHFDI_VENV="$VENV" bash scripts/build_interfaces.sh
 echo "setup: done"
