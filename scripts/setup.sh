@@ -27,9 +27,8 @@ else
   echo "$want" > "$stamp"
 fi
 # The estimator's compiled filter (Numba, wavelet_fdi.estimator_kernel): compiled once into its cache (about
-# 10 s), so that the first replay or detector node does not wait for it; skipped when the cache is there.
+# 10 s; it says so), so that the first replay or detector node does not wait for it; skipped when the cache is there.
 if ! ls src/wavelet_fdi/__pycache__/estimator_kernel._run-*.nbi >/dev/null 2>&1; then
-  echo "setup: compiling the estimator's filter (once, about 10 s) ..."
   "$VENV/bin/python" -c "from wavelet_fdi.reference_estimator import compile_filter; compile_filter()"
 fi
 # The graph's message package (ROS 2 .msg -> C type support + Python); skipped when up to date.

@@ -14,6 +14,8 @@ its import (about 0.7 s) and compilation (cached in ``__pycache__`` after the fi
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -207,6 +209,10 @@ def compiled() -> Callable[..., Any]:
     global _COMPILED
     if _COMPILED is None:
         from numba import njit
+
+        if not list((Path(__file__).parent / "__pycache__").glob("estimator_kernel._run-*.nbi")):
+            # long work shows progress: without the cache (scripts/setup.sh writes it) this takes about 10 s
+            print("wavelet_fdi: compiling the estimator's filter (once, about 10 s) ...", file=sys.stderr, flush=True)
 
         jit = njit(cache=True)
         for name in ("_py_max", "_py_min", "_bisect_left", "_bisect_right", "_ridge_solve", "_adapt", "_predict",
