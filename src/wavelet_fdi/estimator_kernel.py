@@ -1,11 +1,12 @@
 """The estimator's recursion, compiled: one pass of the Kalman filter and its strength adaptation over a chunk.
 
-:class:`wavelet_fdi.reference_estimator.EstimatorStream` keeps the state and calls :func:`run` once per chunk of
-rows. Why compiled (Numba): the filter is a scalar recursion whose every step depends on the last (a table
-lookup at the predicted state, a gain, a correction), so numpy cannot vectorise it; as plain Python it cost
-3.2-3.5 us a sample, half of the whole detector's time on the rig (benchmarks/rig_throughput.py), and every
-evaluation of the estimator's likelihood fit runs it over all training runs. The arithmetic is the plain
-Python recursion's, operation for operation (no fast-math), so the residuals are the same to the last bit.
+:class:`wavelet_fdi.reference_estimator.EstimatorStream` keeps the state and calls :func:`compiled` (:func:`_run`
+compiled) once per chunk of rows. Why compiled (Numba): the filter is a scalar recursion whose every step depends
+on the last (a table lookup at the predicted state, a gain, a correction), so numpy cannot vectorise it; as plain
+Python it cost 3.2-3.5 us a sample, half of the whole detector's time on the rig (benchmarks/rig_throughput.py),
+and every evaluation of the estimator's likelihood fit runs it over all training runs. No fast-math: the compiled
+function computes what the same function interpreted by Python does, operation for operation, to the last bit
+(tests/learned/test_estimator.py runs both).
 
 Numba is imported on the first call, not with the module: the commands that never run the estimator do not pay
 its import (about 0.7 s) and compilation (cached in ``__pycache__`` after the first run on a machine).
