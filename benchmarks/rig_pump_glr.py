@@ -44,13 +44,15 @@ EVERY_SAMPLES = 32  # evaluation times: every block
 def pump_glr(ref, t: np.ndarray, rows: np.ndarray, windows: tuple[int, ...]) -> np.ndarray:
     """The largest pump log-likelihood gain of every window ending at each evaluation time (NaN before the first
     full window): (n_times,) at samples EVERY_SAMPLES, 2 EVERY_SAMPLES, ..."""
-    run = replace(ref, adapt_time_constant_s=0.0)
-    quiet = replace(run, noise=replace(ref.noise, rate_rel_std=ref.noise.rate_rel_std * STIFFNESS,
-                                       walk_ph_per_sqrt_s=ref.noise.walk_ph_per_sqrt_s * STIFFNESS))
-    scaled = {}
-    for i, f in enumerate(ref.feeds):  # the hypothesis' references, built once per c on a grid of the search
-        scaled[i] = lambda c, i=i: replace(quiet, feeds=tuple(replace(g, strength_mM=g.strength_mM * c) if j == i
-                                                               else g for j, g in enumerate(quiet.feeds)))
+    # the fault naming's window filter (wavelet_fdi.estimator_isolation): adaptation off, model trusted
+    quiet = replace(ref, adapt_time_constant_s=0.0,
+                    noise=replace(ref.noise, rate_rel_std=ref.noise.rate_rel_std * STIFFNESS,
+                                  walk_ph_per_sqrt_s=ref.noise.walk_ph_per_sqrt_s * STIFFNESS))
+
+    def scaled(i: int, c: float):  # the hypothesis "pump i delivers c times what is recorded"
+        return replace(quiet, feeds=tuple(replace(g, strength_mM=g.strength_mM * c) if j == i else g
+                                          for j, g in enumerate(quiet.feeds)))
+
     # the adapted filter as it runs (the estimator's own state), forked at every evaluation time
     states = {}
     stream = ref.new_state()
@@ -78,7 +80,7 @@ def pump_glr(ref, t: np.ndarray, rows: np.ndarray, windows: tuple[int, ...]) -> 
             for i in range(m):
                 if not np.nanmax(np.abs(xw[:, i])) > 0:
                     continue
-                res = minimize_scalar(lambda c: nll(scaled[i](c)), bounds=PUMP_RANGE, method="bounded",
+                res = minimize_scalar(lambda c: nll(scaled(i, c)), bounds=PUMP_RANGE, method="bounded",
                                       options={"xatol": 1e-2})
                 best = max(best, healthy - float(res.fun))
         out[e] = best if np.isfinite(best) else np.nan
