@@ -77,6 +77,7 @@ Numba: about 0.3 us a sample against 3.2-3.5 us as plain Python), operation for 
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from dataclasses import asdict, dataclass, field, replace
 
@@ -164,6 +165,9 @@ class EstimatorReference:
     #: False: the same physics run open loop from the first pH (never corrected): a simulation reference
     correct: bool = True
     fit_info: dict = field(default_factory=dict, compare=False)
+    #: the margins by which a fault hypothesis must beat healthy operation re-adapted before an alarm is a fault
+    #: (wavelet_fdi.estimator_isolation, "Confirmation"); empty: every alarm is named a fault (files from before)
+    confirm: dict = field(default_factory=dict, compare=False)
 
     kind = KIND
     lags = 1  # the first sample only starts the state
@@ -186,10 +190,11 @@ class EstimatorReference:
         if not (self.clip_sigma == 0.0 or self.clip_sigma > 0.0):  # also refuses NaN
             raise UserError(f"estimator: clip_sigma must be 0 (no limit) or positive, got {self.clip_sigma}")
         self.noise.check()
-        x, beta = titration_curve(self.buffer_mM, self.carbonate_mM)
+        # a hypothesis or a fit evaluation changes a noise term or a strength, not the curve: share its table
+        x, beta, x_list = _curve_tables(float(self.buffer_mM), float(self.carbonate_mM))
         object.__setattr__(self, "_x_table", x)
         object.__setattr__(self, "_beta_table", beta)
-        object.__setattr__(self, "_x_list", x.tolist())
+        object.__setattr__(self, "_x_list", x_list)
 
     # ---- the protocol every reference kind shares ------------------------------------------
     @property
@@ -214,7 +219,7 @@ class EstimatorReference:
                 "noise": asdict(self.noise), "adapt_time_constant_s": self.adapt_time_constant_s,
                 "block_samples": self.block_samples, "adapt_zones_ph": list(self.adapt_zones_ph),
                 "innovation": self.innovation, "clip_sigma": self.clip_sigma, "correct": self.correct,
-                "fit": self.fit_info}
+                "fit": self.fit_info, **({"confirm": self.confirm} if self.confirm else {})}
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "EstimatorReference":
@@ -226,7 +231,8 @@ class EstimatorReference:
                        # a file written before the zones adapted one factor per feed at every pH
                        tuple(float(b) for b in d.get("adapt_zones_ph", ())),
                        str(d.get("innovation", "ph")), float(d.get("clip_sigma", 0.0)),
-                       bool(d.get("correct", True)), dict(d.get("fit") or {}))
+                       bool(d.get("correct", True)), dict(d.get("fit") or {}),
+                       checked_confirm(d.get("confirm") or {}, f"{where}: confirm"))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not an estimator reference ({exc})") from None
 
@@ -248,6 +254,30 @@ class EstimatorReference:
 
     def with_values(self, **changes) -> "EstimatorReference":
         return replace(self, **changes)
+
+
+def checked_confirm(d: dict, where: str) -> dict:
+    """A reference file's confirmation margins, checked: each a positive number (a damaged entry is one line)."""
+    if not d:
+        return {}
+    if not isinstance(d, dict) or not isinstance(d.get("thresholds"), dict):
+        raise UserError(f"{where}: expected a mapping with 'thresholds'")
+    for k, v in d["thresholds"].items():
+        if not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+            raise UserError(f"{where}: threshold {k!r} must be a positive number, got {v!r}")
+    band = d.get("noise_band")
+    if band is not None and (not isinstance(band, list) or len(band) != 2
+                             or not all(isinstance(b, (int, float)) and b > 0 for b in band) or band[0] > band[1]):
+        raise UserError(f"{where}: noise_band must be [low, high] positive scales, got {band!r}")
+    return dict(d)
+
+
+@functools.lru_cache(maxsize=64)
+def _curve_tables(buffer_mM: float, carbonate_mM: float) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """The curve's tables, computed once per buffer: every reference with this buffer shares them (nothing
+    writes them; they stay writeable arrays so that the compiled filter keeps one signature)."""
+    x, beta = titration_curve(buffer_mM, carbonate_mM)
+    return x, beta, x.tolist()
 
 
 def titration_curve(buffer_mM: float, carbonate_mM: float) -> tuple[np.ndarray, np.ndarray]:
@@ -313,8 +343,13 @@ class EstimatorStream:
         other._gg, other._gy, other._on_s = self._gg.copy(), self._gy.copy(), self._on_s.copy()
         return other
 
-    def residuals(self, t_s: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """Innovations of the next rows (n, len(channels)) at times t_s, in predicted-sigma units."""
+    def residuals(self, t_s: np.ndarray, rows: np.ndarray, noise_at_ph: np.ndarray | None = None) -> np.ndarray:
+        """Innovations of the next rows (n, len(channels)) at times t_s, in predicted-sigma units.
+
+        ``noise_at_ph``: the pH at which the reading's noise is mapped into x (default: the reading). A hypothesis
+        that moves the reading (a probe offset) keeps the noise where it was read: the probe's noise does not
+        change with its offset, and a shift of the curve's buffer capacity would otherwise pass for evidence.
+        """
         ref = self.ref
         rows = np.asarray(rows, dtype=float)
         t = np.ascontiguousarray(t_s, dtype=float)
@@ -326,7 +361,8 @@ class EstimatorStream:
         php = np.where(ok, ph, 7.0)
         xm = ref.x_of_ph(php)
         nz = ref.noise
-        r_meas = (nz.probe_noise_ph * ref.beta_of_ph(php)) ** 2 + nz.curve_std_mM ** 2
+        at = php if noise_at_ph is None else np.where(np.isfinite(noise_at_ph), noise_at_ph, 7.0)
+        r_meas = (nz.probe_noise_ph * ref.beta_of_ph(at)) ** 2 + nz.curve_std_mM ** 2
         n = len(t)
         out = np.full(n, math.nan)
         if n:
