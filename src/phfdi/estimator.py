@@ -12,14 +12,14 @@ like a learned one.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from phfdi.learned import MeasuredRecord, read_measured
 from phfdi_base.errors import UserError
-from wavelet_fdi.estimator_fit import fit_reference
-from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands
+from wavelet_fdi.estimator_calibration import calibrate_estimator
+from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings
 from wavelet_fdi.reference_estimator import EstimatorReference, Feed
 
 PH_CHANNEL = "ph_measured"
@@ -80,13 +80,15 @@ def read_runs(paths: Sequence[str | Path], channels: Sequence[str], column_map=N
 
 
 def fit_estimator(records: Sequence[MeasuredRecord], start: EstimatorReference,
-                  settings: LearnedSettings | None = None) -> LearnedModel:
-    """Fit the estimator on healthy records and calibrate its bands on them."""
+                  settings: LearnedSettings | None = None, progress: Callable[[str], None] | None = None
+                  ) -> LearnedModel:
+    """Fit the estimator on healthy records; its bands and confirmation margins from each record held out
+    (:func:`wavelet_fdi.estimator_calibration.calibrate_estimator`)."""
     if not records:
         raise UserError("the estimator needs at least one healthy run")
     runs = [(r.time_s - r.time_s[0], r.x) for r in records]
     dt = float(np.median(np.concatenate([np.diff(t) for t, _ in runs if len(t) > 1])))
     base = settings or LearnedSettings(**ESTIMATOR_SETTINGS)
     s = LearnedSettings(**{**base.__dict__, "sample_time_s": dt})
-    ref = fit_reference(runs, start)
-    return calibrate_bands(ref, runs, s, {"files": [r.path for r in records], "rows": int(sum(len(r.x) for r in records))})
+    return calibrate_estimator(runs, start, s, {"files": [r.path for r in records],
+                                                "rows": int(sum(len(r.x) for r in records))}, progress=progress)

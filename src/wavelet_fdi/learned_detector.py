@@ -52,6 +52,10 @@ from .statistics import CusumBank, energy_decrease_reference, energy_reference
 FORMAT = "phfdi-learned-detector/1"
 TIME_RING = 1 << 16
 NAMING_RING = 1 << 13  # rows kept for naming an alarm's fault (about 48 min at the rig's 0.35 s)
+#: a longer chunk is processed in parts of this many rows (the same events: any chunking gives them), so that the
+#: ring, filled with a part's rows before its blocks run, still holds every row a naming window reaches back to
+MAX_PART_ROWS = 1024
+NAMING_WINDOW = NAMING_RING - MAX_PART_ROWS
 NAMING_AFTER = 64  # samples after a detection that the naming window takes in
 #: blocks of a run the run-adapted energy scale learns from (a running mean, never frozen) before the energy
 #: CUSUMs look at it: 4 blocks of 32 samples estimate a variance to about 12 % (sqrt(2 / 128))
@@ -124,6 +128,10 @@ class LearnedSettings:
     clear_fraction: float = 0.2
     #: nominal sample time of the record (s)
     sample_time_s: float = 1.0
+    #: with a reference that confirms its alarms (the estimator): a deviation no fault hypothesis explains is
+    #: announced once ("outside calibration", WARN); the next ones are announced only after this long (s) without
+    #: one (each is still kept and counted)
+    outside_hold_s: float = 300.0
 
     def check(self) -> "LearnedSettings":
         try:
@@ -157,6 +165,8 @@ class LearnedSettings:
             raise UserError("sample_time_s must be positive")
         if not 0.0 <= self.clear_fraction < 1.0:
             raise UserError("clear_fraction must be in [0, 1)")
+        if not self.outside_hold_s >= 0:
+            raise UserError("outside_hold_s must be >= 0")
         return self
 
     @classmethod
@@ -281,24 +291,31 @@ def learn(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSetti
 
 
 def calibrate_bands(reference: Reference, runs: Sequence[tuple[np.ndarray, np.ndarray]],
-                    settings: LearnedSettings, source: dict | None = None) -> LearnedModel:
+                    settings: LearnedSettings, source: dict | None = None,
+                    run_references: Sequence[Reference] | None = None) -> LearnedModel:
     """A detector model for ``reference``: each residual band's healthy RMS measured on healthy runs.
 
     Every run (time_s, rows in ``reference.channels`` order) goes through a fresh detector; the bands
     after each run's warm-up are pooled. Works for every reference kind (:mod:`wavelet_fdi.references`).
-    The source keeps each channel's healthy range (``healthy_ranges``, :mod:`wavelet_fdi.healthy_range`).
+    ``run_references``: the reference each run's residuals come from (one per run; e.g. each fitted without
+    its run, so that the bands measure what a day the reference has not seen looks like); default
+    ``reference`` for all. The source keeps each channel's healthy range (``healthy_ranges``,
+    :mod:`wavelet_fdi.healthy_range`).
     """
     source = {**(source or {}), "healthy_ranges": healthy_ranges([rows for _, rows in runs], reference.channels)}
     s = settings.check()
     m = len(reference.residual_channels)
-    provisional = LearnedModel(reference, s, np.ones((m, s.level + 1)), dict(source or {}))
+    refs = list(run_references) if run_references is not None else [reference] * len(runs)
+    if len(refs) != len(runs):
+        raise ValueError(f"{len(refs)} run references for {len(runs)} runs")
     pooled = []
-    for t, rows in runs:
+    for (t, rows), ref in zip(runs, refs):
+        provisional = LearnedModel(ref, s, np.ones((m, s.level + 1)), dict(source or {}))
         det = LearnedDetector(provisional, alarms=False, record_trace=True)
         det.process(t, rows)
         pooled.append(det.trace()["coef"][det.fill_samples:])  # (n, m, J+1), AJ already observer-corrected
     coef = np.concatenate(pooled) if pooled else np.empty((0, m, s.level + 1))
-    fill = LearnedDetector(provisional).fill_samples
+    fill = LearnedDetector(LearnedModel(reference, s, np.ones((m, s.level + 1)))).fill_samples
     if len(coef) < 8 * s.block_samples:
         rows_in = sum(len(r) for _, r in runs)
         raise UserError(f"the healthy part has {rows_in} rows; calibrating the bands needs at least "
@@ -312,14 +329,25 @@ def calibrate_bands(reference: Reference, runs: Sequence[tuple[np.ndarray, np.nd
 
 @dataclass
 class LearnedEvent:
-    """A state change: alarm raised, alarm cleared, or an input problem."""
+    """A state change: a fault alarm raised or cleared, a deviation being checked or found outside calibration,
+    or an input problem.
 
-    kind: str  # "alarm" | "cleared" | "input"
+    Kinds: ``alarm`` (ERROR: a fault; with a confirming reference, the fault hypothesis beat healthy operation
+    re-adapted), ``deviation`` (WARN: a statistic crossed its threshold, a confirming reference checks over
+    the next samples whether a fault explains it), ``outside_calibration`` (WARN: none does: the plant runs
+    where the calibration never went, or the model misses something), ``named`` (the name of an alarm of a
+    reference that names but does not confirm), ``cleared`` (OK), ``input`` (WARN). ``announce`` False: a
+    repeat within ``outside_hold_s`` of the last deviation outside calibration, kept but not to be shown as a
+    new state (the detector node does not publish it).
+    """
+
+    kind: str
     time_s: float
     index: int
     level: str  # "OK" | "WARN" | "ERROR"
     message: str
     alarm: dict | None = None
+    announce: bool = True
 
 
 class LearnedDetector:
@@ -413,6 +441,9 @@ class LearnedDetector:
         self._ring_x = np.full((NAMING_RING, len(self.inputs)), np.nan) if self.namer else np.empty((0, 0))
         self._to_name: list[dict] = []
         self._named: list[int] = []
+        # a confirming reference (its namer says whether a fault explains an alarm): alarms start as deviations
+        self.confirming = self.namer is not None and bool(getattr(model.reference, "confirm", None))
+        self._last_outside_t = -math.inf  # the last deviation outside calibration (the announcements' hold)
         # per channel the last sample beyond the healthy runs' range (an alarm whose window holds one says so)
         self._ranges = model.source.get("healthy_ranges") or {}
         self._last_outside: dict[str, int] = {}
@@ -427,6 +458,10 @@ class LearnedDetector:
                             f"got shape {rows.shape}")
         if len(t) != len(rows):
             raise UserError(f"{len(t)} time stamps for {len(rows)} rows")
+        if len(rows) > MAX_PART_ROWS and self.namer is not None:
+            parts = [self.process(t[a:a + MAX_PART_ROWS], rows[a:a + MAX_PART_ROWS])
+                     for a in range(0, len(rows), MAX_PART_ROWS)]
+            return [e for ev, _ in parts for e in ev], np.concatenate([st for _, st in parts])
         events: list[LearnedEvent] = []
         states = np.zeros(len(rows), dtype=np.int8)
         if not len(rows):
@@ -448,9 +483,16 @@ class LearnedDetector:
         if self.energy or self.energy_down:  # the detail bands' d^2 and missing flags, channel-major, once a chunk
             chunk.e2 = d_norm.transpose(2, 0, 1).reshape(self.m * self.settings.level, n) ** 2
             chunk.miss = np.repeat(missing.T, self.settings.level, axis=0)
+        if self.namer is not None:
+            self._keep(t, rows)
         pos = 0
         while pos < n:
             done = self.samples_processed + pos  # rows processed so far: blocks are aligned to them
+            if self.namer is not None and done % b == 0:
+                # alarms whose naming window ended by this block boundary are named (confirmed or not) before the
+                # block runs: at global indices, so that any chunking names them, and decides the announcement of
+                # a later deviation, in the same order
+                events += self._name_faults(done, final=False)
             end = min(n, pos + (b - done % b))
             ev = self._block(t, pos, end, chunk, states)
             events += ev
@@ -458,7 +500,6 @@ class LearnedDetector:
         if self._ranges:
             self._mark_outside(rows, events)
         if self.namer is not None:
-            events += self._name_faults(t, rows, final=False)
             events.sort(key=lambda e: e.index)  # in sample order, as a chunk of one row at a time gives them
         self.samples_processed += n
         return events, states
@@ -467,27 +508,28 @@ class LearnedDetector:
         """The record ended: name every alarm still waiting for its NAMING_AFTER samples with what there is."""
         if self.namer is None or not self.samples_processed:
             return []
-        return self._name_faults(np.empty(0), np.empty((0, len(self.inputs))), final=True)
+        return self._name_faults(self.samples_processed, final=True)
 
-    def _name_faults(self, t: np.ndarray, rows: np.ndarray, final: bool) -> list[LearnedEvent]:
-        """Keep the rows in the ring; name each alarm whose window (to NAMING_AFTER samples after its detection)
-        is complete. The window ends at a fixed global index, so any chunking names it the same way."""
-        namer = self.namer
-        assert namer is not None, "called only for a reference that names faults"
-        g0 = self.samples_processed
-        idx = (g0 + np.arange(len(rows))) % NAMING_RING
+    def _keep(self, t: np.ndarray, rows: np.ndarray) -> None:
+        """The rows into the ring the naming windows are read from."""
+        idx = (self.samples_processed + np.arange(len(rows))) % NAMING_RING
         self._ring_t[idx] = t
         self._ring_x[idx] = rows
+
+    def _name_faults(self, upto: int, final: bool) -> list[LearnedEvent]:
+        """Name each alarm whose window (to NAMING_AFTER samples after its detection) ended by global index
+        ``upto`` (``final``: every alarm, with the rows there are)."""
+        namer = self.namer
+        assert namer is not None, "called only for a reference that names faults"
         for a in self.alarms[len(self._named_ids()):]:
             self._to_name.append(a)
-        end_all = g0 + len(rows)
         events = []
         for a in list(self._to_name):
             end = a["detection_index"] + NAMING_AFTER
-            if end > end_all and not final:
+            if end > upto and not final:
                 continue
-            end = min(end, end_all)
-            first = max(0, end - NAMING_RING)
+            end = min(end, upto)
+            first = max(0, end - NAMING_WINDOW)
             k = (np.arange(first, end)) % NAMING_RING
             iso = namer(self._ring_t[k], self._ring_x[k], a["onset_index"] - first,
                              a["detection_index"] - first, a["statistic"])
@@ -495,10 +537,35 @@ class LearnedDetector:
             self._to_name.remove(a)
             self._named.append(a["alarm_id"])
             when = float(self._ring_t[(end - 1) % NAMING_RING])
+            if self.confirming:
+                events += self._verdict(a, iso, when, end - 1)
+                continue
             events.append(LearnedEvent("named", when, end - 1, "ERROR" if self.in_alarm else "OK",
                                        f"alarm {a['alarm_id']} named: {iso['family']} fault, {iso['description']} "
                                        f"({iso['size']:g} {iso['unit']})", dict(a)))
         return events
+
+    def _verdict(self, a: dict, iso: dict, t_s: float, index: int) -> list[LearnedEvent]:
+        """A deviation checked: a fault alarm (ERROR, always announced; followed by its clearing when the
+        deviation has already ended) or a deviation outside calibration (WARN, announced as its deviation was)."""
+        size = f"{iso['size']:g} {iso['unit']}".strip()
+        still_up = self.in_alarm and self._alarm is a
+        if iso.get("confirmed", True):
+            a.update(verdict="fault", confirmed_time=t_s, confirmed_index=int(index))
+            out = [LearnedEvent("alarm", t_s, index, "ERROR",
+                                f"alarm {a['alarm_id']}: {iso['family']} fault, {iso['description']} ({size}); "
+                                f"{a['statistic']} crossed its threshold at {a['detection_time']:g} s", dict(a))]
+            if not still_up:
+                out.append(LearnedEvent("cleared", t_s, index, "OK", f"alarm {a['alarm_id']} cleared: the "
+                                        f"deviation had ended at {a.get('cleared_time', t_s):g} s", dict(a)))
+            return out
+        a["verdict"] = "outside calibration"
+        self._last_outside_t = t_s
+        why = (f"its best healthy explanation: {iso['description']} ({size})" if iso["family"] != "none"
+               else "and no healthy explanation fits either")
+        return [LearnedEvent("outside_calibration", t_s, index, "WARN" if still_up else "OK",
+                             f"deviation {a['alarm_id']} outside calibration: no fault hypothesis explains it by the "
+                             f"calibrated margin, {why}", dict(a), announce=a.get("announced", True))]
 
     def _named_ids(self) -> list[int]:
         return self._named + [a["alarm_id"] for a in self._to_name]
@@ -695,8 +762,7 @@ class LearnedDetector:
                 self._episode[:] = 0.0
                 self._peak = np.zeros(self.m)
                 self._alarm = self._raise(t[i0 + j], g0 + j, ratio[:, j])
-                events.append(LearnedEvent("alarm", float(t[i0 + j]), g0 + j, "ERROR", self._alarm_message(),
-                                           dict(self._alarm)))
+                events.append(self._raised_event(float(t[i0 + j]), g0 + j))
             # in alarm: held while a crossing happened in the last block_samples samples
             idx = np.arange(j, nb)
             hold = self._holding(j, ratio, absu)
@@ -755,8 +821,9 @@ class LearnedDetector:
         the alarm may be the reference's rather than the plant's. Any chunking gives the same lists."""
         g0 = self.samples_processed
         masks = outside_masks(self._ranges, rows, self.inputs)
+        raised = "deviation" if self.confirming else "alarm"  # the event of the crossing itself
         for ev in events:
-            if ev.kind != "alarm" or ev.alarm is None:
+            if ev.kind != raised or ev.alarm is None:
                 continue
             a = ev.alarm
             onset = int(a["detection_index"] if a.get("onset_index") is None else a["onset_index"])
@@ -773,11 +840,20 @@ class LearnedDetector:
             if len(hit):
                 self._last_outside[c] = g0 + int(hit[-1])
 
-    def _alarm_message(self) -> str:
+    def _raised_event(self, t_s: float, index: int) -> LearnedEvent:
+        """The event of a statistic crossing: a fault alarm, or with a confirming reference a deviation to be
+        checked (not announced within ``outside_hold_s`` of the last deviation outside calibration)."""
         a = self._alarm
         assert a is not None, "called in alarm only"
         top = ", ".join(f"{c} {v['share']:.0%}" for c, v in list(a["contributions"].items())[:3])
-        return f"alarm {a['alarm_id']}: {a['statistic']} crossed its threshold; channels: {top}"
+        if not self.confirming:
+            return LearnedEvent("alarm", t_s, index, "ERROR",
+                                f"alarm {a['alarm_id']}: {a['statistic']} crossed its threshold; channels: {top}", dict(a))
+        a["verdict"] = "pending"
+        a["announced"] = t_s - self._last_outside_t >= self.settings.outside_hold_s
+        return LearnedEvent("deviation", t_s, index, "WARN",
+                            f"deviation {a['alarm_id']}: {a['statistic']} crossed its threshold; channels: {top}; "
+                            f"checking whether a fault explains it", dict(a), announce=a["announced"])
 
     def _clear(self, t_s: float, index: int) -> LearnedEvent:
         a = self._alarm
@@ -785,9 +861,10 @@ class LearnedDetector:
         a["cleared_time"] = float(t_s)
         a["cleared_index"] = int(index)
         a["episode_contributions"] = self._contributions(self._episode)
+        what = "alarm" if a.get("verdict", "fault") == "fault" else "deviation"
         return LearnedEvent("cleared", float(t_s), int(index), "OK",
-                            f"alarm {a['alarm_id']} cleared: no statistic above its threshold for "
-                            f"{self.settings.block_samples} samples", dict(a))
+                            f"{what} {a['alarm_id']} cleared: no statistic above its threshold for "
+                            f"{self.settings.block_samples} samples", dict(a), announce=a.get("announced", True))
 
     def _missing_events(self, missing: np.ndarray, t: np.ndarray) -> list[LearnedEvent]:
         out = []

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from .common import (
     EPILOG_FORMAT,
@@ -244,7 +245,8 @@ def run_estimator(args: argparse.Namespace) -> int:
     for r in records:
         print_notes("calibrate", r.notes)
     with plant_runs_on(", ".join(args.estimator)):
-        model = fit_estimator(records, start, learned_settings(args.learned, LearnedSettings(**ESTIMATOR_SETTINGS)))
+        model = fit_estimator(records, start, learned_settings(args.learned, LearnedSettings(**ESTIMATOR_SETTINGS)),
+                              progress=lambda msg: print(f"phfdi calibrate: {msg} ...", file=sys.stderr, flush=True))
     store_column_map(args, model)
     model.save(args.out, overwrite=args.overwrite)
     ref = model.reference
@@ -259,10 +261,28 @@ def run_estimator(args: argparse.Namespace) -> int:
     print(f"  strengths adapt with a time constant of {ref.adapt_time_constant_s:g} s of pump-on time "  # type: ignore[attr-defined]
           f"(every {ref.block_samples} samples)")  # type: ignore[attr-defined]
     print(f"  healthy RMS per band ({', '.join(model.settings.bands())}): "
-          + " ".join(f"{v:.2f}" for v in model.band_sigma[0]))
+          + " ".join(f"{v:.2f}" for v in model.band_sigma[0])
+          + f" (from {model.source.get('bands_from', 'the runs themselves')})")
+    print_confirmation(ref)
     print_healthy_ranges(model)
     print(f"wrote {args.out}")
     return 0
+
+
+def print_confirmation(ref) -> None:
+    """The fault confirmation's margin and its design (an estimator reference)."""
+    conf = getattr(ref, "confirm", None) or {}
+    if not conf.get("thresholds"):
+        return
+    tail = conf["null_tail"]["change"]
+    print(f"  fault confirmation: a deviation is a fault alarm when the innovations' change against the run's own "
+          f"past exceeds {conf['thresholds']['change']:.2f} and a probe fault explains it better than any feed's "
+          f"apparent strength; healthy operation exceeds that margin with probability {conf['alpha_per_test']:g} "
+          f"({tail['n']} null values from {'each run held out' if conf.get('held_out') else 'the one run itself'}); "
+          f"else it is a deviation outside calibration (WARN)")
+    if not conf.get("held_out"):
+        print("  note: one calibration run: the scales and the margin come from that run itself, not from a day it did "
+              "not see; calibrate on two runs or more to measure them across days")
 
 
 def print_healthy_ranges(model) -> None:
