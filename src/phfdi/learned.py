@@ -205,35 +205,66 @@ def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | 
 
 
 def format_alarms(alarms: list[dict], unit_of_time: str = "s") -> str:
+    """Each alarm for people: a fault alarm, or (a reference that confirms its alarms) a deviation outside
+    calibration, with where it was detected, the channels behind it, its name and when it cleared."""
     if not alarms:
         return "no alarm"
     lines = []
     for a in alarms:
-        top = ", ".join(f"{c} {v['share']:.0%} ({max(v['bands'], key=v['bands'].get)})"
-                        for c, v in list(a["contributions"].items())[:4])
-        # the file's own position (line of a text file, row of Parquet, sample of a bag; 1 = the first), never
-        # the detector's 0-based index: a spreadsheet or editor shows the same number
-        where = f"{a.get('where', 'line')} {a['detection_line']}" if "detection_line" in a \
-            else f"sample {a['detection_index'] + 1}"
-        where = ", ".join(filter(None, [a.get("detection_stamp"), where]))
-        onset = "" if a.get("onset_time") is None else f", onset about {a['onset_time']:g} {unit_of_time}"
-        if a.get("onset_stamp"):
-            onset += f" ({a['onset_stamp']})"
-        lines.append(f"alarm {a['alarm_id']}: detected {a['detection_time']:g} {unit_of_time} "
-                     f"({where}){onset}, by "
-                     f"{a['statistic']} ({exceedance(a['statistic_value'], a['threshold'])})")
-        lines.append(f"  channels: {top}")
-        if a.get("outside_healthy_range"):
-            lines.append(f"  beyond the reference's healthy runs then: {', '.join(a['outside_healthy_range'])} (a fault, "
-                         f"or an operation the calibration never saw)")
-        iso = a.get("isolation")
-        if iso:
-            began = "" if iso.get("start_time") is None else f" from about {iso['start_time']:g} {unit_of_time}"
-            lines.append(f"  named: {iso['family']} fault, {iso['description']} ({iso['size']:g} {iso['unit']}{began}; "
-                         f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)")
-        if a.get("cleared_time") is not None:
-            ep = a.get("episode_contributions") or {}
-            stamp = f" ({a['cleared_stamp']})" if a.get("cleared_stamp") else ""
-            lines.append(f"  cleared {a['cleared_time']:g} {unit_of_time}{stamp}; over the episode: "
-                         + ", ".join(f"{c} {v['share']:.0%}" for c, v in list(ep.items())[:4]))
+        lines += _alarm_lines(a, unit_of_time)
     return "\n".join(lines)
+
+
+def _alarm_lines(a: dict, u: str) -> list[str]:
+    top = ", ".join(f"{c} {v['share']:.0%} ({max(v['bands'], key=v['bands'].get)})"
+                    for c, v in list(a["contributions"].items())[:4])
+    # the file's own position (line of a text file, row of Parquet, sample of a bag; 1 = the first), never
+    # the detector's 0-based index: a spreadsheet or editor shows the same number
+    where = f"{a.get('where', 'line')} {a['detection_line']}" if "detection_line" in a \
+        else f"sample {a['detection_index'] + 1}"
+    where = ", ".join(filter(None, [a.get("detection_stamp"), where]))
+    onset = "" if a.get("onset_time") is None else f", onset about {a['onset_time']:g} {u}"
+    if a.get("onset_stamp"):
+        onset += f" ({a['onset_stamp']})"
+    crossing = f"{a['statistic']} ({exceedance(a['statistic_value'], a['threshold'])})"
+    verdict = a.get("verdict")
+    iso = a.get("isolation") or {}
+    if verdict is None:  # a reference that does not confirm: every crossing is an alarm
+        out = [f"alarm {a['alarm_id']}: detected {a['detection_time']:g} {u} ({where}){onset}, by {crossing}"]
+    elif verdict == "fault":
+        out = [f"alarm {a['alarm_id']}: fault confirmed {a['confirmed_time']:g} {u}; deviation detected "
+               f"{a['detection_time']:g} {u} ({where}){onset}, by {crossing}"]
+    else:
+        said = "" if a.get("announced", True) else " (not announced: within the hold of the last one)"
+        out = [f"deviation {a['alarm_id']}: detected {a['detection_time']:g} {u} ({where}){onset}, by {crossing}; "
+               f"{verdict or 'being checked'}{said}"]
+    out.append(f"  channels: {top}")
+    if a.get("outside_healthy_range"):
+        out.append(f"  beyond the reference's healthy runs then: {', '.join(a['outside_healthy_range'])} (a fault, "
+                   f"or an operation the calibration never saw)")
+    if iso:
+        out += _named_lines(iso, verdict, u)
+    if a.get("cleared_time") is not None:
+        ep = a.get("episode_contributions") or {}
+        stamp = f" ({a['cleared_stamp']})" if a.get("cleared_stamp") else ""
+        out.append(f"  cleared {a['cleared_time']:g} {u}{stamp}; over the episode: "
+                   + ", ".join(f"{c} {v['share']:.0%}" for c, v in list(ep.items())[:4]))
+    return out
+
+
+def _named_lines(iso: dict, verdict: str | None, u: str) -> list[str]:
+    began = "" if iso.get("start_time") is None else f" from about {iso['start_time']:g} {u}"
+    size = f"{iso['size']:g} {iso['unit']}".strip()
+    conf = iso.get("confirmation") or {}
+    margins = ", ".join(f"{k} {v:.0f} (margin {conf['thresholds'][k]:.0f})"
+                        for k, v in (conf.get("statistics") or {}).items() if k in conf.get("thresholds", {}))
+    if verdict == "outside calibration":
+        why = ("no fault and no healthy explanation fits" if iso["fault_class"] == "unexplained"
+               else f"best explained as healthy operation re-adapted: {iso['description']} ({size})")
+        return [f"  outside calibration: no fault hypothesis beats healthy operation by its margin; {why}",
+                f"  fault-over-healthy log-likelihood ratios: {margins}"]
+    out = [f"  named: {iso['family']} fault, {iso['description']} ({size}{began}; "
+           f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)"]
+    if margins:
+        out.append(f"  confirmed by: {', '.join(conf.get('confirmed_by', []))} (ratios over healthy re-adapted: {margins})")
+    return out

@@ -65,6 +65,9 @@ PARAMS = (
 #: wall time between the checks of a channel map's waits and silent topics
 TICK_S = 0.2
 STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
+#: a confirming reference's deviations take the state their level says (WARN while being checked or outside
+#: calibration; OK when one ended before its verdict)
+STATE_OF_LEVEL = {"ERROR": FaultAlarm.ALARM, "WARN": FaultAlarm.WARN, "OK": FaultAlarm.OK}
 
 
 class LearnedDetectorNode(DetectorNodeBase):
@@ -81,6 +84,7 @@ class LearnedDetectorNode(DetectorNodeBase):
         except UserError as exc:
             raise NodeStartError(f"parameter reference = {path!r}: {exc}") from None
         self.core = LearnedDetector(self.model)
+        self.quiet_events = 0  # deviations (and their verdicts) kept but not published: the hold of the last one
         # where the inputs leave what the reference's healthy runs had (a reference file from before: nothing)
         self.range_watch = RangeWatch(self.model.source.get("healthy_ranges") or {}, self.model.channels)
         self._index = {c: i for i, c in enumerate(self.model.channels)}
@@ -180,20 +184,31 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._pub_range.publish(array)
 
     def _publish(self, ev) -> None:
-        state = STATE_OF_KIND.get(ev.kind, self._state if self._state == FaultAlarm.ALARM else FaultAlarm.WARN)
+        if not ev.announce:  # a repeat within the hold of the last deviation outside calibration: kept, not shown
+            self.quiet_events += 1
+            return
+        if ev.kind in ("deviation", "outside_calibration"):
+            state = STATE_OF_LEVEL[ev.level]
+        else:
+            state = STATE_OF_KIND.get(ev.kind, self._state if self._state == FaultAlarm.ALARM else FaultAlarm.WARN)
         msg = FaultAlarm(loop=self._loop, state=state, message=ev.message, severity=math.nan, wavelet_level=-1)
         msg.stamp = self._stamp(ev.time_s)
         a = ev.alarm
         if a:
             iso = a.get("isolation") or {}
-            msg.fault_class = iso.get("fault_class", "unknown")  # named NAMING_AFTER samples after the detection
+            # named NAMING_AFTER samples after the detection; a deviation no fault explains is no fault class
+            msg.fault_class = {"pending": "pending", "outside calibration": "outside_calibration"}.get(
+                a.get("verdict", ""), iso.get("fault_class", "unknown"))
+            if a.get("verdict") == "outside calibration":
+                iso = {}
             if iso:
                 msg.severity, msg.severity_unit = float(iso["size"]), str(iso["unit"])
             msg.detection_time = self._stamp(a["detection_time"])
             if a.get("onset_time") is not None:
                 msg.onset_time = self._stamp(a["onset_time"])
             msg.statistic, msg.threshold = float(a["statistic_value"]), float(a["threshold"])
-            cont = a["contributions"] if ev.kind == "alarm" else a.get("episode_contributions") or a["contributions"]
+            cont = a["contributions"] if ev.kind in ("alarm", "deviation") \
+                else a.get("episode_contributions") or a["contributions"]
             msg.channels = list(cont)
             msg.channel_shares = [float(v["share"]) for v in cont.values()]
             msg.channel_bands = [max(v["bands"], key=v["bands"].get) for v in cont.values()]
@@ -216,7 +231,7 @@ class LearnedDetectorNode(DetectorNodeBase):
 
     def done_report(self) -> dict:
         report = {"samples": self.core.samples_processed, "alarms": self.core.alarms,
-                  "core_errors": self.core_errors, "reference": self.param("reference"),
+                  "core_errors": self.core_errors, "quiet_events": self.quiet_events, "reference": self.param("reference"),
                   "outside_healthy_range": self.range_watch.summary()}
         if self.inputs is not None:
             a = self.inputs.aligner
