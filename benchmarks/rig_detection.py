@@ -26,23 +26,29 @@ def main() -> None:
     ap.add_argument("--detectors", nargs="+", default=None, metavar="NAME",
                     help="only these (estimator, 'nominal estimator', 'open loop', 'learned ARX', 'learned OE', "
                          "'plain CUSUM (estimator residual)'); without the physics ones the estimator is not fitted")
-    ap.add_argument("--leave-out", type=int, default=1, metavar="K",
-                    help="hold out every set of K runs in turn and calibrate on the others (default 1)")
+    ap.add_argument("--leave-out", default="1", metavar="K",
+                    help="hold out every set of K runs in turn and calibrate on the others (default 1); 'operation': "
+                         "every run of one operation (titrations, open-loop additions, closed-loop control) at once")
     args = ap.parse_args()
     paths = sorted(glob.glob(str(Path(args.data) / "ph_rig" / "*.csv")))
     if not paths:
         raise SystemExit(f"no rig runs under {args.data}/ph_rig")
     t0 = time.perf_counter()
     result = evaluate(paths, shipped_map("ph_rig"), progress=lambda s: print(s, flush=True),
-                      only=args.detectors, leave_out=args.leave_out)
+                      only=args.detectors, leave_out=args.leave_out if args.leave_out == "operation"
+                      else int(args.leave_out))
     result["summary"] = summary(result)
     print(f"\n{len(result['folds'])} folds (leave-{args.leave_out}-out) in {time.perf_counter() - t0:.0f} s; "
           f"load average {os.getloadavg()[0]:.1f}")
     for e in result["summary"]:
-        print(f"\n{e['detector']}: held-out healthy runs: {e['healthy_false_alarms']} alarms in "
-              f"{e['healthy_hours'] * 60:.1f} min ({e['healthy_runs_with_alarm']} of {e['healthy_replays']} replays "
-              f"with an alarm); outside the training runs' healthy range: {e['outside_range_with_alarm']} of those "
-              f"with an alarm, {e['outside_range_without_alarm']} of the others; alarms listing a channel beyond it "
+        hours = e['healthy_hours']
+        print(f"\n{e['detector']}: held-out healthy runs: {e['healthy_false_alarms']} fault alarms in "
+              f"{hours * 60:.1f} min ({e['healthy_false_alarms'] / hours:.2f} per hour; "
+              f"{e['healthy_runs_with_alarm']} of {e['healthy_replays']} replays with one); "
+              f"{e['healthy_warnings']} deviations outside calibration (WARN; {e['healthy_warnings_announced']} "
+              f"announced, {e['healthy_warnings_announced'] / hours:.1f} per hour); outside the training runs' healthy "
+              f"range: {e['outside_range_with_alarm']} of the replays with a fault alarm, "
+              f"{e['outside_range_without_alarm']} of the others; fault alarms listing a channel beyond it "
               f"{e['false_alarms_marked']}")
         for k, v in e["kinds"].items():
             d = "" if v["median_delay_s"] is None else f", median delay {v['median_delay_s']:.1f} s"

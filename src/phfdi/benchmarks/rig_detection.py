@@ -35,10 +35,12 @@ SIZES: dict[str, tuple[float, ...]] = {
     "probe_lag": (30.0, 10.0), "probe_gain": (0.3, 0.1), "pump_low": (0.5, 0.2), "pump_high": (0.5, 0.2),
     "pump_stuck": (3.0, 1.0)}
 ONSET_FRACTIONS = (0.35, 0.55, 0.75)
-#: the class a right name gives each injected probe kind (the hypotheses of wavelet_fdi.estimator_isolation): a
-#: bias, a drift and a slope error are locally an offset; a frozen or sluggish reading loses its noise (s < 1)
-PROBE_CLASS = {"probe_bias": "probe_offset", "probe_drift": "probe_offset", "probe_gain": "probe_offset",
-               "probe_frozen": "probe_noise", "probe_lag": "probe_noise", "probe_noise": "probe_noise"}
+#: the classes a right name gives each injected probe kind (the hypotheses of wavelet_fdi.estimator_isolation), the
+#: first the exact one: a slope error is locally an offset or a drift, a drift over a short window an offset; a
+#: frozen or sluggish reading loses its noise (s < 1)
+PROBE_CLASS = {"probe_bias": ("probe_offset",), "probe_drift": ("probe_drift", "probe_offset"),
+               "probe_gain": ("probe_offset", "probe_drift"), "probe_frozen": ("probe_noise",),
+               "probe_lag": ("probe_noise",), "probe_noise": ("probe_noise",)}
 PLAIN_CUSUM_K = 0.5
 
 
@@ -55,7 +57,10 @@ def plain_cusum_h(arl0: float = 1e5, k: float = PLAIN_CUSUM_K) -> float:
 
 @dataclass
 class Outcome:
-    alarms_before: int = 0
+    alarms_before: int = 0  # fault alarms before the onset (all of them on a healthy run)
+    warnings_before: int = 0  # deviations outside calibration before the onset (WARN, never a fault alarm)
+    warnings_announced_before: int = 0  # of those, announced (not within the hold of the last one)
+    warnings_after: int = 0  # after the onset, before the first fault alarm
     first_after_s: float | None = None
     family: str | None = None  # named by the first alarm after the onset (None: the detector names none)
     fault_class: str | None = None
@@ -64,9 +69,9 @@ class Outcome:
     outside: list | None = None  # the channels the first alarm after the onset lists beyond that range
 
 
-def expected_class(kind: str, pump: str | None) -> str:
-    """The fault class a right name gives an injected fault of ``kind`` (on ``pump``'s flow for the pumps)."""
-    return f"pump:{pump}_flow_ml_s" if kind.startswith("pump") else PROBE_CLASS[kind]
+def expected_class(kind: str, pump: str | None) -> list[str]:
+    """The fault classes a right name gives an injected fault of ``kind`` (on ``pump``'s flow for the pumps)."""
+    return [f"pump:{pump}_flow_ml_s"] if kind.startswith("pump") else list(PROBE_CLASS[kind])
 
 
 def expected_size(kind: str, size: float) -> float | None:
@@ -77,9 +82,18 @@ def expected_size(kind: str, size: float) -> float | None:
 
 
 def outcome(alarms: Sequence[dict], onset_s: float | None) -> Outcome:
+    """What a detector's alarms (:func:`learned_alarms`) say of a run whose fault starts at ``onset_s`` (None:
+    healthy): fault alarms and deviations outside calibration (``verdict``) counted apart."""
     out = Outcome()
     for a in alarms:
         ta = a["t"]
+        if a.get("verdict", "fault") != "fault":
+            if onset_s is None or ta < onset_s:
+                out.warnings_before += 1
+                out.warnings_announced_before += bool(a.get("announced", True))
+            elif out.first_after_s is None:
+                out.warnings_after += 1
+            continue
         if onset_s is None or ta < onset_s:
             out.alarms_before += 1
             out.marked_before += bool(a.get("outside"))
@@ -90,29 +104,32 @@ def outcome(alarms: Sequence[dict], onset_s: float | None) -> Outcome:
 
 
 def learned_alarms(model: LearnedModel, rec: MeasuredRecord) -> list[dict]:
-    """Each alarm's raise time ``t``, the time it cleared (``until``; the record's end if it did not), the
-    fault family named (estimator references; None for the others) and the channels it lists beyond the training
-    runs' healthy range (``outside``)."""
-    events, _, _ = run_record(model, rec.time_s, rec.x)
-    # the core names an alarm NAMING_AFTER samples after its detection (a "named" event)
-    names = {e.alarm["alarm_id"]: e.alarm["isolation"] for e in events if e.kind == "named" and e.alarm}
+    """Each deviation the detector raised: ``t``, when it became a fault alarm (a confirming reference: when the
+    fault was confirmed, i.e. when /fault_alarm says ALARM) or was raised (others, and deviations outside
+    calibration: ``verdict``), the time it cleared (``until``; the record's end if it did not), the fault
+    family, class and size named (estimator references; None for the others), whether it was announced, and
+    the channels it lists beyond the training runs' healthy range (``outside``)."""
+    _, _, det = run_record(model, rec.time_s, rec.x)
     out: list[dict] = []
-    for e in events:
-        if e.kind == "alarm" and e.alarm:
-            iso = names.get(e.alarm["alarm_id"]) or {}
-            out.append({"t": float(e.time_s), "until": float(rec.time_s[-1]), "family": iso.get("family"),
-                        "fault_class": iso.get("fault_class"), "size": iso.get("size"),
-                        "outside": e.alarm.get("outside_healthy_range")})
-        elif e.kind == "cleared" and out:
-            out[-1]["until"] = float(e.time_s)
-    return out
+    for a in det.alarms:
+        iso = a.get("isolation") or {}
+        verdict = a.get("verdict", "fault")
+        t = a.get("confirmed_time", a["detection_time"]) if verdict == "fault" else a["detection_time"]
+        until = a.get("cleared_time")
+        out.append({"t": float(t), "until": float(rec.time_s[-1] if until is None else max(until, t)),
+                    "verdict": verdict, "announced": a.get("announced", True), "family": iso.get("family"),
+                    "fault_class": iso.get("fault_class"), "size": iso.get("size"),
+                    "confirmation": (iso.get("confirmation") or {}).get("statistics"),
+                    "outside": a.get("outside_healthy_range")})
+    return sorted(out, key=lambda a: a["t"])
 
 
 def held_share(alarms: Sequence[dict], onset_s: float, end_s: float) -> float:
     """Share of the time from the onset to the record's end with an alarm up (the fault stays to the end)."""
     if not end_s > onset_s:
         return 0.0
-    up = sum(max(0.0, min(a["until"], end_s) - max(a["t"], onset_s)) for a in alarms)
+    up = sum(max(0.0, min(a["until"], end_s) - max(a["t"], onset_s)) for a in alarms
+             if a.get("verdict", "fault") == "fault")
     return up / (end_s - onset_s)
 
 
@@ -162,7 +179,7 @@ def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_fla
 
         def plain(rec: MeasuredRecord) -> list[dict]:
             r = est.reference.new_state().residuals(rec.time_s - rec.time_s[0], rec.x)[:, 0]
-            return [{"t": t, "until": t} for t in cusum_alarm_times(r, rec.time_s, h)]
+            return [{"t": t, "until": t} for t in cusum_alarm_times(r, rec.time_s, h)]  # every alarm a fault
 
         # the extended model's gain: the same filter and detector on the plant model as declared, nothing fitted
         nominal_model = calibrate_bands(start_from_model(model), runs, est.settings, files)
@@ -182,7 +199,10 @@ def injected_cases(path: str, rec: MeasuredRecord, workdir: Path, column_map) ->
 
     t0, t1 = float(rec.time_s[0]), float(rec.time_s[-1])
     cases = []
-    for kind, sizes in SIZES.items():
+    sizes_of = dict(SIZES)
+    if Path(path).name in CONTROLLED:  # the issue's controlled-run bias, scored apart (rank "controlled")
+        sizes_of["probe_bias"] = (*SIZES["probe_bias"], CONTROLLED_BIAS_PH)
+    for kind, sizes in sizes_of.items():
         pumps: tuple[str | None, ...] = ("acid", "base") if kind.startswith("pump") else (None,)
         for rank, size in enumerate(sizes):
             for frac in ONSET_FRACTIONS:
@@ -195,21 +215,43 @@ def injected_cases(path: str, rec: MeasuredRecord, workdir: Path, column_map) ->
                         continue  # no effect on this run (a pump that is off, ...)
                     f = workdir / f"{kind}-{rank}-{frac}-{pump}.csv"
                     f.write_bytes(data)
-                    truth.update({"size_rank": "larger" if rank == 0 else "smaller", "onset_s": onset})
+                    truth.update({"size_rank": ("larger", "smaller", "controlled")[rank], "onset_s": onset})
                     cases.append((truth, read_measured(f, column_map, channels=list(CHANNELS))))
     return cases
 
 
-def held_out_sets(paths: Sequence[str], leave_out: int = 1) -> list[tuple[list[str], list[str]]]:
+#: the operation each shared rig run is (its PROVENANCE.md): a leave-one-operation-out split holds out every run of
+#: one operation, so that the calibration has never seen that way of running the rig
+OPERATIONS = {"2025.03.03-001_acid_to_base_titration.csv": "titration",
+              "2025.04.07-001-base_to_acid_titration.csv": "titration",
+              "2025.02.24-add_acid_pH7-3.csv": "open-loop addition",
+              "2025.02.24-001_add_base_pH9.5-11.5.csv": "open-loop addition",
+              "2025.02.24-005_control_pH7_from_basic.csv": "closed-loop control"}
+#: runs under closed-loop control (where a controller acts on the reading): a 0.4 pH bias is scored on them too
+CONTROLLED = {p for p, op in OPERATIONS.items() if op == "closed-loop control"}
+CONTROLLED_BIAS_PH = 0.4
+
+
+def operation_of(path: str) -> str:
+    return OPERATIONS.get(Path(path).name, Path(path).name)
+
+
+def held_out_sets(paths: Sequence[str], leave_out: int | str = 1) -> list[tuple[list[str], list[str]]]:
     """(training runs, held-out runs) of every fold: each set of ``leave_out`` runs held out once, the others
-    fitted on (1: leave-one-run-out; 2: leave-two-out, a harder test of what the calibration does not cover)."""
-    if not 1 <= leave_out < len(paths):
+    fitted on (1: leave-one-run-out; 2: leave-two-out, a harder test of what the calibration does not cover;
+    ``"operation"``: every run of one operation (:data:`OPERATIONS`) held out at once)."""
+    if leave_out == "operation":
+        ops = sorted({operation_of(p) for p in paths})
+        return [([q for q in paths if operation_of(q) != op], [q for q in paths if operation_of(q) == op])
+                for op in ops if any(operation_of(q) != op for q in paths)]
+    k = int(leave_out)
+    if not 1 <= k < len(paths):
         raise ValueError(f"leave_out must be 1..{len(paths) - 1} for {len(paths)} runs, got {leave_out}")
-    return [([q for q in paths if q not in held], list(held)) for held in itertools.combinations(paths, leave_out)]
+    return [([q for q in paths if q not in held], list(held)) for held in itertools.combinations(paths, k)]
 
 
 def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] = print,
-             only: Sequence[str] | None = None, leave_out: int = 1) -> dict:
+             only: Sequence[str] | None = None, leave_out: int | str = 1) -> dict:
     records = {p: read_measured(p, column_map, channels=list(CHANNELS)) for p in paths}
     rows: list[dict] = []
     folds = {}
@@ -237,6 +279,7 @@ def _score_run(p: str, rec: MeasuredRecord, fold: Fold, tmp: Path, column_map, r
         o = outcome(det(rec), None)
         rows.append({"run": Path(p).name, "fold": fold.held_out, "detector": name, "case": "healthy",
                      "hours": hours, "false_alarms": o.alarms_before, "false_alarms_marked": o.marked_before,
+                     "warnings": o.warnings_before, "warnings_announced": o.warnings_announced_before,
                      "outside_healthy_range": outside})
     for truth, frec in injected_cases(p, rec, tmp, column_map):
         for name, det in fold.detectors.items():
@@ -245,7 +288,8 @@ def _score_run(p: str, rec: MeasuredRecord, fold: Fold, tmp: Path, column_map, r
             rows.append({"run": Path(p).name, "fold": fold.held_out, "detector": name, "case": truth["kind"],
                          "family": truth["family"], "size": truth["size"], "size_rank": truth["size_rank"],
                          "pump": truth.get("pump"), "onset_s": truth["onset_s"],
-                         "alarms_before": o.alarms_before, "family_named": o.family,
+                         "alarms_before": o.alarms_before, "warnings_before": o.warnings_before,
+                         "warnings_after": o.warnings_after, "family_named": o.family,
                          "class": expected_class(truth["kind"], truth.get("pump")),
                          "class_named": o.fault_class, "size_named": o.size,
                          "held_share": held_share(alarms, truth["onset_s"], float(frec.time_s[-1])),
@@ -256,11 +300,16 @@ def _score_run(p: str, rec: MeasuredRecord, fold: Fold, tmp: Path, column_map, r
 def _class_and_size(detected: list[dict], kind: str) -> dict:
     """How many detected cases were named the right class, and the median size named for those, beside the
     size a right estimate gives (None where the injected size does not map onto the class's unit)."""
-    right = [r for r in detected if r.get("class_named") is not None and r["class_named"] == r.get("class")]
+    right = [r for r in detected if r.get("class_named") is not None and r["class_named"] in _classes(r)]
     sizes = sorted(r["size_named"] for r in right if r.get("size_named") is not None)
     true = expected_size(kind, detected[0]["size"]) if detected else None
     return {"class_right": len(right), "median_size_named": sizes[len(sizes) // 2] if sizes else None,
             "size_expected": true}
+
+
+def _classes(row: dict) -> list[str]:
+    c = row.get("class")
+    return [c] if isinstance(c, str) else list(c or [])  # rows written before 2026-12-05 hold one class
 
 
 def summary(result: dict) -> list[dict]:
@@ -272,6 +321,8 @@ def summary(result: dict) -> list[dict]:
         fa = sum(r["false_alarms"] for r in healthy)
         hours = sum(r["hours"] for r in healthy)
         entry = {"detector": det, "healthy_false_alarms": fa, "healthy_hours": hours, "healthy_replays": len(healthy),
+                 "healthy_warnings": sum(r.get("warnings", 0) for r in healthy),
+                 "healthy_warnings_announced": sum(r.get("warnings_announced", 0) for r in healthy),
                  "healthy_runs_with_alarm": sum(1 for r in healthy if r["false_alarms"]),
                  # replays that leave the training runs' healthy range (phfdi replay's note), with and without alarm
                  "outside_range_with_alarm": sum(1 for r in healthy if r["false_alarms"] and r.get("outside_healthy_range")),
@@ -281,7 +332,7 @@ def summary(result: dict) -> list[dict]:
                  "false_alarms_marked": sum(r.get("false_alarms_marked", 0) for r in healthy),
                  "kinds": {}}
         for kind in SIZES:
-            for rank in ("larger", "smaller"):
+            for rank in ("larger", "smaller", "controlled"):
                 cs = [r for r in rows if r["detector"] == det and r["case"] == kind and r["size_rank"] == rank]
                 if not cs:
                     continue
