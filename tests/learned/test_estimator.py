@@ -28,20 +28,28 @@ def flask(volume_ml: float = 1000.0, base_mM: float = 50.0, **kw) -> EstimatorRe
 
 
 def simulate(ref: EstimatorReference, n: int, base_flow, true_factor=lambda k: 1.0, ph0: float = 11.0,
-             seed: int = 1, fault_ph=None) -> tuple[np.ndarray, np.ndarray]:
-    """A run of the reference's own physics (exact steps), pH read with noise and the meter's 0.01 resolution."""
+             seed: int = 1, fault_ph=None, factor_of_ph=lambda ph: 1.0, lag_s: float = 0.0,
+             acid_flow_ml_s: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """A run of the reference's own physics (exact steps), pH read with noise and the meter's 0.01 resolution.
+    ``true_factor(k)``, ``factor_of_ph(ph)``: the caustic's true strength over the model's, by sample and by pH;
+    ``lag_s``: the probe reads the flask through a first-order lag (mixing, the probe's response)."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) * DT_S
     qb = np.array([base_flow(k) for k in range(n)], dtype=float)
-    qa = np.full(n, 0.5)
+    qa = np.full(n, acid_flow_ml_s)
     x = float(ref.x_of_ph(np.array([ph0]))[0])
     ph = np.empty(n)
     for k in range(n):
         if k:
             d = (qa[k - 1] + qb[k - 1]) / ref.volume_ml
-            u = (-20.0 * qa[k - 1] + ref.feeds[1].strength_mM * true_factor(k) * qb[k - 1]) / ref.volume_ml
+            strength = ref.feeds[1].strength_mM * true_factor(k) * factor_of_ph(ph[k - 1])
+            u = (-20.0 * qa[k - 1] + strength * qb[k - 1]) / ref.volume_ml
             x = u / d + (x - u / d) * math.exp(-d * DT_S)
         ph[k] = ref.ph_of_x(x)
+    if lag_s > 0:
+        a = math.exp(-DT_S / lag_s)
+        for k in range(1, n):
+            ph[k] = a * ph[k - 1] + (1.0 - a) * ph[k]
     ph = ph + rng.normal(0.0, 0.03, n)
     if fault_ph is not None:
         ph = fault_ph(t, ph)

@@ -1,0 +1,146 @@
+"""A fault alarm means a fault: the estimator's confirmation (wavelet_fdi.estimator_isolation, "Confirmation") on
+synthetic flask runs whose truth the detector never sees.
+
+The calibration runs switch the base pump between 2.0 and 0.5 mL/s against a little acid, the pH above 10.8, the
+probe reading the flask through a 5 s lag. The runs the faults are hidden in are an operation it never saw: six
+times the acid, the base pump chattering at 3 mL/s in bursts, the pH swinging between 2 and 11 through the steep
+part, the caustic at 60 % of its strength below pH 9 (an apparent strength that depends on the pH, as the rig's
+carbonate makes it). Each hidden effect (a probe offset, a noisier probe) starts at an onset drawn from the test's
+own random generator and is known to the test only. Operations never seen on a realistic rig, with their
+deviations outside calibration: tests/rigsim.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from wavelet_fdi.estimator_calibration import calibrate_estimator
+from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel, LearnedSettings, run_record
+from wavelet_fdi.reference_estimator import EstimatorReference, NoiseModel
+
+from .test_estimator import DT_S, flask, simulate
+
+SETTINGS = LearnedSettings(sample_time_s=DT_S, observer_time_constant_s=60.0, energy_down_variance_ratio=0.05,
+                           energy_variance_ratio=4.0, energy_baseline_time_constant_s=120.0)
+
+
+LAG_S = 5.0
+
+
+def _calibration_runs(ref: EstimatorReference) -> list[tuple[np.ndarray, np.ndarray]]:
+    flow = lambda k: 2.0 if (k // 300) % 2 == 0 else 0.5  # noqa: E731
+    return [simulate(ref, 1500, flow, seed=40 + i, ph0=10.9 + 0.2 * i, lag_s=LAG_S) for i in range(3)]
+
+
+@pytest.fixture(scope="module")
+def calibrated() -> tuple[EstimatorReference, LearnedModel]:
+    truth = flask()
+    # the fit starts from a wrong strength and the default noise model
+    start = replace(flask(base_mM=35.0), noise=NoiseModel())
+    return truth, calibrate_estimator(_calibration_runs(truth), start, SETTINGS)
+
+
+def _unseen(truth: EstimatorReference, seed: int, fault_ph=None) -> tuple[np.ndarray, np.ndarray]:
+    """The operation the calibration never saw (module doc)."""
+    chatter = lambda k: (3.0 if (k // 3) % 2 == 0 else 0.0) if (k // 200) % 2 == 0 else 0.0  # noqa: E731
+    return simulate(truth, 2200, chatter, seed=seed, ph0=11.0, fault_ph=fault_ph, lag_s=LAG_S, acid_flow_ml_s=3.0,
+                    factor_of_ph=lambda ph: 0.6 if ph < 9.0 else 1.0)
+
+
+def _verdicts(model: LearnedModel, t: np.ndarray, rows: np.ndarray) -> list[dict]:
+    _, _, det = run_record(model, t, rows)
+    return det.alarms
+
+
+def test_the_calibration_states_its_design_and_margin(calibrated):
+    _, model = calibrated
+    conf = model.reference.confirm
+    assert conf["held_out"] is True and conf["alpha_per_test"] == pytest.approx(1e-3)
+    assert conf["thresholds"]["change"] > 0 and conf["null_tail"]["change"]["n"] >= 100
+    assert model.source["bands_from"] == "leave-one-run-out residuals"
+    back = LearnedModel.from_dict(model.to_dict())
+    assert back.reference.confirm == model.reference.confirm
+
+
+def test_the_unseen_operation_healthy_raises_no_fault_alarm(calibrated):
+    truth, model = calibrated
+    for seed in (1, 2, 3):
+        t, rows = _unseen(truth, seed)
+        assert rows[:, 2].min() < 4.0 < 10.0 < rows[:, 2].max()  # it does cross the steep part
+        assert not [a for a in _verdicts(model, t, rows) if a["verdict"] == "fault"]
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_a_probe_offset_in_the_unseen_operation_is_a_confirmed_fault(calibrated, seed):
+    """A 0.5 pH offset from an onset drawn per seed: a fault alarm after the onset, named a probe offset of about
+    0.5 pH; none before it."""
+    truth, model = calibrated
+    onset = int(np.random.default_rng(seed).integers(700, 1500))
+    t, rows = _unseen(truth, seed, lambda t, ph: np.where(np.arange(len(ph)) >= onset, ph + 0.5, ph))
+    alarms = _verdicts(model, t, rows)
+    faults = [a for a in alarms if a["verdict"] == "fault"]
+    assert not [a for a in faults if a["detection_index"] < onset]
+    assert faults, [(a["detection_time"], a["verdict"]) for a in alarms]
+    iso = faults[0]["isolation"]
+    assert iso["fault_class"] == "probe_offset" and 0.35 < iso["size"] < 0.65, iso
+
+
+def test_a_noisier_day_is_not_a_fault_and_a_probe_turning_noisy_is(calibrated):
+    """The whole run read with twice the calibrated noise is the run's own level (no fault alarm); the same run
+    whose probe turns three times noisier than that at a drawn onset is a confirmed probe-noise fault after it."""
+    truth, model = calibrated
+    rng = np.random.default_rng(5)
+    extra = rng.normal(0.0, 0.03 * np.sqrt(3.0), 2200)
+    t, noisy_day = _unseen(truth, 21, lambda t, ph: ph + extra)
+    assert not [a for a in _verdicts(model, t, noisy_day) if a["verdict"] == "fault"]
+    onset = int(rng.integers(800, 1500))
+    louder = rng.normal(0.0, 0.06 * np.sqrt(8.0), 2200)
+    t, turning = _unseen(truth, 21, lambda t, ph: ph + extra + np.where(np.arange(len(ph)) >= onset, louder, 0.0))
+    faults = [a for a in _verdicts(model, t, turning) if a["verdict"] == "fault"]
+    assert faults and faults[0]["detection_index"] >= onset
+    assert faults[0]["isolation"]["fault_class"] == "probe_noise" and faults[0]["isolation"]["size"] > 1.5
+
+
+def test_confirmed_and_outside_events_are_the_same_whatever_the_chunking(calibrated):
+    truth, model = calibrated
+    t, rows = _unseen(truth, 12, lambda t, ph: np.where(np.arange(len(ph)) >= 1100, ph + 0.5, ph))
+    whole, _, _ = run_record(model, t, rows, chunk=None)
+    assert {e.kind for e in whole} >= {"deviation", "alarm"}
+    for chunk in (1, 97):
+        again, _, _ = run_record(model, t, rows, chunk=chunk)
+        assert [(e.kind, e.index, e.message, e.announce) for e in again] == \
+            [(e.kind, e.index, e.message, e.announce) for e in whole]
+
+
+def test_deviations_no_fault_explains_are_announced_once_per_hold(calibrated, monkeypatch):
+    """Within outside_hold_s of a deviation outside calibration the next deviations are kept (and counted) but not
+    announced, a confirmed fault always is. The verdicts come from a namer that confirms only what the test says
+    (the detector's own hold logic is under test here, not the confirmation)."""
+    truth, model = calibrated
+    # four probe jumps, up and back down twice: four deviations 100 to 140 s apart
+    jumps = (600, 900, 1300, 1700)
+    step = lambda k: sum((1 if i % 2 == 0 else -1) * (k >= j) for i, j in enumerate(jumps))  # noqa: E731
+    t, rows = _unseen(truth, 3, lambda t, ph: ph + 0.6 * np.array([step(k) for k in range(len(ph))]))
+
+    def verdict_for(*args):
+        iso = real_namer(*args)
+        return {**iso, "confirmed": bool(confirm_next.pop(0))}
+
+    # the first three not confirmed, the fourth confirmed: with the hold, only the first and the fault are announced
+    for hold, expect_announced in ((300.0, [True, False, False, True]), (0.0, [True, True, True, True])):
+        settings = LearnedSettings(**{**SETTINGS.__dict__, "outside_hold_s": hold})
+        det = LearnedDetector(LearnedModel(model.reference, settings, model.band_sigma, model.source))
+        real_namer = det.namer
+        confirm_next = [False, False, False, True, True, True, True]
+        monkeypatch.setattr(det, "namer", verdict_for)
+        events, _ = det.process(t[:1800], rows[:1800])
+        events += det.process(t[1800:], rows[1800:])[0] + det.finish()
+        raised = [a for a in det.alarms]
+        assert len(raised) >= 4, [(a["detection_index"], a["statistic"]) for a in raised]
+        announced = [a["announced"] or a["verdict"] == "fault" for a in raised[:4]]
+        assert announced == expect_announced, [(a["detection_index"], a["verdict"], a["announced"]) for a in raised]
+        quiet = [e for e in events if not e.announce]
+        assert all(e.kind in ("deviation", "outside_calibration", "cleared") for e in quiet)
