@@ -13,14 +13,24 @@ sees, which no fault written into a recorded file afterwards can do.
     run = simulate_run("pi_base", seed=4, day=0, probe_fault=ProbeFault("probe_bias", 300.0, 0.5))
 
 Command line: ``phfdi rig-sim``.
+
+Examples
+--------
+>>> from phfdi.rigsim import DAY_RANGES, FLOW_PER_PCT, HEADER, PROBE_FAULTS
+>>> DAY_RANGES["zone_tau_s"].low, DAY_RANGES["zone_tau_s"].high, DAY_RANGES["zone_tau_s"].unit
+(3.0, 12.0, 's')
+>>> f"{60 * FLOW_PER_PCT['acid']:.2f} {100 * FLOW_PER_PCT['base']:.2f}"  # mL/s at 60 % acid, 100 % base
+'4.31 6.45'
+>>> HEADER.split(",")[:2], PROBE_FAULTS[:2]
+(['Time', ' ElapsedTime (s)'], ('probe_bias', 'probe_drift'))
 """
 
 from .day import DAY_RANGES, FLOW_PER_PCT, RigDay, draw_day
 from .operations import Operation, OperationSpec, draw_operation, load_catalogue, operation_names
 from .record import HEADER, command_profile, csv_text, write_run
-from .simulate import PROBE_FAULTS, ProbeFault, RigRun, simulate_run
+from .simulate import PROBE_FAULTS, ProbeFault, RigRun, draw_runs, simulate_run
 from .stats import RunStatistics, run_statistics
 
 __all__ = ["DAY_RANGES", "FLOW_PER_PCT", "HEADER", "PROBE_FAULTS", "Operation", "OperationSpec", "ProbeFault",
-           "RigDay", "RigRun", "RunStatistics", "command_profile", "csv_text", "draw_day", "draw_operation",
+           "RigDay", "RigRun", "RunStatistics", "command_profile", "csv_text", "draw_day", "draw_runs", "draw_operation",
            "load_catalogue", "operation_names", "run_statistics", "simulate_run", "write_run"]

@@ -140,7 +140,8 @@ class RigDay:
         missing = sorted(names - set(d))
         if unknown or missing:
             raise ValueError(f"rig day: unknown {unknown} / missing {missing}")
-        return cls(**{k: (int(v) if k == "number" else float(v)) for k, v in d.items()})
+        values = {k: float(v) for k, v in d.items() if k != "number"}
+        return cls(number=int(d["number"]), **values)  # type: ignore[arg-type]
 
     def with_values(self, **changes: float) -> "RigDay":
         """A copy with some fields replaced (a test pins a parameter, a study varies one)."""

@@ -92,7 +92,22 @@ def _check_within(name: str, p: Param | None, low: float, high: float) -> None:
 
 
 class OperationSpec(_Strict):
-    """One operation of the catalogue (see the module docstring; units in the key names)."""
+    """One operation of the catalogue (see the module docstring; units in the key names).
+
+    Examples
+    --------
+    >>> from phfdi.rigsim import OperationSpec, simulate_run
+    >>> op = OperationSpec(name="hold_ph9", group="unseen", kind="on_off", description="on/off about pH 9",
+    ...                    duration_s=300.0, start_ph=8.0, switched="base", on_pct=40.0, other_pct=20.0,
+    ...                    setpoint_ph=9.0, band_ph=0.3)
+    >>> float(simulate_run(op, seed=1).setpoint_ph[0])
+    9.0
+    >>> OperationSpec(name="x", group="unseen", kind="pi", description="d", duration_s=60.0, start_ph=7.0)
+    Traceback (most recent call last):
+    ...
+    pydantic_core._pydantic_core.ValidationError: 1 validation error for OperationSpec
+    ...
+    """
 
     name: str = Field(pattern=r"^[a-z][a-z0-9_]*$")
     group: Literal["shared", "unseen"]
@@ -167,7 +182,7 @@ class OperationSpec(_Strict):
                 raise ValueError(f"{name} must be one of {', '.join(sorted(allowed_texts))}, got {bad[0]!r}")
         if self.profile is not None:
             lo, _ = _bounds(self.duration_s)
-            if self.profile[-1][0] >= lo:
+            if self.profile[-1][0] > lo:
                 raise ValueError("the profile's last change point must come before the end of the run")
         return self
 
@@ -316,7 +331,17 @@ def operation_names(group: str | None = None, path: str | Path | None = None) ->
 @dataclass
 class Operation:
     """An operation with every parameter drawn: what one run does (``values``: name -> number or text;
-    ``setpoints``: (time from the start in s, pH) change points of a controller, empty for open loop)."""
+    ``setpoints``: (time from the start in s, pH) change points of a controller, empty for open loop).
+
+    Examples
+    --------
+    >>> from phfdi.rigsim import simulate_run
+    >>> op = simulate_run("pi_base", seed=2, duration_s=120.0).operation
+    >>> op.kind, op.duration_s, sorted(op.values)[:3]
+    ('pi', 120.0, ['duration_s', 'kp_pct_per_ph', 'other_pct'])
+    >>> op.setpoints[0][0]
+    0.0
+    """
 
     name: str
     group: str
@@ -346,7 +371,17 @@ def _draw(p: Param | TextParam, rng: np.random.Generator) -> float | str:
 
 def draw_operation(spec: OperationSpec, rng: np.random.Generator, duration_s: float | None = None) -> Operation:
     """One run's operation: every parameter of ``spec`` drawn from ``rng`` (``duration_s`` overrides the
-    drawn duration; a profile is cut there or its last commands held)."""
+    drawn duration; a profile is cut there or its last commands held).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phfdi.rigsim import draw_operation, load_catalogue
+    >>> spec = load_catalogue()["add_base_new_setting"]
+    >>> op = draw_operation(spec, np.random.default_rng(0))
+    >>> op.values["base_pct"] in (10.0, 30.0, 45.0, 80.0), 300.0 <= op.duration_s <= 900.0
+    (True, True)
+    """
     values: dict[str, object] = {}
     for name in ("duration_s", "start_ph", "start_elapsed_s", "acid_pct", "base_pct", "acid_end_pct",
                  "base_end_pct", "band_ph", "switched", "on_pct", "pump", "kp_pct_per_ph", "ti_s", "other_pct"):

@@ -43,7 +43,7 @@ def csv_text(run: RigRun) -> str:
 
     Examples
     --------
-    >>> from phfdi.rigsim import csv_text, simulate_run
+    >>> from phfdi.rigsim import HEADER, csv_text, simulate_run
     >>> lines = csv_text(simulate_run("shared_add_base", seed=1, duration_s=20.0)).splitlines()
     >>> lines[0] == HEADER, lines[1].count(","), lines[1].endswith(",,,,")
     (True, 11, True)
@@ -76,6 +76,20 @@ def write_run(run: RigRun, out: str | Path, overwrite: bool = False) -> list[Pat
     Nothing is replaced without ``overwrite`` (checked for every file before any is written); the sidecars
     are placed first, then the CSV, so a CSV never stands without its truth; a failure removes what this call
     placed. A fault-free run removes a stale ``OUT.fault.json`` only with ``overwrite``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi.rigsim import simulate_run, write_run
+    >>> out = Path(tempfile.mkdtemp()) / "run.csv"
+    >>> [p.name for p in write_run(simulate_run("slow_rise", seed=1, duration_s=60.0), out)]
+    ['run.csv', 'run.csv.rigsim.json']
+    >>> try:
+    ...     write_run(simulate_run("slow_rise", seed=2, duration_s=60.0), out)
+    ... except Exception as exc:
+    ...     print(str(exc).endswith("exists; give --overwrite to replace it"))
+    True
     """
     out = Path(out)
     meta_path, fault_path = sidecars(out)

@@ -16,11 +16,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
+from typing import Callable
 
 import numpy as np
 
 from ph_plant_sim.sensors import lag_step
 from phfdi.inject_kinds import KINDS, PH_MAX, PH_MIN, PH_RESOLUTION, TRUTH_FORMAT
+from phfdi_base.blocks import Block
 from phfdi_base.errors import UserError
 
 from .control import build_policy
@@ -45,7 +47,16 @@ _RUN_STREAM = 0x52_16_51_4D  # a run's random stream, apart from the day's
 class ProbeFault:
     """A probe fault from ``onset_s`` (record time, the file's ElapsedTime) on, on the reading the controller
     sees: ``kind`` one of :data:`PROBE_FAULTS` with ``size`` in ``phfdi inject``'s unit for it (bias pH,
-    drift pH/min, noise pH std, lag s, gain fraction; frozen takes none); ``seed`` seeds a noise fault."""
+    drift pH/min, noise pH std, lag s, gain fraction; frozen takes none); ``seed`` seeds a noise fault.
+
+    Examples
+    --------
+    >>> from phfdi.rigsim import ProbeFault, simulate_run
+    >>> run = simulate_run("on_off_acid", seed=1, duration_s=200.0, probe_fault=ProbeFault("probe_frozen", 100.0))
+    >>> k0 = run.fault["onset_index"]
+    >>> len(set(run.ph[k0:].tolist())), run.fault["unit"]
+    (1, 'none')
+    """
 
     kind: str
     onset_s: float
@@ -72,15 +83,15 @@ class ProbeFault:
         from valve_actuator.blocks import Blocking
 
         size = 0.0 if self.size is None else float(self.size)
-        inner = {
+        makers: dict[str, Callable[[], Block]] = {
             "probe_bias": lambda: sensors.Bias(size),
             "probe_drift": lambda: sensors.Drift(size / 60.0),  # pH/min -> pH/s
             "probe_frozen": lambda: Blocking(),  # holds the reading where the onset found it
             "probe_noise": lambda: sensors.GaussianNoise(size, seed=self.seed),
             "probe_lag": lambda: sensors.FirstOrderLag(size, dt_s=dt_s),
             "probe_gain": lambda: sensors.Gain(1.0 + size, reference=7.0),
-        }[self.kind]()
-        return Injected(inner, self.onset_s)
+        }
+        return Injected(makers[self.kind](), self.onset_s)
 
 
 @dataclass
@@ -91,6 +102,16 @@ class RigRun:
     any); ``ph_probe`` what a healthy probe would have read (the same run, no fault); ``ph_zone`` the true pH
     where the probe sits; ``ph_true`` the flask's (bulk) pH; ``setpoint_ph`` the controller's setpoint (NaN
     in open loop).
+
+    Examples
+    --------
+    >>> from phfdi.rigsim import simulate_run
+    >>> run = simulate_run("shared_add_base", seed=0)
+    >>> run.operation.name, run.day.number, len(run) == len(run.ph) == len(run.ph_true)
+    ('shared_add_base', 0, True)
+    >>> rec = run.measured()  # as phfdi.learned.read_measured gives its CSV
+    >>> rec.channels, rec.x.shape[0] == len(run)
+    (('acid_flow_ml_s', 'base_flow_ml_s', 'ph_measured'), True)
     """
 
     operation: Operation
@@ -114,6 +135,26 @@ class RigRun:
 
     def __len__(self) -> int:
         return len(self.time_s)
+
+    #: the channels of the ``ph_rig`` column map and where a run holds them
+    MAP_CHANNELS = {"acid_flow_ml_s": "acid_flow_ml_s", "base_flow_ml_s": "base_flow_ml_s", "ph_measured": "ph"}
+
+    def recorded(self, name: str) -> np.ndarray:
+        """A ``ph_rig`` channel as the CSV holds it (flows and pH at 2 decimals): what reading the file gives."""
+        if name not in self.MAP_CHANNELS:
+            raise UserError(f"no channel {name!r}; the rig's are {', '.join(self.MAP_CHANNELS)}")
+        return np.round(getattr(self, self.MAP_CHANNELS[name]), 2)
+
+    def measured(self, channels=("acid_flow_ml_s", "base_flow_ml_s", "ph_measured")):
+        """The run as :func:`phfdi.learned.read_measured` gives its CSV under the ``ph_rig`` map (the same
+        numbers, no file): a :class:`phfdi.learned.MeasuredRecord` for the detector's and the estimator's code."""
+        from phfdi.learned import MeasuredRecord
+
+        x = np.column_stack([self.recorded(c) for c in channels])
+        units = {"acid_flow_ml_s": "mL/s", "base_flow_ml_s": "mL/s", "ph_measured": "pH"}
+        return MeasuredRecord(f"rig-sim:{self.operation.name}:seed{self.seed}:day{self.day.number}",
+                              np.round(self.time_s, 3), x, tuple(channels), np.arange(2, len(self) + 2), "line", [],
+                              {c: units[c] for c in channels}, None)
 
     def meta(self) -> dict:
         """What made this run (operation drawn, day, seed, fault truth): the OUT.rigsim.json sidecar."""
@@ -204,10 +245,41 @@ def simulate_run(operation: str | OperationSpec, seed: int, day: int | RigDay | 
 
     flask = RigFlask(rig_day)
     policy = build_policy(op)
-    arrays = _loop(flask, policy, t, white, ripple_acid, ripple_base, op, probe_fault)
+    acid, base, acid_flow, base_flow, ph, ph_probe, ph_zone, ph_true, setpoint = \
+        _loop(flask, policy, t, white, ripple_acid, ripple_base, op, probe_fault)
     fault = _truth(probe_fault, t, op) if probe_fault is not None else None
-    return RigRun(op, rig_day, int(seed), t, *arrays, room_temp_c=room, clock_start=clock_start,
-                  uptime_s=uptime_s, fault=fault)
+    return RigRun(op, rig_day, int(seed), t, acid, base, acid_flow, base_flow, ph, ph_probe, ph_zone, ph_true,
+                  setpoint, room, clock_start, uptime_s, fault)
+
+
+def draw_runs(hours: float, group: str | None = "unseen", first_seed: int = 0, *, operations=None,
+              days=None, catalogue=None):
+    """Runs until ``hours`` of record are simulated: the operations of ``group`` (or the names in
+    ``operations``) in turn, seed ``first_seed``, ``first_seed + 1``, ... (each on day = its seed, or on the
+    day numbers ``days`` cycled). A generator: each :class:`RigRun` as it is made.
+
+    Examples
+    --------
+    >>> from phfdi.rigsim import draw_runs
+    >>> runs = list(draw_runs(0.2, operations=["shared_add_base", "shared_add_acid"], first_seed=10))
+    >>> [r.operation.name for r in runs][:3], sum(float(r.time_s[-1] - r.time_s[0]) for r in runs) >= 720
+    (['shared_add_base', 'shared_add_acid', 'shared_add_base'], True)
+    """
+    from .operations import operation_names
+
+    names = list(operations) if operations is not None else operation_names(group, catalogue)
+    if not names:
+        raise UserError("no operation to run")
+    if not (math.isfinite(hours) and hours > 0):
+        raise UserError(f"hours must be positive, got {hours}")
+    total_s, i = 0.0, 0
+    while total_s < hours * 3600.0:
+        seed = first_seed + i
+        day = None if days is None else list(days)[i % len(list(days))]
+        run = simulate_run(names[i % len(names)], seed, day, catalogue=catalogue)
+        total_s += float(run.time_s[-1] - run.time_s[0])
+        i += 1
+        yield run
 
 
 def _loop(flask: RigFlask, policy, t: np.ndarray, white: np.ndarray, ripple_acid: np.ndarray,
