@@ -69,8 +69,8 @@ DAY_RANGES: dict[str, Range] = {
                         "(benchmarks/rig_mixing_state.py)"),
     "zone_volume_fraction": Range(0.005, 0.02, "of the flask", "a small zone around the probe; with no feed "
                                   "dosed into it only its time constant shows in the pH"),
-    "probe_tau_s": Range(1.0, 3.0, "s", "a glass electrode's response (issue 34's brief); the knees of the "
-                         "real runs pass pH 5-9 in 6-12 s where the flask alone needs 4 s"),
+    "probe_tau_s": Range(1.0, 3.0, "s", "a glass electrode's response; the recorded knees pass pH 5-9 in "
+                         "4.5-19 s where the flask alone needs a few"),
     "white_noise_ph": Range(0.006, 0.012, "pH", "the reading's noise outside the stroke band: the recorded "
                             "readings' noise is mostly the band (next rows); this part barely moves their statistics"),
     "acid_ripple_ph": Range(0.038, 0.058, "pH (std)", "robust noise of the detrended reading while the acid pump "
@@ -85,6 +85,8 @@ DAY_RANGES: dict[str, Range] = {
     "probe_drift_ph_per_h": Range(-0.02, 0.02, "pH/h", "no significant drift in the real runs (diagnose: "
                                   "sensor drift not significant); kept below the noise over an hour"),
     "room_temp_c": Range(21.5, 23.2, "deg C", "T_Room of the real runs: 21.6-23.1 deg C"),
+    "idle_ripple_ph": Range(0.0, 0.025, "pH (std)", "the band's noise while neither pump runs: no recorded run stops "
+                            "both, so from none (the hump is the pumps') to the base pump's level (the meter's own)"),
 }
 
 
@@ -122,6 +124,7 @@ class RigDay:
     white_noise_ph: float
     acid_ripple_ph: float
     base_ripple_ph: float
+    idle_ripple_ph: float
     acid_stroke_s: float
     base_stroke_s: float
     stroke_coherence_s: float

@@ -268,14 +268,15 @@ def draw_runs(hours: float, group: str | None = "unseen", first_seed: int = 0, *
     from .operations import operation_names
 
     names = list(operations) if operations is not None else operation_names(group, catalogue)
-    if not names:
-        raise UserError("no operation to run")
+    day_list = None if days is None else [int(d) for d in days]
+    if not names or day_list == []:
+        raise UserError("no operation to run (or an empty list of days)")
     if not (math.isfinite(hours) and hours > 0):
         raise UserError(f"hours must be positive, got {hours}")
     total_s, i = 0.0, 0
     while total_s < hours * 3600.0:
         seed = first_seed + i
-        day = None if days is None else list(days)[i % len(list(days))]
+        day = None if day_list is None else day_list[i % len(day_list)]
         run = simulate_run(names[i % len(names)], seed, day, catalogue=catalogue)
         total_s += float(run.time_s[-1] - run.time_s[0])
         i += 1
@@ -303,6 +304,7 @@ def _loop(flask: RigFlask, policy, t: np.ndarray, white: np.ndarray, ripple_acid
     inflow: dict[tuple[float, float], np.ndarray] = {}
     slope, offset, drift = day.probe_slope, day.probe_offset_ph, day.probe_drift_ph_per_h / 3600.0
     tau = day.probe_tau_s
+    idle = day.idle_ripple_ph / day.base_ripple_ph
     for k in range(n):
         tk = float(t[k])
         if k:
@@ -312,6 +314,8 @@ def _loop(flask: RigFlask, policy, t: np.ndarray, white: np.ndarray, ripple_acid
             noise += float(ripple_acid[k])
         if previous[1] > 0.0:
             noise += float(ripple_base[k])
+        if previous[0] <= 0.0 and previous[1] <= 0.0:
+            noise += idle * float(ripple_base[k])  # neither pump: the band's noise at the day's idle level
         healthy = 7.0 + slope * (probe - 7.0) + offset + drift * (tk - t0) + noise
         seen = block.step(healthy, tk) if block is not None else healthy
         reading = _meter(seen)
