@@ -26,6 +26,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 PACKAGES = {
     "phfdi_base": True, "ph_plant_sim": True, "valve_actuator": True, "pi_controllers": True, "wavelet_fdi": True,
     "phfdi.records": False, "phfdi.diagnosis": True, "phfdi.loopdiag": True, "phfdi.study": True,
+    "phfdi.rigsim": False,
 }
 NAMES = [(p, n) for p in PACKAGES for n in importlib.import_module(p).__all__]
 EXAMPLES = re.compile(r"^Examples\n--------\n", re.M)

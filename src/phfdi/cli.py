@@ -33,6 +33,7 @@ COMMANDS = [
     "loop_diagnose",
     "diagnose",
     "inject",
+    "rig_sim",
 ]
 
 
