@@ -256,15 +256,16 @@ def _named_lines(iso: dict, verdict: str | None, u: str) -> list[str]:
     began = "" if iso.get("start_time") is None else f" from about {iso['start_time']:g} {u}"
     size = f"{iso['size']:g} {iso['unit']}".strip()
     conf = iso.get("confirmation") or {}
-    margins = ", ".join(f"{k} {v:.0f} (margin {conf['thresholds'][k]:.0f})"
-                        for k, v in (conf.get("statistics") or {}).items() if k in conf.get("thresholds", {}))
+    change = ", ".join(f"{exceedance(v, conf['thresholds'][k], '>' if v > conf['thresholds'][k] else '<=')}"
+                       for k, v in (conf.get("statistics") or {}).items() if k in conf.get("thresholds", {}))
     if verdict == "outside calibration":
-        why = ("no fault and no healthy explanation fits" if iso["fault_class"] == "unexplained"
+        why = ("no healthy re-adaptation fits either" if iso["fault_class"] == "unexplained"
                else f"best explained as healthy operation re-adapted: {iso['description']} ({size})")
-        return [f"  outside calibration: no fault hypothesis beats healthy operation by its margin; {why}",
-                f"  fault-over-healthy log-likelihood ratios: {margins}"]
+        return [f"  outside calibration, not a fault: the innovations' change against the run's own past {change} "
+                f"(the margin); {why}"]
     out = [f"  named: {iso['family']} fault, {iso['description']} ({size}{began}; "
            f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)"]
-    if margins:
-        out.append(f"  confirmed by: {', '.join(conf.get('confirmed_by', []))} (ratios over healthy re-adapted: {margins})")
+    if change:
+        out.append(f"  confirmed: the innovations' change against the run's own past {change} (the margin), and the "
+                   f"probe fault fits better than any feed's re-adapted strength")
     return out

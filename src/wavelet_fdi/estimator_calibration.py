@@ -13,8 +13,6 @@ residuals of runs the reference did not see:
    statistics as if an alarm were detected at every other block) is sampled on the same held-out residuals,
    and each margin placed where healthy operation exceeds it with the design probability
    (:func:`wavelet_fdi.estimator_isolation.confirmation_thresholds`);
-4. the healthy runs' band of probe-noise scales (each held-out run's maximum-likelihood scale) is kept for a
-   window with too little of its run before it to compare with.
 
 With one run there is nothing to hold out: the scales come from the run itself and the result says so
 (``held_out: false``).
@@ -22,15 +20,13 @@ With one run there is nothing to hold out: the scales come from the run itself a
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from .estimator_fit import fit_reference
-from .estimator_isolation import DEFAULT_ALPHA, NOISE_RANGE, confirmation_thresholds, null_statistics
+from .estimator_isolation import DEFAULT_ALPHA, confirmation_thresholds, null_statistics
 from .learned_detector import LearnedModel, LearnedSettings, calibrate_bands
 from .reference_estimator import EstimatorReference
 
@@ -50,18 +46,6 @@ def fold_references(runs: Runs, start: EstimatorReference, progress: Callable[[s
     return out
 
 
-def run_noise_scale(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray) -> float:
-    """The probe-noise scale (times the reference's) that makes a run's innovations most likely."""
-    def cost(log_s: float) -> float:
-        stream = replace(ref, noise=replace(ref.noise, probe_noise_ph=ref.noise.probe_noise_ph
-                                                 * math.exp(log_s))).new_state()
-        stream.residuals(t_s, rows)
-        return stream.nll
-
-    res = minimize_scalar(cost, bounds=tuple(np.log(NOISE_RANGE)), method="bounded", options={"xatol": 1e-3})
-    return float(math.exp(res.x))
-
-
 def calibrate_estimator(runs: Runs, start: EstimatorReference, settings: LearnedSettings,
                         source: dict | None = None, alpha: float = DEFAULT_ALPHA,
                         progress: Callable[[str], None] | None = None) -> LearnedModel:
@@ -74,17 +58,10 @@ def calibrate_estimator(runs: Runs, start: EstimatorReference, settings: Learned
     held_out = len(runs) >= 2
     say("sampling the confirmation's null on " + ("each run held out" if held_out else "the run itself"))
     nulls: list[dict[str, float]] = []
-    scales = []
     for (t, rows), fold in zip(runs, folds):
         nulls += null_statistics(fold, t, rows)
-        scales.append(run_noise_scale(fold, t, rows))
     confirm = confirmation_thresholds(nulls, alpha)
-    # the band of healthy noise scales a window without enough of its run before it is compared with: the
-    # calibrated scale itself and each held-out run's (one at a search bound says nothing: the process terms
-    # carried that run's variance)
-    inside = [x for x in scales if NOISE_RANGE[0] * 1.01 < x < NOISE_RANGE[1] / 1.01]
-    band = [round(min([1.0, *inside]), 4), round(max([1.0, *inside]), 4)]
-    confirm.update(noise_band=band, held_out=held_out,
+    confirm.update(held_out=held_out,
                    design=(f"a healthy deviation confirmed as a fault with probability {alpha:.2g}, the change "
                            f"statistic's null measured on {'leave-one-run-out' if held_out else 'in-sample'} "
                            f"residuals of {len(runs)} run(s), its tail beyond the 90th percentile exponential"))

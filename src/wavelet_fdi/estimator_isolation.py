@@ -24,25 +24,30 @@ Healthy, re-adapted (what the plant does where the calibration never went):
 * ``pump:<channel>``, one per feed that ran in the window: the feed's apparent strength is c times the
   calibrated one (a pump setting, batch or pH passage the calibration did not see; or a pump delivering other
   than recorded: on a rig whose flows are the pump commands the two cannot be told apart, docs/detector.md);
-* the run's own noise level: the innovations' scale before the window, whatever the calibration's was.
+* ``mixing_delay``: the feeds reach the probe d seconds later than recorded (mixing, feed lines): a reading that
+  keeps moving after a pump stopped;
+* the run's own noise, pump state by pump state: the innovations' scale before the window whatever the
+  calibration's was, and a still flask (no feed running) whose reading goes quiet.
 
-Offset, drift and the pumps are fitted in the model-trusting window (the filter's rate and walk uncertainty cut
-to ``STIFFNESS``), where a deterministic fault shows as the divergence it causes.
+Offset, drift, the pumps and the delay are fitted in the model-trusting window (the filter's rate and walk
+uncertainty cut to ``STIFFNESS``), where a deterministic fault shows as the divergence it causes.
 
 **Confirmation** (``EstimatorReference.confirm``, written by ``phfdi calibrate --estimator``). A fault alarm
-means a fault. An alarm is confirmed when both hold:
+means a fault. An alarm is confirmed when all of these hold:
 
-1. ``change``: the filter's innovations in the window changed scale against the run's own stretch before it
-   (up to ``NOISE_BEFORE_SAMPLES``), by the two-sample likelihood ratio of the probe-noise scale (one scale for
-   both against one each; with too short a stretch before, the window's scale against the nearest of the healthy
-   runs' scales, ``noise_band``) beyond a calibrated margin. The filter's innovations are normalised by its own
-   predicted variance, which grows where the pumps move the pH fast or the curve is steep, and the run is
-   compared with itself, so neither a day noisier than the calibration's nor process-driven variance reads as a
-   change; a probe that jumps, drifts, freezes, lags or turns noisy does change it;
-2. the sensor hypothesis that fits best beats every healthy re-adaptation (a feed's strength) in the
-   likelihood of the window.
+1. ``change`` (:func:`change_statistic`): the filter's standardised innovations in the window changed scale
+   against the run's own stretch before it (up to ``NOISE_BEFORE_SAMPLES``), pump state by pump state (each state
+   its own variance; samples within ``SETTLE_S`` of a pump switching left out), by a profile likelihood ratio
+   beyond a calibrated margin. The innovations are normalised by the filter's own predicted variance, which grows
+   where the pumps move the pH fast or the curve is steep, and the run is compared with itself in the same pump
+   state, so neither a day noisier than the calibration's nor the pumps' stroke ripple reads as a change; a probe
+   that jumps, drifts, freezes, lags or turns noisy does change it;
+2. the sensor hypothesis that fits best beats every healthy re-adaptation (a feed's strength, a mixing delay) in
+   the likelihood of the window, and gains more over healthy than a one-parameter fit of a well-specified model
+   gains by chance with probability ``alpha`` (half the chi-square(1) quantile);
+3. a probe that lost its noise is not confirmed while no feed runs (a still flask reads quiet too).
 
-The margin is the value healthy operation exceeds with probability ``alpha`` (:data:`DEFAULT_ALPHA`, 1e-3 per
+The margin of 1 is the value healthy operation exceeds with probability ``alpha`` (:data:`DEFAULT_ALPHA`, 1e-3 per
 deviation): the statistic is sampled on leave-one-run-out residuals of the calibration runs (each run by the
 reference fitted on the others) at every block, in the windows both kinds of alarm have, and its tail beyond the
 90th percentile taken as exponential (:func:`confirmation_thresholds`). An alarm not confirmed is a deviation no
@@ -50,9 +55,11 @@ fault explains: the detector reports it as "outside calibration" (WARN), never a
 explanation.
 
 Tried and not kept (2026-12-05, docs/detector.md): the offset and drift likelihood ratios over the pumps' as
-confirmation statistics with margins from the same held-out null. Their null depends on the operation (its
-99th percentile 4 to 900 from one three-run calibration to another): calibrated without the closed loop, the
-closed loop's pump starts confirmed as probe offsets.
+confirmation statistics with margins from the same held-out null (their null depends on the operation: its 99th
+percentile 4 to 900 from one three-run calibration to another, and calibrated without the closed loop the closed
+loop's pump starts confirmed as probe offsets); the same with the filter tracking (the same spread); a regression
+t statistic of the offset (its null has single-sample outliers at the knees); the probe-noise scale's two-sample
+ratio without pump states (on simulated on/off control the stroke ripple starting and stopping confirmed faults).
 """
 
 from __future__ import annotations
@@ -63,6 +70,7 @@ from typing import Sequence
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from scipy.stats import chi2
 
 from .reference_estimator import FACTOR_BOUNDS, EstimatorReference, EstimatorStream
 from .statistics import parse_statistic
@@ -82,13 +90,21 @@ DRIFT_RANGE_PH_PER_MIN = (-5.0, 5.0)
 NOISE_RANGE = (0.02, 20.0)  # searched on its logarithm
 #: a feed's apparent strength: up to what the adaptation itself may reach, or nothing delivered
 PUMP_RANGE = (0.0, FACTOR_BOUNDS[1])
+#: how much later than recorded the feeds may reach the probe (s): the rig's mixing zone was fitted at 5-11 s
+MIXING_DELAY_RANGE_S = (0.0, 30.0)
 STIFFNESS = 0.1
 #: the detector's statistics that watch the reading's noise (wavelet_fdi.learned_detector)
 NOISE_STATISTICS = ("energy", "energy_down", "repeats")
 #: the run's stretch before the window that the two-sample noise test compares with (samples), and the least
 #: that makes a comparison (below it: the healthy runs' band of noise scales)
-NOISE_BEFORE_SAMPLES = 256
+NOISE_BEFORE_SAMPLES = 1024
 NOISE_BEFORE_MIN_SAMPLES = 32
+#: the least samples of one pump state before the window that the change test compares that state's window
+#: samples with
+STATE_MIN_SAMPLES = 16
+#: how long after a pump switches (on, off, to another octave) its samples stay out of the change test (s): the
+#: mixing delay the alternatives allow (MIXING_DELAY_RANGE_S)
+SETTLE_S = 30.0
 #: the confirmation's statistics (module doc)
 CONFIRM_STATISTICS = ("change",)
 #: the sensor fault hypotheses (what a confirmed alarm is named by)
@@ -146,7 +162,7 @@ class _Window:
     a: int  # the fault's estimated start (first row of the window)
     b: int  # one past the window's last row
     start: EstimatorStream  # the non-adapting filter at a
-    before: EstimatorStream | None  # the non-adapting filter at the start of the stretch before the window
+    before: EstimatorStream  # the non-adapting filter at the start of the stretch before the window
     pre: int  # that stretch's first row (it ends where the change-time search began)
     lo: int
 
@@ -163,7 +179,7 @@ def _window(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     run = ref.new_state()
     run.residuals(t_s[:pre], rows[:pre])
     run = run.fork(replace(ref, adapt_time_constant_s=0.0))
-    before = run.fork() if lo - pre >= NOISE_BEFORE_MIN_SAMPLES else None
+    before = run.fork()
     run.residuals(t_s[pre:lo], rows[pre:lo])
     # the window starts where the raw residual changed, not at the band statistic's onset (a noise change moves
     # no mean, and a residual with no change point in the lookback has none to place: the onset stays)
@@ -183,7 +199,7 @@ def _with_noise(ref: EstimatorReference, scale: float) -> EstimatorReference:
 
 
 def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window,
-                noise_only: bool = False, noise_band: Sequence[float] | None = None) -> dict:
+                noise_only: bool = False) -> dict:
     """Every hypothesis's gain in log-likelihood over healthy and its fitted size, and the two-sample noise
     statistic (``noise_vs_run``): {name: (gain, size)}."""
     m = len(ref.feeds)
@@ -206,7 +222,7 @@ def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _
 
     f, x = _fit(noise_cost, log_range)  # type: ignore[arg-type]
     out["probe_noise"] = (healthy_tracking - f, math.exp(x))
-    out["noise_vs_run"] = _noise_against_run(tracking, t_s, rows, w, f, x, noise_cost, noise_band)
+    out["noise_vs_run"] = (change_statistic(tracking, t_s, rows, w), 0.0)
     if noise_only:
         return out
     elapsed_min = (tw - tw[0]) / 60.0
@@ -228,28 +244,98 @@ def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _
                 return _window_nll(w.start, replace(mean_ref, feeds=tuple(feeds)), tw, xw)
             f, x = _fit(pump, PUMP_RANGE)
             out[f"pump:{feed.channel}"] = (healthy - f, x)
+    out["mixing_delay"] = _delay_alternative(mean_ref, w, t_s, rows, healthy)
     return out
 
 
-def _noise_against_run(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window,
-                       f_window: float, log_s_window: float, window_cost, noise_band) -> tuple[float, float]:
-    """The two-sample ratio of the probe-noise scale (the stretch before the window and the window: one scale
-    against one each) and the stretch's scale; without a stretch long enough, the window's scale against the
-    nearest of the healthy runs' band (``noise_band``; none: the calibrated scale)."""
-    if w.before is None:
-        lo_s, hi_s = (1.0, 1.0) if not noise_band else (float(noise_band[0]), float(noise_band[1]))
-        near = min(max(math.exp(log_s_window), lo_s), hi_s)
-        return window_cost(math.log(near)) - f_window, near
-    tb, xb = t_s[w.pre:w.lo], rows[w.pre:w.lo]
-    before = w.before
+def _delay_alternative(ref: EstimatorReference, w: _Window, t_s: np.ndarray, rows: np.ndarray,
+                       healthy: float) -> tuple[float, float]:
+    """Healthy, re-adapted: what the feeds deliver reaches the probe d seconds later than recorded (mixing, feed
+    lines): the flows of the record shifted by d (held before the record's start), the reading as read; fitted
+    over 0..MIXING_DELAY_RANGE_S. A reading that keeps moving after a pump stopped, or lags one that started,
+    is this, not a probe fault."""
+    m = len(ref.feeds)
+    t_all = np.asarray(t_s, dtype=float)
+    flows = np.asarray(rows, dtype=float)[:, :m]
+    tw = t_all[w.a:w.b]
+    xw = np.array(rows[w.a:w.b], dtype=float)
 
-    def before_cost(log_s: float) -> float:
-        return _window_nll(before, _with_noise(tracking, math.exp(log_s)), tb, xb)
+    def cost(d: float) -> float:
+        moved = xw.copy()
+        for i in range(m):  # the flow recorded d seconds earlier (its previous sample: a pump's command is held)
+            j = np.clip(np.searchsorted(t_all, tw - d, side="right") - 1, 0, len(t_all) - 1)
+            moved[:, i] = np.nan_to_num(flows[j, i])
+        return _window_nll(w.start, ref, tw, moved)
 
-    log_range = tuple(np.log(NOISE_RANGE))
-    f_before, x_before = _fit(before_cost, log_range)  # type: ignore[arg-type]
-    f_joint, _ = _fit(lambda v: before_cost(v) + window_cost(v), log_range)  # type: ignore[arg-type]
-    return f_joint - f_before - f_window, math.exp(x_before)
+    f, d = _fit(cost, MIXING_DELAY_RANGE_S)
+    return healthy - f, d
+
+
+def pump_states(flows: np.ndarray) -> np.ndarray:
+    """Each row's pump state: per feed off, or the octave its flow is in (the pumps' stroke ripple, noise the
+    model does not know, grows with a pump's setting and stops with it). One integer per row."""
+    q = np.nan_to_num(np.asarray(flows, dtype=float))
+    octave = np.where(q > 0, np.clip(np.floor(np.log2(np.maximum(q, 1e-9) / 0.25)) + 1, 1, 15), 0).astype(int)
+    return (octave * (16 ** np.arange(q.shape[1]))).sum(axis=1)
+
+
+def change_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window) -> float:
+    """How far the window's innovations changed scale against the run's own stretch before it, pump state by pump
+    state: the profile likelihood ratio of one factor s on the window's variance, each pump state keeping a
+    variance of its own (estimated on both stretches), from the filter's standardised innovations (tracking,
+    nothing adapting, no limit: they are normalised by the filter's own predicted variance). Samples within
+    ``SETTLE_S`` of a pump's switching are left out; a window sample whose pump state the stretch before did not
+    show at least ``STATE_MIN_SAMPLES`` times (settled) says nothing (its state's noise is unknown to the run);
+    none left: 0."""
+    m = len(tracking.feeds)
+    raw = replace(tracking, clip_sigma=0.0)
+    stream = w.before.fork(raw)
+    r = stream.residuals(t_s[w.pre:w.b], rows[w.pre:w.b])[:, 0]
+    all_states = pump_states(np.asarray(rows[:w.b], dtype=float)[:, :m])
+    states = all_states[w.pre:]
+    k = np.arange(w.pre, w.b)
+    # the samples within SETTLE_S of a pump's switching are left out: the mixing and the stroke ripple's start
+    # after a switch are noise the model does not describe, on a healthy plant as much as on a faulty probe
+    switched = np.flatnonzero(np.diff(all_states) != 0) + 1
+    t_all = np.asarray(t_s[:w.b], dtype=float)
+    last = np.searchsorted(switched, k, side="right") - 1
+    switch_t = t_all[switched] if len(switched) else np.zeros(1)
+    since = np.where(last >= 0, t_all[k] - switch_t[np.maximum(last, 0)], np.inf)
+    settled = since >= SETTLE_S
+    # the reading's own second difference: what a probe that froze or turned sluggish loses, a still or slowly
+    # curving pH does not (the innovations stay near their scale then: the filter follows the reading)
+    ph = np.asarray(rows[w.pre:w.b], dtype=float)[:, m]
+    d2 = np.full(len(ph), np.nan)
+    d2[2:] = ph[2:] - 2.0 * ph[1:-1] + ph[:-2]
+    before, window = settled & (k < w.lo), settled & (k >= w.a)
+    return max(_scale_change(r ** 2, before, window, states), _scale_change(d2 ** 2, before, window, states))
+
+
+def _scale_change(square: np.ndarray, before: np.ndarray, window: np.ndarray, states: np.ndarray) -> float:
+    """The profile likelihood ratio of one factor s^2 on the window's mean square (Gaussian values), each pump
+    state with a variance of its own estimated from both stretches; states with fewer than
+    ``STATE_MIN_SAMPLES`` usable samples before the window are left out (none left: 0)."""
+    ok = np.isfinite(square)
+    before, window = before & ok, window & ok
+    sums = []
+    for st in np.unique(states[window]):
+        b_st, w_st = before & (states == st), window & (states == st)
+        nb, nw = int(b_st.sum()), int(w_st.sum())
+        if nb >= STATE_MIN_SAMPLES and nw:
+            sums.append((nb, float(square[b_st].sum()), nw, float(square[w_st].sum())))
+    if not sums:
+        return 0.0
+    n_b, s_b, n_w, s_w = (np.array(v, dtype=float) for v in zip(*sums))
+    floor = 1e-12 * max(float(np.sum(s_b + s_w)), 1e-300)  # an exactly frozen window: a ratio, not a log of 0
+
+    def profile(log_s2: float) -> float:  # minus the log-likelihood, each state's variance profiled out
+        s2 = math.exp(log_s2)
+        var = (s_b + s_w / s2) / (n_b + n_w)
+        return float(0.5 * np.sum((n_b + n_w) * np.log(np.maximum(var, floor)) + n_w * log_s2))
+
+    res = minimize_scalar(profile, bounds=(math.log(1e-4), math.log(1e4)), method="bounded",
+                          options={"xatol": 1e-4})
+    return max(0.0, profile(0.0) - float(res.fun))
 
 
 def confirmation_statistics(evidence: dict) -> dict[str, float]:
@@ -274,7 +360,7 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     noise_alarm = bool(statistic) and parse_statistic(statistic)[2] in NOISE_STATISTICS
     w = _window(ref, t_s, rows, onset_index, detection_index, noise_alarm)
     conf = dict(ref.confirm or {})
-    ev = _hypotheses(ref, t_s, rows, w, noise_only=noise_alarm, noise_band=conf.get("noise_band"))
+    ev = _hypotheses(ref, t_s, rows, w, noise_only=noise_alarm)
     evidence = {name: {"log_likelihood_gain": round(g, 3), "size": round(x, 4), "unit": _unit(name)}
                 for name, (g, x) in ev.items() if name not in ("noise_vs_run", "zones_crossed")
                 and not name.startswith("t_")}
@@ -290,16 +376,30 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
                     "thresholds": {k: margins[k] for k in stats if k in margins},
                     "confirmed_by": confirmed_by, "alpha_per_test": conf.get("alpha_per_test")}
     sensor = _best(ev, [k for k in SENSOR_CLASSES if k in ev])
-    healthy_ones = [k for k in ev if k.startswith("pump:") and ev[k][0] > 0]
+    healthy_ones = [k for k in ev if (k.startswith("pump:") or k == "mixing_delay") and ev[k][0] > 0]
     explanation = _best(ev, healthy_ones) if healthy_ones else None
     # a fault: the window changed beyond the margin AND a sensor fault explains it better than any healthy
     # re-adaptation (a feed's apparent strength): else the plant left what the reference knows
     beaten = explanation is not None and ev[explanation][0] >= ev[sensor][0]
+    # the fault hypothesis must explain the window itself: its gain over healthy beyond what a one-parameter fit
+    # of a well-specified model gains by chance with probability alpha (chi-square(1) / 2)
+    alpha = float(conf.get("alpha_per_test") or DEFAULT_ALPHA)
+    weak = ev[sensor][0] <= 0.5 * float(chi2.isf(alpha, 1))
     confirmation["best_healthy_explanation"] = explanation
-    if confirmed_by and not beaten:
+    # a reading that went quiet while no feed ran is a still flask as much as a frozen probe: nothing to confirm
+    still = sensor == "probe_noise" and ev[sensor][1] < 1.0 and not _feeds_ran(ref, rows, w)
+    confirmation["still_flask"] = still
+    confirmation.update(sensor_gain_margin=round(0.5 * float(chi2.isf(alpha, 1)), 3))
+    if confirmed_by and not beaten and not still and not weak:
         return {**result, **_naming(sensor, ev), "confirmed": True, "confirmation": confirmation}
     named = explanation or "unexplained"
     return {**result, **_naming(named, ev), "confirmed": False, "confirmation": confirmation}
+
+
+def _feeds_ran(ref: EstimatorReference, rows: np.ndarray, w: _Window) -> bool:
+    """Whether any feed ran in at least half of the window's samples (its recorded flow above zero)."""
+    flows = np.nan_to_num(np.asarray(rows[w.a:w.b], dtype=float)[:, :len(ref.feeds)])
+    return bool(len(flows)) and float(np.mean(np.any(flows > 0, axis=1))) >= 0.5
 
 
 def _best(ev: dict, names: Sequence[str]) -> str:
@@ -307,7 +407,8 @@ def _best(ev: dict, names: Sequence[str]) -> str:
 
 
 def _unit(name: str) -> str:
-    return {"probe_offset": "pH", "probe_drift": "pH/min", "probe_noise": "x healthy noise"}.get(name, "x recorded")
+    return {"probe_offset": "pH", "probe_drift": "pH/min", "probe_noise": "x healthy noise",
+            "mixing_delay": "s"}.get(name, "x recorded")
 
 
 def _naming(name: str, ev: dict) -> dict:
@@ -316,6 +417,9 @@ def _naming(name: str, ev: dict) -> dict:
         return {"family": "none", "fault_class": name, "description": "no fault hypothesis explains it",
                 "size": 0.0, "unit": "", "log_likelihood_gain": 0.0}
     gain, size = ev[name]
+    if name == "mixing_delay":
+        return {"family": "none", "fault_class": name, "unit": "s", "log_likelihood_gain": round(gain, 3),
+                "description": "the feeds reach the probe later than recorded (mixing, feed lines)", "size": round(size, 4)}
     if name.startswith("pump:"):
         family, what = "actuator", f"{name[5:]} delivers other than recorded (or runs where the calibration never did)"
     else:
