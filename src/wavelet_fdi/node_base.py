@@ -53,6 +53,26 @@ class DetectorNodeBase(GraphNode):
         self._poked = False  # the worker calls process([]) once: work that is due without new rows
         self._worker: threading.Thread | None = None
 
+    def graph_node_names(self) -> list[str]:
+        """With a channel map the plant is your own, not the simulator: unless ``graph_nodes`` is given, the start
+        barrier waits for no other node (the default, the simulator's plant, controllers and valve, would never come:
+        the node used to stop after ``connect_timeout_s`` waiting for them)."""
+        if self.alone_on_a_map():
+            return [self.get_name()]
+        return super().graph_node_names()
+
+    def alone_on_a_map(self) -> bool:
+        """A channel map and no ``graph_nodes`` given (``-p`` or a parameter file): a graph of this node alone."""
+        given = getattr(self, "_parameter_overrides", {})
+        return bool(self.param("channel_map_file")) and "graph_nodes" not in given
+
+    def start_barrier(self) -> None:
+        """The start barrier; a mapped node alone says in one line that it waits for no other node."""
+        if self.alone_on_a_map():
+            self.get_logger().info("channel map: your plant's own topics; the start barrier waits for no other node "
+                                   "(set graph_nodes to wait for some)")
+        super().start_barrier()
+
     def open_alarm_output(self) -> None:
         self.pub_alarm = self.data_publisher(FaultAlarm, FAULT_ALARM.name)
 
