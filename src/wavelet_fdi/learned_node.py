@@ -49,7 +49,7 @@ from .channel_align import grid_period_ns
 from .channel_map import load_channel_map
 from .healthy_range import RangeWatch, describe_first, healthy_span, span
 from .learned_detector import LearnedDetector, LearnedModel
-from .map_inputs import MappedInputs
+from .map_inputs import MappedInputs, SummedWarnings
 from .node_base import DetectorNodeBase
 
 PARAMS = (
@@ -87,6 +87,7 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._t_last = 0.0
         self.open_alarm_output()
         self._pub_range = self.diagnostics_publisher()
+        self._range_warnings = SummedWarnings(self.get_logger(), f"/diagnostics ('{self.get_name()}: healthy range')")
         self._received = 0
         self.inputs: MappedInputs | None = None
         if self.param("channel_map_file"):
@@ -158,8 +159,9 @@ class LearnedDetectorNode(DetectorNodeBase):
         for ev in events:
             self._publish(ev)
         new = self.range_watch.update(x)
-        for o in new:  # once per channel: the reference extrapolates from here on
-            self.get_logger().warning(describe_first(o))
+        for o in new:  # once per channel: the reference extrapolates from here on (beyond a few: summed up)
+            self._range_warnings.warn("range", o["channel"], describe_first(o))
+        self._range_warnings.flush({"range": "channels beyond the reference's healthy runs"})
         if new:
             self._report_range()
 
