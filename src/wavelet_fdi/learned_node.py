@@ -50,7 +50,7 @@ from .channel_map import load_channel_map
 from .healthy_range import RangeWatch, describe_first, healthy_span, span
 from .learned_detector import LearnedDetector, LearnedModel
 from .map_inputs import MappedInputs, SummedWarnings
-from .node_base import DetectorNodeBase
+from .node_base import STATE_NAMES, DetectorNodeBase, next_multiple
 
 PARAMS = (
     ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
@@ -61,6 +61,11 @@ PARAMS = (
               (0.1, 3600.0)),
     ParamSpec("diagnostics_period_s", 5.0, "wall time between the channel map's /diagnostics reports",
               (0.1, 3600.0)),
+    # as the physics detector's (wavelet_fdi.node): on the stream's own time, so a replay faster than real time
+    # gives the heartbeats the plant's time would have
+    ParamSpec("heartbeat_period_s", 60.0, "publish the state on /fault_alarm every this many s of the record's time "
+                                          "(at most one per batch the worker takes); 0: only on changes",
+              range=(0.0, 1e9), runtime=True),
 )
 #: wall time between the checks of a channel map's waits and silent topics
 TICK_S = 0.2
@@ -85,6 +90,8 @@ class LearnedDetectorNode(DetectorNodeBase):
         self.range_watch = RangeWatch(self.model.source.get("healthy_ranges") or {}, self.model.channels)
         self._index = {c: i for i, c in enumerate(self.model.channels)}
         self._t_last = 0.0
+        self._heartbeat_s = self.param("heartbeat_period_s")
+        self._last_heartbeat_t = -math.inf
         self.open_alarm_output()
         self._pub_range = self.diagnostics_publisher()
         self._range_warnings = SummedWarnings(self.get_logger(), f"/diagnostics ('{self.get_name()}: healthy range')")
@@ -158,6 +165,10 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._t_last = float(t[-1])
         for ev in events:
             self._publish(ev)
+        if self._t_last < self._last_heartbeat_t:  # the record's clock went back: the schedule follows it
+            self._last_heartbeat_t = self._t_last
+        if self._heartbeat_s > 0 and self._t_last >= next_multiple(self._last_heartbeat_t, self._heartbeat_s):
+            self._publish_heartbeat()
         new = self.range_watch.update(x)
         for o in new:  # once per channel: the reference extrapolates from here on (beyond a few: summed up)
             self._range_warnings.warn("range", o["channel"], describe_first(o))
@@ -187,22 +198,48 @@ class LearnedDetectorNode(DetectorNodeBase):
         msg.stamp = self._stamp(ev.time_s)
         a = ev.alarm
         if a:
-            iso = a.get("isolation") or {}
-            msg.fault_class = iso.get("fault_class", "unknown")  # named NAMING_AFTER samples after the detection
-            if iso:
-                msg.severity, msg.severity_unit = float(iso["size"]), str(iso["unit"])
-            msg.detection_time = self._stamp(a["detection_time"])
-            if a.get("onset_time") is not None:
-                msg.onset_time = self._stamp(a["onset_time"])
+            self._alarm_fields(msg, a, ev.kind)
             msg.statistic, msg.threshold = float(a["statistic_value"]), float(a["threshold"])
-            cont = a["contributions"] if ev.kind == "alarm" else a.get("episode_contributions") or a["contributions"]
-            msg.channels = list(cont)
-            msg.channel_shares = [float(v["share"]) for v in cont.values()]
-            msg.channel_bands = [max(v["bands"], key=v["bands"].get) for v in cont.values()]
-            band = msg.channel_bands[0] if msg.channel_bands else ""
-            msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
+            msg.statistic_name = str(a["statistic"])
         self.publish_alarm(msg, ev.kind, ev.time_s, a)
         self._state = state
+
+    def _alarm_fields(self, msg: FaultAlarm, a: dict, kind: str) -> None:
+        """What /fault_alarm says of an alarm: its class and size once named, its times, its channels."""
+        iso = a.get("isolation") or {}
+        msg.fault_class = iso.get("fault_class", "unknown")  # named NAMING_AFTER samples after the detection
+        if iso:
+            msg.severity, msg.severity_unit = float(iso["size"]), str(iso["unit"])
+        msg.detection_time = self._stamp(a["detection_time"])
+        if a.get("onset_time") is not None:
+            msg.onset_time = self._stamp(a["onset_time"])
+        cont = a["contributions"] if kind == "alarm" else a.get("episode_contributions") or a["contributions"]
+        msg.channels = list(cont)
+        msg.channel_shares = [float(v["share"]) for v in cont.values()]
+        msg.channel_bands = [max(v["bands"], key=v["bands"].get) for v in cont.values()]
+        band = msg.channel_bands[0] if msg.channel_bands else ""
+        msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
+
+    def _publish_heartbeat(self) -> None:
+        """The state now on /fault_alarm (no JSON line: not a change): the worst statistic against its threshold,
+        and the open alarm's times and channels while there is one (as the physics detector's heartbeat)."""
+        core = self.core
+        ratio = core.cusum.value / core.h
+        worst = int(np.argmax(ratio)) if len(ratio) else -1
+        name, value, h = (core.stat_names[worst], float(core.cusum.value[worst]), float(core.h[worst])) \
+            if worst >= 0 else ("", math.nan, math.nan)
+        text = (f"{STATE_NAMES[self._state]}: worst statistic {name} {value:.1f} of threshold {h:.1f}; "
+                f"{core.samples_processed} samples")
+        msg = FaultAlarm(loop=self._loop, state=self._state, message=text, severity=math.nan, wavelet_level=-1,
+                         statistic=value, threshold=h, statistic_name=name)
+        msg.stamp = self._stamp(self._t_last)
+        if core.in_alarm and core.alarms:
+            self._alarm_fields(msg, core.alarms[-1], "alarm")
+        self.publish_alarm(msg, "state", self._t_last, None, report=False)
+        self._last_heartbeat_t = self._t_last
+
+    def apply_parameters(self, params) -> None:
+        self._heartbeat_s = self.param("heartbeat_period_s")  # from the next batch the worker takes
 
     def _stamp(self, t_s: float):
         """A core time as a ROS time: with a channel map on the grid's origin (the first stamp taken)."""
@@ -214,6 +251,8 @@ class LearnedDetectorNode(DetectorNodeBase):
         """The stream ended: name the alarms still waiting for their window (as the offline replay does)."""
         for ev in self.core.finish():
             self._publish(ev)
+        if self.core.samples_processed:
+            self._publish_heartbeat()  # the state at the end, as the physics detector's last heartbeat
         self._report_range()
 
     def done_report(self) -> dict:
@@ -221,11 +260,7 @@ class LearnedDetectorNode(DetectorNodeBase):
                   "core_errors": self.core_errors, "reference": self.param("reference"),
                   "outside_healthy_range": self.range_watch.summary()}
         if self.inputs is not None:
-            a = self.inputs.aligner
-            report["channel_map"] = {"file": self.param("channel_map_file"), "align": a.rule,
-                                     "grid_origin_ns": a.origin_ns, "samples_waited_out": a.waited_out,
-                                     "counts": {s.channel: vars(c) for s, c in zip(self.inputs.cmap.sources, a.counts)},
-                                     "problems": list(self.inputs.problems.values())}
+            report["channel_map"] = {**self.inputs.report(), "file": self.param("channel_map_file")}
         return report
 
 

@@ -84,7 +84,8 @@ class MappedInputs:
     def __init__(self, node: Any, cmap: ChannelMap, dt_ns: int, deliver: Callable[[list], None],
                  silent_after_s: float) -> None:
         self.node, self.cmap, self.deliver, self.silent_after_s = node, cmap, deliver, silent_after_s
-        self.aligner = ChannelAligner(len(cmap.sources), dt_ns, cmap.align, cmap.max_wait_s, cmap.hold_samples)
+        self.aligner = ChannelAligner(len(cmap.sources), dt_ns, cmap.align, cmap.max_wait_s, cmap.hold_samples,
+                                      stamped=tuple(s.stamp != STAMP_RECEIVE for s in cmap.sources))
         self.received = 0
         self.problems: dict[str, str] = {}  # key -> the one line said about it (each said once)
         self.warnings = SummedWarnings(node.get_logger(), f"/diagnostics ('{node.get_name()}: channel map')")
@@ -114,6 +115,15 @@ class MappedInputs:
                          "channel is missing (NaN) in those samples")
             self.aligner.add(i, stamp_ns, value, now)
         self.deliver(self.aligner.take(now))
+
+    def report(self) -> dict:
+        """The ``channel_map`` part of the node's ``detector_done`` report."""
+        a = self.aligner
+        return {"file": self.cmap.path, "align": a.rule, "grid_origin_ns": a.origin_ns,
+                "sample_times": "stamps" if a.times_from_stamps else "grid",
+                "stamps_not_increasing": a.stamps_not_increasing, "samples_waited_out": a.waited_out,
+                "counts": {s.channel: vars(c) for s, c in zip(self.cmap.sources, a.counts)},
+                "problems": list(self.problems.values())}
 
     def _stamp_ns(self, source: ChannelSource, msg: Any) -> int:
         if source.stamp == STAMP_RECEIVE:
@@ -158,6 +168,11 @@ class MappedInputs:
             self.say(f"grid {source.channel}", f"channel {source.channel}: every message of {source.topic} is "
                      f"stamped off the grid ({off_s:.6g} s from its origin, {source.stamp}): "
                      "are its stamps on another clock than the other channels'?")
+        if self.aligner.stamps_not_increasing:
+            topic = next(s.topic for s, stamped in zip(self.cmap.sources, self.aligner.stamped) if stamped)
+            self.say(f"stamp order {topic}", f"{topic}: a sample stamped no later than the one before it (the sample "
+                     "times come from its stamps with align: sequence): timed one sample period after it; does its "
+                     "publisher fill in its stamps? (stamp: receive in the channel map stamps them on receipt)")
         for topic in self.cmap.topics():
             last = self._last_arrival.get(topic, self._start)
             if now - last < self.silent_after_s:

@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import json
+import math
 import threading
 from typing import Any
 
@@ -156,6 +157,12 @@ class DetectorNodeBase(GraphNode):
         self.flush_publishers(5.0)
         self.report_published()
         self.report({"event": "detector_done", **self.done_report()})
+
+
+def next_multiple(t_s: float, period_s: float) -> float:
+    """The first multiple of the period after t_s: periodic messages (heartbeats) stay on their grid of the stream's
+    time (0, 60, 120 s, ...) whatever the chunks the core was given."""
+    return (math.floor(t_s / period_s) + 1) * period_s if math.isfinite(t_s) else -math.inf
 
 
 def json_default(x):
