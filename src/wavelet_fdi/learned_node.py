@@ -6,14 +6,18 @@ reference from the topic, message type and field the map names (std_msgs numbers
 scalars, the project's messages), stamped by its header where it has one and by the node's clock when it is
 received otherwise, put onto the reference's sample grid by :mod:`wavelet_fdi.channel_align` (the map's
 ``align`` rule); the channel sources, stamp rules, counts and problems on /diagnostics (``detector: channel
-map``), the /fault_alarm stamps on the grid (its origin + k * sample time). Without it: /measured/sample
+map``), the /fault_alarm stamps on the plant's clock (the grid's origin + each sample's time: k * sample time, or
+with ``align: sequence`` and stamped messages the samples' own stamps). Without it: /measured/sample
 (phfdi_interfaces/MeasuredSample: channel names and values of one row of a measured record, e.g. played from a
 bag of ``phfdi bag from-csv``). The channels are matched to the
 reference's by name (a channel a message lacks is missing for that row). Output: /fault_alarm
 (phfdi_interfaces/FaultAlarm) when an alarm is raised or cleared and when a channel goes missing,
 with the channels that carry the alarm (``channels``, ``channel_shares``, ``channel_bands``); for a
 reference that names faults (the estimator), once more when the alarm is named (``fault_class``,
-``severity`` and ``severity_unit``: the hypothesis that explains it best and its size).
+``severity`` and ``severity_unit``: the hypothesis that explains it best and its size); every message about an
+alarm names its statistic (``statistic_name``). A heartbeat every ``heartbeat_period_s`` of the record's time (at
+most one per batch, and one at the end) gives the state, the worst statistic against its threshold and, while an
+alarm is open, its times and channels, as the physics detector's heartbeat does.
 
 The reference is the kind the model file names (a learned ARX reference from ``phfdi calibrate --learn``,
 the rig's Kalman estimator from ``phfdi calibrate --estimator``, ...). The core takes each row at its
@@ -242,7 +246,7 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._heartbeat_s = self.param("heartbeat_period_s")  # from the next batch the worker takes
 
     def _stamp(self, t_s: float):
-        """A core time as a ROS time: with a channel map on the grid's origin (the first stamp taken)."""
+        """A core time as a ROS time: with a channel map on the plant's clock (the grid's origin added)."""
         origin = self.inputs.aligner.origin_ns if self.inputs is not None else None
         return to_time((origin or 0) + seconds_to_ns(t_s))
 
