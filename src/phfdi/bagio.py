@@ -656,9 +656,12 @@ def _recovered_topics(channels: dict, schemas: dict, counts: dict[int, int]) -> 
     return out
 
 
-def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
+def recover(src: str | Path, dst: str | Path, overwrite: bool = True, caller_holds_lock: bool = False) -> dict:
     """Copy everything up to the last complete chunk of a (truncated) bag into a new, finished bag, with the
-    rosbag2 metadata record that a killed recorder could not write (counted from what was recovered)."""
+    rosbag2 metadata record that a killed recorder could not write (counted from what was recovered).
+
+    A bag another process is recording is refused (:class:`BagBusyError`); ``caller_holds_lock``: the caller holds
+    ``src``'s writer lock itself (the launcher, recovering a killed recorder's bag in place under :func:`bag_lock`)."""
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
@@ -669,7 +672,8 @@ def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
         raise UserError("recover writes a new file: give an output path other than the input")
     # a bag being recorded is not truncated, it is growing: a copy of it now would be a partial bag that looks
     # finished; and an output being recorded would be replaced under its recorder
-    check_not_recording(src, "recover it after that recording has ended")
+    if not caller_holds_lock:
+        check_not_recording(src, "recover it after that recording has ended")
     check_not_recording(dst)
     with open(src, "rb") as f:
         if f.read(8) != b"\x89MCAP0\r\n":

@@ -601,7 +601,7 @@ class Launcher:
                 unfinished = path.with_name(f".{path.stem}.{os.getpid()}.unfinished.mcap")
                 os.replace(path, unfinished)
                 try:
-                    rec = bagio.recover(unfinished, path)  # staged: all or nothing
+                    rec = bagio.recover(unfinished, path, caller_holds_lock=True)  # staged: all or nothing
                 except (UserError, OSError) as exc:
                     os.replace(unfinished, path)
                     result.notes.append(
