@@ -61,7 +61,9 @@ def test_a_port_with_nothing_behind_it_is_one_line(loop_csv):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     line = _one_error_line(_diagnose(loop_csv, f"tcp://127.0.0.1:{port}"))
-    assert f"cannot reach the Dask scheduler at tcp://127.0.0.1:{port}" in line
+    # distributed's refusal (its retries end at 4 s) or, on a machine too loaded for those, our 5 s limit
+    assert (f"cannot reach the Dask scheduler at tcp://127.0.0.1:{port}" in line
+            or f"the Dask scheduler at tcp://127.0.0.1:{port} did not answer within" in line), line
 
 
 def test_a_listener_that_never_answers_is_one_line_within_the_timeout(loop_csv):

@@ -48,7 +48,9 @@ def _reach(address: str, timeout_s: float) -> None:
     from distributed.comm import connect
 
     async def handshake() -> None:
-        comm = await asyncio.wait_for(connect(address, timeout=timeout_s), timeout_s)
+        # distributed's own limit (its retries of a refused connection, then its OSError naming the cause) a little
+        # inside ours (a handshake that never comes)
+        comm = await asyncio.wait_for(connect(address, timeout=0.8 * timeout_s), timeout_s)
         await comm.close()
 
     try:
