@@ -74,6 +74,9 @@ PARAMS = (
 #: wall time between the checks of a channel map's waits and silent topics
 TICK_S = 0.2
 STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
+#: what a heartbeat during an alarm repeats from the alarm's last message (its statistic is the heartbeat's own)
+ALARM_FIELDS = ("fault_class", "severity", "severity_unit", "detection_time", "onset_time", "channels",
+                "channel_shares", "channel_bands", "wavelet_level")
 
 
 class LearnedDetectorNode(DetectorNodeBase):
@@ -96,6 +99,7 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._t_last = 0.0
         self._heartbeat_s = self.param("heartbeat_period_s")
         self._last_heartbeat_t = -math.inf
+        self._alarm_said: FaultAlarm | None = None
         self.open_alarm_output()
         self._pub_range = self.diagnostics_publisher()
         self._range_warnings = SummedWarnings(self.get_logger(), f"/diagnostics ('{self.get_name()}: healthy range')")
@@ -202,27 +206,24 @@ class LearnedDetectorNode(DetectorNodeBase):
         msg.stamp = self._stamp(ev.time_s)
         a = ev.alarm
         if a:
-            self._alarm_fields(msg, a, ev.kind)
-            msg.statistic, msg.threshold = float(a["statistic_value"]), float(a["threshold"])
+            iso = a.get("isolation") or {}
+            msg.fault_class = iso.get("fault_class", "unknown")  # named NAMING_AFTER samples after the detection
+            if iso:
+                msg.severity, msg.severity_unit = float(iso["size"]), str(iso["unit"])
+            msg.detection_time = self._stamp(a["detection_time"])
+            if a.get("onset_time") is not None:
+                msg.onset_time = self._stamp(a["onset_time"])
             msg.statistic_name = str(a["statistic"])
+            msg.statistic, msg.threshold = float(a["statistic_value"]), float(a["threshold"])
+            cont = a["contributions"] if ev.kind == "alarm" else a.get("episode_contributions") or a["contributions"]
+            msg.channels = list(cont)
+            msg.channel_shares = [float(v["share"]) for v in cont.values()]
+            msg.channel_bands = [max(v["bands"], key=v["bands"].get) for v in cont.values()]
+            band = msg.channel_bands[0] if msg.channel_bands else ""
+            msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
         self.publish_alarm(msg, ev.kind, ev.time_s, a)
         self._state = state
-
-    def _alarm_fields(self, msg: FaultAlarm, a: dict, kind: str) -> None:
-        """What /fault_alarm says of an alarm: its class and size once named, its times, its channels."""
-        iso = a.get("isolation") or {}
-        msg.fault_class = iso.get("fault_class", "unknown")  # named NAMING_AFTER samples after the detection
-        if iso:
-            msg.severity, msg.severity_unit = float(iso["size"]), str(iso["unit"])
-        msg.detection_time = self._stamp(a["detection_time"])
-        if a.get("onset_time") is not None:
-            msg.onset_time = self._stamp(a["onset_time"])
-        cont = a["contributions"] if kind == "alarm" else a.get("episode_contributions") or a["contributions"]
-        msg.channels = list(cont)
-        msg.channel_shares = [float(v["share"]) for v in cont.values()]
-        msg.channel_bands = [max(v["bands"], key=v["bands"].get) for v in cont.values()]
-        band = msg.channel_bands[0] if msg.channel_bands else ""
-        msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
+        self._alarm_said = msg if a else self._alarm_said  # what the heartbeat repeats of an open alarm
 
     def _publish_heartbeat(self) -> None:
         """The state now on /fault_alarm (no JSON line: not a change): the worst statistic against its threshold,
@@ -237,8 +238,9 @@ class LearnedDetectorNode(DetectorNodeBase):
         msg = FaultAlarm(loop=self._loop, state=self._state, message=text, severity=math.nan, wavelet_level=-1,
                          statistic=value, threshold=h, statistic_name=name)
         msg.stamp = self._stamp(self._t_last)
-        if core.in_alarm and core.alarms:
-            self._alarm_fields(msg, core.alarms[-1], "alarm")
+        if core.in_alarm and self._alarm_said is not None:  # the open alarm's class, times and channels as last said
+            for field in ALARM_FIELDS:
+                setattr(msg, field, getattr(self._alarm_said, field))
         self.publish_alarm(msg, "state", self._t_last, None, report=False)
         self._last_heartbeat_t = self._t_last
 
