@@ -71,12 +71,12 @@ PARAMS = (
                                           "(at most one per batch the worker takes); 0: only on changes",
               range=(0.0, 1e9), runtime=True),
 )
-#: wall time between the checks of a channel map's waits and silent topics
-TICK_S = 0.2
-STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
 #: what a heartbeat during an alarm repeats from the alarm's last message (its statistic is the heartbeat's own)
 ALARM_FIELDS = ("fault_class", "severity", "severity_unit", "detection_time", "onset_time", "channels",
                 "channel_shares", "channel_bands", "wavelet_level")
+#: wall time between the checks of a channel map's waits and silent topics
+TICK_S = 0.2
+STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
 
 
 class LearnedDetectorNode(DetectorNodeBase):
