@@ -133,12 +133,17 @@ def _lock_holder(fd: int) -> int | None:
     return None
 
 
-def busy_message(path: str | Path, pid: int | None) -> str:
+#: what a writer that finds its file being recorded is told to do
+GIVE_ANOTHER_NAME = "give another name, or stop that recording first"
+
+
+def busy_message(path: str | Path, pid: int | None, advice: str = GIVE_ANOTHER_NAME) -> str:
     who = f"another process (pid {pid})" if pid else "another process"
-    return f"{path}: {who} is recording this bag now; give another name, or stop that recording first"
+    return f"{path}: {who} is recording this bag now; {advice}"
 
 
-def _lock(fd: int, path: str | Path, how: int = fcntl.LOCK_EX, retry_s: float = LOCK_RETRY_S) -> None:
+def _lock(fd: int, path: str | Path, how: int = fcntl.LOCK_EX, retry_s: float = LOCK_RETRY_S,
+          advice: str = GIVE_ANOTHER_NAME) -> None:
     """Take ``how`` (flock) on ``fd`` without blocking, retrying for ``retry_s``; :class:`BagBusyError` if
     another process keeps it."""
     deadline = time.monotonic() + retry_s
@@ -148,12 +153,13 @@ def _lock(fd: int, path: str | Path, how: int = fcntl.LOCK_EX, retry_s: float = 
             return
         except BlockingIOError:
             if time.monotonic() >= deadline:
-                raise BagBusyError(busy_message(path, _lock_holder(fd))) from None
+                raise BagBusyError(busy_message(path, _lock_holder(fd), advice)) from None
             time.sleep(0.02)
 
 
-def check_not_recording(path: str | Path) -> None:
-    """:class:`BagBusyError` (one line) if a writer holds ``path``'s lock; nothing if the file does not exist.
+def check_not_recording(path: str | Path, advice: str = GIVE_ANOTHER_NAME) -> None:
+    """:class:`BagBusyError` (one line, ending in ``advice``) if a writer holds ``path``'s lock; nothing if the
+    file does not exist.
 
     The test takes a shared lock for an instant and releases it (a writer retries for :data:`LOCK_RETRY_S`,
     so the test never makes one fail)."""
@@ -165,7 +171,7 @@ def check_not_recording(path: str | Path) -> None:
         return  # not ours to judge here: the writer says what is wrong with the path
     try:
         if stat.S_ISREG(os.fstat(fd).st_mode):
-            _lock(fd, path, fcntl.LOCK_SH, retry_s=0.0)
+            _lock(fd, path, fcntl.LOCK_SH, retry_s=0.0, advice=advice)
             fcntl.flock(fd, fcntl.LOCK_UN)
     finally:
         os.close(fd)
@@ -650,9 +656,12 @@ def _recovered_topics(channels: dict, schemas: dict, counts: dict[int, int]) -> 
     return out
 
 
-def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
+def recover(src: str | Path, dst: str | Path, overwrite: bool = True, caller_holds_lock: bool = False) -> dict:
     """Copy everything up to the last complete chunk of a (truncated) bag into a new, finished bag, with the
-    rosbag2 metadata record that a killed recorder could not write (counted from what was recovered)."""
+    rosbag2 metadata record that a killed recorder could not write (counted from what was recovered).
+
+    A bag another process is recording is refused (:class:`BagBusyError`); ``caller_holds_lock``: the caller holds
+    ``src``'s writer lock itself (the launcher, recovering a killed recorder's bag in place under :func:`bag_lock`)."""
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
@@ -661,6 +670,11 @@ def recover(src: str | Path, dst: str | Path, overwrite: bool = True) -> dict:
     src, dst = regular_file(src), Path(dst)
     if src.resolve() == dst.resolve():
         raise UserError("recover writes a new file: give an output path other than the input")
+    # a bag being recorded is not truncated, it is growing: a copy of it now would be a partial bag that looks
+    # finished; and an output being recorded would be replaced under its recorder
+    if not caller_holds_lock:
+        check_not_recording(src, "recover it after that recording has ended")
+    check_not_recording(dst)
     with open(src, "rb") as f:
         if f.read(8) != b"\x89MCAP0\r\n":
             raise UserError(f"{src}: not an MCAP file")

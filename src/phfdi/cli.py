@@ -58,11 +58,23 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     try:
         return _main(argv)
+    except KeyboardInterrupt:
+        # Ctrl-C before the command runs (building the parser imports for about 0.3 s) or after a command has
+        # restored the default handler: one line, the shell's status for SIGINT, no traceback
+        print(f"{_prog(argv)}: interrupted", file=sys.stderr)
+        return 130
     except BrokenPipeError:
         # the reader of our output went away (`phfdi replay ... --json | head`): stop quietly, as a Unix tool
         # does on SIGPIPE, and keep the interpreter's final flush of stdout from raising again
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141  # 128 + SIGPIPE, what a shell reports for a tool ended by a closed pipe
+
+
+def _prog(argv: list[str] | None) -> str:
+    """``phfdi COMMAND`` as far as the arguments name one (for a line written before they are parsed)."""
+    args = sys.argv[1:] if argv is None else argv
+    command = next((a for a in args if not a.startswith("-")), None)
+    return f"phfdi {command}" if command in {c.replace("_", "-") for c in COMMANDS} else "phfdi"
 
 
 def _flags(parser: argparse.ArgumentParser, out: dict[str, str] | None = None) -> dict[str, str]:

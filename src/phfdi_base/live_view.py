@@ -71,7 +71,8 @@ SCHEMAS: dict[str, dict] = {
         "severity": "the fault's size in severity_unit (NaN: unknown)", "statistic": "decision statistic",
         "threshold": "its alarm threshold", "ratio": "statistic / threshold"},
         {"state_name": {"type": "string", "enum": list(ALARM_STATES.values())},
-         "fault_class": {"type": "string"}, "severity_unit": {"type": "string"}, "message": {"type": "string"}}),
+         "fault_class": {"type": "string"}, "severity_unit": {"type": "string"}, "message": {"type": "string"},
+         "statistic_name": {"type": "string", "description": "which statistic, e.g. ph.R.mean_down"}}),
 }
 
 
@@ -116,7 +117,7 @@ def fault_alarm(msg: Any) -> dict:
             "fault_class": msg.fault_class, "confidence": finite(msg.confidence), "severity": finite(msg.severity),
             "severity_unit": msg.severity_unit, "statistic": finite(msg.statistic),
             "threshold": finite(msg.threshold), "ratio": finite(ratio(msg.statistic, msg.threshold)),
-            "message": msg.message}
+            "statistic_name": getattr(msg, "statistic_name", ""), "message": msg.message}
 
 
 def monitor(time_s: float, values: dict[str, float]) -> dict:

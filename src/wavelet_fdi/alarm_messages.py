@@ -60,6 +60,7 @@ def to_dict(msg) -> dict:
         "detection_time": detection if detection > 0 else None,
         "severity": float(msg.severity), "severity_unit": msg.severity_unit,
         "statistic": float(msg.statistic), "threshold": float(msg.threshold),
+        "statistic_name": getattr(msg, "statistic_name", ""),  # a bag recorded before the field: none
         "wavelet_level": int(msg.wavelet_level), "message": msg.message,
     }
 

@@ -2,9 +2,14 @@
 use the same code).
 
 The grid is t_k = t_0 + k * dt: dt is the reference's sample time (to the ns: :func:`grid_period_ns`), t_0 the
-stamp of the first message taken. The detector gets the times k * dt (seconds from the first sample, as the
-offline replay gets a record's times from its first row); :attr:`ChannelAligner.origin_ns` says where the grid
-starts.
+stamp of the first message taken. The detector gets each sample's time in seconds from the first sample (as the
+offline replay gets a record's times from its first row); :attr:`ChannelAligner.origin_ns` says where that is on
+the plant's clock. With ``hold`` the time of sample k is k * dt. With ``sequence`` it is the stamp its messages
+carry (the first channel, in map order, whose stamps come from the message: a header or a stamp field) minus the
+origin, the first sample's stamp: the plant's own times, gaps included, as the offline replay of the record has
+them; a sample without such a stamp, or whose stamp does not come after the previous sample's, is one dt after
+the previous sample (counted: :attr:`ChannelAligner.stamps_not_increasing`). Channels stamped on receipt only
+(std_msgs' numbers) give sample k the time k * dt: receive times faster than real time say nothing.
 
 Two rules (the channel map's ``align``):
 
@@ -80,9 +85,12 @@ class ChannelAligner:
     max_wait_s: float = 5.0
     hold_samples: int = 5
     origin_ns: int | None = None
+    #: sequence: per channel, whether its stamps are the message's own (a header or stamp field; not receive times)
+    stamped: tuple[bool, ...] = ()
     counts: list[ChannelCounts] = field(init=False)
     samples_out: int = 0
     waited_out: int = 0  # samples that went out after max_wait_s without every channel
+    stamps_not_increasing: int = 0  # sequence: samples whose stamp was not after the previous sample's (put dt on)
 
     def __post_init__(self) -> None:
         if self.rule not in ALIGN_RULES:
@@ -96,8 +104,18 @@ class ChannelAligner:
         self._last: list[tuple[int, float] | None] = [None] * self.n_channels
         self._advances: deque[tuple[int, float]] = deque()  # (sample now seen, wall time): when samples fell due
         self._seen_top = -1
-        # sequence: per channel (value, wall time of arrival)
-        self._fifo: list[deque[tuple[float, float]]] = [deque() for _ in range(self.n_channels)]
+        # sequence: per channel (value, wall time of arrival, stamp ns); the time of the last sample out (ns from
+        # the origin); whether sample times come from the stamps
+        self._fifo: list[deque[tuple[float, float, int]]] = [deque() for _ in range(self.n_channels)]
+        self._last_t_ns: int | None = None
+        self._by_stamp = self.rule == "sequence" and any(self.stamped)
+        if self.stamped and len(self.stamped) != self.n_channels:
+            raise ValueError("stamped needs one flag per channel")
+
+    @property
+    def times_from_stamps(self) -> bool:
+        """Sample times from the messages' stamps (sequence with a stamped channel), else on the grid."""
+        return self._by_stamp
 
     # ---- in ------------------------------------------------------------------------------------
     def add(self, channel: int, stamp_ns: int, value: float, now_s: float) -> None:
@@ -105,11 +123,12 @@ class ChannelAligner:
         counts = self.counts[channel]
         counts.received += 1
         counts.last_stamp_ns = stamp_ns
-        if self.origin_ns is None:
+        if self.origin_ns is None and not self._by_stamp:  # by stamp: the first sample's stamp, when it goes out
             self.origin_ns = stamp_ns
         if self.rule == "sequence":
-            self._fifo[channel].append((value, now_s))
+            self._fifo[channel].append((value, now_s, stamp_ns))
             return
+        assert self.origin_ns is not None  # hold: set by the first message
         k = (stamp_ns - self.origin_ns + self.dt_ns // 2) // self.dt_ns
         if k < self.samples_out or k > self.samples_out + MAX_AHEAD_SAMPLES:
             counts.late += 1
@@ -130,6 +149,24 @@ class ChannelAligner:
         """The samples that are complete, or have waited ``max_wait_s``: (seconds from the first sample, row)."""
         return self._emit(now_s, final=False)
 
+    def _sample_time_ns(self, stamp_ns: int | None) -> int:
+        """The time of the sample going out (ns from the origin): its stamp, else one dt after the last sample."""
+        k = self.samples_out
+        if not self._by_stamp:
+            return k * self.dt_ns
+        if stamp_ns is not None and self.origin_ns is None:
+            self.origin_ns = stamp_ns - k * self.dt_ns  # samples before it (none stamped) lie on the grid
+        nxt = k * self.dt_ns if self._last_t_ns is None else self._last_t_ns + self.dt_ns
+        if stamp_ns is None or self.origin_ns is None:
+            t_ns = nxt
+        elif self._last_t_ns is not None and stamp_ns - self.origin_ns <= self._last_t_ns:
+            self.stamps_not_increasing += 1
+            t_ns = nxt
+        else:
+            t_ns = stamp_ns - self.origin_ns
+        self._last_t_ns = t_ns
+        return t_ns
+
     def flush(self) -> list[tuple[float, np.ndarray]]:
         """At the end of the stream: every sample begun, without waiting (missing channels NaN)."""
         return self._emit(math.inf, final=True)
@@ -137,13 +174,15 @@ class ChannelAligner:
     def _emit(self, now_s: float, final: bool) -> list[tuple[float, np.ndarray]]:
         out: list[tuple[float, np.ndarray]] = []
         while True:
-            row = self._next_sequence(now_s, final) if self.rule == "sequence" else self._next_hold(now_s, final)
+            stamp: list[int] = []  # sequence: the stamp of the sample's first stamped channel, if any
+            row = self._next_sequence(now_s, final, stamp) if self.rule == "sequence" else self._next_hold(now_s,
+                                                                                                             final)
             if row is None:
                 return out
-            out.append((stamp_seconds(self.samples_out * self.dt_ns), row))
+            out.append((stamp_seconds(self._sample_time_ns(stamp[0] if stamp else None)), row))
             self.samples_out += 1
 
-    def _next_sequence(self, now_s: float, final: bool) -> np.ndarray | None:
+    def _next_sequence(self, now_s: float, final: bool, stamp: list[int]) -> np.ndarray | None:
         waiting = [q for q in self._fifo if q]
         if not waiting:
             return None
@@ -155,8 +194,11 @@ class ChannelAligner:
         row = np.full(self.n_channels, np.nan)
         for c, q in enumerate(self._fifo):
             if q:
-                row[c] = q.popleft()[0]
+                value, _, stamp_ns = q.popleft()
+                row[c] = value
                 self.counts[c].used += 1
+                if self._by_stamp and self.stamped[c] and not stamp:
+                    stamp.append(stamp_ns)
             else:
                 self.counts[c].missing += 1
         return row
@@ -195,11 +237,11 @@ class ChannelAligner:
 
 
 def align_messages(messages: Iterable[tuple[int, int, float, float]], n_channels: int, dt_ns: int,
-                   rule: str = "hold", max_wait_s: float = 5.0, hold_samples: int = 5
-                   ) -> tuple[np.ndarray, np.ndarray, ChannelAligner]:
+                   rule: str = "hold", max_wait_s: float = 5.0, hold_samples: int = 5,
+                   stamped: Sequence[bool] = ()) -> tuple[np.ndarray, np.ndarray, ChannelAligner]:
     """Messages (channel, stamp ns, value, arrival wall time s) in arrival order through one aligner, then its
     end: the times (s from the first sample), the rows (n, n_channels) and the aligner (its counts)."""
-    aligner = ChannelAligner(n_channels, dt_ns, rule, max_wait_s, hold_samples)
+    aligner = ChannelAligner(n_channels, dt_ns, rule, max_wait_s, hold_samples, stamped=tuple(stamped))
     out: list[tuple[float, np.ndarray]] = []
     for channel, stamp_ns, value, now_s in messages:
         aligner.add(channel, stamp_ns, value, now_s)

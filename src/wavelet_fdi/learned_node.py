@@ -6,14 +6,18 @@ reference from the topic, message type and field the map names (std_msgs numbers
 scalars, the project's messages), stamped by its header where it has one and by the node's clock when it is
 received otherwise, put onto the reference's sample grid by :mod:`wavelet_fdi.channel_align` (the map's
 ``align`` rule); the channel sources, stamp rules, counts and problems on /diagnostics (``detector: channel
-map``), the /fault_alarm stamps on the grid (its origin + k * sample time). Without it: /measured/sample
+map``), the /fault_alarm stamps on the plant's clock (the grid's origin + each sample's time: k * sample time, or
+with ``align: sequence`` and stamped messages the samples' own stamps). Without it: /measured/sample
 (phfdi_interfaces/MeasuredSample: channel names and values of one row of a measured record, e.g. played from a
 bag of ``phfdi bag from-csv``). The channels are matched to the
 reference's by name (a channel a message lacks is missing for that row). Output: /fault_alarm
 (phfdi_interfaces/FaultAlarm) when an alarm is raised or cleared and when a channel goes missing,
 with the channels that carry the alarm (``channels``, ``channel_shares``, ``channel_bands``); for a
 reference that names faults (the estimator), once more when the alarm is named (``fault_class``,
-``severity`` and ``severity_unit``: the hypothesis that explains it best and its size).
+``severity`` and ``severity_unit``: the hypothesis that explains it best and its size); every message about an
+alarm names its statistic (``statistic_name``). A heartbeat every ``heartbeat_period_s`` of the record's time (at
+most one per batch, and one at the end) gives the state, the worst statistic against its threshold and, while an
+alarm is open, its times and channels, as the physics detector's heartbeat does.
 
 The reference is the kind the model file names (a learned ARX reference from ``phfdi calibrate --learn``,
 the rig's Kalman estimator from ``phfdi calibrate --estimator``, ...). The core takes each row at its
@@ -49,8 +53,8 @@ from .channel_align import grid_period_ns
 from .channel_map import load_channel_map
 from .healthy_range import RangeWatch, describe_first, healthy_span, span
 from .learned_detector import LearnedDetector, LearnedModel
-from .map_inputs import MappedInputs
-from .node_base import DetectorNodeBase
+from .map_inputs import MappedInputs, SummedWarnings
+from .node_base import STATE_NAMES, DetectorNodeBase, next_multiple
 
 PARAMS = (
     ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
@@ -61,7 +65,15 @@ PARAMS = (
               (0.1, 3600.0)),
     ParamSpec("diagnostics_period_s", 5.0, "wall time between the channel map's /diagnostics reports",
               (0.1, 3600.0)),
+    # as the physics detector's (wavelet_fdi.node): on the stream's own time, so a replay faster than real time
+    # gives the heartbeats the plant's time would have
+    ParamSpec("heartbeat_period_s", 60.0, "publish the state on /fault_alarm every this many s of the record's time "
+                                          "(at most one per batch the worker takes); 0: only on changes",
+              range=(0.0, 1e9), runtime=True),
 )
+#: what a heartbeat during an alarm repeats from the alarm's last message (its statistic is the heartbeat's own)
+ALARM_FIELDS = ("fault_class", "severity", "severity_unit", "detection_time", "onset_time", "channels",
+                "channel_shares", "channel_bands", "wavelet_level")
 #: wall time between the checks of a channel map's waits and silent topics
 TICK_S = 0.2
 STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
@@ -89,8 +101,12 @@ class LearnedDetectorNode(DetectorNodeBase):
         self.range_watch = RangeWatch(self.model.source.get("healthy_ranges") or {}, self.model.channels)
         self._index = {c: i for i, c in enumerate(self.model.channels)}
         self._t_last = 0.0
+        self._heartbeat_s = self.param("heartbeat_period_s")
+        self._last_heartbeat_t = -math.inf
+        self._alarm_said: FaultAlarm | None = None
         self.open_alarm_output()
         self._pub_range = self.diagnostics_publisher()
+        self._range_warnings = SummedWarnings(self.get_logger(), f"/diagnostics ('{self.get_name()}: healthy range')")
         self._received = 0
         self.inputs: MappedInputs | None = None
         if self.param("channel_map_file"):
@@ -161,9 +177,14 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._t_last = float(t[-1])
         for ev in events:
             self._publish(ev)
+        if self._t_last < self._last_heartbeat_t:  # the record's clock went back: the schedule follows it
+            self._last_heartbeat_t = self._t_last
+        if self._heartbeat_s > 0 and self._t_last >= next_multiple(self._last_heartbeat_t, self._heartbeat_s):
+            self._publish_heartbeat()
         new = self.range_watch.update(x)
-        for o in new:  # once per channel: the reference extrapolates from here on
-            self.get_logger().warning(describe_first(o))
+        for o in new:  # once per channel: the reference extrapolates from here on (beyond a few: summed up)
+            self._range_warnings.warn("range", o["channel"], describe_first(o))
+        self._range_warnings.flush({"range": "channels beyond the reference's healthy runs"})
         if new:
             self._report_range()
 
@@ -206,6 +227,7 @@ class LearnedDetectorNode(DetectorNodeBase):
             msg.detection_time = self._stamp(a["detection_time"])
             if a.get("onset_time") is not None:
                 msg.onset_time = self._stamp(a["onset_time"])
+            msg.statistic_name = str(a["statistic"])
             msg.statistic, msg.threshold = float(a["statistic_value"]), float(a["threshold"])
             cont = a["contributions"] if ev.kind in ("alarm", "deviation") \
                 else a.get("episode_contributions") or a["contributions"]
@@ -216,9 +238,32 @@ class LearnedDetectorNode(DetectorNodeBase):
             msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
         self.publish_alarm(msg, ev.kind, ev.time_s, a)
         self._state = state
+        self._alarm_said = msg if a else self._alarm_said  # what the heartbeat repeats of an open alarm
+
+    def _publish_heartbeat(self) -> None:
+        """The state now on /fault_alarm (no JSON line: not a change): the worst statistic against its threshold,
+        and the open alarm's times and channels while there is one (as the physics detector's heartbeat)."""
+        core = self.core
+        ratio = core.cusum.value / core.h
+        worst = int(np.argmax(ratio)) if len(ratio) else -1
+        name, value, h = (core.stat_names[worst], float(core.cusum.value[worst]), float(core.h[worst])) \
+            if worst >= 0 else ("", math.nan, math.nan)
+        text = (f"{STATE_NAMES[self._state]}: worst statistic {name} {value:.1f} of threshold {h:.1f}; "
+                f"{core.samples_processed} samples")
+        msg = FaultAlarm(loop=self._loop, state=self._state, message=text, severity=math.nan, wavelet_level=-1,
+                         statistic=value, threshold=h, statistic_name=name)
+        msg.stamp = self._stamp(self._t_last)
+        if core.in_alarm and self._alarm_said is not None:  # the open alarm's class, times and channels as last said
+            for field in ALARM_FIELDS:
+                setattr(msg, field, getattr(self._alarm_said, field))
+        self.publish_alarm(msg, "state", self._t_last, None, report=False)
+        self._last_heartbeat_t = self._t_last
+
+    def apply_parameters(self, params) -> None:
+        self._heartbeat_s = self.param("heartbeat_period_s")  # from the next batch the worker takes
 
     def _stamp(self, t_s: float):
-        """A core time as a ROS time: with a channel map on the grid's origin (the first stamp taken)."""
+        """A core time as a ROS time: with a channel map on the plant's clock (the grid's origin added)."""
         origin = self.inputs.aligner.origin_ns if self.inputs is not None else None
         return to_time((origin or 0) + seconds_to_ns(t_s))
 
@@ -227,6 +272,8 @@ class LearnedDetectorNode(DetectorNodeBase):
         """The stream ended: name the alarms still waiting for their window (as the offline replay does)."""
         for ev in self.core.finish():
             self._publish(ev)
+        if self.core.samples_processed:
+            self._publish_heartbeat()  # the state at the end, as the physics detector's last heartbeat
         self._report_range()
 
     def done_report(self) -> dict:
@@ -234,11 +281,7 @@ class LearnedDetectorNode(DetectorNodeBase):
                   "core_errors": self.core_errors, "quiet_events": self.quiet_events, "reference": self.param("reference"),
                   "outside_healthy_range": self.range_watch.summary()}
         if self.inputs is not None:
-            a = self.inputs.aligner
-            report["channel_map"] = {"file": self.param("channel_map_file"), "align": a.rule,
-                                     "grid_origin_ns": a.origin_ns, "samples_waited_out": a.waited_out,
-                                     "counts": {s.channel: vars(c) for s, c in zip(self.inputs.cmap.sources, a.counts)},
-                                     "problems": list(self.inputs.problems.values())}
+            report["channel_map"] = {**self.inputs.report(), "file": self.param("channel_map_file")}
         return report
 
 

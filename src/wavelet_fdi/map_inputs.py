@@ -34,6 +34,39 @@ BEST_EFFORT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliab
 
 #: hold: this many messages of a topic in a row with the same stamp are said (its publisher does not stamp them)
 STAMP_REPEATS = 3
+#: problems of one kind said one by one on the log; the rest of that kind summed up in one line (a map of 1000
+#: channels on silent topics said 1000 WARN lines)
+SAY_EACH = 3
+#: the kinds of problem (the first word of a problem's key), as the summing-up line names them
+PROBLEM_KINDS = {"silent": "silent topics", "type": "topics of another type", "qos": "topics whose QoS does not match",
+                 "value": "channels without their value", "stamp": "topics whose stamp repeats",
+                 "grid": "channels stamped off the grid"}
+
+
+class SummedWarnings:
+    """WARN lines of one kind: the first :data:`SAY_EACH` one by one, the others held and summed up in one line at
+    the next :meth:`flush` (each one stays on /diagnostics, where the summing-up line points)."""
+
+    def __init__(self, logger, where: str) -> None:
+        self.logger, self.where = logger, where
+        self._said: dict[str, int] = {}
+        self._held: dict[str, list[str]] = {}
+
+    def warn(self, kind: str, subject: str, line: str) -> None:
+        n = self._said.get(kind, 0)
+        self._said[kind] = n + 1
+        if n < SAY_EACH:
+            self.logger.warning(line)
+        else:
+            self._held.setdefault(kind, []).append(subject)
+
+    def flush(self, words: dict[str, str]) -> None:
+        """One line per kind for the warnings held since the last flush."""
+        for kind, subjects in self._held.items():
+            shown = ", ".join(subjects[:SAY_EACH]) + (", ..." if len(subjects) > SAY_EACH else "")
+            self.logger.warning(f"... and {len(subjects)} more {words.get(kind, kind)} like it ({shown}): each is "
+                                f"on {self.where}")
+        self._held.clear()
 
 
 def message_class(type_name: str) -> Any:
@@ -51,9 +84,11 @@ class MappedInputs:
     def __init__(self, node: Any, cmap: ChannelMap, dt_ns: int, deliver: Callable[[list], None],
                  silent_after_s: float) -> None:
         self.node, self.cmap, self.deliver, self.silent_after_s = node, cmap, deliver, silent_after_s
-        self.aligner = ChannelAligner(len(cmap.sources), dt_ns, cmap.align, cmap.max_wait_s, cmap.hold_samples)
+        self.aligner = ChannelAligner(len(cmap.sources), dt_ns, cmap.align, cmap.max_wait_s, cmap.hold_samples,
+                                      stamped=tuple(s.stamp != STAMP_RECEIVE for s in cmap.sources))
         self.received = 0
         self.problems: dict[str, str] = {}  # key -> the one line said about it (each said once)
+        self.warnings = SummedWarnings(node.get_logger(), f"/diagnostics ('{node.get_name()}: channel map')")
         self._start = time.monotonic()
         self._last_arrival: dict[str, float] = {}
         self._last_stamp: dict[str, tuple[int | None, int]] = {}  # topic -> (last stamp, repeats of it in a row)
@@ -80,6 +115,15 @@ class MappedInputs:
                          "channel is missing (NaN) in those samples")
             self.aligner.add(i, stamp_ns, value, now)
         self.deliver(self.aligner.take(now))
+
+    def report(self) -> dict:
+        """The ``channel_map`` part of the node's ``detector_done`` report."""
+        a = self.aligner
+        return {"file": self.cmap.path, "align": a.rule, "grid_origin_ns": a.origin_ns,
+                "sample_times": "stamps" if a.times_from_stamps else "grid",
+                "stamps_not_increasing": a.stamps_not_increasing, "samples_waited_out": a.waited_out,
+                "counts": {s.channel: vars(c) for s, c in zip(self.cmap.sources, a.counts)},
+                "problems": list(self.problems.values())}
 
     def _stamp_ns(self, source: ChannelSource, msg: Any) -> int:
         if source.stamp == STAMP_RECEIVE:
@@ -124,6 +168,11 @@ class MappedInputs:
             self.say(f"grid {source.channel}", f"channel {source.channel}: every message of {source.topic} is "
                      f"stamped off the grid ({off_s:.6g} s from its origin, {source.stamp}): "
                      "are its stamps on another clock than the other channels'?")
+        if self.aligner.stamps_not_increasing:
+            topic = next(s.topic for s, stamped in zip(self.cmap.sources, self.aligner.stamped) if stamped)
+            self.say(f"stamp order {topic}", f"{topic}: a sample stamped no later than the one before it (the sample "
+                     "times come from its stamps with align: sequence): timed one sample period after it; does its "
+                     "publisher fill in its stamps? (stamp: receive in the channel map stamps them on receipt)")
         for topic in self.cmap.topics():
             last = self._last_arrival.get(topic, self._start)
             if now - last < self.silent_after_s:
@@ -133,16 +182,20 @@ class MappedInputs:
                 what = "has published nothing" if topic not in self._last_arrival else "has been silent"
                 self.say(f"silent {topic}", f"{topic} {what} for {now - last:.0f} s (channel {channels}): its "
                          "samples go out without it")
+        self.warnings.flush(PROBLEM_KINDS)
 
     def flush(self) -> None:
         """The end of the stream: every sample begun goes to the core."""
         self.deliver(self.aligner.flush())
+        self.warnings.flush(PROBLEM_KINDS)
 
     def say(self, key: str, line: str) -> None:
-        """A problem, once: one line on the log and, in the next status, on /diagnostics."""
+        """A problem, once: on the log (one line; beyond :data:`SAY_EACH` of its kind summed up at the next tick)
+        and, in the next status, on /diagnostics."""
         if key not in self.problems:
             self.problems[key] = line
-            self.node.get_logger().warning(line)
+            kind, _, subject = key.partition(" ")
+            self.warnings.warn(kind, subject, line)
 
     # ---- /diagnostics ---------------------------------------------------------------------------
     def status(self) -> DiagnosticStatus:
@@ -159,7 +212,10 @@ class MappedInputs:
                                    value=f"received {c.received}, used {c.used}, held {c.held}, missing {c.missing}, "
                                          f"late {c.late}, superseded {c.superseded}"))
         values += [KeyValue(key="problem", value=line) for line in self.problems.values()]
-        summary = "; ".join(self.problems.values()) or (
+        lines = list(self.problems.values())
+        summary = "; ".join(lines[:SAY_EACH]) + (f"; and {len(lines) - SAY_EACH} more problems (each under "
+                                                 "'problem')" if len(lines) > SAY_EACH else "")
+        summary = summary or (
             f"{len(self.cmap.sources)} channels on {len(self.cmap.topics())} topics, {a.samples_out} samples")
         level = DiagnosticStatus.WARN if self.problems else DiagnosticStatus.OK
         return DiagnosticStatus(level=level, name=f"{self.node.get_name()}: channel map",

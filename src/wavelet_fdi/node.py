@@ -64,7 +64,7 @@ from .channel_map import load_channel_map
 from .config import Calibration, load_default_calibration, setting_specs, settings_from_values
 from .detector import StreamingDetector
 from .map_inputs import MappedInputs
-from .node_base import STATE_OF_LEVEL, DetectorNodeBase
+from .node_base import STATE_OF_LEVEL, DetectorNodeBase, next_multiple
 from .reference import KnownStart
 
 PARAMS = (
@@ -465,10 +465,10 @@ class DetectorNode(DetectorNodeBase):
         t_now = self._t_last()
         self._follow_clock(t_now, problems)
         self._live_outputs(rows, t_now)
-        if changed or (self._heartbeat_s > 0 and t_now >= _next_multiple(self._last_heartbeat_t, self._heartbeat_s)):
+        if changed or (self._heartbeat_s > 0 and t_now >= next_multiple(self._last_heartbeat_t, self._heartbeat_s)):
             self._publish_heartbeat(status, t_now, changed)
         grew = any(v > self._reported_problems.get(k, 0) for k, v in problems.items())
-        if grew or events or changed or (self._diagnostics_s > 0 and t_now >= _next_multiple(self._last_diag_t,
+        if grew or events or changed or (self._diagnostics_s > 0 and t_now >= next_multiple(self._last_diag_t,
                                                                                               self._diagnostics_s)):
             self._publish_diagnostics(t_now, problems, grew)
 
@@ -498,7 +498,7 @@ class DetectorNode(DetectorNodeBase):
                         "level_output_pct": live_view.finite(outputs[1])}, ns)
         if (self.pub_monitor is None and self.live is None) or not rows:
             return
-        if self._monitor_period_s > 0 and t_now < _next_multiple(self._last_monitor_t, self._monitor_period_s):
+        if self._monitor_period_s > 0 and t_now < next_multiple(self._last_monitor_t, self._monitor_period_s):
             return
         t_s, values = self.core.monitor()
         if not math.isfinite(t_s):
@@ -507,7 +507,7 @@ class DetectorNode(DetectorNodeBase):
         ns = seconds_to_ns(t_s)
         if self.pub_monitor is not None:
             msg = MeasuredSample(source=DETECTOR_MONITOR.publisher, names=list(values), values=list(values.values()))
-            msg.stamp = to_time(ns)
+            msg.stamp = self._ros_time(ns)
             self.pub_monitor.publish(msg)
         if self.live is not None:
             self._to_live(live_view.MONITOR, live_view.monitor(t_s, values), ns)
@@ -552,12 +552,18 @@ class DetectorNode(DetectorNodeBase):
         if state != FaultAlarm.ALARM:  # an input problem does not hide an active alarm
             state = FaultAlarm.WARN
         msg = FaultAlarm(loop=self._loop, state=state, message=text)
-        msg.stamp = to_time(finite_or(self._inputs_t, self._last_ns))
+        msg.stamp = self._ros_time(finite_or(self._inputs_t, self._last_ns))
         self._alarm_fields(msg, None)
         self.publish_alarm(msg, "input", self._inputs_t, None)
         self._inputs_held, self._inputs_texts = 0, []
         self._inputs_sent_at = time.monotonic()
         return state
+
+    def _ros_time(self, ns: int):
+        """A core time (ns) as a ROS time on the plant's clock: with a channel map the grid's origin (the plant's
+        first stamp) is added, as the learned detector does; else simulated time as it is."""
+        origin = self.inputs.aligner.origin_ns if self.inputs is not None else None
+        return to_time(ns + (origin or 0))
 
     def _t_last(self) -> float:
         """Time (s) of the last sample the core took; else of the newest stamp received."""
@@ -584,8 +590,8 @@ class DetectorNode(DetectorNodeBase):
             return
         msg.fault_class = alarm["fault_class"]
         msg.confidence = float(alarm["confidence"])
-        msg.onset_time = to_time(seconds_to_ns(alarm["onset_time"]))
-        msg.detection_time = to_time(seconds_to_ns(alarm["detection_time"]))
+        msg.onset_time = self._ros_time(seconds_to_ns(alarm["onset_time"]))
+        msg.detection_time = self._ros_time(seconds_to_ns(alarm["detection_time"]))
         msg.severity, msg.severity_unit = severity_of(alarm)
         band = alarm.get("dominant_level") or ""
         msg.wavelet_level = int(band[1:]) if band.startswith("D") else 0 if band.startswith("A") else -1
@@ -599,10 +605,11 @@ class DetectorNode(DetectorNodeBase):
         elif state != FaultAlarm.ALARM:  # an input problem does not hide an active alarm
             state = STATE_OF_LEVEL[ev.level]
         msg = FaultAlarm(loop=self._loop, state=state, message=ev.message)
-        msg.stamp = to_time(finite_or(ev.time_s, self._last_ns))
+        msg.stamp = self._ros_time(finite_or(ev.time_s, self._last_ns))
         self._alarm_fields(msg, ev.alarm)
         if ev.alarm:
             msg.statistic, msg.threshold = float(ev.alarm["statistic_value"]), float(ev.alarm["threshold"])
+            msg.statistic_name = str(ev.alarm["statistic"])
         self.publish_alarm(msg, ev.kind, ev.time_s, ev.alarm)
         return state
 
@@ -612,8 +619,9 @@ class DetectorNode(DetectorNodeBase):
                 f"{status['worst_statistic_value']:.1f} of threshold {status['worst_threshold']:.1f}; "
                 f"{status['samples_processed']} samples")
         msg = FaultAlarm(loop=self._loop, state=state, message=("state now " if changed else "") + text,
-                         statistic=status["worst_statistic_value"], threshold=status["worst_threshold"])
-        msg.stamp = to_time(finite_or(t_s, self._last_ns))
+                         statistic=status["worst_statistic_value"], threshold=status["worst_threshold"],
+                         statistic_name=str(status["worst_statistic"]))
+        msg.stamp = self._ros_time(finite_or(t_s, self._last_ns))
         self._alarm_fields(msg, status["alarm"])
         self.publish_alarm(msg, "state", t_s, status["alarm"], report=changed)
         self._last_heartbeat_t = t_s
@@ -650,7 +658,7 @@ class DetectorNode(DetectorNodeBase):
                                  name=f"{self.get_name()}: {self._loop} loop state", hardware_id=f"{self._loop}_loop",
                                  message=f"{d['state']}; {d['alarms']} alarm(s); calibration {self.calibration_source}")
         array = DiagnosticArray(status=[inputs, state])
-        array.header.stamp = to_time(finite_or(t_s, self._last_ns))
+        array.header.stamp = self._ros_time(finite_or(t_s, self._last_ns))
         self.pub_diag.publish(array)
         self._last_diag_t = t_s
         self._reported_problems = problems
@@ -677,18 +685,8 @@ class DetectorNode(DetectorNodeBase):
                   "lag": self.lag.summary() | {"pairing_wait_max_s": self.pairing.max_wait_s},
                   "calibration": self.calibration_source}
         if self.inputs is not None:
-            a = self.inputs.aligner
-            report["channel_map"] = {"file": self.param("channel_map_file"), "align": a.rule,
-                                     "grid_origin_ns": a.origin_ns, "samples_waited_out": a.waited_out,
-                                     "counts": {s.channel: vars(c) for s, c in zip(self.inputs.cmap.sources, a.counts)},
-                                     "problems": list(self.inputs.problems.values())}
+            report["channel_map"] = {**self.inputs.report(), "file": self.param("channel_map_file")}
         return report
-
-
-def _next_multiple(t_s: float, period_s: float) -> float:
-    """The first multiple of the period after t_s: periodic messages stay on their grid of simulated time
-    (0, 60, 120 s, ...) whatever the chunks the core was given."""
-    return (math.floor(t_s / period_s) + 1) * period_s if math.isfinite(t_s) else -math.inf
 
 
 def _text(v) -> str:

@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import json
+import math
 import threading
 from typing import Any
 
@@ -52,6 +53,26 @@ class DetectorNodeBase(GraphNode):
         self._closing = False
         self._poked = False  # the worker calls process([]) once: work that is due without new rows
         self._worker: threading.Thread | None = None
+
+    def graph_node_names(self) -> list[str]:
+        """With a channel map the plant is your own, not the simulator: unless ``graph_nodes`` is given, the start
+        barrier waits for no other node (the default, the simulator's plant, controllers and valve, would never come:
+        the node used to stop after ``connect_timeout_s`` waiting for them)."""
+        if self.alone_on_a_map():
+            return [self.get_name()]
+        return super().graph_node_names()
+
+    def alone_on_a_map(self) -> bool:
+        """A channel map and no ``graph_nodes`` given (``-p`` or a parameter file): a graph of this node alone."""
+        given = getattr(self, "_parameter_overrides", {})
+        return bool(self.param("channel_map_file")) and "graph_nodes" not in given
+
+    def start_barrier(self) -> None:
+        """The start barrier; a mapped node alone says in one line that it waits for no other node."""
+        if self.alone_on_a_map():
+            self.get_logger().info("channel map: your plant's own topics; the start barrier waits for no other node "
+                                   "(set graph_nodes to wait for some)")
+        super().start_barrier()
 
     def open_alarm_output(self) -> None:
         self.pub_alarm = self.data_publisher(FaultAlarm, FAULT_ALARM.name)
@@ -136,6 +157,12 @@ class DetectorNodeBase(GraphNode):
         self.flush_publishers(5.0)
         self.report_published()
         self.report({"event": "detector_done", **self.done_report()})
+
+
+def next_multiple(t_s: float, period_s: float) -> float:
+    """The first multiple of the period after t_s: periodic messages (heartbeats) stay on their grid of the stream's
+    time (0, 60, 120 s, ...) whatever the chunks the core was given."""
+    return (math.floor(t_s / period_s) + 1) * period_s if math.isfinite(t_s) else -math.inf
 
 
 def json_default(x):

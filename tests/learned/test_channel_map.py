@@ -101,6 +101,31 @@ def test_sequence_takes_the_kth_message_of_each_channel_whatever_its_stamp():
     assert np.array_equal(x, rows) and t.tolist() == [0.5 * k for k in range(6)] and al.origin_ns == SEC
 
 
+def test_sequence_times_stamped_samples_by_their_stamps_gaps_included():
+    """A record with gaps (rows 2 s apart where the grid says 1 s) published in order with its own stamps: the
+    samples get the record's times from the first stamp, as the offline replay of the record gives them
+    (issue 36 item 10); a receive-stamped channel beside the stamped one does not decide."""
+    times_ns = [100 * SEC + t * SEC for t in (0, 1, 2, 4, 5, 8, 9)]  # gaps after 2 s and 5 s
+    msgs = []
+    for k, ns in enumerate(times_ns):
+        msgs.append((0, 7 * SEC + k, float(k), 0.0))  # channel 0: received (receive-time stamps, another clock)
+        msgs.append((1, ns, 10.0 + k, 0.0))  # channel 1: its header stamps
+    t, x, al = align_messages(msgs, 2, SEC, "sequence", stamped=(False, True))
+    assert t.tolist() == [0.0, 1.0, 2.0, 4.0, 5.0, 8.0, 9.0] and al.origin_ns == 100 * SEC
+    assert x[:, 1].tolist() == [10.0 + k for k in range(7)] and al.times_from_stamps
+    assert al.stamps_not_increasing == 0
+    # receive-time stamps only: the grid (faster than real time they say nothing)
+    t_grid, _, al_grid = align_messages(msgs, 2, SEC, "sequence")
+    assert t_grid.tolist() == [float(k) for k in range(7)] and not al_grid.times_from_stamps
+
+
+def test_sequence_times_a_stamp_that_does_not_increase_one_period_after_the_previous_sample():
+    stamps = [5 * SEC, 6 * SEC, 6 * SEC, 0, 9 * SEC]  # a repeat, then a publisher's zero
+    msgs = [(0, ns, float(k), 0.0) for k, ns in enumerate(stamps)]
+    t, _, al = align_messages(msgs, 1, SEC, "sequence", stamped=(True,))
+    assert t.tolist() == [0.0, 1.0, 2.0, 3.0, 4.0] and al.stamps_not_increasing == 2
+
+
 def test_hold_puts_stamps_on_the_nearest_grid_point_and_holds_a_slower_channel():
     dt = SEC
     msgs = []

@@ -13,7 +13,8 @@ put that many samples on its grid). It listens to /fault_alarm meanwhile. Prints
 ``detector: channel map`` status of /diagnostics (level, message, values).
 
 With ``"stamped": {"t0_ns": T0, "dt_ns": DT, "topics": [{"topic", "type", "field", "columns", "names"}, ...]}`` it
-publishes stamped messages instead, row k stamped T0 + k * DT: sensor_msgs/FluidPressure or Temperature (header,
+publishes stamped messages instead, row k stamped T0 + k * DT (T0 + ``stamps_ns[k]`` when given:
+a record's own times): sensor_msgs/FluidPressure or Temperature (header,
 ``field`` = column ``columns[0]``) or phfdi_interfaces/MeasuredSample (its stamp; ``names`` = ``columns``).
 """
 
@@ -70,6 +71,7 @@ def main(domain_id: int, spec_path: str) -> int:
     def on_alarm(m: FaultAlarm) -> None:
         received.append({"state": int(m.state), "stamp_ns": time_ns(m.stamp), "detection_ns": time_ns(m.detection_time),
                          "onset_ns": time_ns(m.onset_time), "statistic": m.statistic, "threshold": m.threshold,
+                         "statistic_name": m.statistic_name,
                          "channels": list(m.channels), "channel_shares": list(m.channel_shares),
                          "channel_bands": list(m.channel_bands), "fault_class": m.fault_class,
                          "severity": m.severity, "message": m.message})
@@ -128,12 +130,17 @@ def stamped_senders(node, stamped: dict) -> list:
     from phfdi_base.ros.graph_node import DATA_QOS, to_time
 
     t0_ns, dt_ns = int(stamped["t0_ns"]), int(stamped["dt_ns"])
+    stamps = stamped.get("stamps_ns")  # row k's own stamp (a record's times, gaps included), else on the grid
+
+    def stamp_of(k: int):
+        return to_time(t0_ns + (stamps[k] if stamps else k * dt_ns))
+
     senders = []
     for t in stamped["topics"]:
         cols = t["columns"]
         if t["type"] == "phfdi_interfaces/msg/MeasuredSample":
             def build(row, k, cols=cols, names=t["names"]):
-                return MeasuredSample(stamp=to_time(t0_ns + k * dt_ns), names=names,
+                return MeasuredSample(stamp=stamp_of(k), names=names,
                                       values=[float(row[c]) for c in cols])
             mtype = MeasuredSample
         else:
@@ -141,7 +148,7 @@ def stamped_senders(node, stamped: dict) -> list:
 
             def build(row, k, cols=cols, mtype=mtype, field=t["field"]):
                 msg = mtype()
-                msg.header.stamp = to_time(t0_ns + k * dt_ns)
+                msg.header.stamp = stamp_of(k)
                 setattr(msg, field, float(row[cols[0]]))
                 return msg
         senders.append((node.create_publisher(mtype, t["topic"], DATA_QOS), build))

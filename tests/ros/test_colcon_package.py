@@ -4,8 +4,9 @@ recorder, lock-step, equal to `phfdi launch` of the same graph. The default scen
 compare), so both runs add the same fault (``fault:=backlash`` on every node, as `phfdi launch --fault backlash`).
 
 What this cannot run here: launch/detector_loop.launch.py under `ros2 launch` (launch and launch_ros are not on
-PyPI; tests/ros/test_shipped_config.py only compiles it) and a colcon build of phfdi_interfaces (built into the
-venv by scripts/build_interfaces.sh; colcon is told to take it from there).
+PyPI; tests/ros/test_shipped_config.py only compiles it). This test ignores phfdi_interfaces (built into the venv
+by scripts/build_interfaces.sh; colcon takes it from there) to stay fast; tests/ros/test_interfaces_cpp.py runs
+the documented plain `colcon build` of both packages.
 """
 
 from __future__ import annotations

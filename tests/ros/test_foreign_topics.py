@@ -168,6 +168,7 @@ def check_same_alarms(done: dict, received: list[dict], offline: dict, dt_ns: in
     assert sorted(raised) == [origin + a["detection_index"] * dt_ns for a in alarms]
     for a, (_, m) in zip(alarms, sorted(raised.items())):
         assert m["statistic"] == a["statistic_value"] and m["threshold"] == a["threshold"]
+        assert m["statistic_name"] == a["statistic"]
         assert m["channels"] == list(a["contributions"])
         assert m["channel_shares"] == [v["share"] for v in a["contributions"].values()]
         assert m["stamp_ns"] == m["detection_ns"]
@@ -301,7 +302,9 @@ def test_a_simulated_backlash_on_float64_topics_gives_the_physics_detectors_offl
                                                         "bad_time", "commands_missing")), done["diagnostics"]
     assert done["alarms"] == offline
     raised = [m for m in heard["received"] if m["state"] == 2 and m["detection_ns"]]
-    assert {m["detection_ns"] for m in raised} == {seconds_to_ns(a["detection_time"]) for a in offline}
+    origin = done["channel_map"]["grid_origin_ns"]  # /fault_alarm is on the plant's clock (here: receive times)
+    assert {m["detection_ns"] for m in raised} == {origin + seconds_to_ns(a["detection_time"]) for a in offline}
+    assert {m["statistic_name"] for m in raised} >= {a["statistic"] for a in offline}
     assert any(m["fault_class"] == "backlash" for m in raised), raised
 
 

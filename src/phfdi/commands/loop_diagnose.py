@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from phfdi.loopdiag.dask_run import CONNECT_TIMEOUT_S
+
 from .common import EPILOG_FORMAT, print_notes
 
 EXAMPLES = """examples:
@@ -68,7 +70,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-baselines", action="store_true", help="skip the Horch and He et al. stiction tests")
     p.add_argument("--workers", type=int, default=None, help="Dask worker processes of the local cluster (default: 2)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")
+                   help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one; one "
+                        f"line and exit status 2 if it does not answer within {CONNECT_TIMEOUT_S:g} s")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write the plant-wide table (loops.parquet, loops.csv) and worst_loops.txt into DIR")
     p.add_argument("--top", type=int, default=10, metavar="N", help="loops in the ranked summary (default 10)")
@@ -105,6 +108,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
     if args.top < 1:
         raise UserError(f"--top must be at least 1, got {args.top}")
+    if args.scheduler is not None:  # a malformed address: one line before any file is read
+        from phfdi.loopdiag.dask_run import check_scheduler_address
+
+        check_scheduler_address(args.scheduler)
     for folder in (args.out, args.figure):  # before the work, not after it
         if folder:
             check_writable_folder(folder)

@@ -13,6 +13,53 @@ from typing import Callable, Iterable, Iterator
 
 from phfdi_base.errors import UserError
 
+#: how long reaching a running scheduler may take (s): the TCP connection and distributed's handshake together
+CONNECT_TIMEOUT_S = 5.0
+#: address schemes of a scheduler on another process or machine (distributed's ``inproc`` is in-process only)
+REMOTE_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+
+
+def check_scheduler_address(address: str) -> None:
+    """One line (:class:`UserError`) unless ``address`` is one distributed can dial: SCHEME://HOST:PORT."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)  # no scheme: tcp
+        host, port = parse_host_port(location)
+    except ValueError as exc:
+        raise UserError(f"Dask scheduler address {address!r}: {exc}; give tcp://HOST:PORT, e.g. "
+                        f"tcp://10.0.0.5:8786") from None
+    if scheme not in REMOTE_SCHEMES:
+        hint = " (a scheduler listens on tcp://HOST:8786; http://HOST:8787 is its dashboard)" \
+            if scheme in ("http", "https") else ""
+        raise UserError(f"Dask scheduler address {address!r}: unknown scheme {scheme!r}, use one of "
+                        f"{', '.join(REMOTE_SCHEMES)}{hint}")
+    if not host or not 1 <= int(port) <= 65535:
+        raise UserError(f"Dask scheduler address {address!r}: give a host and a port 1 .. 65535, e.g. "
+                        f"tcp://10.0.0.5:8786")
+
+
+def _reach(address: str, timeout_s: float) -> None:
+    """Connect to the scheduler and complete distributed's handshake within ``timeout_s``, else one line. The
+    Client's own timeout bounds the TCP connect but not the handshake's read: a listener that accepts and never
+    answers held it for more than 100 s."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def handshake() -> None:
+        # distributed's own limit (its retries of a refused connection, then its OSError naming the cause) a little
+        # inside ours (a handshake that never comes)
+        comm = await asyncio.wait_for(connect(address, timeout=0.8 * timeout_s), timeout_s)
+        await comm.close()
+
+    try:
+        asyncio.run(handshake())
+    except TimeoutError:
+        raise UserError(f"the Dask scheduler at {address} did not answer within {timeout_s:g} s") from None
+    except OSError as exc:
+        raise UserError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+
 
 def default_workers() -> int:
     return max(1, min(2, os.cpu_count() or 1))
@@ -25,8 +72,10 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, proces
     from distributed import Client, LocalCluster
 
     if scheduler:
+        check_scheduler_address(scheduler)
+        _reach(scheduler, CONNECT_TIMEOUT_S)
         try:
-            client = Client(scheduler, timeout="10s")
+            client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S:g}s")
         except (OSError, TimeoutError) as exc:
             raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
         try:

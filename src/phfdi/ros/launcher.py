@@ -275,18 +275,28 @@ class Launcher:
         self._last_progress = 0.0  # monotonic time of its last one
         self._pace = 0.0  # the clock node's pace, as it last reported it (for the watchdog's sample period)
         self._stall: dict = {}  # what the watchdog saw when it fired
+        self.t0 = self.t_stop = time.monotonic()  # reset when the nodes start (_spawn_all)
+        self.t0_wall = time.time()
+        self.wall_t0 = self.t0_wall - 1.0
 
     # ---- public ---------------------------------------------------------------------------
     def run(self) -> LaunchResult:
-        self._check_bags_free()  # before anything starts: a refusal costs nothing and touches nothing
-        lease = reserve_domain_id(self.requested_domain)
-        self.log_dir = Path(tempfile.mkdtemp(prefix="phfdi-launch-")) if self.log_dir is None else self.log_dir
-        self.log_dir.mkdir(parents=True, exist_ok=True)
+        # signals first: a Ctrl-C while the domain is reserved or the nodes start is a stop request like any other
+        # (an interrupted reservation or a half-made log folder would be left behind otherwise)
         previous = self._catch_signals()
+        try:
+            self._check_bags_free()  # before anything starts: a refusal costs nothing and touches nothing
+            lease = reserve_domain_id(self.requested_domain)
+        except BaseException:
+            self._restore_signals(previous)
+            raise
         result = LaunchResult(status=0, samples=0, samples_done=0, connect_s=float("nan"), run_wall_s=float("nan"),
                               domain_id=lease.domain_id)
         try:
-            self._spawn_all(lease.domain_id)
+            self.log_dir = Path(tempfile.mkdtemp(prefix="phfdi-launch-")) if self.log_dir is None else self.log_dir
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            if not self._signals:  # stopped before any node started: none is started
+                self._spawn_all(lease.domain_id)
             self._watch(result)
         finally:
             self._stop_all(result)
@@ -340,6 +350,9 @@ class Launcher:
         return [sys.executable, "-m", spec.module, "--ros-args", "--params-file", str(params_file)]
 
     def _watch(self, result: LaunchResult) -> None:
+        if not self.procs:  # a stop request came before any node started
+            self._interrupted(result)
+            return
         plant = self.procs[self.clock_node]
         done = False
         while True:
@@ -347,9 +360,7 @@ class Launcher:
                 done = self._on_plant_event(line, result) or done
             self._follow_others()
             if self._signals:
-                sig = self._signals[0]
-                result.status = 128 + sig
-                result.interrupted_by = signal.Signals(sig).name
+                self._interrupted(result)
                 return
             for p in self.procs.values():
                 if p.popen.poll() is None:
@@ -372,6 +383,11 @@ class Launcher:
                     result.failure = self._describe_stall(result)  # told again with the nodes' counts after the stop
                     return
             time.sleep(0.05)
+
+    def _interrupted(self, result: LaunchResult) -> None:
+        sig = self._signals[0]
+        result.status = 128 + sig
+        result.interrupted_by = signal.Signals(sig).name
 
     def watchdog_limit_s(self, sample_time_s: float) -> float:
         """Wall seconds without progress that count as a stall: ``watchdog_s``, but never less than
@@ -494,6 +510,8 @@ class Launcher:
         for p in self.procs.values():
             if p.killed_by_us:
                 result.notes.append(f"node {p.name} did not stop within {self.stop_timeout_s:g} s and was killed")
+            elif p.popen.returncode == -signal.SIGTERM and self.t_connected is None:
+                pass  # stopped by our SIGTERM while it was still starting (before its handler): nothing to say
             elif p.popen.returncode not in (0, None) and p.expected_exit and result.failure is None:
                 result.notes.append(f"node {p.name} {p.describe_exit()} while stopping: "
                                     + " | ".join(p.stderr_tail(3)))
@@ -583,7 +601,7 @@ class Launcher:
                 unfinished = path.with_name(f".{path.stem}.{os.getpid()}.unfinished.mcap")
                 os.replace(path, unfinished)
                 try:
-                    rec = bagio.recover(unfinished, path)  # staged: all or nothing
+                    rec = bagio.recover(unfinished, path, caller_holds_lock=True)  # staged: all or nothing
                 except (UserError, OSError) as exc:
                     os.replace(unfinished, path)
                     result.notes.append(

@@ -142,9 +142,14 @@ class StartBarrierMixin(Node):
         if not self._connected:
             self._check_barrier()  # the last peer's "ready" connects the graph now, not at the next timer tick
 
+    def graph_node_names(self) -> list[str]:
+        """The nodes this node waits for at the start barrier: ``graph_nodes`` (a node of a graph of its own may
+        say otherwise: the detectors on a channel map)."""
+        return list(self.param("graph_nodes"))
+
     def _unmatched(self) -> str | None:
         """Why this node's endpoints are not all matched yet (None: they are)."""
-        missing = [n for n in self.param("graph_nodes") if n not in self._peers]
+        missing = [n for n in self.graph_node_names() if n not in self._peers]
         if missing:
             return "waiting for node(s) " + ", ".join(missing)
         for pub in self._data_publishers:
@@ -166,7 +171,7 @@ class StartBarrierMixin(Node):
             self._startup_step("matched")
             self._announce()
         if why is None:
-            waiting = [n for n in self.param("graph_nodes") if n not in self._peers_ready]
+            waiting = [n for n in self.graph_node_names() if n not in self._peers_ready]
             why = "waiting for node(s) " + ", ".join(waiting) + " to connect" if waiting else None
         if why is None:
             self._connected = True
