@@ -194,3 +194,60 @@ def test_a_short_nul_tail_is_left_to_the_reader(tmp_path):
     path.write_bytes(b"time_s,ph_measured\n" + b"".join(b"%d,7.0\n" % k for k in range(5000)) + b"\0" * 300)
     record = read_record(path)
     assert len(record.time_s) >= 5000
+
+
+def _twice(text: str, key_line: str) -> str:
+    """``text`` with ``key_line`` (a line of it) repeated right after itself."""
+    assert key_line in text.splitlines(), key_line
+    return text.replace(key_line + "\n", key_line + "\n" + key_line + "\n", 1)
+
+
+def _shipped(relative: str) -> str:
+    from tests.conftest import ROOT
+
+    return (ROOT / relative).read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("what", ["column map", "scenario", "plant model", "loop column map", "--set"])
+def test_a_duplicate_yaml_key_is_refused_naming_it(what, tmp_path, run_cli):
+    """YAML keeps the last of two equal keys without a word: a column map naming ph_measured twice, a scenario
+    with duration_s twice, used one of them silently. Each is now one line naming the file, the key and the line."""
+    record = tmp_path / "loop.csv"
+    record.write_text("t,pH,op,pv,sp\n" + "".join(f"{k},7.0,50,1,1\n" for k in range(200)))
+    path = tmp_path / "file.yaml"
+    if what == "column map":
+        path.write_text("time_s: t\nph_measured: pH\nph_measured: op\n")
+        argv, key, line = ["replay", str(record), "--map", str(path)], "ph_measured", 3
+    elif what == "scenario":
+        path.write_text(_twice(_shipped("src/phfdi/scenarios/paper.yaml"), "duration_s: 10000.0"))
+        argv, key = ["simulate", "--scenario", str(path), "--out", str(tmp_path / "r.csv")], "duration_s"
+        line = next(k for k, t in enumerate(path.read_text().splitlines(), 1) if t == "duration_s: 10000.0") + 1
+    elif what == "plant model":
+        text = _shipped("src/ph_plant_sim/presets/paper.yaml")
+        first = next(t for t in text.splitlines() if t and not t.startswith((" ", "#")) and ":" in t)
+        path.write_text(_twice(text, first))
+        scenario = tmp_path / "s.yaml"
+        scenario.write_text(_shipped("src/phfdi/scenarios/paper.yaml").replace("plant: paper", f"plant: {path}"))
+        argv, key = ["simulate", "--scenario", str(scenario), "--out", str(tmp_path / "r.csv")], first.split(":")[0]
+        line = text.splitlines().index(first) + 2
+    elif what == "loop column map":
+        path.write_text("columns: {time: t, op: op, pv: pv, sp: sp}\ncolumns: {time: t, op: pv, pv: op}\n")
+        argv, key, line = ["loop-diagnose", str(record), "--columns", str(path)], "columns", 2
+    else:
+        argv = ["simulate", "--set", "sensors.ph={bias: 0.1, bias: 0.2}", "--out", str(tmp_path / "r.csv")]
+        key, line, path = "bias", 1, "--set sensors.ph"
+    status, _, err = run_cli(*argv)
+    message = _one_line(status, err)
+    assert f"{path}: line {line}: key {key!r} appears twice" in message, message
+
+
+def test_a_channel_map_with_a_channel_twice_is_refused(tmp_path):
+    from phfdi_base.errors import UserError
+    from wavelet_fdi.channel_map import load_channel_map
+
+    text = _shipped("config/channel_map_skab.yaml")
+    line = next(t for t in text.splitlines() if t.strip().startswith("Current:"))
+    path = tmp_path / "channels.yaml"
+    path.write_text(_twice(text, line))
+    with pytest.raises(UserError, match=r"channels.yaml: line \d+: key 'Current' appears twice"):
+        load_channel_map(path)
