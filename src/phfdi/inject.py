@@ -234,25 +234,29 @@ def _mapped(cmap, signal: str) -> str:
 
 
 def _check_size(spec: FaultKind, size: float | None) -> float:
-    if spec.name == "probe_frozen":
+    """The size, if it is in the kind's range (:data:`~phfdi.inject_kinds.KINDS`); one line naming the range."""
+    if spec.sizes is None:
         return 0.0
     if size is None or not math.isfinite(size):
-        raise UserError(f"{spec.name} needs a finite --size (in {spec.unit})")
-    limits = {"probe_noise": (0.0, math.inf, "above 0"), "probe_lag": (0.0, math.inf, "above 0 s"),
-              "probe_gain": (-1.0, math.inf, "above -1"), "pump_low": (0.0, 1.0, "between 0 and 1"),
-              "pump_high": (0.0, math.inf, "above 0"), "pump_stuck": (0.0, math.inf, "above 0 mL/s")}
-    low, high, say = limits.get(spec.name, (-math.inf, math.inf, ""))
-    if not low < size < high:
-        raise UserError(f"{spec.name}: --size must be {say} ({spec.unit}), got {size:g}")
+        raise UserError(f"{spec.name} needs a finite --size, {spec.sizes.says(spec.unit)}")
+    if size not in spec.sizes:
+        raise UserError(f"--size {size:g}: {spec.name} takes a size {spec.sizes.says(spec.unit)}")
     return float(size)
 
 
+#: how far (relative to the stamp, at least absolute seconds) an onset may lie outside the record's first or last
+#: stamp and still be taken as that stamp: a stamp such as 1.25200000000041 s is shown as 1.252 s
+ONSET_TOLERANCE = 1e-9
+
+
 def _onset_row(time_s: np.ndarray, onset_s: float, column: str) -> int:
+    """The first row at or after the onset; an onset outside the record is refused naming its exact range."""
     lo, hi = float(np.nanmin(time_s)), float(np.nanmax(time_s))
-    if not (math.isfinite(onset_s) and lo <= onset_s <= hi):
-        raise UserError(f"--onset {onset_s:g} s is outside the record: its time ({column!r}) runs from {lo:g} to "
-                        f"{hi:g} s")
-    return int(np.argmax(time_s >= onset_s))
+    slack = ONSET_TOLERANCE * max(1.0, abs(lo), abs(hi))
+    if not (math.isfinite(onset_s) and lo - slack <= onset_s <= hi + slack):
+        raise UserError(f"--onset {onset_s!r} s is outside the record: its time ({column!r}) runs from {lo!r} to "
+                        f"{hi!r} s")
+    return int(np.flatnonzero(time_s >= min(onset_s, hi))[0])
 
 
 def inject_fault(path: str | Path, kind: str, onset_s: float, size: float | None = None, *,
@@ -300,7 +304,8 @@ def inject_fault(path: str | Path, kind: str, onset_s: float, size: float | None
         raise UserError(f"{kind} of size {size:g} {spec.unit} from {onset_s:g} s would change no cell of {path} "
                         f"(at the file's resolution); nothing written")
     truth = _truth(csv, spec, channels, onset_s, k0, size, pump, seed, changes)
-    truth["onset_index"] = int(np.searchsorted(record.time_s, onset_s, side="left"))
+    last_s = float(record.time_s[-1])  # an onset a rounding past the last stamp is that stamp (_onset_row)
+    truth["onset_index"] = int(np.searchsorted(record.time_s, min(onset_s, last_s), side="left"))
     return csv.to_bytes(changes), truth
 
 

@@ -184,7 +184,7 @@ def one_error_line(status: int, err: str) -> str:
 def test_cli_refusals_are_one_line_and_leave_no_file(rig_file, tmp_path, run_cli):
     base = ["inject", rig_file, "--fault", "probe_bias", "--size", "0.3"]
     line = one_error_line(*run_cli(*base, "--onset", "1e6", "--out", tmp_path / "a.csv")[::2])
-    assert "--onset 1e+06 s is outside the record" in line
+    assert "--onset 1000000.0 s is outside the record" in line
     line = one_error_line(*run_cli("inject", rig_file, "--fault", "pump_stuck", "--pump", "acid", "--size", "1",
                                    "--onset", onset_in(rig_file), "--out", tmp_path / "a.csv")[::2])
     assert "would change nothing" in line
@@ -241,7 +241,8 @@ def test_help_names_units_and_record_time(capsys):
         main(["inject", "--help"])
     text = capsys.readouterr().out
     assert exc.value.code == 0 and "example" in text and "record's time" in text
-    for unit in ("[pH]", "[pH/min]", "[pH (std)]", "[s]", "[fraction]", "[mL/s]"):
+    for unit in ("to 14 pH]", "to 14 pH/min]", "at most 14 pH (std)]", "at most 86400 s]", "below 1 (a fraction)]",
+                 "at most 1000 mL/s]"):
         assert unit in text
 
 

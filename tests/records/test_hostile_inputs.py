@@ -3,6 +3,7 @@ is expected, a link loop, a YAML alias bomb and an oversized YAML, a CSV line pa
 
 from __future__ import annotations
 
+import json
 import os
 
 import pytest
@@ -251,3 +252,57 @@ def test_a_channel_map_with_a_channel_twice_is_refused(tmp_path):
     path.write_text(_twice(text, line))
     with pytest.raises(UserError, match=r"channels.yaml: line \d+: key 'Current' appears twice"):
         load_channel_map(path)
+
+
+#: the first and last stamps of :func:`_rig_csv`: float noise as the rig's own (1.25200000000041), either side
+FIRST_STAMP, LAST_STAMP = "1.25200000000041", "140.90199999999"
+
+
+def _rig_csv(path, n: int = 400):
+    """A record in the rig's columns, 0.35 s apart, from FIRST_STAMP to LAST_STAMP."""
+    header = 'Time, ElapsedTime (s),"%, Acid","%, Base","Acid Flow, mL/s","Base Flow, mL/s","pH","T_Room",,,,\n'
+    stamps = [FIRST_STAMP, *(f"{1.252 + 0.35 * k:.3f}" for k in range(1, n - 1)), LAST_STAMP]
+    rows = [f"2/24/2025 2:00:00 PM , {stamps[k]} ,60.00,"
+            f"{100 if (k // 40) % 2 == 0 else 0:.2f},4.31,{6.45 if (k // 40) % 2 == 0 else 0:.2f},"
+            f"{7 + (k % 7) / 10:.2f},22.5,,,,\n" for k in range(n)]
+    path.write_text(header + "".join(rows))
+    return path
+
+
+@pytest.mark.parametrize("kind, size, says", [
+    ("probe_bias", "1e308", "from -14 to 14 pH"), ("probe_bias", "-14.5", "from -14 to 14 pH"),
+    ("probe_drift", "1e308", "from -14 to 14 pH/min"), ("probe_noise", "1e308", "above 0 and at most 14 pH (std)"),
+    ("probe_noise", "0", "above 0 and at most 14 pH (std)"), ("probe_lag", "1e308", "above 0 and at most 86400 s"),
+    ("probe_gain", "1e308", "above -1 and at most 10 (a fraction)"),
+    ("probe_gain", "-1", "above -1 and at most 10 (a fraction)"),
+    ("pump_low", "1", "above 0 and below 1 (a fraction)"), ("pump_high", "1e308", "above 0 and at most 10 (a fraction)"),
+    ("pump_stuck", "1e308", "above 0 and at most 1000 mL/s")])
+def test_an_inject_size_outside_its_kinds_range_is_one_line(kind, size, says, tmp_path, run_cli):
+    """--size 1e308 was taken with numpy overflow warnings and wrote a flow cell of 309 digits beside a command
+    left unchanged; each kind now has its range (phfdi.inject_kinds.KINDS), refused naming kind, range and unit."""
+    record = _rig_csv(tmp_path / "rig.csv")
+    pump = ["--pump", "base"] if kind.startswith("pump_") else []
+    out = tmp_path / "faulty.csv"
+    status, _, err = run_cli("inject", str(record), "--fault", kind, "--size", size, "--onset", "20", *pump,
+                             "--out", str(out))
+    line = _one_line(status, err)
+    assert f"--size {float(size):g}: {kind} takes a size {says}" in line, line
+    assert "Warning" not in err and not out.exists()
+
+
+def test_an_onset_at_the_first_stamp_as_shown_is_taken(tmp_path, run_cli):
+    """The rig's first stamp 1.25200000000041 s was shown as 1.252 s in the refusal of --onset 1.252 ("outside
+    the record: its time runs from 1.252 ..."). An onset a float rounding off the first or last stamp is now that
+    stamp; one really outside is refused naming the exact stamps."""
+    record = _rig_csv(tmp_path / "rig.csv")
+    for onset, row in (("1.252", 0), ("140.902", 399)):  # each stamp as :g shows it
+        out = tmp_path / f"at_{row}.csv"
+        status, text, err = run_cli("inject", str(record), "--fault", "probe_bias", "--size", "1", "--onset", onset,
+                                    "--out", str(out), "--json")
+        assert status == 0, err
+        truth = json.loads(text)
+        assert truth["onset_index"] == row and truth["onset_line"] == row + 2, truth
+    line = _one_line(*run_cli("inject", str(record), "--fault", "probe_bias", "--size", "1", "--onset", "1.25",
+                              "--out", str(tmp_path / "before.csv"))[::2])
+    assert f"--onset 1.25 s is outside the record: its time ('ElapsedTime (s)') runs from {FIRST_STAMP} to " \
+           f"{LAST_STAMP} s" in line, line
