@@ -68,7 +68,8 @@ class FaultKind:
 
 KINDS: dict[str, FaultKind] = {k.name: k for k in (
     FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH", SizeRange(-PH_MAX, PH_MAX)),
-    FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH", SizeRange(-PH_MAX, PH_MAX)),
+    FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH",
+              SizeRange(-PH_MAX, PH_MAX)),
     FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)", None),
     FaultKind("probe_noise", "sensor", "pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added",
               SizeRange(0.0, PH_MAX, low_in=False)),

@@ -275,7 +275,8 @@ def _rig_csv(path, n: int = 400):
     ("probe_noise", "0", "above 0 and at most 14 pH (std)"), ("probe_lag", "1e308", "above 0 and at most 86400 s"),
     ("probe_gain", "1e308", "above -1 and at most 10 (a fraction)"),
     ("probe_gain", "-1", "above -1 and at most 10 (a fraction)"),
-    ("pump_low", "1", "above 0 and below 1 (a fraction)"), ("pump_high", "1e308", "above 0 and at most 10 (a fraction)"),
+    ("pump_low", "1", "above 0 and below 1 (a fraction)"),
+    ("pump_high", "1e308", "above 0 and at most 10 (a fraction)"),
     ("pump_stuck", "1e308", "above 0 and at most 1000 mL/s")])
 def test_an_inject_size_outside_its_kinds_range_is_one_line(kind, size, says, tmp_path, run_cli):
     """--size 1e308 was taken with numpy overflow warnings and wrote a flow cell of 309 digits beside a command
@@ -306,3 +307,98 @@ def test_an_onset_at_the_first_stamp_as_shown_is_taken(tmp_path, run_cli):
                               "--out", str(tmp_path / "before.csv"))[::2])
     assert f"--onset 1.25 s is outside the record: its time ('ElapsedTime (s)') runs from {FIRST_STAMP} to " \
            f"{LAST_STAMP} s" in line, line
+
+
+#: a driver of one `phfdi` process in a race: every "exists?" check (phfdi_base.outputs.refuse_existing) waits at
+#: a barrier until the other process has made the same check, so both pass every check before either writes (the
+#: interleaving a real race needs); placing a .fault.json it waits BEFORE_S before and AFTER_S after (a slow disk)
+RACER = """
+import os, sys, time
+from pathlib import Path
+import phfdi_base.outputs as outputs
+me, other, folder = sys.argv[1], sys.argv[2], Path(sys.argv[3])
+before_s, after_s = (float(x) for x in sys.argv[4].split(":"))
+check, calls = outputs.refuse_existing, [0]
+def at_barrier(path, overwrite):
+    check(path, overwrite)
+    calls[0] += 1
+    (folder / f"{me}.{calls[0]}").touch()
+    deadline = time.monotonic() + 60
+    while not (folder / f"{other}.{calls[0]}").exists() and time.monotonic() < deadline:
+        time.sleep(0.002)
+outputs.refuse_existing = at_barrier
+def slowly(place):
+    def placed(src, dst, *a, **k):
+        truth = str(dst).endswith(".fault.json")
+        time.sleep(before_s if truth else 0.0)
+        place(src, dst, *a, **k)
+        time.sleep(after_s if truth else 0.0)
+    return placed
+os.replace, os.link = slowly(os.replace), slowly(os.link)
+from phfdi.cli import main
+sys.exit(main(sys.argv[5:]))
+"""
+
+
+def _race(tmp_path, argv_a: list[str], argv_b: list[str], slow: tuple[str, str] = ("0:0", "0:0")):
+    """Run two `phfdi` processes at once under :data:`RACER`: [(status, stderr)] of each."""
+    import subprocess
+    import sys
+
+    driver = tmp_path / "racer.py"
+    driver.write_text(RACER)
+    barrier = tmp_path / "barrier"
+    barrier.mkdir()
+    procs = [subprocess.Popen([sys.executable, str(driver), me, other, str(barrier), wait, *argv],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for me, other, wait, argv in (("a", "b", slow[0], argv_a), ("b", "a", slow[1], argv_b))]
+    return [(p.wait(timeout=120), p.communicate()[1]) for p in procs]
+
+
+@pytest.mark.parametrize("command", ["inject", "bag from-csv"])
+def test_two_commands_writing_one_new_file_at_once_cannot_both_succeed(command, tmp_path):
+    """Both passed the "exists?" check, then both renamed into place: two `inject --out X` (or `bag from-csv ..
+    X`) at once both exited 0, the second silently replacing the first. Now a new file is created exclusively
+    (a hard link of the staged file): one wins, the other is one line, and no staged file is left."""
+    record = _rig_csv(tmp_path / "rig.csv")
+    if command == "inject":
+        out = tmp_path / "faulty.csv"
+        argv = [["inject", str(record), "--fault", "probe_bias", "--size", size, "--onset", "20", "--out", str(out)]
+                for size in ("0.5", "1")]
+    else:
+        out = tmp_path / "rig.mcap"
+        argv = [["bag", "from-csv", str(record), str(out), "--map", "ph_rig"]] * 2
+    results = _race(tmp_path, *argv)
+    statuses = sorted(status for status, _ in results)
+    assert statuses == [0, 2], results
+    loser = next(err for status, err in results if status == 2)
+    line = _one_line(2, loser)  # inject places the truth first: that is the file it finds
+    assert f"error: {out}" in line and line.endswith(" exists; give --overwrite to replace it"), line
+    assert not [p for p in tmp_path.iterdir() if ".partial" in p.name]
+    if command == "inject":
+        from phfdi.inject import read_truth
+
+        assert read_truth(out)["kind"] == "probe_bias"  # the winner's pair: the truth's hash is its CSV's
+
+
+def test_two_overwriting_injects_at_once_leave_one_runs_pair(tmp_path):
+    """With --overwrite, two injects of one name at once could leave the CSV of one and the .fault.json of the
+    other (truth a, truth b, CSV b, CSV a). The pair is now placed under its folder's lock: whichever runs last,
+    its CSV and its truth stand together (the truth's size is the CSV's, and its sha256 matches)."""
+    import numpy as np
+
+    from phfdi.inject import read_truth
+    from phfdi.records import read_record
+
+    record = _rig_csv(tmp_path / "rig.csv")
+    out = tmp_path / "faulty.csv"
+    argv = [["inject", str(record), "--fault", "probe_bias", "--size", size, "--onset", "20", "--out", str(out),
+             "--overwrite"] for size in ("0.5", "1")]
+    # unlocked, this is truth a (0 s), truth b (0.2 s), CSV b (0.25 s), CSV a (0.8 s): a's CSV with b's truth
+    results = _race(tmp_path, *argv, slow=("0:0.8", "0.2:0.05"))
+    assert [status for status, _ in results] == [0, 0], results
+    truth = json.loads((tmp_path / "faulty.csv.fault.json").read_text())
+    cmap = {"time_s": "ElapsedTime (s)", "ph_measured": "pH"}
+    shift = read_record(out, cmap).signals["ph_measured"] - read_record(record, cmap).signals["ph_measured"]
+    assert np.isclose(np.nanmax(shift), truth["size"]), (np.nanmax(shift), truth["size"])
+    assert read_truth(out) == truth
