@@ -41,8 +41,8 @@ from typing import Iterator
 
 from .errors import UserError
 
-__all__ = ["OutputError", "check_writable_folder", "folder_lock", "refuse_existing", "save_figure", "staged",
-           "write_bytes", "write_text", "write_together"]
+__all__ = ["OutputError", "check_writable_folder", "folder_lock", "output_folder", "refuse_existing", "save_figure",
+           "staged", "write_bytes", "write_text", "write_together"]
 
 
 class OutputError(UserError):
@@ -231,6 +231,33 @@ def check_writable_folder(folder: str | Path) -> Path:
     except OSError as exc:
         raise OutputError(f"cannot write to {folder}: {_reason(exc)}") from None
     return folder
+
+
+def output_folder(folder: str | Path, overwrite: bool) -> Path:
+    """The output folder of a command that writes several files (``--out DIR``), made and proven writable before
+    the work (:func:`check_writable_folder`). The same rule as for a file: a folder that already holds files is
+    written into only with ``overwrite`` (``--overwrite``: the files the command writes are replaced, each
+    atomically; others are left as they are); without it, one :class:`OutputError` before any work.
+
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> folder = output_folder(Path(tempfile.mkdtemp()) / "report", overwrite=False)  # new: made
+    >>> _ = (folder / "REPORT.md").write_text("# a report")
+    >>> try:
+    ...     output_folder(folder, overwrite=False)
+    ... except OutputError as exc:
+    ...     print(str(exc).replace(str(folder), "DIR"))
+    DIR holds files of an earlier run; give --overwrite to replace them (or another folder)
+    >>> output_folder(folder, overwrite=True) == folder
+    True
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(f"{folder} is a file; give a folder")
+    if not overwrite and folder.is_dir() and any(folder.iterdir()):
+        raise OutputError(f"{folder} holds files of an earlier run; give --overwrite to replace them (or another "
+                          f"folder)")
+    return check_writable_folder(folder)
 
 
 def save_figure(fig, path: str | Path, dpi: float, overwrite: bool = True) -> Path:
