@@ -167,7 +167,7 @@ ROWS = (
         f"{PY} benchmarks/graph_startup.py --repeat 3 --detector", "under half of 4.3 s", _startup, ros=True),
     Row("detector_node", "detector node against a 100 Hz stream", f"{PY} benchmarks/detector_node.py",
         "no backlog", _detector_node, ros=True),
-    Row("soak", "soak, 100 000 s simulated with detector and recorder", f"{PY} benchmarks/soak.py --sim-s 100000",
+    Row("soak", "soak, 100 000 s simulated with detector and recorder", f"{PY} benchmarks/soak.py --sim-s 100000 --overwrite",
         "< 10 %, 0 lost", _soak, ros=True, timeout_s=3600.0),
     Row("analysis", "Section 6 analysis of 35 x 1440 samples", f"{PY} benchmarks/analysis.py", "< 2 s", _analysis,
         quick=True),
