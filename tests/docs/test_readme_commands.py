@@ -37,8 +37,11 @@ inputs exist or were written by an earlier run command of the same block, except
 So run: the README's rig workflow (``calibrate --estimator``, ``replay``, ``inject``, ``replay``), its learned
 reference on SKAB (``calibrate --learn``, ``replay --reference``, ``bag from-csv``), ``simulate`` + ``replay``, the
 short ``--set`` run, the single-loop ``loop-diagnose``, ``scenarios``, and the cheap ``--help`` examples with real
-files (simulate, replay's simulate-then-replay, scenarios, inject, loop-diagnose on one file). About 40 s on one core
-(2026-11-28); run ``pytest tests/docs -v`` to see each command's verdict in the test ids and skip reasons.
+files (simulate, replay's simulate-then-replay, scenarios, inject, loop-diagnose on one file). Each README block is
+run twice in the same folder, as a newcomer following it twice does. And every command the README shows starts
+with ``.venv/bin/`` (a newcomer's shell has no ``phfdi`` or project ``python``), and every one that writes gives
+``--overwrite`` (the rule of every command: an existing output is kept without it). About 45 s on one core
+(2026-12-05); run ``pytest tests/docs -v`` to see each command's verdict in the test ids and skip reasons.
 """
 
 from __future__ import annotations
