@@ -142,7 +142,11 @@ def place(tmp: Path, target: Path, overwrite: bool) -> None:
             os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
         except FileExistsError:
             raise OutputError(f"{target} exists; give --overwrite to replace it") from None
-        os.replace(tmp, target)
+        try:
+            os.replace(tmp, target)
+        except OSError:
+            target.unlink(missing_ok=True)  # the empty file that reserved the name: ours
+            raise
         return
     with contextlib.suppress(OSError):
         tmp.unlink()
