@@ -155,3 +155,21 @@ def test_an_output_folder_of_an_earlier_run_is_kept_without_overwrite(command, s
         status, _, err = run_cli(*argv, "--out", str(out), "--overwrite")
         assert status == 0, err
         assert len(list(out.iterdir())) > 1  # its own files beside the one it does not write
+
+
+def test_without_hard_links_a_new_file_is_still_created_exclusively(tmp_path, monkeypatch):
+    """On a file system without hard links (FAT, some network mounts) the name is reserved by O_EXCL instead."""
+    import errno
+
+    from phfdi_base.outputs import OutputError, write_text
+
+    def no_links(src, dst):
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_links)
+    target = tmp_path / "run.csv"
+    write_text(target, "first\n")
+    with pytest.raises(OutputError, match="run.csv exists; give --overwrite"):
+        write_text(target, "second\n")
+    write_text(target, "third\n", overwrite=True)
+    assert target.read_text() == "third\n" and [p.name for p in tmp_path.iterdir()] == ["run.csv"]
