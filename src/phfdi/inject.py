@@ -244,8 +244,8 @@ def _check_size(spec: FaultKind, size: float | None) -> float:
     return float(size)
 
 
-#: how far (relative to the stamp, at least absolute seconds) an onset may lie outside the record's first or last
-#: stamp and still be taken as that stamp: a stamp such as 1.25200000000041 s is shown as 1.252 s
+#: how far an onset may lie outside the record's first or last stamp and still be taken as that stamp, relative to
+#: the larger stamp (and never less than this many seconds): float noise, as the rig's 1.25200000000041 s shown 1.252
 ONSET_TOLERANCE = 1e-9
 
 
