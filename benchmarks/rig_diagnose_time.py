@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     phfdi = str(Path(sys.executable).with_name("phfdi"))
     cmd = ["nice", "-n", "10", phfdi, "diagnose", "--model", "rig_flask", "--map", "ph_rig", "--initial", "fit",
            "--structure", "--group", "^([0-9.]{10})", "--adapt", "0.2", "--fit", *fit, "--validate", *val,
-           "--out", str(args.out)] + (["--workers", str(args.workers)] if args.workers else [])
+           "--out", str(args.out), "--overwrite"] + (["--workers", str(args.workers)] if args.workers else [])
     load0 = os.getloadavg()
     t0 = time.perf_counter()
     before = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -27,6 +27,11 @@ node, 0 messages lost.
     .venv/bin/python benchmarks/soak.py --sim-s 100000                    # lock-step, 100 000 s simulated
     .venv/bin/python benchmarks/soak.py --pace 1 --wall-s 3600 --load 2   # 1 h real time, + 2 busy processes
     .venv/bin/python benchmarks/soak.py --sim-s 2000 --out /tmp/soak      # a quick check (about 30 s)
+    .venv/bin/python benchmarks/soak.py --sim-s 100000 --results          # into the committed results
+
+The results go to out/soak/ unless ``--out`` says otherwise; ``--results`` writes them into
+benchmarks/results/soak/, the committed measurements docs/results.md cites (a run there replaced them without a
+word before). An existing <name>.json is kept unless ``--overwrite``.
 
 ``--load N`` starts N busy-loop processes (nice ``--load-nice``) for the whole
 run, on top of whatever else runs on the machine; the load average is
@@ -53,6 +58,10 @@ from phfdi.bagio import bag_parts
 #: /proc/<pid>/status fields sampled (kB)
 MEMORY_FIELDS = ("VmRSS", "RssAnon", "RssFile", "RssShmem", "VmHWM")
 GROWTH_LIMIT = 0.10  # issue 15: under 10 % from middle to end
+
+#: where a run's files go by default, and with --results (the committed measurements)
+SCRATCH_OUT = "out/soak"
+RESULTS_OUT = "benchmarks/results/soak"
 
 
 # ---- measuring ---------------------------------------------------------------------------------
@@ -335,7 +344,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--load-nice", type=int, default=10,
                     help="niceness of the busy processes (default 10; never below this script's own)")
     ap.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: a free one)")
-    ap.add_argument("--out", default="benchmarks/results/soak", help="folder for the JSON, CSV, figure and bag")
+    ap.add_argument("--out", default=None,
+                    help=f"folder for the JSON, CSV, figure and bag (default {SCRATCH_OUT}; --results: {RESULTS_OUT})")
+    ap.add_argument("--results", action="store_true",
+                    help=f"write into {RESULTS_OUT} (the committed results) instead of {SCRATCH_OUT}")
+    ap.add_argument("--overwrite", action="store_true", help="replace an earlier run's <name>.json of the same name")
     ap.add_argument("--name", default=None, help="file name stem (default soak_<lockstep|paceF>_<sim>s)")
     ap.add_argument("--keep-bag", action="store_true", help="keep the bag (default: deleted after measuring)")
     ap.add_argument("--split-s", type=float, default=0.0,
@@ -358,6 +371,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     if args.name is None:
         mode = "lockstep" if args.pace <= 0 else f"pace{args.pace:g}"
         args.name = f"soak_{mode}_{args.sim_s:g}s"
+    if args.out is not None and args.results:
+        ap.error("give --out DIR or --results, not both")
+    args.out = args.out or (RESULTS_OUT if args.results else SCRATCH_OUT)
     return args
 
 
@@ -385,6 +401,10 @@ def main(argv: list[str] | None = None) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if (out / f"{args.name}.json").exists() and not args.overwrite:
+        print(f"soak: error: {out / (args.name + '.json')} exists (an earlier run's results): give --overwrite, "
+              f"another --name or another --out", file=sys.stderr)
+        return 2
     bag = (out / f"{args.name}.mcap").resolve()
     if bag_parts(bag):
         print(f"soak: error: {bag} exists: remove it (and its parts {bag.stem}.N.mcap) or give another --name",

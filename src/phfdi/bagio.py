@@ -582,7 +582,9 @@ def bag_info(path: str | Path) -> dict:
                           for cid, ch in sorted(summary.channels.items())]
         info["compression"] = sorted({c.compression or "none" for c in summary.chunk_indexes})
     else:
-        if path.read_bytes()[:8] != b"\x89MCAP0\r\n":
+        with open(path, "rb") as f:  # 8 bytes, not the whole file (a sparse 2 GB file was read whole)
+            magic = f.read(8)
+        if magic != b"\x89MCAP0\r\n":
             raise UserError(f"{path}: not an MCAP file")
         records, n_chunks, error = _scan(path, validate=False)
         schemas = {r.id: r.name for r in records if isinstance(r, Schema)}

@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 
 from phfdi_base.errors import UserError
-from phfdi_base.outputs import refuse_existing, staged, write_bytes
+from phfdi_base.outputs import write_together
 
 from .inject_kinds import KINDS, PH_CAL_POINT, PH_MAX, PH_MIN, PH_RESOLUTION, PUMPS, TRUTH_FORMAT, FaultKind
 
@@ -234,25 +234,29 @@ def _mapped(cmap, signal: str) -> str:
 
 
 def _check_size(spec: FaultKind, size: float | None) -> float:
-    if spec.name == "probe_frozen":
+    """The size, if it is in the kind's range (:data:`~phfdi.inject_kinds.KINDS`); one line naming the range."""
+    if spec.sizes is None:
         return 0.0
     if size is None or not math.isfinite(size):
-        raise UserError(f"{spec.name} needs a finite --size (in {spec.unit})")
-    limits = {"probe_noise": (0.0, math.inf, "above 0"), "probe_lag": (0.0, math.inf, "above 0 s"),
-              "probe_gain": (-1.0, math.inf, "above -1"), "pump_low": (0.0, 1.0, "between 0 and 1"),
-              "pump_high": (0.0, math.inf, "above 0"), "pump_stuck": (0.0, math.inf, "above 0 mL/s")}
-    low, high, say = limits.get(spec.name, (-math.inf, math.inf, ""))
-    if not low < size < high:
-        raise UserError(f"{spec.name}: --size must be {say} ({spec.unit}), got {size:g}")
+        raise UserError(f"{spec.name} needs a finite --size, {spec.sizes.says(spec.unit)}")
+    if size not in spec.sizes:
+        raise UserError(f"--size {size:g}: {spec.name} takes a size {spec.sizes.says(spec.unit)}")
     return float(size)
 
 
+#: how far an onset may lie outside the record's first or last stamp and still be taken as that stamp, relative to
+#: the larger stamp (and never less than this many seconds): float noise, as the rig's 1.25200000000041 s shown 1.252
+ONSET_TOLERANCE = 1e-9
+
+
 def _onset_row(time_s: np.ndarray, onset_s: float, column: str) -> int:
+    """The first row at or after the onset; an onset outside the record is refused naming its exact range."""
     lo, hi = float(np.nanmin(time_s)), float(np.nanmax(time_s))
-    if not (math.isfinite(onset_s) and lo <= onset_s <= hi):
-        raise UserError(f"--onset {onset_s:g} s is outside the record: its time ({column!r}) runs from {lo:g} to "
-                        f"{hi:g} s")
-    return int(np.argmax(time_s >= onset_s))
+    slack = ONSET_TOLERANCE * max(1.0, abs(lo), abs(hi))
+    if not (math.isfinite(onset_s) and lo - slack <= onset_s <= hi + slack):
+        raise UserError(f"--onset {onset_s!r} s is outside the record: its time ({column!r}) runs from {lo!r} to "
+                        f"{hi!r} s")
+    return int(np.flatnonzero(time_s >= min(onset_s, hi))[0])
 
 
 def inject_fault(path: str | Path, kind: str, onset_s: float, size: float | None = None, *,
@@ -300,8 +304,11 @@ def inject_fault(path: str | Path, kind: str, onset_s: float, size: float | None
         raise UserError(f"{kind} of size {size:g} {spec.unit} from {onset_s:g} s would change no cell of {path} "
                         f"(at the file's resolution); nothing written")
     truth = _truth(csv, spec, channels, onset_s, k0, size, pump, seed, changes)
-    truth["onset_index"] = int(np.searchsorted(record.time_s, onset_s, side="left"))
-    return csv.to_bytes(changes), truth
+    last_s = float(record.time_s[-1])  # an onset a rounding past the last stamp is that stamp (_onset_row)
+    truth["onset_index"] = int(np.searchsorted(record.time_s, min(onset_s, last_s), side="left"))
+    data = csv.to_bytes(changes)
+    truth["output_sha256"] = hashlib.sha256(data).hexdigest()  # the file this truth belongs to (read_truth)
+    return data, truth
 
 
 def _times(csv: CsvText, cmap) -> np.ndarray:
@@ -361,27 +368,58 @@ def sidecar_path(out: str | Path) -> Path:
 
 
 def write_injected(out: str | Path, data: bytes, truth: dict, overwrite: bool = False) -> tuple[Path, Path]:
-    """Write the faulty CSV and its truth (``OUT.fault.json``) atomically (:mod:`phfdi_base.outputs`, the one
-    way every command writes); an OSError becomes one UserError naming the file.
+    """Write the faulty CSV and its truth (``OUT.fault.json``) as one unit (:func:`phfdi_base.outputs.write_together`,
+    the one way every command writes); an OSError becomes one UserError naming the file.
 
-    The truth is placed first, then the CSV, so a faulty file never stands without its truth; an existing file
-    is replaced only with ``overwrite``; the folder is made. Nothing partial is left: a failure removes the
-    staged files, and a truth placed for a CSV that then fails to follow is removed too.
+    The truth carries ``output_sha256``, the hash of the CSV it belongs to (:func:`read_truth` checks it). Without
+    ``overwrite`` an existing file refuses both, and two commands writing the same new pair at once cannot both
+    succeed (each file is created exclusively; the truth goes first, and is removed again if its CSV cannot
+    follow, so a faulty file never stands without its truth). With ``overwrite`` the pair is placed under its
+    folder's lock, so two such commands at once leave one run's pair, never a CSV of one with the truth of the
+    other. The folder is made; a failure leaves no staged file.
     """
     out = Path(out)
     side = sidecar_path(out)
     if str(out.resolve()) == str(Path(truth["source"]).resolve()):
         raise UserError(f"--out {out} is the input file; write the faulty copy elsewhere")
-    for target in (out, side):
-        refuse_existing(target, overwrite)
-    placed_truth = False
-    try:
-        with staged(out, overwrite) as tmp:
-            tmp.write_bytes(data)
-            write_bytes(side, (json.dumps(truth, indent=2) + "\n").encode("utf-8"), overwrite)
-            placed_truth = True
-    except UserError:
-        if placed_truth:
-            side.unlink(missing_ok=True)  # no truth without its faulty file
-        raise
+    truth = {**truth, "output_sha256": hashlib.sha256(data).hexdigest()}
+    write_together([(side, (json.dumps(truth, indent=2) + "\n").encode("utf-8")), (out, data)], overwrite)
     return out, side
+
+
+def read_truth(out: str | Path) -> dict:
+    """The truth of the faulty file ``out`` (its ``OUT.fault.json``), checked against the file: a
+    :class:`~phfdi_base.errors.UserError` if the truth is missing or belongs to another version of the file.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> _ = (folder / "rig.csv").write_text("t,pH\\n0,7.00\\n1,7.10\\n2,7.20\\n")
+    >>> cmap = {"time_s": "t", "ph_measured": "pH"}
+    >>> data, truth = inject_fault(folder / "rig.csv", "probe_bias", 1.0, 0.5, column_map=cmap)
+    >>> out, _ = write_injected(folder / "faulty.csv", data, truth)
+    >>> read_truth(out)["kind"]
+    'probe_bias'
+    >>> _ = out.write_text("t,pH\\n0,7.00\\n1,7.10\\n2,7.20\\n")
+    >>> try:
+    ...     read_truth(out)
+    ... except UserError as exc:
+    ...     print(str(exc).split(": ", 1)[1])
+    its truth faulty.csv.fault.json belongs to another version of the file (sha256 differs): inject it again
+    """
+    out = Path(out)
+    side = sidecar_path(out)
+    try:
+        truth = json.loads(side.read_text(encoding="utf-8"))
+        data = out.read_bytes()
+    except FileNotFoundError as exc:
+        raise UserError(f"{out}: no {Path(exc.filename).name}; write both with phfdi inject") from None
+    except (OSError, ValueError) as exc:
+        raise UserError(f"{side}: not a readable truth ({exc})") from None
+    want = truth.get("output_sha256") if isinstance(truth, dict) else None
+    if want is not None and want != hashlib.sha256(data).hexdigest():
+        raise UserError(f"{out}: its truth {side.name} belongs to another version of the file (sha256 differs): "
+                        f"inject it again")
+    return truth

@@ -14,26 +14,76 @@ TRUTH_FORMAT = "phfdi-fault/1"
 
 
 @dataclass(frozen=True)
+class SizeRange:
+    """The sizes a fault kind takes: from ``low`` to ``high`` in its unit, each end in or out of the range.
+
+    >>> SizeRange(0.0, 1.0, low_in=False, high_in=False).says("fraction")
+    'above 0 and below 1 (a fraction)'
+    >>> 1e308 in SizeRange(-14.0, 14.0)
+    False
+    """
+
+    low: float
+    high: float
+    low_in: bool = True
+    high_in: bool = True
+
+    def __contains__(self, size: float) -> bool:
+        above = size >= self.low if self.low_in else size > self.low
+        below = size <= self.high if self.high_in else size < self.high
+        return above and below
+
+    def says(self, unit: str) -> str:
+        """The range in words, with its unit."""
+        unit = "(a fraction)" if unit == "fraction" else unit
+        if self.low_in and self.high_in:
+            return f"from {self.low:g} to {self.high:g} {unit}"
+        low = f"at least {self.low:g}" if self.low_in else f"above {self.low:g}"
+        high = f"at most {self.high:g}" if self.high_in else f"below {self.high:g}"
+        return f"{low} and {high} {unit}"
+
+
+@dataclass(frozen=True)
 class FaultKind:
-    """One injectable fault: its family (sensor or actuator), the unit of its size and what it does."""
+    """One injectable fault: its family (sensor or actuator), the unit of its size, what it does and the sizes
+    it takes (None: it takes no size).
+
+    The ranges are where a size still means the fault: beyond the probe's 0..14 pH span a bias, a drift per
+    minute or a noise's standard deviation only clips to the span's ends; a lag longer than a day is a frozen
+    probe in any record; a gain at or below -1 turns the slope over; a pump can deliver nothing (pump_low's 1)
+    but no less; eleven times the recorded flow (pump_high's 10) and 1000 mL/s (a litre a second: no lab or pilot
+    dosing pump) are where a record stops being a pump's.
+    """
 
     name: str
     family: str
     unit: str
     what: str
+    sizes: SizeRange | None
+
+    def size_text(self) -> str:
+        """'from -14 to 14 pH' (--help): the range and its unit."""
+        return "none" if self.sizes is None else self.sizes.says(self.unit)
 
 
 KINDS: dict[str, FaultKind] = {k.name: k for k in (
-    FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH"),
-    FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH"),
-    FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)"),
-    FaultKind("probe_noise", "sensor", "pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added"),
-    FaultKind("probe_lag", "sensor", "s", "a first-order lag of time constant SIZE s added to the probe"),
-    FaultKind("probe_gain", "sensor", "fraction", "slope error about pH 7: pH' = 7 + (1 + SIZE)(pH - 7)"),
+    FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH", SizeRange(-PH_MAX, PH_MAX)),
+    FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH",
+              SizeRange(-PH_MAX, PH_MAX)),
+    FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)", None),
+    FaultKind("probe_noise", "sensor", "pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added",
+              SizeRange(0.0, PH_MAX, low_in=False)),
+    FaultKind("probe_lag", "sensor", "s", "a first-order lag of time constant SIZE s added to the probe",
+              SizeRange(0.0, 86400.0, low_in=False)),
+    FaultKind("probe_gain", "sensor", "fraction", "slope error about pH 7: pH' = 7 + (1 + SIZE)(pH - 7)",
+              SizeRange(-1.0, 10.0, low_in=False)),
     FaultKind("pump_low", "actuator", "fraction", "the pump delivers SIZE less than recorded: "
-                                                  "recorded = delivered / (1 - SIZE)"),
+                                                  "recorded = delivered / (1 - SIZE)",
+              SizeRange(0.0, 1.0, low_in=False, high_in=False)),
     FaultKind("pump_high", "actuator", "fraction", "the pump delivers SIZE more than recorded: "
-                                                   "recorded = delivered / (1 + SIZE)"),
+                                                   "recorded = delivered / (1 + SIZE)",
+              SizeRange(0.0, 10.0, low_in=False)),
     FaultKind("pump_stuck", "actuator", "mL/s", "the pump delivers nothing while the record says SIZE mL/s "
-                                                "(only where the data's pump is off)"),
+                                                "(only where the data's pump is off)",
+              SizeRange(0.0, 1000.0, low_in=False)),
 )}

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import yaml
 
 from phfdi_base import topics as T
+from phfdi_base.errors import UserError
+from phfdi_base.yamlfile import load_yaml
 
 #: MCAP metadata record (and key) that rosbag2's MCAP storage plugin writes at close
 RECORD_NAME = "rosbag2"
@@ -66,10 +68,8 @@ def load_from_bag(text: str) -> object | None:
     if not text or len(text) > MAX_YAML_CHARS:
         return None
     try:
-        if any(isinstance(e, yaml.AliasEvent) for e in yaml.parse(text, Loader=yaml.SafeLoader)):
-            return None
-        return yaml.safe_load(text)
-    except (yaml.YAMLError, ValueError, OverflowError):  # ValueError: a typed scalar that cannot be built
+        return load_yaml(text, "bag metadata")  # strict: no aliases, no key twice
+    except UserError:
         return None
 
 

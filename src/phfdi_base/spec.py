@@ -16,11 +16,11 @@ from __future__ import annotations
 import copy
 from typing import Any, Literal, Sequence
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .errors import UserError
 from .spec_tools import checked_block, injected_faults, load_plugins, profile
+from .yamlfile import DuplicateKeyError, load_yaml
 
 __all__ = [
     "AirExchangeSpec", "BlockSpec", "ChangeSpec", "ChemistrySpec", "ComponentSpec", "ControllersSpec", "FaultSite",
@@ -345,8 +345,10 @@ def parse_override(text: str) -> tuple[list[str], Any]:
         raise UserError(f"--set expects key=value, got {text!r}")
     key, value = text.split("=", 1)
     try:
-        parsed = yaml.safe_load(value)
-    except yaml.YAMLError:
+        parsed = load_yaml(value, f"--set {key.strip()}")
+    except DuplicateKeyError:
+        raise
+    except UserError:  # not YAML: the text itself (a name such as 'a: b' stays a string)
         parsed = value
     return key.strip().split("."), parsed
 

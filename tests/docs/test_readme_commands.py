@@ -37,8 +37,11 @@ inputs exist or were written by an earlier run command of the same block, except
 So run: the README's rig workflow (``calibrate --estimator``, ``replay``, ``inject``, ``replay``), its learned
 reference on SKAB (``calibrate --learn``, ``replay --reference``, ``bag from-csv``), ``simulate`` + ``replay``, the
 short ``--set`` run, the single-loop ``loop-diagnose``, ``scenarios``, and the cheap ``--help`` examples with real
-files (simulate, replay's simulate-then-replay, scenarios, inject, loop-diagnose on one file). About 40 s on one core
-(2026-11-28); run ``pytest tests/docs -v`` to see each command's verdict in the test ids and skip reasons.
+files (simulate, replay's simulate-then-replay, scenarios, inject, loop-diagnose on one file). Each README block is
+run twice in the same folder, as a newcomer following it twice does. And every command the README shows starts
+with ``.venv/bin/`` (a newcomer's shell has no ``phfdi`` or project ``python``), and every one that writes gives
+``--overwrite`` (the rule of every command: an existing output is kept without it). About 45 s on one core
+(2026-12-05); run ``pytest tests/docs -v`` to see each command's verdict in the test ids and skip reasons.
 """
 
 from __future__ import annotations
@@ -393,6 +396,11 @@ def check_python(cmd: Command) -> None:
         for path in (a for a in argv[2:] if not a.startswith("-")):
             assert (ROOT / path.split("::")[0]).exists(), f"{cmd.source}: `{cmd.text}`: no {path}"
         return
+    if argv[0] == "-m":  # a module of the project (a node): it must be there
+        import importlib.util
+
+        assert importlib.util.find_spec(argv[1]) is not None, f"{cmd.source}: `{cmd.text}`: no module {argv[1]}"
+        return
     script = ROOT / argv[0]
     assert script.is_file(), f"{cmd.source}: `{cmd.text}`: no script {argv[0]}"
     source = script.read_text(encoding="utf-8")
@@ -474,11 +482,66 @@ def shared(request):
 
 @pytest.mark.parametrize("block", BLOCKS, ids=[where for where, _ in BLOCKS])
 def test_readme_block(block, shared, tmp_path, monkeypatch, run_cli):
-    """Each fenced bash block of the README, in order, in a fresh folder: run or parsed and checked."""
+    """Each fenced bash block of the README, in order, in a fresh folder: run or parsed and checked; then the
+    whole block again in the same folder, as a newcomer who follows the README twice does (a command refusing
+    the output of its first run failed there: exit 2)."""
     _, commands = block
     monkeypatch.chdir(tmp_path)
     verdicts = run_sequence(commands, shared, True, run_cli)
+    assert run_sequence(commands, shared, True, run_cli) == verdicts
     print("\n".join(verdicts))
+
+
+#: what a newcomer's shell has after the README's two set-up commands: none of these on its PATH
+NOT_ON_PATH = ("phfdi", "python", "python3", "pip", "pytest")
+
+
+def _typed_commands() -> list[tuple[str, str]]:
+    """(where, first word) of every command the README shows: each fenced bash line and inline code span, split at
+    ``&&``/``;``/``|``/``&``, environment assignments and ``nice``/``time`` skipped."""
+    text = README.read_text(encoding="utf-8")
+    lines: list[tuple[str, str]] = []
+    for k, body in enumerate(re.findall(r"```bash\n(.*?)```", text, flags=re.S), start=1):
+        numbered = list(enumerate(body.splitlines()))
+        lines += [(f"README.md, bash block {k}", line) for _, line in _join_continuations(numbered)
+                  if line.strip() and not line.lstrip().startswith("#")]
+    prose = re.sub(r"```.*?```", "", text, flags=re.S)
+    lines += [("README.md (inline)", span) for span in re.findall(r"`([^`\n]+)`", prose) if " " in span]
+    out = []
+    for where, line in lines:
+        for tokens, _ in _split_shell(line.split(" #", 1)[0], {}):
+            while tokens and (re.fullmatch(r"[A-Z_][A-Z0-9_]*=\S*", tokens[0]) or tokens[0] in ("nice", "time")):
+                tokens.pop(0)
+            if tokens:
+                out.append((f"{where}: `{line.strip()}`", tokens[0]))
+    return out
+
+
+def test_readme_commands_work_outside_an_activated_venv():
+    """The README's bare `phfdi ...` and `python -m ...` failed in a newcomer's shell (command not found, or the
+    system Python without the project): every command it shows starts with .venv/bin/ (or bash scripts/...)."""
+    typed = _typed_commands()
+    assert len(typed) > 40, "the README's commands were not found"
+    bare = [where for where, head in typed if head in NOT_ON_PATH]
+    assert not bare, "commands a newcomer's shell cannot run:\n" + "\n".join(bare)
+
+
+#: commands that write a default output folder even without --out
+DEFAULT_OUTPUT = {"demo", "diagnose"}
+
+
+def test_readme_commands_that_write_give_overwrite():
+    """Running an example twice exited 2 on the output of the first run: every README command that writes
+    (fenced or inline, run here or only parsed: launch, demo, diagnose) gives --overwrite."""
+    commands = [c for _, block in BLOCKS for c in block] + readme_inline()
+    missing = []
+    for cmd in commands:
+        if cmd.program != "phfdi" or (cmd.inline and len(cmd.argv) == 1):
+            continue
+        parsed = parse(cmd)
+        if (parsed.outputs or parsed.subcommand in DEFAULT_OUTPUT) and "--overwrite" not in cmd.argv:
+            missing.append(f"{cmd.source}: `{cmd.text}`")
+    assert not missing, "README commands that write without --overwrite:\n" + "\n".join(missing)
 
 
 def test_readme_inline_commands(shared, tmp_path, monkeypatch, run_cli):

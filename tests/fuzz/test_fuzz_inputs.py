@@ -244,7 +244,7 @@ CLI_CASES = {
                   lambda f, o: ["calibrate", "--runs", f, *SET, "--out", o / "c.yaml", "--overwrite"]),
     "diagnose": (["run.csv", "run.parquet", "run.mcap"],
                  lambda f, o: ["diagnose", "--data", f, "--candidates", "sensor_bias", "--no-pairs", "--workers",
-                               "1", "--quiet", "--out", o]),
+                               "1", "--quiet", "--out", o, "--overwrite"]),
     "loop-diagnose": (["loop.txt", "run.csv"], lambda f, o: ["loop-diagnose", f, "--no-baselines", "--causes",
                                                              "stiction", "--workers", "1", "--columns",
                                                              "op=valve_command_pct,pv=ph_measured,time=time_s"

@@ -184,13 +184,13 @@ def one_error_line(status: int, err: str) -> str:
 def test_cli_refusals_are_one_line_and_leave_no_file(rig_file, tmp_path, run_cli):
     base = ["inject", rig_file, "--fault", "probe_bias", "--size", "0.3"]
     line = one_error_line(*run_cli(*base, "--onset", "1e6", "--out", tmp_path / "a.csv")[::2])
-    assert "--onset 1e+06 s is outside the record" in line
+    assert "--onset 1000000.0 s is outside the record" in line
     line = one_error_line(*run_cli("inject", rig_file, "--fault", "pump_stuck", "--pump", "acid", "--size", "1",
                                    "--onset", onset_in(rig_file), "--out", tmp_path / "a.csv")[::2])
     assert "would change nothing" in line
     (tmp_path / "blocker").write_text("a file, not a folder")
     line = one_error_line(*run_cli(*base, "--onset", onset_in(rig_file), "--out", tmp_path / "blocker" / "a.csv")[::2])
-    assert line.startswith(f"phfdi inject: error: cannot write {tmp_path / 'blocker' / 'a.csv'}: ")
+    assert line.endswith(f"{tmp_path / 'blocker'} is a file, not a folder"), line
     assert {p.name for p in tmp_path.iterdir()} <= {"blocker", "rig.csv"}  # rig.csv: the synthetic record
 
 
@@ -220,15 +220,17 @@ def test_a_failed_write_leaves_nothing_partial(rig_file, tmp_path, run_cli, monk
 def test_sidecar_failure_removes_the_new_csv(rig_file, tmp_path, monkeypatch):
     from phfdi import inject as mod
 
-    real = os.replace
-
-    def replace(src, dst):
-        if str(dst).endswith(".fault.json"):
-            raise OSError(5, "Input/output error")
-        real(src, dst)
+    def failing(real):
+        def place(src, dst):
+            if str(dst).endswith(".fault.json"):
+                raise OSError(5, "Input/output error")
+            real(src, dst)
+        return place
 
     data, truth = inject_fault(rig_file, "probe_bias", onset_in(rig_file), 0.3)
-    monkeypatch.setattr(os, "replace", replace)  # the one writer (phfdi_base.outputs) renames with it
+    # the one writer (phfdi_base.outputs) places a new file with a hard link, a replaced one with a rename
+    monkeypatch.setattr(os, "link", failing(os.link))
+    monkeypatch.setattr(os, "replace", failing(os.replace))
     with pytest.raises(UserError, match="cannot write .*a.csv.fault.json: Input/output error"):
         mod.write_injected(tmp_path / "a.csv", data, truth)
     assert {p.name for p in tmp_path.iterdir()} <= {"rig.csv"}
@@ -241,7 +243,8 @@ def test_help_names_units_and_record_time(capsys):
         main(["inject", "--help"])
     text = capsys.readouterr().out
     assert exc.value.code == 0 and "example" in text and "record's time" in text
-    for unit in ("[pH]", "[pH/min]", "[pH (std)]", "[s]", "[fraction]", "[mL/s]"):
+    for unit in ("to 14 pH]", "to 14 pH/min]", "at most 14 pH (std)]", "at most 86400 s]", "below 1 (a fraction)]",
+                 "at most 1000 mL/s]"):
         assert unit in text
 
 

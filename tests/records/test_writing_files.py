@@ -105,7 +105,8 @@ def test_a_folder_that_cannot_be_made_is_one_line_before_the_work(short_files, t
         status, out, err = run_cli(*argv)
         assert status == 2, (argv, err)
         line = _one_error_line(err)
-        assert str(blocker) in line and "Not a directory" in line or "exists" in line, line
+        assert str(blocker) in line and any(w in line for w in ("Not a directory", "is a file, not a folder",
+                                                               "exists")), line
         assert out == ""  # nothing computed and reported first
 
 
@@ -117,3 +118,58 @@ def test_outputs_get_the_usual_permissions(short_files, tmp_path, run_cli):
     mask = os.umask(0)
     os.umask(mask)
     assert target.stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+#: the commands that write a folder (--out DIR): argv without --out, and whether the test runs it with
+#: --overwrite too (the others take minutes; their refusal is what is checked)
+FOLDER_COMMANDS = {
+    "demo": (["demo", "--no-ros", "--onset", "1000", "--set", "duration_s=1600",
+              "--set", "setpoints.ph.changes=[{at_s: 200, value: 8.0}]"], True),
+    "diagnose": (["diagnose", "--data", "{csv}", "--model", "paper", "--candidates", "sensor_bias", "--no-pairs",
+                  "--workers", "1", "--quiet"], True),
+    "loop-diagnose": (["loop-diagnose", "{csv}", "--no-baselines", "--causes", "stiction", "--columns",
+                       "op=valve_command_pct,pv=ph_measured,time=time_s"], True),
+    "evaluate": (["evaluate", "--quick"], False),
+    "analyze": (["analyze"], False),
+    "paper-runs": (["paper-runs"], False),
+}
+
+
+@pytest.mark.parametrize("command", FOLDER_COMMANDS)
+def test_an_output_folder_of_an_earlier_run_is_kept_without_overwrite(command, short_files, tmp_path, run_cli):
+    """One rule for every command that writes: `demo` and `diagnose --out` silently replaced an earlier run's
+    files where `simulate --out` refused. A folder that holds files is now written into only with --overwrite,
+    refused before any work (nothing printed, the earlier file untouched)."""
+    argv, runs = FOLDER_COMMANDS[command]
+    argv = [a.replace("{csv}", str(short_files["csv"])) for a in argv]
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = out / "REPORT.md"
+    earlier.write_text("an earlier run's report\n")
+    status, printed, err = run_cli(*argv, "--out", str(out))
+    assert status == 2 and printed == "", err
+    assert _one_error_line(err).endswith(f"{out} holds files of an earlier run; give --overwrite to replace them "
+                                         f"(or another folder)")
+    assert earlier.read_text() == "an earlier run's report\n"
+    if runs:
+        status, _, err = run_cli(*argv, "--out", str(out), "--overwrite")
+        assert status == 0, err
+        assert len(list(out.iterdir())) > 1  # its own files beside the one it does not write
+
+
+def test_without_hard_links_a_new_file_is_still_created_exclusively(tmp_path, monkeypatch):
+    """On a file system without hard links (FAT, some network mounts) the name is reserved by O_EXCL instead."""
+    import errno
+
+    from phfdi_base.outputs import OutputError, write_text
+
+    def no_links(src, dst):
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_links)
+    target = tmp_path / "run.csv"
+    write_text(target, "first\n")
+    with pytest.raises(OutputError, match="run.csv exists; give --overwrite"):
+        write_text(target, "second\n")
+    write_text(target, "third\n", overwrite=True)
+    assert target.read_text() == "third\n" and [p.name for p in tmp_path.iterdir()] == ["run.csv"]

@@ -10,7 +10,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .common import EPILOG_FORMAT, Progress
+from .common import EPILOG_FORMAT, Progress, add_overwrite_arg
 
 EXAMPLES = """examples:
   phfdi analyze --out out/analysis                      # simulate the paper's 35 runs + Section 7 runs (about a minute)
@@ -35,6 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "Simulates the paper's data set unless run files or bags are given.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     p.add_argument("--out", required=True, help="output folder (REPORT.md, results.json, figures)")
+    add_overwrite_arg(p, folder=True)
     p.add_argument("--bags", nargs="+", default=None, metavar="FILE",
                    help="runs to analyse instead of simulating: .csv/.parquet run files or bags")
     p.add_argument("--section7-bags", nargs="+", default=None, metavar="FILE",
@@ -134,9 +135,9 @@ class _RunSets:
 def run(args: argparse.Namespace) -> int:
     from phfdi.study.paperset import PAPER_GROUPING
     from phfdi.study.report import section6_claims, section7_claims, write_all
-    from phfdi_base.outputs import check_writable_folder
+    from phfdi_base.outputs import output_folder
 
-    out = check_writable_folder(args.out)  # before the simulations, not after them
+    out = output_folder(args.out, args.overwrite)  # before the simulations, not after them
     opts = _options(args)
     t_start = time.perf_counter()
     sets = _read_runs(args) if args.bags else _simulate_runs(args, out)

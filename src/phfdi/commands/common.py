@@ -68,10 +68,13 @@ class Progress:
 
 
 # ---- measured records (phfdi.records) -------------------------------------------------------
-def add_overwrite_arg(p: argparse.ArgumentParser) -> None:
-    """--overwrite: without it an existing output file is kept and the command stops with one line, before
-    any work (outputs are written atomically either way: docs/records.md, "Writing files")."""
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output file (default: refuse)")
+def add_overwrite_arg(p: argparse.ArgumentParser, folder: bool = False) -> None:
+    """--overwrite: without it an existing output file (or an output folder that holds files) is kept and the
+    command stops with one line, before any work (outputs are written atomically either way: docs/records.md,
+    "Writing files"). The one rule of every command that writes."""
+    what = "write into an output folder that holds files, replacing the files this command writes there" \
+        if folder else "replace an existing output file"
+    p.add_argument("--overwrite", action="store_true", help=f"{what} (default: refuse, before any work)")
 
 
 def add_record_args(p: argparse.ArgumentParser, units: bool = True) -> None:

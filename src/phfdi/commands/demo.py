@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from .common import EPILOG_FORMAT, Progress
+from .common import EPILOG_FORMAT, Progress, add_overwrite_arg
 
 EXAMPLES = """examples:
   phfdi demo                       # paper scenario, backlash at 7000 s, through the ROS 2 graph; out/demo
@@ -33,6 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "a summary, replay the bag offline to confirm the same alarms, write figures.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     p.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
+    add_overwrite_arg(p, folder=True)
     p.add_argument("--fault", default="backlash", help="fault preset (default: backlash)")
     p.add_argument("--onset", type=float, default=None, metavar="S", help="fault onset (s; default the fault's, 7000)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -80,8 +81,9 @@ def run(args: argparse.Namespace) -> int:
     spec = load_scenario("paper", fault=args.fault, overrides=args.overrides, onset_s=args.onset)
     if args.fault in ("healthy", "none"):
         raise UserError("the demo shows a fault being found: give a fault preset, e.g. --fault backlash")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    from phfdi_base.outputs import output_folder
+
+    out = output_folder(args.out, args.overwrite)  # an earlier demo's files: kept unless --overwrite
     t0 = time.perf_counter()
     if args.no_ros:
         run_, received = _in_process(spec, out)
@@ -111,11 +113,10 @@ def _through_graph(args, spec, out: Path):
     from .launch import alarm_event_line
 
     bag = out / "run.mcap"
-    bag.unlink(missing_ok=True)
     onset = spec.faults[0].onset_s if spec.faults else None
     _say(f"[1/4] ROS 2 graph: plant, controllers, valve, fault detector, recorder; scenario {spec.name}, "
          f"{spec.duration_s:g} s simulated, {args.fault} from {onset:g} s")
-    nodes = loop_graph("paper", args.fault, args.onset, args.overrides, bag, detector={})
+    nodes = loop_graph("paper", args.fault, args.onset, args.overrides, bag, detector={}, overwrite=args.overwrite)
 
     def on_event(node: str, event: dict) -> None:
         line = alarm_event_line(event)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from phfdi_base.errors import UserError
 
-from .common import EPILOG_FORMAT, column_map_from_args, plant_runs_on, print_notes
+from .common import EPILOG_FORMAT, add_overwrite_arg, column_map_from_args, plant_runs_on, print_notes
 
 EXAMPLES = """examples:
   # a run of the project (CSV, Parquet or .mcap bag) against the paper model, segments held out
@@ -88,6 +88,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                           "model (calibrated_model.yaml)")
     how.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
     how.add_argument("--out", default="out/diagnose", help="report folder (default: out/diagnose)")
+    add_overwrite_arg(how, folder=True)
     how.add_argument("--structure", action="store_true",
                      help="forward structure search: add the effect with the largest held-out gain, refit all "
                           "jointly, stop when the next addition is not significant; writes structure_model.yaml")
@@ -148,12 +149,12 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("no data: give --data FILE ... or --fit FILE ... [--validate FILE ...]")
     if args.validate and not args.fit:
         raise UserError("--validate needs --fit")
-    from phfdi_base.outputs import check_writable_folder
+    from phfdi_base.outputs import output_folder
 
-    check_writable_folder(args.out)  # before minutes of fitting, not after them
     cmap = _map(args)
     fit_records = _records(args.data or args.fit, cmap, args.dt, args.encoding)
     val_records = _records(args.validate or [], cmap, args.dt, args.encoding)
+    output_folder(args.out, args.overwrite)  # after the records are read, before minutes of fitting
     print_notes("diagnose", [f"{r.name}: {n}" for r in fit_records + val_records for n in r.notes])
     nominal = nominal_raw(args.model, args.overrides)
     progress = None if args.quiet else (lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .calibrate import add_detector_args, parse_seeds, settings_from_args
-from .common import EPILOG_FORMAT
+from .common import EPILOG_FORMAT, add_overwrite_arg
 
 EXAMPLES = """examples:
   phfdi evaluate --out out/eval                   # full matrix (about 70 runs; minutes, progress on stderr)
@@ -27,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "isolation accuracy and parameter-estimate errors.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     p.add_argument("--out", required=True, help="output folder")
+    add_overwrite_arg(p, folder=True)
     p.add_argument("--scenario", default="paper", help="scenario preset or .yaml (default paper)")
     p.add_argument("--onset", type=float, default=7000.0, metavar="S", help="fault onset (s), default 7000")
     p.add_argument("--seeds", default="1-3", help="noise seeds of the faulty runs (default 1-3)")
@@ -41,10 +42,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from phfdi.study.evaluation import EvalConfig, run_evaluation
-    from phfdi_base.outputs import check_writable_folder
+    from phfdi_base.outputs import output_folder
 
     settings = settings_from_args(args)
-    check_writable_folder(args.out)  # before the evaluation's runs, not after them
+    output_folder(args.out, args.overwrite)  # before the evaluation's runs, not after them
     common = dict(scenario=args.scenario, onset_s=args.onset, settings=settings, jobs=args.jobs)
     if args.quick:
         cfg = EvalConfig.quick(**common)

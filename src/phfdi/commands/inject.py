@@ -17,7 +17,7 @@ EXAMPLES = """examples:
   phfdi inject control.csv --fault pump_stuck --pump base --onset 500 --size 2 --out faulty_stuck.csv
   phfdi inject add_base.csv --fault probe_noise --size 0.05 --seed 7 --onset 30 --out faulty_noise.csv
 
-faults (--size in the unit given):
+faults (--size in the unit and range given):
 {kinds}
 Sensor faults change the pH column only, rounded to the meter's 0.01 pH and clipped to 0..14. Pump faults
 are model free: the measured pH is what the pumps really delivered, so the fault is written into the
@@ -37,7 +37,7 @@ a detector never needs it. Both files are written atomically; an existing file i
 def _examples() -> str:
     from phfdi.inject_kinds import KINDS
 
-    return EXAMPLES.replace("{kinds}", "\n".join(f"  {k.name:13s} [{k.unit}] {k.what}" for k in KINDS.values()))
+    return EXAMPLES.replace("{kinds}", "\n".join(f"  {k.name:13s} [{k.size_text()}] {k.what}" for k in KINDS.values()))
 
 
 def register(sub: argparse._SubParsersAction) -> None:

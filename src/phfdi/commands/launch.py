@@ -126,9 +126,8 @@ def check_port_free(host: str, port: int) -> None:
 
 def detector_params(items: list[str]) -> dict:
     """--detector-param NAME=VALUE items as typed node parameters (VALUE read as YAML: 2.0, true, [ph, level])."""
-    import yaml
-
     from phfdi_base.errors import UserError
+    from phfdi_base.yamlfile import DuplicateKeyError, load_yaml
 
     out = {}
     for item in items:
@@ -136,8 +135,10 @@ def detector_params(items: list[str]) -> dict:
         if not sep or not name.strip():
             raise UserError(f"--detector-param {item!r}: write NAME=VALUE")
         try:
-            out[name.strip()] = yaml.safe_load(value) if value.strip() else ""
-        except yaml.YAMLError:
+            out[name.strip()] = load_yaml(value, f"--detector-param {name.strip()}") if value.strip() else ""
+        except DuplicateKeyError:
+            raise
+        except UserError:
             raise UserError(f"--detector-param {item!r}: cannot read the value") from None
     if "calibration" in out and out["calibration"]:
         out["calibration"] = str(Path(out["calibration"]).resolve())

@@ -7,7 +7,7 @@ import sys
 
 from phfdi.loopdiag.dask_run import CONNECT_TIMEOUT_S
 
-from .common import EPILOG_FORMAT, print_notes
+from .common import EPILOG_FORMAT, add_overwrite_arg, print_notes
 
 EXAMPLES = """examples:
   phfdi loop-diagnose ../shared/data/plant_loops/stiction/stic_2111FIC46005_0614_0003.txt
@@ -77,6 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--top", type=int, default=10, metavar="N", help="loops in the ranked summary (default 10)")
     p.add_argument("--figure", "--figures", dest="figure", default=None, metavar="DIR",
                    help="write one PNG per loop into DIR (trends, PV-OP and OP-dPV with the fitted models)")
+    add_overwrite_arg(p, folder=True)
     p.add_argument("--json", action="store_true", help="print the reports as JSON")
     p.set_defaults(func=run)
 
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.loopdiag.report import format_report, format_summary, to_json
     from phfdi.loopdiag.vocabulary import ACTUATOR_CAUSES
     from phfdi_base.errors import UserError
-    from phfdi_base.outputs import check_writable_folder, write_text
+    from phfdi_base.outputs import output_folder, write_text
 
     columns = ColumnMap.parse(args.columns) if args.columns else None
     settings = Settings(baselines=not args.no_baselines,
@@ -112,9 +113,9 @@ def run(args: argparse.Namespace) -> int:
         from phfdi.loopdiag.dask_run import check_scheduler_address
 
         check_scheduler_address(args.scheduler)
-    for folder in (args.out, args.figure):  # before the work, not after it
+    for folder in (args.out, args.figure):  # before the work, not after it; an earlier run's: only --overwrite
         if folder:
-            check_writable_folder(folder)
+            output_folder(folder, args.overwrite)
     jobs = expand(args.files, columns)
     reports = diagnose_jobs(jobs, settings, args.figure, args.scheduler, args.workers, _progress(len(jobs)),
                             each_segment=args.segments == "each")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .common import EPILOG_FORMAT, Progress
+from .common import EPILOG_FORMAT, Progress, add_overwrite_arg
 
 EXAMPLES = """examples:
   phfdi paper-runs --out out/paper
@@ -28,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "unless --onset is given.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     p.add_argument("--out", required=True, help="output folder")
+    add_overwrite_arg(p, folder=True)
     p.add_argument("--scenario", default="paper", help="scenario preset or .yaml (default: paper)")
     p.add_argument("--onset", type=float, default=0.0, metavar="S", help="fault onset (s), default 0")
     p.add_argument("--json", action="store_true", help="print the summaries as JSON")
@@ -39,9 +40,9 @@ def run(args: argparse.Namespace) -> int:
     from phfdi.loop import simulate
     from phfdi.scenario import load_scenario
     from phfdi.summary import format_summary, summarize
-    from phfdi_base.outputs import check_writable_folder, write_text
+    from phfdi_base.outputs import output_folder, write_text
 
-    out = check_writable_folder(args.out)
+    out = output_folder(args.out, args.overwrite)
     runs, labels, summaries = [], [], {}
     progress = Progress("paper-runs", enabled=True)
     for i, fault in enumerate(PAPER_FAULTS):

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Callable
 
 from phfdi.records.formats import firsts, historian_suffixes, is_format
+from phfdi.records.sources import refuse_nul_filled
 from phfdi_base.errors import UserError
 from phfdi_base.outputs import staged, write_text
 
@@ -86,8 +87,9 @@ def _jobs_of_file(f: Path, columns: ColumnMap | None) -> list[Job]:
     if columns is not None or not is_format(f, "csv") or not f.is_file():
         return [Job(str(f), columns)]
     try:
+        refuse_nul_filled(f)  # a sparse file is one endless line: its job's reader refuses it in one line
         header = _csv_header(f)
-    except OSError:
+    except (OSError, UserError):
         return [Job(str(f))]
     loops = wide_loops(header)
     if len(loops) < 2:

@@ -8,6 +8,7 @@ Damaged files give a :class:`ReadError`, never the parser's own exception.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -31,10 +32,56 @@ def read_table(path: Path, encoding: str | None = None) -> Table:
         raise ReadError(path, "a folder, not a record file (CSV, Parquet or MCAP)")
     regular_file(path)  # a FIFO, a device or a link loop: one line, never a hang
     try:
-        data = path.read_bytes()
+        head = refuse_nul_filled(path)  # before the file is read whole: a sparse 2 GB file cost 15 GB
+        fmt = format_of(path, head)
+        data = None if fmt.name == "bag" else path.read_bytes()  # a bag is read from its file, by its index
     except OSError as exc:
         raise ReadError(path, f"cannot read the file ({exc.strerror})") from None
-    return format_of(path, data).read(path, data, encoding)
+    return fmt.read(path, data, encoding)
+
+
+#: the NUL sample taken before a file is read: blocks of this many bytes, this many of them spread over the file
+NUL_BLOCK_BYTES = 4096
+NUL_SAMPLES = 32
+
+
+def refuse_nul_filled(path: Path) -> bytes:
+    """The file's first bytes; a :class:`ReadError` when its start, or most of it, is NUL bytes.
+
+    NUL is valid UTF-8 and a CSV line may be any length, so a sparse file (``truncate -s 2G``) or a zero-filled
+    preallocation was decoded whole and cost several times its size in memory before the csv module refused it.
+    A record is never mostly NUL: text has none (UTF-16 has one every other byte, never a whole block), and an
+    MCAP or Parquet file (told by its first bytes, and not checked) has headers and lengths in every few hundred
+    bytes. So: the first block all NUL, or more than half of :data:`NUL_SAMPLES` blocks spread over the file all
+    NUL, is refused after reading at most NUL_SAMPLES x NUL_BLOCK_BYTES bytes. A short NUL tail (a logger that
+    died mid-write) is left to the reader, which marks that line and says so.
+    """
+    with open(path, "rb") as fh:
+        head = fh.read(NUL_BLOCK_BYTES)
+        if head.startswith((PARQUET_MAGIC, MCAP_MAGIC)):
+            return head
+        size = os.fstat(fh.fileno()).st_size
+        what = f"a sparse or zero-filled file ({_size_text(size)}), not a record (CSV, Parquet or MCAP)"
+        if head and head.count(0) == len(head):
+            raise ReadError(path, f"its first {len(head)} bytes are all NUL: {what}")
+        last = max(size - NUL_BLOCK_BYTES, 0)
+        offsets = sorted({last * k // (NUL_SAMPLES - 1) for k in range(NUL_SAMPLES)})
+        empty = 0
+        for offset in offsets:
+            fh.seek(offset)
+            block = fh.read(NUL_BLOCK_BYTES)
+            empty += bool(block) and block.count(0) == len(block)
+        if empty > len(offsets) // 2:
+            raise ReadError(path, f"{empty} of {len(offsets)} blocks sampled across it are all NUL bytes: {what}")
+    return head
+
+
+def _size_text(size: int) -> str:
+    """'2.0 GiB', '512 kiB', '900 bytes'."""
+    for unit, shift in (("GiB", 30), ("MiB", 20), ("kiB", 10)):
+        if size >= 1 << shift:
+            return f"{size / (1 << shift):.1f} {unit}"
+    return f"{size} bytes"
 
 
 # ---- text ---------------------------------------------------------------------------------
