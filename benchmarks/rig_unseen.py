@@ -33,7 +33,8 @@ def main() -> None:
     result = evaluate(args.calibrations, args.hours, args.runs_per_kind, args.data, shipped_map("ph_rig"), say)
     print(f"{time.perf_counter() - t0:.0f} s; load average {os.getloadavg()[0]:.1f}")
     for r in result["results"]:
-        print(f"\ncalibrated on the {'five recorded runs' if r['calibration'] == 'real' else 'recorded operations on simulated days'}: "
+        which = "five recorded runs" if r["calibration"] == "real" else "recorded operations on simulated days"
+        print(f"\ncalibrated on the {which}: "
               f"{r['healthy_runs']} simulated healthy runs of unseen operations, {r['healthy_hours']:.2f} h: "
               f"{r['fault_alarms']} fault alarms ({r['fault_alarms_per_hour']:.3f} per hour"
               + (f"; in {', '.join(r['runs_with_fault_alarm'])}" if r["runs_with_fault_alarm"] else "")

@@ -24,12 +24,10 @@ Healthy, re-adapted (what the plant does where the calibration never went):
 * ``pump:<channel>``, one per feed that ran in the window: the feed's apparent strength is c times the
   calibrated one (a pump setting, batch or pH passage the calibration did not see; or a pump delivering other
   than recorded: on a rig whose flows are the pump commands the two cannot be told apart, docs/detector.md);
-* ``mixing_delay``: the feeds reach the probe d seconds later than recorded (mixing, feed lines): a reading that
-  keeps moving after a pump stopped;
 * the run's own noise, pump state by pump state: the innovations' scale before the window whatever the
   calibration's was, and a still flask (no feed running) whose reading goes quiet.
 
-Offset, drift, the pumps and the delay are fitted in the model-trusting window (the filter's rate and walk
+Offset, drift and the pumps are fitted in the model-trusting window (the filter's rate and walk
 uncertainty cut to ``STIFFNESS``), where a deterministic fault shows as the divergence it causes.
 
 **Confirmation** (``EstimatorReference.confirm``, written by ``phfdi calibrate --estimator``). A fault alarm
@@ -37,13 +35,13 @@ means a fault. An alarm is confirmed when all of these hold:
 
 1. ``change`` (:func:`change_statistic`): the filter's standardised innovations in the window changed scale
    against the run's own stretch before it (up to ``NOISE_BEFORE_SAMPLES``), pump state by pump state (each state
-   its own variance; samples within ``SETTLE_S`` of a pump switching left out), by a profile likelihood ratio
+   its own variance; a state is the pumps' flows now and over the last ``SETTLE_S``), by a profile likelihood ratio
    beyond a calibrated margin. The innovations are normalised by the filter's own predicted variance, which grows
    where the pumps move the pH fast or the curve is steep, and the run is compared with itself in the same pump
    state, so neither a day noisier than the calibration's nor the pumps' stroke ripple reads as a change; a probe
    that jumps, drifts, freezes, lags or turns noisy does change it;
-2. the sensor hypothesis that fits best beats every healthy re-adaptation (a feed's strength, a mixing delay) in
-   the likelihood of the window, and gains more over healthy than a one-parameter fit of a well-specified model
+2. the sensor hypothesis that fits best beats every healthy re-adaptation (a feed's strength) in the likelihood
+   of the window, and gains more over healthy than a one-parameter fit of a well-specified model
    gains by chance with probability ``alpha`` (half the chi-square(1) quantile);
 3. a probe that lost its noise is not confirmed while no feed runs (a still flask reads quiet too).
 
@@ -90,8 +88,6 @@ DRIFT_RANGE_PH_PER_MIN = (-5.0, 5.0)
 NOISE_RANGE = (0.02, 20.0)  # searched on its logarithm
 #: a feed's apparent strength: up to what the adaptation itself may reach, or nothing delivered
 PUMP_RANGE = (0.0, FACTOR_BOUNDS[1])
-#: how much later than recorded the feeds may reach the probe (s): the rig's mixing zone was fitted at 5-11 s
-MIXING_DELAY_RANGE_S = (0.0, 30.0)
 STIFFNESS = 0.1
 #: the detector's statistics that watch the reading's noise (wavelet_fdi.learned_detector)
 NOISE_STATISTICS = ("energy", "energy_down", "repeats")
@@ -102,8 +98,8 @@ NOISE_BEFORE_MIN_SAMPLES = 32
 #: the least samples of one pump state before the window that the change test compares that state's window
 #: samples with
 STATE_MIN_SAMPLES = 16
-#: how long after a pump switches (on, off, to another octave) its samples stay out of the change test (s): the
-#: mixing delay the alternatives allow (MIXING_DELAY_RANGE_S)
+#: the span of a pump's recent mean flow that the change test's pump state holds (s): three times the rig's mixing
+#: zone's time constant as fitted (5-11 s, docs/diagnosis.md)
 SETTLE_S = 30.0
 #: the confirmation's statistics (module doc)
 CONFIRM_STATISTICS = ("change",)
@@ -244,70 +240,52 @@ def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _
                 return _window_nll(w.start, replace(mean_ref, feeds=tuple(feeds)), tw, xw)
             f, x = _fit(pump, PUMP_RANGE)
             out[f"pump:{feed.channel}"] = (healthy - f, x)
-    out["mixing_delay"] = _delay_alternative(mean_ref, w, t_s, rows, healthy)
     return out
 
 
-def _delay_alternative(ref: EstimatorReference, w: _Window, t_s: np.ndarray, rows: np.ndarray,
-                       healthy: float) -> tuple[float, float]:
-    """Healthy, re-adapted: what the feeds deliver reaches the probe d seconds later than recorded (mixing, feed
-    lines): the flows of the record shifted by d (held before the record's start), the reading as read; fitted
-    over 0..MIXING_DELAY_RANGE_S. A reading that keeps moving after a pump stopped, or lags one that started,
-    is this, not a probe fault."""
-    m = len(ref.feeds)
-    t_all = np.asarray(t_s, dtype=float)
-    flows = np.asarray(rows, dtype=float)[:, :m]
-    tw = t_all[w.a:w.b]
-    xw = np.array(rows[w.a:w.b], dtype=float)
-
-    def cost(d: float) -> float:
-        moved = xw.copy()
-        for i in range(m):  # the flow recorded d seconds earlier (its previous sample: a pump's command is held)
-            j = np.clip(np.searchsorted(t_all, tw - d, side="right") - 1, 0, len(t_all) - 1)
-            moved[:, i] = np.nan_to_num(flows[j, i])
-        return _window_nll(w.start, ref, tw, moved)
-
-    f, d = _fit(cost, MIXING_DELAY_RANGE_S)
-    return healthy - f, d
+def _octaves(q: np.ndarray) -> np.ndarray:
+    """Per value: 0 for off, else the octave of the flow above 0.25 mL/s (1..15)."""
+    return np.where(q > 1e-6, np.clip(np.floor(np.log2(np.maximum(q, 1e-9) / 0.25)) + 1, 1, 15), 0).astype(int)
 
 
-def pump_states(flows: np.ndarray) -> np.ndarray:
-    """Each row's pump state: per feed off, or the octave its flow is in (the pumps' stroke ripple, noise the
-    model does not know, grows with a pump's setting and stops with it). One integer per row."""
+def pump_states(t_s: np.ndarray, flows: np.ndarray) -> np.ndarray:
+    """Each row's pump state, one integer: per feed the octave its flow is in now (0: off) and the octave of its
+    mean flow over the last ``SETTLE_S``. The pumps' stroke ripple (noise the model does not know) grows with a
+    pump's setting and stops with it, and the mixing after a pump switched takes a while: a run is compared with
+    itself only where it runs alike, now and over the last half minute (a chattering pump is a state of its own,
+    the half minute after a start one of its own)."""
+    t = np.asarray(t_s, dtype=float)
     q = np.nan_to_num(np.asarray(flows, dtype=float))
-    octave = np.where(q > 0, np.clip(np.floor(np.log2(np.maximum(q, 1e-9) / 0.25)) + 1, 1, 15), 0).astype(int)
-    return (octave * (16 ** np.arange(q.shape[1]))).sum(axis=1)
+    dt = np.diff(t, prepend=t[0] if len(t) else 0.0)
+    area = np.cumsum(q * dt[:, None], axis=0)  # delivered volume so far, per feed
+    start = np.searchsorted(t, t - SETTLE_S, side="left")
+    span = np.maximum(t - t[start], 1e-9)
+    mean = (area - area[start]) / span[:, None]
+    code = _octaves(q) + 16 * _octaves(mean)
+    return (code * (256 ** np.arange(q.shape[1]))).sum(axis=1)
 
 
 def change_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window) -> float:
     """How far the window's innovations changed scale against the run's own stretch before it, pump state by pump
-    state: the profile likelihood ratio of one factor s on the window's variance, each pump state keeping a
-    variance of its own (estimated on both stretches), from the filter's standardised innovations (tracking,
-    nothing adapting, no limit: they are normalised by the filter's own predicted variance). Samples within
-    ``SETTLE_S`` of a pump's switching are left out; a window sample whose pump state the stretch before did not
-    show at least ``STATE_MIN_SAMPLES`` times (settled) says nothing (its state's noise is unknown to the run);
-    none left: 0."""
+    state (:func:`pump_states`): the profile likelihood ratio of one factor s on the window's variance, each pump
+    state keeping a variance of its own (estimated on both stretches), from the filter's standardised innovations
+    (tracking, nothing adapting, no limit: they are normalised by the filter's own predicted variance), and the
+    same on the reading's second difference; the larger. A window sample whose pump state the stretch before did
+    not show at least ``STATE_MIN_SAMPLES`` times says nothing (its state's noise is unknown to the run); none
+    left: 0."""
     m = len(tracking.feeds)
     raw = replace(tracking, clip_sigma=0.0)
     stream = w.before.fork(raw)
     r = stream.residuals(t_s[w.pre:w.b], rows[w.pre:w.b])[:, 0]
-    all_states = pump_states(np.asarray(rows[:w.b], dtype=float)[:, :m])
-    states = all_states[w.pre:]
+    lead = max(0, w.pre - int(4 * SETTLE_S / max(float(np.median(np.diff(t_s[w.pre:w.b]))), 1e-3)))
+    states = pump_states(t_s[lead:w.b], np.asarray(rows[lead:w.b], dtype=float)[:, :m])[w.pre - lead:]
     k = np.arange(w.pre, w.b)
-    # the samples within SETTLE_S of a pump's switching are left out: the mixing and the stroke ripple's start
-    # after a switch are noise the model does not describe, on a healthy plant as much as on a faulty probe
-    switched = np.flatnonzero(np.diff(all_states) != 0) + 1
-    t_all = np.asarray(t_s[:w.b], dtype=float)
-    last = np.searchsorted(switched, k, side="right") - 1
-    switch_t = t_all[switched] if len(switched) else np.zeros(1)
-    since = np.where(last >= 0, t_all[k] - switch_t[np.maximum(last, 0)], np.inf)
-    settled = since >= SETTLE_S
     # the reading's own second difference: what a probe that froze or turned sluggish loses, a still or slowly
     # curving pH does not (the innovations stay near their scale then: the filter follows the reading)
     ph = np.asarray(rows[w.pre:w.b], dtype=float)[:, m]
     d2 = np.full(len(ph), np.nan)
     d2[2:] = ph[2:] - 2.0 * ph[1:-1] + ph[:-2]
-    before, window = settled & (k < w.lo), settled & (k >= w.a)
+    before, window = k < w.lo, k >= w.a
     return max(_scale_change(r ** 2, before, window, states), _scale_change(d2 ** 2, before, window, states))
 
 
@@ -362,7 +340,7 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     conf = dict(ref.confirm or {})
     ev = _hypotheses(ref, t_s, rows, w, noise_only=noise_alarm)
     evidence = {name: {"log_likelihood_gain": round(g, 3), "size": round(x, 4), "unit": _unit(name)}
-                for name, (g, x) in ev.items() if name not in ("noise_vs_run", "zones_crossed")
+                for name, (g, x) in ev.items() if name != "noise_vs_run"
                 and not name.startswith("t_")}
     result = {"window": [int(w.a), int(w.b)], "start_time": float(t_s[w.a]), "evidence": evidence}
     named = _best(ev, [k for k in ev if k in SENSOR_CLASSES or k.startswith("pump:")])
@@ -376,7 +354,7 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
                     "thresholds": {k: margins[k] for k in stats if k in margins},
                     "confirmed_by": confirmed_by, "alpha_per_test": conf.get("alpha_per_test")}
     sensor = _best(ev, [k for k in SENSOR_CLASSES if k in ev])
-    healthy_ones = [k for k in ev if (k.startswith("pump:") or k == "mixing_delay") and ev[k][0] > 0]
+    healthy_ones = [k for k in ev if k.startswith("pump:") and ev[k][0] > 0]
     explanation = _best(ev, healthy_ones) if healthy_ones else None
     # a fault: the window changed beyond the margin AND a sensor fault explains it better than any healthy
     # re-adaptation (a feed's apparent strength): else the plant left what the reference knows
@@ -407,8 +385,7 @@ def _best(ev: dict, names: Sequence[str]) -> str:
 
 
 def _unit(name: str) -> str:
-    return {"probe_offset": "pH", "probe_drift": "pH/min", "probe_noise": "x healthy noise",
-            "mixing_delay": "s"}.get(name, "x recorded")
+    return {"probe_offset": "pH", "probe_drift": "pH/min", "probe_noise": "x healthy noise"}.get(name, "x recorded")
 
 
 def _naming(name: str, ev: dict) -> dict:
@@ -417,9 +394,6 @@ def _naming(name: str, ev: dict) -> dict:
         return {"family": "none", "fault_class": name, "description": "no fault hypothesis explains it",
                 "size": 0.0, "unit": "", "log_likelihood_gain": 0.0}
     gain, size = ev[name]
-    if name == "mixing_delay":
-        return {"family": "none", "fault_class": name, "unit": "s", "log_likelihood_gain": round(gain, 3),
-                "description": "the feeds reach the probe later than recorded (mixing, feed lines)", "size": round(size, 4)}
     if name.startswith("pump:"):
         family, what = "actuator", f"{name[5:]} delivers other than recorded (or runs where the calibration never did)"
     else:
