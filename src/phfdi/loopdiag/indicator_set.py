@@ -6,6 +6,7 @@ import numpy as np
 
 from .baselines import he_curve_fit, horch_ccf
 from .bicoherence import apparent_stiction, ngi_nli
+from .deadband import deadband_evidence
 from .indicators import Indicator, area_peak_ratio, horch_histogram, kano_stuck_index, not_applicable, relay_shape
 from .stickslip import stick_slip_index
 
@@ -15,7 +16,8 @@ HE_REF = "He, Wang, Pottmann & Qin (2007), Ind. Eng. Chem. Res. 46, 4549-4560: t
 
 def compute_indicators(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt_s: float,
                        process_type: str) -> dict[str, Indicator]:
-    """The published indicators (Hammerstein S/J come from :mod:`.hammerstein` separately)."""
+    """The published indicators and this project's dead-band screen (:mod:`.deadband`); the full valve-model
+    fit with Kano's S and J comes from :mod:`.hammerstein` separately, for the loops the screen flags."""
     out: dict[str, Indicator] = {}
     h = horch_ccf(op, pv, sp, dt_s, process_type)
     out["horch_ccf"] = (Indicator("horch_ccf", h.index, h.decision, dict(h.detail), HORCH_CCF_REF)
@@ -34,4 +36,5 @@ def compute_indicators(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt
     out["bicoherence_ngi"] = ngi
     out["bicoherence_nli"] = nli
     out["ellipse_apparent_stiction"] = apparent_stiction(op, pv, sp, dt_s)
+    out["deadband_evidence"] = deadband_evidence(op, pv, process_type)
     return out
