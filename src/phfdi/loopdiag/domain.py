@@ -285,12 +285,14 @@ def class_sequence(n: int) -> list[str]:
     return out
 
 
-def draw_domain_loops(n: int, seed: int, prefix: str = "DOM") -> tuple[list[tuple[DrawnLoop, Run]], dict]:
+def draw_domain_loops(n: int, seed: int, prefix: str = "DOM",
+                      limit: int | None = None) -> tuple[list[tuple[DrawnLoop, Run]], dict]:
     """``n`` usable loops in the class shares (:func:`class_sequence`), each simulated; sticky valves that did not
-    slip :data:`MIN_SLIPS` times are redrawn. Also returns counts of what was redrawn and why."""
+    slip :data:`MIN_SLIPS` times are redrawn. Also returns counts of what was redrawn and why. ``limit``: only the
+    first that many of the ``n`` (the same loops, drawn from the same stream)."""
     rng = np.random.default_rng(seed)
     out, redrawn = [], {"unusable": 0, "sticky_valve_never_slipped": 0}
-    for k, cls in enumerate(class_sequence(n)):
+    for k, cls in enumerate(class_sequence(n)[:limit]):
         for _ in range(200):
             loop = draw_domain_spec(rng, cls, f"{prefix}{seed}_{k:05d}")
             run = simulate_loop(loop.spec)
