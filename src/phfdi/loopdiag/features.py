@@ -48,8 +48,6 @@ FEATURES: tuple[Feature, ...] = (
     Feature("oscillation_regularity", "oscillation", 0.0, 0.0, math.log1p(10.0),
             "log(1 + r), r the ACF zero-crossing regularity (Thornhill et al. 2003), r capped at 10"),
     Feature("horch_ccf", "horch_ccf", 0.5, 0.0, 1.0, "Horch (1999) CCF oddness psi (0 even, 1 odd)"),
-    Feature("horch_histogram", "horch_histogram", 0.5, 0.0, 1.0,
-            "Horch derivative histogram: share of variance a sinusoid explains (0 Gaussian, 1 camel)", -1),
     Feature("he_curve_fit", "he_curve_fit", 0.5, 0.0, 1.0, "He et al. (2007) SI (triangle vs sinusoid)"),
     Feature("kano_stuck", "kano_stuck", 0.0, 0.0, 1.0, "Kano et al. (2004) share of OP travel while stuck"),
     Feature("stick_slip", "stick_slip", 0.0, 0.0, 1.0,
