@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.loopdiag.classifier import call_rates, simulated_data, train_from_rows
+from phfdi.loopdiag.classifier import call_rates
+from phfdi.loopdiag.dataset import simulated_data, train_from_rows
 from phfdi.loopdiag.features import FEATURE_NAMES
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -16,16 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from phfdi.loopdiag.classifier import (
-    HARD_NEGATIVES,
-    NO_STICTION_BELOW,
-    SIM_FALSE_CALL,
-    load_model,
-    simulated_data,
-    train_from_rows,
-    train_simulated,
-)
-from phfdi.loopdiag.dataset import simulated_row
+from phfdi.loopdiag.classifier import HARD_NEGATIVES, NO_STICTION_BELOW, SIM_FALSE_CALL, load_model, train_simulated
+from phfdi.loopdiag.dataset import simulated_data, simulated_row, train_from_rows
 from phfdi.loopdiag.domain import draw_domain_loops
 from phfdi.loopdiag.features import FEATURE_NAMES
 

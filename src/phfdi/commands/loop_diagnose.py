@@ -20,8 +20,10 @@ EXAMPLES = """examples:
 screen and fits: every loop is screened (structure checks, oscillation, the published indicators, the
 dead-band screen, a calibrated p(stiction)); the valve-model fits (Kano S and J, backlash, dead-zone,
 saturation, quantisation) run only where the screen flags stiction or undetermined (--fits all: every
-loop; --fits none: none, the screen alone). A record longer than 1502 samples is screened in windows of 751 (at most 64, spread over it); a
-text file of more than 200 000 rows is read as 64 windows of 800 rows spread over it (said in a note).
+loop; --fits none: none, the screen alone). The probability's model, calibration and thresholds were
+fitted on simulated loops only. A record longer than 1502 samples is screened in windows of 751 (at
+most 64, spread over it); a text file of more than 200 000 rows is read as 64 windows of 800 rows
+spread over it (said in a note, with progress on stderr).
 
 inputs: files and folders (every .txt, .csv, .parquet below them). A CSV whose header holds several
 loops' tags (<tag>.OP or .MV, .PV, .SP or .SV) is a wide historian export: each loop tag is one job.

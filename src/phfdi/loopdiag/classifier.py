@@ -507,20 +507,3 @@ def train_simulated(train_set: Data, calibration_set: Data, hard: np.ndarray) ->
                        "calibration_calls": call_rates(model.call(p_cal), calibration_set.y)})
     return model
 
-
-def simulated_data(rows: list[dict]) -> Data:
-    """Data of simulated rows (:func:`phfdi.loopdiag.dataset.simulated_row`): features, labels, each loop its own
-    group, the features' published signs."""
-    from .features import FEATURE_NAMES, FEATURE_SIGNS
-
-    return Data(np.array([r["features"] for r in rows], float), np.array([r["stiction"] for r in rows], bool),
-                [r["group"] for r in rows], np.zeros(len(rows), bool), list(FEATURE_NAMES), list(FEATURE_SIGNS))
-
-
-def train_from_rows(rows: list[dict]) -> LogisticModel:
-    """:func:`train_simulated` on the ``train`` and ``calibration`` rows of a data set
-    (benchmarks/stiction_dataset.py), the calibration set's hard negatives marked by their class."""
-    train_rows = [r for r in rows if r["source"] == "train" and not r.get("error")]
-    cal_rows = [r for r in rows if r["source"] == "calibration" and not r.get("error")]
-    hard = np.array([r["loop_class"] in HARD_NEGATIVES for r in cal_rows])
-    return train_simulated(simulated_data(train_rows), simulated_data(cal_rows), hard)

@@ -7,10 +7,13 @@ the labelled refinery records are for testing (benchmarks/stiction_real_test.py)
 
 from __future__ import annotations
 
+import numpy as np
+
 from phfdi.run import Run
 
+from .classifier import HARD_NEGATIVES, Data, LogisticModel, train_simulated
 from .domain import slips
-from .features import FEATURE_NAMES, screen_evidence
+from .features import FEATURE_NAMES, FEATURE_SIGNS, screen_evidence
 from .synthetic import simulate_loop
 from .training import DrawnLoop
 
@@ -33,3 +36,19 @@ def simulated_row(loop: DrawnLoop, source: str) -> dict:
            "valve": loop.spec.valve, "slips": slips(run["stem_pct"], run["op_pct"])}
     row.update(screen_row(run, loop.process_type))
     return row
+
+
+def simulated_data(rows: list[dict]) -> Data:
+    """Data of simulated rows (:func:`phfdi.loopdiag.dataset.simulated_row`): features, labels, each loop its own
+    group, the features' published signs."""
+    return Data(np.array([r["features"] for r in rows], float), np.array([r["stiction"] for r in rows], bool),
+                [r["group"] for r in rows], np.zeros(len(rows), bool), list(FEATURE_NAMES), list(FEATURE_SIGNS))
+
+
+def train_from_rows(rows: list[dict]) -> LogisticModel:
+    """:func:`train_simulated` on the ``train`` and ``calibration`` rows of a data set
+    (benchmarks/stiction_dataset.py), the calibration set's hard negatives marked by their class."""
+    train_rows = [r for r in rows if r["source"] == "train" and not r.get("error")]
+    cal_rows = [r for r in rows if r["source"] == "calibration" and not r.get("error")]
+    hard = np.array([r["loop_class"] in HARD_NEGATIVES for r in cal_rows])
+    return train_simulated(simulated_data(train_rows), simulated_data(cal_rows), hard)

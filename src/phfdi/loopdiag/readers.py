@@ -29,6 +29,7 @@ frozen by :mod:`.loopcheck`.
 from __future__ import annotations
 
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -313,6 +314,8 @@ def sampled_table(path: Path):
     rows = total - header_lines
     if rows <= MAX_READ_ROWS:
         return None
+    print(f"loop-diagnose: {path}: {rows} rows, more than {MAX_READ_ROWS}: reading {SAMPLED_WINDOWS} windows of "
+          f"{WINDOW_ROWS} rows spread over it", file=sys.stderr, flush=True)  # progress: the reading takes seconds
     starts = np.linspace(header_lines, total - WINDOW_ROWS, SAMPLED_WINDOWS).round().astype(int)
     data, lines = _pick_lines(path, header_lines, starts)
     table = fmt.read(path, data, None)

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import sys
 from dataclasses import replace
 
+from phfdi.run import Run
 from phfdi_base.errors import UserError
 
-from .classifier import STICTION, UNDETERMINED
+from .classifier import NO_STICTION, STICTION, UNDETERMINED
 from .diagnose import Evidence, Settings, gather_evidence, report
 from .features import ScreenEvidence, _r4, baselines_of, kano_fit, screen_evidence, stiction_verdict
 from .indicators import noise_level
@@ -15,6 +17,17 @@ from .oscillation import detect_oscillation
 from .readers import ColumnMap, check_loop_run, read_loop, read_loop_segments
 from .verdict import loop_verdict
 from .vocabulary import FRICTION_CAUSES
+from .windows import (
+    PROGRESS_EVERY,
+    WHOLE_MAX,
+    WINDOW,
+    WINDOW_ALPHA,
+    record_call,
+    representative,
+    screen_windows,
+    window_bounds,
+    window_run,
+)
 
 #: the screen's calls that get the valve-model fits
 FLAGGED = (STICTION, UNDETERMINED)
@@ -85,8 +98,6 @@ def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None =
     >>> {name: round(value) for name, value in report["parameters"].items()}  # simulated: S 3 %, J 1 %
     {'s_pct': 3, 'j_pct': 1}
     """
-    from .windows import WHOLE_MAX, diagnose_long
-
     settings = settings or Settings()
     if len(run) > WHOLE_MAX:
         return diagnose_long(run, settings, figure_dir)
@@ -189,3 +200,51 @@ def diagnose_file_segments(path: str, columns: ColumnMap | None = None, settings
         rep["lines"] = [a, b]
         out.append(rep)
     return out
+
+
+# ---- long records (phfdi.loopdiag.windows) ---------------------------------------------------------
+def diagnose_long(run: Run, settings: Settings, figure_dir: str | None = None) -> dict:
+    """The report of a record longer than :data:`.windows.WHOLE_MAX` samples (:mod:`.windows`)."""
+    where = run.metadata.get("file") or run.metadata.get("loop_tag") or "record"
+    progress = _stderr_progress(where) if len(window_bounds(run)) > PROGRESS_EVERY else None
+    windows = screen_windows(run, settings, progress)
+    rc = record_call(windows)
+    rep_w = representative(windows, rc["call"])
+    sub = window_run(run, rep_w["start"], rep_w["stop"])
+    rep = diagnose_run(sub, settings, figure_dir)
+    if "error" in rep:
+        return rep
+    samples = sum(w["stop"] - w["start"] for w in windows)
+    total = int(run.metadata.get("file_rows") or len(run))
+    note = (f"record of {total} samples: {len(windows)} windows of up to {WINDOW} samples screened "
+            f"({samples} samples, {100.0 * samples / total:.1f} %), evenly spread; stiction in {rc[STICTION]}, "
+            f"undetermined in {rc[UNDETERMINED]}, no stiction in {rc[NO_STICTION]} of {rc['scored']} scored windows; "
+            f"valve models and this report: samples {rep_w['start']}-{rep_w['stop'] - 1}")
+    rep["samples"] = total
+    rep["windows"] = {**rc, "report_window": [rep_w["start"], rep_w["stop"]], "samples_screened": samples}
+    rep["notes"] = list(run.metadata.get("notes") or []) + [note] + list(rep.get("notes") or [])
+    rep["reading_notes"] = list(run.metadata.get("notes") or [])
+    _apply_record_call(rep, rc)
+    return rep
+
+
+def _apply_record_call(rep: dict, rc: dict) -> None:
+    """The record's call in the report's one verdict (the representative window's evidence stays)."""
+    lv = rep.get("loop_verdict") or {}
+    if rc["scored"] == 0 or rep.get("stiction") is None:
+        return
+    rep["stiction"]["verdict"] = rc["call"]
+    structure = lv.get("structure") or {}
+    check = LoopCheck(None, list(structure.get("reasons") or []))
+    rep["loop_verdict"] = loop_verdict(check, rep)
+    head = (f"{rc[STICTION]} of {rc['scored']} windows call stiction (stiction from {rc['critical']}, the count "
+            f"{WINDOW_ALPHA:.0%} of healthy loops would reach at a {rc['false_rate_assumed']:.0%} false-call rate "
+            "per window)")
+    rep["loop_verdict"]["evidence"].insert(0, head)
+
+
+def _stderr_progress(where: str):
+    def show(done: int, total: int) -> None:
+        print(f"loop-diagnose: {where}: screened {done}/{total} windows", file=sys.stderr, flush=True)
+    return show
+

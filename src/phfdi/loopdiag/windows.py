@@ -22,8 +22,6 @@ are screened the same way.
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 from scipy.stats import binom
 
@@ -130,55 +128,3 @@ def representative(windows: list[dict], call: str) -> dict:
         return max((w for w in scored if w["call"] == STICTION), key=lambda w: w["probability"])
     ordered = sorted(scored, key=lambda w: w["probability"])
     return ordered[len(ordered) // 2]
-
-
-def diagnose_long(run: Run, settings: Settings, figure_dir: str | None = None) -> dict:
-    """The report of a record longer than :data:`WHOLE_MAX` samples (module docstring)."""
-    from .single import diagnose_run
-
-    where = run.metadata.get("file") or run.metadata.get("loop_tag") or "record"
-    progress = _stderr_progress(where) if len(window_bounds(run)) > PROGRESS_EVERY else None
-    windows = screen_windows(run, settings, progress)
-    rc = record_call(windows)
-    rep_w = representative(windows, rc["call"])
-    sub = window_run(run, rep_w["start"], rep_w["stop"])
-    rep = diagnose_run(sub, settings, figure_dir)
-    if "error" in rep:
-        return rep
-    samples = sum(w["stop"] - w["start"] for w in windows)
-    total = int(run.metadata.get("file_rows") or len(run))
-    note = (f"record of {total} samples: {len(windows)} windows of up to {WINDOW} samples screened "
-            f"({samples} samples, {100.0 * samples / total:.1f} %), evenly spread; stiction in {rc[STICTION]}, "
-            f"undetermined in {rc[UNDETERMINED]}, no stiction in {rc[NO_STICTION]} of {rc['scored']} scored windows; "
-            f"valve models and this report: samples {rep_w['start']}-{rep_w['stop'] - 1}")
-    rep["samples"] = total
-    rep["windows"] = {**rc, "report_window": [rep_w["start"], rep_w["stop"]], "samples_screened": samples}
-    rep["notes"] = list(run.metadata.get("notes") or []) + [note] + list(rep.get("notes") or [])
-    rep["reading_notes"] = list(run.metadata.get("notes") or [])
-    _apply_record_call(rep, rc)
-    return rep
-
-
-def _apply_record_call(rep: dict, rc: dict) -> None:
-    """The record's call in the report's one verdict (the representative window's evidence stays)."""
-    from .loopcheck import LoopCheck
-    from .verdict import loop_verdict
-
-    lv = rep.get("loop_verdict") or {}
-    if rc["scored"] == 0 or rep.get("stiction") is None:
-        return
-    rep["stiction"]["verdict"] = rc["call"]
-    structure = lv.get("structure") or {}
-    check = LoopCheck(None, list(structure.get("reasons") or []))
-    rep["loop_verdict"] = loop_verdict(check, rep)
-    head = (f"{rc[STICTION]} of {rc['scored']} windows call stiction (stiction from {rc['critical']}, the count "
-            f"{WINDOW_ALPHA:.0%} of healthy loops would reach at a {rc['false_rate_assumed']:.0%} false-call rate "
-            "per window)")
-    rep["loop_verdict"]["evidence"].insert(0, head)
-
-
-def _stderr_progress(where: str):
-    def show(done: int, total: int) -> None:
-        print(f"loop-diagnose: {where}: screened {done}/{total} windows", file=sys.stderr, flush=True)
-    return show
-
