@@ -6,6 +6,8 @@ records made small by shrinking the bounds.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.stats import binom
@@ -54,14 +56,15 @@ def _sticky(n: int, seed: int = 1) -> Run:
                                        loop_tag="FIC7"))
 
 
-def test_a_long_record_is_screened_in_windows_and_says_so():
+def test_a_long_record_is_screened_in_windows_and_says_so(tmp_path):
     run = _sticky(4 * 751)
-    rep = diagnose_run(run, Settings(baselines=False))
+    rep = diagnose_run(run, Settings(baselines=False), figure_dir=str(tmp_path))
     w = rep["windows"]
     assert rep["samples"] == len(run) and w["windows"] == 4 and w["scored"] == 4
     assert w[STICTION] + w[UNDETERMINED] + w[NO_STICTION] == 4
     assert rep["loop_verdict"]["verdict"] == w["call"] or rep["loop_verdict"]["contradiction"]
     assert any("4 windows of up to 751 samples screened" in n for n in rep["notes"])
+    assert (tmp_path / Path(rep["figure"]).name).is_file()
 
 
 def test_a_file_too_long_to_read_whole_is_read_as_windows_with_its_line_numbers(tmp_path, monkeypatch):

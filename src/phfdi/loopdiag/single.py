@@ -211,7 +211,7 @@ def diagnose_long(run: Run, settings: Settings, figure_dir: str | None = None) -
     rc = record_call(windows)
     rep_w = representative(windows, rc["call"])
     sub = window_run(run, rep_w["start"], rep_w["stop"])
-    rep = diagnose_run(sub, settings, figure_dir)
+    rep = diagnose_run(sub, settings)
     if "error" in rep:
         return rep
     samples = sum(w["stop"] - w["start"] for w in windows)
@@ -225,6 +225,10 @@ def diagnose_long(run: Run, settings: Settings, figure_dir: str | None = None) -
     rep["notes"] = list(run.metadata.get("notes") or []) + [note] + list(rep.get("notes") or [])
     rep["reading_notes"] = list(run.metadata.get("notes") or [])
     _apply_record_call(rep, rc)
+    if figure_dir:  # the report window's trends under the record's verdict
+        from .figures import plot_record
+
+        rep["figure"] = str(plot_record(sub, rep, figure_dir))
     return rep
 
 
