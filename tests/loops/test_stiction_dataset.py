@@ -75,3 +75,26 @@ def test_the_pipeline_on_a_small_set_of_other_seeds():
     # the weights follow the published signs (a feature may end at 0, never against its paper's reading)
     signs = np.array([1 if s > 0 else -1 for s in (model.signs or [])])
     assert np.all(model.weights * signs >= 0)
+
+
+def test_a_sticky_valve_shows_by_three_slips_or_one_after_a_long_stand():
+    """The label's rule (domain.sticking_shows): break-aways are counted from the simulated stem, and one slip
+    after a stand of LONG_STAND samples shows as much as MIN_SLIPS short ones; one short stand does not."""
+    from phfdi.loopdiag.domain import LONG_STAND, MIN_SLIPS, sticking_shows, stands
+
+    op = np.linspace(40.0, 60.0, 200)  # OP creeping the whole time
+
+    def stem_of(stand_lengths: list[int]) -> np.ndarray:
+        stem, k = op.copy(), 10
+        for n in stand_lengths:  # the stem holds for n samples, then catches OP up
+            stem[k:k + n + 1] = stem[k]
+            k += n + 5
+        return stem
+
+    assert stands(stem_of([3, LONG_STAND]), op) == [3, LONG_STAND]
+    assert not sticking_shows(stem_of([3]), op)
+    assert not sticking_shows(stem_of([3] * (MIN_SLIPS - 1)), op)
+    assert sticking_shows(stem_of([3] * MIN_SLIPS), op)
+    assert sticking_shows(stem_of([LONG_STAND]), op)
+    assert not sticking_shows(stem_of([LONG_STAND - 1]), op)
+    assert not sticking_shows(op.copy(), op)

@@ -10,10 +10,11 @@ the same way for every class, so that no property but the valve tells the label:
   temperatures; a second lag in 30 %) or integrating (a level, 35 %; a short lag); dead time 0 to about 10
   samples; gain of either sign (direct-acting loops); sample time 1 to 60 s and any PV level;
 * **tuning**: SIMC (Skogestad 2003) with the closed-loop time constant 0.5 to 10 times the rule's (aggressive
-  to sluggish, as plant loops mostly are), then Kp and Ti each off the rule by up to 2 and 3 times (irregular
-  tuning);
+  to sluggish, as plant loops mostly are), in 30 % of the loops stretched 2 to 8 times more (detuned: OP creeps
+  for minutes after an upset), then Kp and Ti each off the rule by up to 2 and 3 times (irregular tuning);
 * **disturbances**, each with its own probability: a first-order filtered load (coloured, any bandwidth), a
-  random-walk load, load steps, load ramps, setpoint steps, a setpoint wandering like a cascade master's output;
+  random-walk load, load steps, load ramps, an operator's setpoint steps (half the loops), a setpoint wandering
+  like a cascade master's output;
 * **measurement**: white or coloured (AR(1)) noise of 0.01 to 0.5 % of travel in PV units, PV rounded to the
   historian's resolution, OP rounded, and exception-based storage (PV and OP held flat until they move past a
   dead-band) in a quarter of the loops.
@@ -29,8 +30,9 @@ the label.
 
 **A sticky valve must show.** A valve that never broke away in the record (OP never travelled S) leaves no trace
 in OP and PV, and its label would only be noise: a sticky loop is kept only when its stem (known in simulation)
-slipped at least :data:`MIN_SLIPS` times, each a break-away after it stood still while OP moved; the others are
-redrawn and counted.
+slipped at least :data:`MIN_SLIPS` times, each a break-away after it stood still while OP moved, or once after
+standing :data:`LONG_STAND` samples or more (a detuned loop's OP creeping through the dead-band after a setpoint
+step, then one slip: a pattern of plant records); the others are redrawn and counted.
 """
 
 from __future__ import annotations
@@ -53,8 +55,16 @@ SAMPLE_TIMES_S = (1.0, 2.0, 5.0, 10.0, 30.0, 60.0)
 CLASS_SHARES = {"stiction": 0.5, "tight_tuning": 0.125, "external_oscillation": 0.125, "load_steps": 0.1,
                 "healthy_other": 0.1, "other_nonlinearity": 0.05}
 CLASSES = tuple(CLASS_SHARES)
-#: a sticky valve must have slipped this many times in the record to be labelled (module docstring)
+#: a sticky valve must have slipped this many times in the record to be labelled (module docstring) ...
 MIN_SLIPS = 3
+#: ... or at least once after standing this many samples while OP travelled (one long stand and slip shows)
+LONG_STAND = 30
+#: share of the loops (of every class but the tight ones) detuned beyond SIMC's sluggish end, and by how much
+#: their closed-loop time constant is stretched further
+DETUNED_SHARE = 0.3
+DETUNED_FACTOR = (2.0, 8.0)
+#: share of the loops whose operator moves the setpoint during the record
+SETPOINT_STEP_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -123,7 +133,10 @@ def _tuning(rng: np.random.Generator, p: Process, tight: bool) -> tuple[float, f
     """(Kc, Ti in samples): irregular SIMC; ``tight``: Ti 0.2 to 1 times the aggressive rule's and Kc raised
     until the gain margin is 1.1 to 1.8 (a loop that rings or cycles on its own)."""
     if not tight:
-        kc, ti = simc(p, _logu(rng, 0.5, 10.0))
+        ratio = _logu(rng, 0.5, 10.0)
+        if rng.random() < DETUNED_SHARE:  # detuned for safety, as many plant loops are (OP creeps for minutes)
+            ratio *= _logu(rng, *DETUNED_FACTOR)
+        kc, ti = simc(p, ratio)
         return kc * _logu(rng, 0.5, 2.0), max(ti * _logu(rng, 0.33, 3.0), 1.0)
     kc, ti = simc(p, 0.5)
     ti = max(ti * _logu(rng, 0.2, 1.0), 1.0)
@@ -150,7 +163,7 @@ def _background(rng: np.random.Generator, p: Process, n: int, pv_scale: float, k
         names.append("load_ramps")
     sp = kw["pv0"]
     steps = [(float(rng.uniform(0.0, 0.05) * n * dt), sp + float(pv_scale * rng.uniform(-1.0, 1.0)))]
-    if rng.random() < 0.35:
+    if rng.random() < SETPOINT_STEP_SHARE:
         for t in np.sort(rng.uniform(0.05, 0.9, int(rng.integers(1, 5)))) * n * dt:
             steps.append((float(t), sp + float(rng.choice([-1, 1]) * pv_scale * _logu(rng, 0.3, 5.0))))
         names.append("setpoint_steps")
@@ -247,10 +260,11 @@ def draw_domain_spec(rng: np.random.Generator, loop_class: str, tag: str) -> Dra
                      "integrating" if p.integrating else "self_regulating", loop_class)
 
 
-def slips(stem: np.ndarray, op: np.ndarray) -> int:
-    """Break-aways of a simulated stem: it moves after standing still for at least two samples while OP moved."""
+def stands(stem: np.ndarray, op: np.ndarray) -> list[int]:
+    """Lengths (samples) of the stands of a simulated stem that ended in a break-away: it stood still for at
+    least two samples while OP moved, then moved."""
     still = np.abs(np.diff(stem)) == 0.0
-    count, run, travel = 0, 0, 0.0
+    out, run, travel = [], 0, 0.0
     dop = np.abs(np.diff(op))
     for k in range(len(still)):
         if still[k]:
@@ -258,9 +272,21 @@ def slips(stem: np.ndarray, op: np.ndarray) -> int:
             travel += dop[k]
             continue
         if run >= 2 and travel > 0:
-            count += 1
+            out.append(run)
         run, travel = 0, 0.0
-    return count
+    return out
+
+
+def slips(stem: np.ndarray, op: np.ndarray) -> int:
+    """Break-aways of a simulated stem: it moves after standing still for at least two samples while OP moved."""
+    return len(stands(stem, op))
+
+
+def sticking_shows(stem: np.ndarray, op: np.ndarray) -> bool:
+    """A sticky valve that shows in the record: :data:`MIN_SLIPS` break-aways, or one after a stand of
+    :data:`LONG_STAND` samples or more (a detuned loop's OP creeping through the dead-band, then a slip)."""
+    st = stands(stem, op)
+    return len(st) >= MIN_SLIPS or (len(st) >= 1 and max(st) >= LONG_STAND)
 
 
 def usable(run: Run) -> bool:
@@ -288,7 +314,7 @@ def class_sequence(n: int) -> list[str]:
 def draw_domain_loops(n: int, seed: int, prefix: str = "DOM",
                       limit: int | None = None) -> tuple[list[tuple[DrawnLoop, Run]], dict]:
     """``n`` usable loops in the class shares (:func:`class_sequence`), each simulated; sticky valves that did not
-    slip :data:`MIN_SLIPS` times are redrawn. Also returns counts of what was redrawn and why. ``limit``: only the
+    show (:func:`sticking_shows`) are redrawn. Also returns counts of what was redrawn and why. ``limit``: only the
     first that many of the ``n`` (the same loops, drawn from the same stream)."""
     rng = np.random.default_rng(seed)
     out, redrawn = [], {"unusable": 0, "sticky_valve_never_slipped": 0}
@@ -300,7 +326,7 @@ def draw_domain_loops(n: int, seed: int, prefix: str = "DOM",
             if not usable(run):
                 redrawn["unusable"] += 1
                 continue
-            if loop.stiction and slips(run["stem_pct"], run["op_pct"]) < MIN_SLIPS:
+            if loop.stiction and not sticking_shows(run["stem_pct"], run["op_pct"]):
                 redrawn["sticky_valve_never_slipped"] += 1
                 continue
             out.append((loop, run))
