@@ -80,7 +80,7 @@ def test_the_pipeline_on_a_small_set_of_other_seeds():
 def test_a_sticky_valve_shows_by_three_slips_or_one_after_a_long_stand():
     """The label's rule (domain.sticking_shows): break-aways are counted from the simulated stem, and one slip
     after a stand of LONG_STAND samples shows as much as MIN_SLIPS short ones; one short stand does not."""
-    from phfdi.loopdiag.domain import LONG_STAND, MIN_SLIPS, sticking_shows, stands
+    from phfdi.loopdiag.domain import LONG_STAND, MIN_SLIPS, stands, sticking_shows
 
     op = np.linspace(40.0, 60.0, 200)  # OP creeping the whole time
 
