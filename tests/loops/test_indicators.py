@@ -120,7 +120,7 @@ def test_indicator_set_names_every_method_with_its_reference(loops):
 
     op, pv, sp, dt = loops["stiction"]
     ind = compute_indicators(op, pv, sp, dt, SELF)
-    assert set(ind) == {"horch_ccf", "horch_histogram", "he_curve_fit", "kano_stuck", "area_peak_ratio",
+    assert set(ind) == {"horch_ccf", "he_curve_fit", "kano_stuck", "area_peak_ratio",
                         "relay_shape", "bicoherence_ngi", "bicoherence_nli", "ellipse_apparent_stiction", "stick_slip",
                         "deadband_evidence"}
     assert all(i.reference for i in ind.values())
