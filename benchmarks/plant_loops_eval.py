@@ -3,13 +3,10 @@
     .venv/bin/python benchmarks/plant_loops_eval.py                       # full run, both cores
     .venv/bin/python benchmarks/plant_loops_eval.py --records out.json    # also keep the per-file records
     .venv/bin/python benchmarks/plant_loops_eval.py --from-records benchmarks/results/plant_loops_records.json
-    .venv/bin/python benchmarks/plant_loops_eval.py --classifier    # the stiction classifier vs Horch, He, previous
+    .venv/bin/python benchmarks/plant_loops_eval.py --classifier    # the one verdict (benchmarks/stiction_real_test.py)
 
-``--classifier``: the combined stiction classifier under nested leave-one-loop-out against Horch,
-He et al. and this diagnosis at 10 %, then the one verdict per record (calibrated p, undetermined band
-chosen in the inner folds, structure checks) with its precision, recall, false-stiction rate and
-undetermined share (from benchmarks/results/stiction_dataset.json, written by
-benchmarks/stiction_dataset.py; the same as ``benchmarks/train_stiction_classifier.py --no-write``).
+``--classifier``: the one verdict of ``phfdi loop-diagnose`` on every record, its model trained on simulated
+loops only: precision, recall, false calls and undetermined share (benchmarks/stiction_real_test.py).
 
 Prints the table of docs/loop_diagnosis.md (accuracy, precision and recall for "stiction" of
 the Hammerstein diagnosis and of the Horch and He et al. baselines), the wall time, and the
@@ -27,6 +24,7 @@ import time
 from pathlib import Path
 
 from phfdi.loopdiag.batch import diagnose_files, stderr_progress
+from phfdi.loopdiag.diagnose import Settings
 from phfdi.loopdiag.evaluate import evaluate, format_table, read_labels, record
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,7 +33,9 @@ DATA = Path(os.environ.get("PHFDI_SHARED_DATA", ROOT.parent / "shared" / "data")
 
 def collect(labels_csv: Path, workers: int | None, limit: int | None = None) -> list[dict]:
     items = read_labels(labels_csv)[:limit]
-    reports = diagnose_files([it.file for it in items], workers=workers, progress=stderr_progress(True))
+    # the valve-model (Hammerstein) diagnosis of every file, not only those the stiction screen flags
+    reports = diagnose_files([it.file for it in items], settings=Settings(fits="all"), workers=workers,
+                             progress=stderr_progress(True))
     return [record(rep, it) for rep, it in zip(reports, items)]
 
 
@@ -47,13 +47,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--from-records", type=Path, default=None, help="evaluate saved records instead of diagnosing")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("--classifier", action="store_true",
-                   help="evaluate the stiction classifier (nested leave-one-loop-out) against the baselines")
+                   help="the one verdict on the records (benchmarks/stiction_real_test.py)")
     args = p.parse_args(argv)
     if args.classifier:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from train_stiction_classifier import main as classifier_main
+        from stiction_real_test import main as real_test_main
 
-        return classifier_main(["--no-write"])
+        return real_test_main([])
     t0 = time.perf_counter()
     if args.from_records:
         records = json.loads(args.from_records.read_text())

@@ -110,3 +110,21 @@ def test_weights_are_held_to_the_published_sign():
     bound = fit_logistic(flipped_x, d.y, w, 0.1, d.features, signs=[1, 0])
     assert free.weights[0] < -1.0
     assert bound.weights[0] == 0.0 and bound.signs == [1, 0]
+
+
+def test_operating_point_bounds_false_calls_on_all_negatives_and_on_the_hard_ones():
+    """The cut lets at most 2 % of the negatives through, and at most 2 % of the hard ones: here the hard
+    negatives score higher, so they set the cut."""
+    from phfdi.loopdiag.classifier import SIM_FALSE_CALL, operating_point
+
+    rng = np.random.default_rng(7)
+    easy, hard_p, pos = rng.uniform(0.0, 0.6, 600), rng.uniform(0.3, 0.95, 200), rng.uniform(0.5, 1.0, 400)
+    p = np.concatenate([easy, hard_p, pos])
+    y = np.concatenate([np.zeros(800, bool), np.ones(400, bool)])
+    hard = np.concatenate([np.zeros(600, bool), np.ones(200, bool), np.zeros(400, bool)])
+    op = operating_point(p, y, hard)
+    assert op["false_call_rate"] <= SIM_FALSE_CALL and op["hard_false_call_rate"] <= SIM_FALSE_CALL
+    assert op["cut"] > np.quantile(hard_p, 0.95)  # the hard negatives' tail sets it
+    assert op["recall"] == pytest.approx(np.mean(pos >= op["cut"]))
+    # one fewer allowed false call would have been possible only with a higher cut: the cut is the lowest
+    assert np.sum(hard_p >= np.nextafter(op["cut"], 0.0)) > np.floor(SIM_FALSE_CALL * 200)

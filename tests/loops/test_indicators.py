@@ -120,9 +120,28 @@ def test_indicator_set_names_every_method_with_its_reference(loops):
 
     op, pv, sp, dt = loops["stiction"]
     ind = compute_indicators(op, pv, sp, dt, SELF)
-    assert set(ind) == {"horch_ccf", "horch_histogram", "he_curve_fit", "kano_stuck", "area_peak_ratio",
-                        "relay_shape", "bicoherence_ngi", "bicoherence_nli", "ellipse_apparent_stiction", "stick_slip"}
+    assert set(ind) == {"horch_ccf", "he_curve_fit", "kano_stuck", "area_peak_ratio",
+                        "relay_shape", "bicoherence_ngi", "bicoherence_nli", "ellipse_apparent_stiction", "stick_slip",
+                        "deadband_evidence"}
     assert all(i.reference for i in ind.values())
     assert ind["horch_ccf"].decision == "stiction"  # an odd CCF for a self-regulating stiction loop
     level = compute_indicators(*loops["stiction_level"], INTEG)
     assert level["horch_ccf"].decision == "not_applicable"  # Horch: not for integrating processes
+
+
+def test_deadband_screen_finds_a_sticking_stem_and_not_a_linear_valve():
+    """The dead-band screen on a sticky loop (a stem that sticks explains PV better than OP does) against the
+    same loop with a healthy valve, and what it says when OP does not move. (With PV noise of 0.02 instead of
+    0.1 the healthy loop reads 0.22: with almost no noise, a dead-band that smooths OP's small moves fits the
+    setpoint responses' increments better; docs/loop_diagnosis.md, Limitations.)"""
+    from phfdi.loopdiag.deadband import deadband_evidence
+
+    base = dict(ti_s=30, dt_s=4.0, duration_s=3000, setpoint_steps=[(100, 52), (1500, 49)], noise_std=0.1, seed=4)
+    sticky = simulate_loop(SyntheticLoop(valve=("stiction", {"s_pct": 3.0, "j_pct": 3.0}), **base))
+    healthy = simulate_loop(SyntheticLoop(**base))
+    st = deadband_evidence(sticky["op_pct"], sticky["pv"], SELF)
+    ok = deadband_evidence(healthy["op_pct"], healthy["pv"], SELF)
+    assert st.value > 0.15 and st.decision == "stiction" and st.detail["model"].startswith(("backlash", "stiction"))
+    assert ok.value < 0.05 and ok.decision == "no_stiction"
+    still = deadband_evidence(np.full(500, 40.0), healthy["pv"][:500], SELF)
+    assert still.value is None and still.decision == "not_applicable"

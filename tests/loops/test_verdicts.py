@@ -29,7 +29,7 @@ from phfdi.loopdiag.loopcheck import ALPHA, NOT_A_CLOSED_LOOP, PV_FROZEN, check_
 from phfdi.loopdiag.readers import read_loop
 from phfdi.loopdiag.single import diagnose_run
 from phfdi.loopdiag.synthetic import SyntheticLoop, simulate_loop
-from phfdi.loopdiag.verdict import loop_verdict, valve_model_evidence
+from phfdi.loopdiag.verdict import contradiction, loop_verdict, valve_model_evidence
 from phfdi.run import Run
 
 STICTION_FILE = "stiction/stic_2111FIC46005_0614_0003.txt"
@@ -78,10 +78,17 @@ def test_pv_of_another_loop_without_setpoint_is_not_a_loop(real_loops):
     assert check_loop(run["op_pct"], run["pv"], run["sp"]).verdict is None
 
 
-def test_real_stiction_loop_still_gets_a_stiction_verdict(real_loops):
+def test_a_real_loop_gets_a_verdict_its_evidence_supports(real_loops):
+    """The README's example: whatever the call, a "stiction" verdict never stands against a valve-model fit that
+    names another nonlinearity or a Kano S within OP's noise, and an "undetermined" one says why."""
     rep = diagnose_run(real_loops[0])
-    assert rep["loop_verdict"]["verdict"] == "stiction"
-    assert rep["loop_verdict"]["probability"] >= rep["loop_verdict"]["band"][1]
+    lv = rep["loop_verdict"]
+    assert lv["verdict"] in ("stiction", "undetermined", "no_stiction")
+    against = contradiction(rep)
+    if rep["stiction"]["verdict"] == "stiction" and against is not None:
+        assert lv["verdict"] == "undetermined" and against[0] in lv["summary"] and lv["contradiction"] == against[1]
+    if lv["verdict"] == "stiction":
+        assert against is None and rep["valve_models"] == "fitted"
 
 
 def test_independence_test_holds_its_level_and_finds_a_simulated_loop():
@@ -173,21 +180,37 @@ def test_nested_band_is_chosen_without_the_held_out_loop(monkeypatch):
 
 
 # ---- one verdict: the valve-model fit is evidence, and the figures say the verdict -------------------
-@pytest.mark.parametrize("cause, family, verdict, agreement", [
-    ("backlash", "actuator", "stiction", "agrees"),
-    ("stiction", "actuator", "no_stiction", "disagrees"),
-    ("none", "none", "stiction", "disagrees"),
-    ("external_disturbance", "loop", "no_stiction", "agrees"),
-    ("deadzone", "actuator", "stiction", "neither"),
-    ("backlash", "actuator", "undetermined", "neither"),
+@pytest.mark.parametrize("cause, family, verdict, agreement, final", [
+    ("backlash", "actuator", "stiction", "agrees", "stiction"),
+    ("stiction", "actuator", "no_stiction", "disagrees", "no_stiction"),
+    ("none", "none", "stiction", "disagrees", "stiction"),  # no valve model found: the indicators still stand
+    ("external_disturbance", "loop", "no_stiction", "agrees", "no_stiction"),
+    ("deadzone", "actuator", "stiction", "neither", "undetermined"),  # another nonlinearity named: not stiction
+    ("backlash", "actuator", "undetermined", "neither", "undetermined"),
 ])
-def test_valve_model_fit_is_evidence_of_the_one_verdict(cause, family, verdict, agreement):
+def test_valve_model_fit_is_evidence_of_the_one_verdict(cause, family, verdict, agreement, final):
     rep = {"cause": cause, "family": family, "gain_percent": 20.0 if family == "actuator" else 3.0,
-           "stiction": {"verdict": verdict, "probability": 0.5, "band": [0.34, 0.63], "evidence": []}}
+           "verdict": "explained" if family == "actuator" else "none", "valve_models": "fitted",
+           "stiction": {"verdict": verdict, "probability": 0.95, "band": [0.5, 0.9], "evidence": [],
+                        "kano_s_pct": 1.0, "op_noise": 0.01}}
     assert valve_model_evidence(rep, verdict)["agreement"] == agreement
     lv = loop_verdict(check_loop(*_coupled_pair()), rep)
-    assert lv["verdict"] == verdict  # the classifier's banded call stands, whatever the fit names
-    assert any(e.startswith("valve-model fit:") and agreement in e for e in lv["evidence"])
+    assert lv["verdict"] == final
+    if final != verdict:  # taken back: the summary says why, and the first piece of evidence in full
+        assert "not friction" in lv["summary"] and lv["evidence"][0].startswith("undetermined because")
+    assert any(e.startswith("valve-model fit:") for e in lv["evidence"])
+
+
+def test_a_kano_s_within_op_noise_contradicts_a_stiction_call():
+    st = {"verdict": "stiction", "probability": 0.95, "band": [0.5, 0.9], "evidence": [], "op_noise": 0.01}
+    rep = {"cause": "stiction", "family": "actuator", "gain_percent": 20.0, "verdict": "explained",
+           "valve_models": "fitted", "stiction": {**st, "kano_s_pct": 2.9 * 0.01}}
+    assert loop_verdict(check_loop(*_coupled_pair()), rep)["verdict"] == "undetermined"
+    rep["stiction"]["kano_s_pct"] = 3.1 * 0.01
+    assert loop_verdict(check_loop(*_coupled_pair()), rep)["verdict"] == "stiction"
+    rep["valve_models"] = "not fitted"  # no fit (--fits none): nothing to contradict the call
+    rep["stiction"]["kano_s_pct"] = 0.001
+    assert loop_verdict(check_loop(*_coupled_pair()), rep)["verdict"] == "stiction"
 
 
 def _coupled_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -212,4 +235,4 @@ def test_figure_titles_carry_one_verdict(tmp_path, monkeypatch, real_loops):
     assert titles[1].endswith("PV does not respond: valve stuck or transmitter failed")
     assert titles[1] == f"{frozen['loop_tag']}: {frozen['loop_verdict']['summary']}"
     for t in titles:  # one verdict: the classifier's call or the structure verdict, never a second beside it
-        assert "classifier" not in t and "valve-model" not in t and ";" not in t
+        assert "classifier" not in t and "valve-model fit:" not in t and ";" not in t

@@ -19,6 +19,14 @@ EXAMPLES = """examples:
   phfdi loop-diagnose export.csv --columns op=FIC101.OP,pv=FIC101.PV,sp=FIC101.SP,time=Timestamp
   phfdi loop-diagnose export.csv --columns mapping.yaml --process integrating --figure figs/
 
+screen and fits: every loop is screened (structure checks, oscillation, the published indicators, the
+dead-band screen, a calibrated p(stiction)); the valve-model fits (Kano S and J, backlash, dead-zone,
+saturation, quantisation) run only where the screen flags stiction or undetermined (--fits all: every
+loop; --fits none: none, the screen alone). The probability's model, calibration and thresholds were
+fitted on simulated loops only. A record longer than 1502 samples is screened in windows of 751 (at
+most 64, spread over it); a text file of more than 200 000 rows is read as 64 windows of 800 rows
+spread over it (said in a note, with progress on stderr).
+
 inputs: files and folders (every .txt, .csv, .parquet below them). A CSV whose header holds several
 loops' tags (<tag>.OP or .MV, .PV, .SP or .SV) is a wide historian export: each loop tag is one job.
 Many jobs run on Dask: a local cluster of --workers processes (default 2) or, with --scheduler, a
@@ -68,6 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="actuator causes to fit, comma separated (default: all of "
                         "backlash,deadzone,saturation,quantization,stiction)")
     p.add_argument("--no-baselines", action="store_true", help="skip the Horch and He et al. stiction tests")
+    p.add_argument("--fits", choices=("flagged", "all", "none"), default="flagged",
+                   help="which loops get the valve-model fits (Kano S and J, the other valve models): the ones the "
+                        "screen flags, stiction or undetermined (default; the others are screened only), all, or "
+                        "none (the screen alone, fastest; its stiction calls are not checked against a fit)")
     p.add_argument("--workers", type=int, default=None, help="Dask worker processes of the local cluster (default: 2)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one; one "
@@ -93,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
 
     columns = ColumnMap.parse(args.columns) if args.columns else None
     settings = Settings(baselines=not args.no_baselines,
-                        process_type=None if args.process == "auto" else args.process)
+                        process_type=None if args.process == "auto" else args.process, fits=args.fits)
     if args.gain_threshold is not None:
         if not args.gain_threshold >= 0:
             raise UserError(f"--gain-threshold must be a percentage >= 0, got {args.gain_threshold}")

@@ -444,3 +444,66 @@ def nested_lolo(d: Data, progress=None, criterion: str = "real+synthetic") -> tu
     """(prob, prediction at the fold's threshold, choices per fold) of :func:`nested_lolo_calls`."""
     n = nested_lolo_calls(d, progress, criterion)
     return n.prob, n.pred, n.choices
+
+
+# ---- trained on simulation only: the shipped model ----------------------------------------------
+#: the verdict's operating point: at most this share of the simulated calibration loops without stiction, and
+#: of its hard negatives (loops tuned too tight, loops cycling with an external oscillation), called "stiction"
+SIM_FALSE_CALL = 0.02
+#: the classes of :mod:`.domain` whose false calls the operating point also bounds on their own
+HARD_NEGATIVES = ("tight_tuning", "external_oscillation")
+#: below this calibrated p (even odds at the calibration set's half-sticky mix) the answer is "no stiction"
+NO_STICTION_BELOW = 0.5
+
+
+def cv_log_loss(d: Data, l2: float, folds: int = SYNTHETIC_FOLDS) -> float:
+    """Mean log-loss of ``folds``-fold cross-validation (records in folds by position, every loop its own
+    group), each fold predicted by a model fitted on the others."""
+    k = np.arange(len(d.y)) % folds
+    loss = 0.0
+    for f in range(folds):
+        held = k == f
+        m = fit_logistic(d.x[~held], d.y[~held], np.ones(int((~held).sum())), l2, d.features, d.signs)
+        p = np.clip(m.probability(d.x[held]), 1e-12, 1 - 1e-12)
+        loss += float(-np.sum(np.where(d.y[held], np.log(p), np.log(1 - p))))
+    return loss / len(d.y)
+
+
+def operating_point(p_calibrated: np.ndarray, y: np.ndarray, hard: np.ndarray,
+                    max_false: float = SIM_FALSE_CALL) -> dict:
+    """The lowest cut on the calibrated p at which at most ``max_false`` of the loops without stiction, and of the
+    hard negatives among them, reach it; with the recall it keeps."""
+    p, y, hard = np.asarray(p_calibrated, float), np.asarray(y, bool), np.asarray(hard, bool)
+    cut = 0.5
+    for group in (~y, ~y & hard):
+        if group.any():
+            neg = np.sort(p[group])
+            allowed = int(math.floor(max_false * len(neg)))  # this many may reach the cut
+            k = len(neg) - allowed - 1  # the highest negative that must stay below
+            cut = max(cut, float(np.nextafter(neg[k], 1.0)) if k >= 0 else cut)
+    return {"cut": cut, "false_call_rate": float(np.mean(p[~y] >= cut)) if (~y).any() else math.nan,
+            "hard_false_call_rate": float(np.mean(p[~y & hard] >= cut)) if (~y & hard).any() else math.nan,
+            "recall": float(np.mean(p[y] >= cut)) if y.any() else math.nan}
+
+
+def train_simulated(train_set: Data, calibration_set: Data, hard: np.ndarray) -> LogisticModel:
+    """The shipped model, from simulated loops only: the L2 strength of :data:`L2_GRID` with the least
+    cross-validated log-loss on ``train_set``, weights fitted on all of it; Platt's calibration on
+    ``calibration_set`` (:func:`fit_platt`), and the undetermined band from it: "no stiction" below
+    :data:`NO_STICTION_BELOW`, "stiction" from the operating point of :func:`operating_point` (``hard`` marks
+    the calibration set's hard negatives)."""
+    losses = {l2: cv_log_loss(train_set, l2) for l2 in L2_GRID}
+    l2 = min(losses, key=lambda v: (round(losses[v], 9), -v))
+    model = fit_logistic(train_set.x, train_set.y, np.ones(len(train_set.y)), l2, train_set.features,
+                         train_set.signs)
+    model.synthetic_ratio = 1.0
+    model.calibration = fit_platt(model.probability(calibration_set.x), calibration_set.y)
+    p_cal = model.calibrated(calibration_set.x)
+    op = operating_point(p_cal, calibration_set.y, hard)
+    model.band = (NO_STICTION_BELOW, max(op["cut"], NO_STICTION_BELOW))
+    model.threshold = 0.5
+    model.info.update({"trained_on": "simulated loops only (phfdi.loopdiag.domain)", "cv_log_loss": losses,
+                       "operating_point": op, "max_false_call": SIM_FALSE_CALL,
+                       "calibration_calls": call_rates(model.call(p_cal), calibration_set.y)})
+    return model
+

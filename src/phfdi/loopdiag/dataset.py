@@ -1,63 +1,54 @@
-"""Rows of the classifier's data set: one per loop record, real (labelled) or synthetic.
+"""Rows of the classifier's data sets: one per loop record, simulated (labelled by construction) or real.
 
-A row holds the feature vector (:mod:`.features`), the label, the group the record belongs to (the
-loop tag: leave-one-loop-out holds out every record of one group), and the decisions of the
-methods the classifier is compared with (Horch's CCF, He et al.'s curve fit, the Hammerstein
-diagnosis at its default 10 % gain).
+A row holds the feature vector of the screen (:func:`.features.screen_evidence`), the label and the group the
+record belongs to. The classifier is trained and calibrated on simulated rows only (:mod:`.domain`); rows of
+the labelled refinery records are for testing (benchmarks/stiction_real_test.py), never for fitting.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+import numpy as np
 
 from phfdi.run import Run
-from phfdi_base.errors import UserError
 
-from .diagnose import Settings
-from .evaluate import Labelled
-from .features import FEATURE_NAMES, loop_evidence
-from .readers import read_loop
+from .classifier import HARD_NEGATIVES, Data, LogisticModel, train_simulated
+from .domain import slips
+from .features import FEATURE_NAMES, FEATURE_SIGNS, screen_evidence
 from .synthetic import simulate_loop
 from .training import DrawnLoop
-from .vocabulary import FRICTION_CAUSES
 
 
-def row_for_run(run: Run, stiction: bool, group: str, source: str, name: str,
-                settings: Settings | None = None) -> dict:
-    le = loop_evidence(run, settings)
-    ind = le.indicators
-    gain = le.evidence.gain_percent() if le.evidence.identifiable else None
-    return {
-        "name": name, "group": group, "source": source, "stiction": bool(stiction),
-        "process_type": run.metadata.get("process_type"),
-        "features": [float(v) for v in le.features],
-        "measured": [le.measured[n] for n in FEATURE_NAMES],
-        "horch_decision": ind["horch_ccf"].decision, "horch_index": ind["horch_ccf"].value,
-        "he_decision": ind["he_curve_fit"].decision, "he_index": ind["he_curve_fit"].value,
-        "hammerstein_gain_percent": gain,  # best of the valve models fitted (all five for real records)
-        "oscillating": bool(le.evidence.oscillation.oscillating),
-    }
+def screen_row(run: Run, process_type: str) -> dict:
+    """The screen's features of one run (and which were measured)."""
+    sp = run["sp"] if "sp" in run else None
+    scr = screen_evidence(run["op_pct"], run["pv"], sp, run.dt_s, process_type)
+    return {"features": [float(v) for v in scr.features], "measured": [scr.measured[n] for n in FEATURE_NAMES],
+            "oscillating": bool(scr.oscillation.oscillating)}
 
 
-def real_row(item: Labelled, root: str | None = None) -> dict:
-    """Row of a labelled file (``error`` set when it cannot be read)."""
-    name = str(Path(item.file).relative_to(root)) if root and Path(item.file).is_relative_to(root) else item.file
-    try:
-        run = read_loop(item.file)
-    except UserError as exc:
-        return {"name": name, "group": item.loop_tag, "source": "real", "stiction": item.stiction,
-                "error": str(exc)}
-    return row_for_run(run, item.stiction, item.loop_tag, "real", name)
-
-
-def synthetic_row(loop: DrawnLoop) -> dict:
+def simulated_row(loop: DrawnLoop, source: str) -> dict:
+    """Row of one simulated loop (``source``: which set it belongs to, e.g. "train" or "calibration"): its
+    features, label, class, conditions, valve and how often its stem broke away."""
     run = simulate_loop(loop.spec)
     run.metadata["process_type"] = loop.process_type
-    # the features need the friction models only (the Hammerstein comparison runs on real records)
-    row = row_for_run(run, loop.stiction, loop.group, "synthetic", loop.group,
-                      Settings(causes=FRICTION_CAUSES, baselines=False))
-    row["conditions"] = list(loop.conditions)
-    if loop.loop_class:
-        row["loop_class"] = loop.loop_class
-    row["valve"] = loop.spec.valve
+    row = {"name": loop.group, "group": loop.group, "source": source, "stiction": bool(loop.stiction),
+           "loop_class": loop.loop_class, "process_type": loop.process_type, "conditions": list(loop.conditions),
+           "valve": loop.spec.valve, "slips": slips(run["stem_pct"], run["op_pct"])}
+    row.update(screen_row(run, loop.process_type))
     return row
+
+
+def simulated_data(rows: list[dict]) -> Data:
+    """Data of simulated rows (:func:`phfdi.loopdiag.dataset.simulated_row`): features, labels, each loop its own
+    group, the features' published signs."""
+    return Data(np.array([r["features"] for r in rows], float), np.array([r["stiction"] for r in rows], bool),
+                [r["group"] for r in rows], np.zeros(len(rows), bool), list(FEATURE_NAMES), list(FEATURE_SIGNS))
+
+
+def train_from_rows(rows: list[dict]) -> LogisticModel:
+    """:func:`train_simulated` on the ``train`` and ``calibration`` rows of a data set
+    (benchmarks/stiction_dataset.py), the calibration set's hard negatives marked by their class."""
+    train_rows = [r for r in rows if r["source"] == "train" and not r.get("error")]
+    cal_rows = [r for r in rows if r["source"] == "calibration" and not r.get("error")]
+    hard = np.array([r["loop_class"] in HARD_NEGATIVES for r in cal_rows])
+    return train_simulated(simulated_data(train_rows), simulated_data(cal_rows), hard)

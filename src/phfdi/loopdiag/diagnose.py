@@ -49,10 +49,16 @@ MIN_SP_R2 = 0.3
 MIN_OP_MOVEMENT = 1e-3
 
 
+#: which loops get the valve-model (Hammerstein) fits: those the screen flags (its call stiction or
+#: undetermined), all, or none (the screen alone: its stiction calls are then not reconciled with a fit)
+FITS = ("flagged", "all", "none")
+
+
 @dataclass
 class Settings:
     """What the loop diagnosis considers: the held-out gain a valve model needs (%), the causes it tries,
-    the process type (None: from the loop tag, LIC -> integrating) and whether the baselines run.
+    the process type (None: from the loop tag, LIC -> integrating), whether the baselines run, and which loops
+    get the valve-model fits (:data:`FITS`: the ones the screen flags, or all).
 
     Examples
     --------
@@ -66,6 +72,7 @@ class Settings:
     causes: tuple[str, ...] = ACTUATOR_CAUSES
     process_type: str | None = None  # None: from the loop tag (LIC -> integrating)
     baselines: bool = True
+    fits: str = "flagged"
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""The classifier's features of one loop: each published indicator's value on a common footing.
+"""The classifier's features of one loop: each indicator's value on a common footing.
 
 A feature is the indicator's index on its published scale, with two rules:
 
@@ -8,24 +8,26 @@ A feature is the indicator's index on its published scale, with two rules:
   nothing to the verdict;
 * unbounded indices are clipped to the range their papers discuss.
 
-The Hammerstein fit (:mod:`.hammerstein`) gives two: the held-out NRMSE gain over the linear model
-of the better friction model (Kano's stiction with S and J, or its J = 0 case, a dead-band/backlash),
-and that of Kano's model alone. Only these two valve models enter, so the features do not depend
-on which other valve models a run fitted.
+Every feature comes from the screen (:func:`screen_evidence`: the oscillation test, the published indicators
+and the dead-band screen of :mod:`.deadband`), a few tens of milliseconds per loop; none needs the valve-model
+(Hammerstein) fit, which runs only for the loops the screen flags and is then evidence beside the verdict
+(:mod:`.verdict`), with Kano's S and J.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from phfdi.run import Run
 
 from .diagnose import Evidence, Settings, gather_evidence
 from .indicator_set import compute_indicators
 from .indicators import Indicator
+from .oscillation import Oscillation, detect_oscillation
 from .vocabulary import FRICTION_CAUSES
 
 
@@ -46,8 +48,6 @@ FEATURES: tuple[Feature, ...] = (
     Feature("oscillation_regularity", "oscillation", 0.0, 0.0, math.log1p(10.0),
             "log(1 + r), r the ACF zero-crossing regularity (Thornhill et al. 2003), r capped at 10"),
     Feature("horch_ccf", "horch_ccf", 0.5, 0.0, 1.0, "Horch (1999) CCF oddness psi (0 even, 1 odd)"),
-    Feature("horch_histogram", "horch_histogram", 0.5, 0.0, 1.0,
-            "Horch derivative histogram: share of variance a sinusoid explains (0 Gaussian, 1 camel)", -1),
     Feature("he_curve_fit", "he_curve_fit", 0.5, 0.0, 1.0, "He et al. (2007) SI (triangle vs sinusoid)"),
     Feature("kano_stuck", "kano_stuck", 0.0, 0.0, 1.0, "Kano et al. (2004) share of OP travel while stuck"),
     Feature("stick_slip", "stick_slip", 0.0, 0.0, 1.0,
@@ -58,10 +58,8 @@ FEATURES: tuple[Feature, ...] = (
     Feature("bicoherence_nli", "bicoherence_nli", 0.0, 0.0, 1.0, "Choudhury et al. (2004) NLI (0 if Gaussian)"),
     Feature("ellipse_apparent_stiction", "ellipse_apparent_stiction", 0.0, 0.0, 1.0,
             "Choudhury et al. (2006) PV-OP ellipse width along OP / OP span"),
-    Feature("friction_model_gain", "hammerstein", 0.0, -0.5, 1.0,
-            "held-out NRMSE gain of the better of Kano stiction and backlash over the linear model (fraction)"),
-    Feature("stiction_model_gain", "hammerstein", 0.0, -0.5, 1.0,
-            "held-out NRMSE gain of Kano's stiction model (S, J) over the linear one (fraction)"),
+    Feature("deadband_gain", "deadband_evidence", 0.0, -0.5, 1.0,
+            "share of the OP model's error of PV's changes a sticking stem removes (the dead-band screen)"),
 )
 FEATURE_NAMES = tuple(f.name for f in FEATURES)
 FEATURE_SIGNS = tuple(f.stiction_sign for f in FEATURES)
@@ -87,19 +85,14 @@ def hammerstein_gains(ev: Evidence) -> tuple[float | None, float | None]:
     return max(gains.values()), gains.get("stiction")
 
 
-def feature_vector(indicators: dict[str, Indicator], ev: Evidence) -> tuple[np.ndarray, dict[str, bool]]:
+def feature_vector(indicators: dict[str, Indicator], oscillation: Oscillation) -> tuple[np.ndarray, dict[str, bool]]:
     """The features in :data:`FEATURE_NAMES` order and, per feature, whether it was measured
     (False: neutral value used)."""
     values, measured = [], {}
-    gain, st_gain = hammerstein_gains(ev)
     for f in FEATURES:
         if f.source == "oscillation":
-            r = ev.oscillation.regularity
+            r = oscillation.regularity
             v = math.log1p(min(r, 10.0)) if math.isfinite(r) else math.log1p(10.0)
-        elif f.name == "friction_model_gain":
-            v = gain
-        elif f.name == "stiction_model_gain":
-            v = st_gain
         else:
             v = indicators[f.source].value
         ok = v is not None and math.isfinite(v)
@@ -109,8 +102,29 @@ def feature_vector(indicators: dict[str, Indicator], ev: Evidence) -> tuple[np.n
 
 
 @dataclass
+class ScreenEvidence:
+    """What the screen measures on one loop: the indicators, the oscillation and the feature vector."""
+
+    indicators: dict[str, Indicator]
+    oscillation: Oscillation
+    features: np.ndarray
+    measured: dict[str, bool]
+
+
+def screen_evidence(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt_s: float,
+                    process_type: str) -> ScreenEvidence:
+    """Oscillation, indicators and features of one loop (one BLAS thread: the fits are small, and threads only
+    wait on each other; a plant-wide run uses the cores for loops instead)."""
+    with threadpool_limits(limits=1, user_api="blas"):
+        indicators = compute_indicators(op, pv, sp, dt_s, process_type)
+        osc = detect_oscillation(pv, sp, dt_s)
+    x, measured = feature_vector(indicators, osc)
+    return ScreenEvidence(indicators, osc, x, measured)
+
+
+@dataclass
 class LoopEvidence:
-    """What the classifier and the report need from one loop."""
+    """The screen and the valve-model (Hammerstein) fit of one loop."""
 
     indicators: dict[str, Indicator]
     evidence: Evidence
@@ -119,32 +133,34 @@ class LoopEvidence:
 
 
 def loop_evidence(run: Run, settings: Settings | None = None) -> LoopEvidence:
-    """Indicators, the Hammerstein evidence and the feature vector of one loop (``settings.causes``
-    must include :data:`FRICTION_CAUSES`; the others only matter for the report)."""
+    """The screen's indicators and features and the valve-model evidence of one loop (``settings.causes`` gets
+    :data:`FRICTION_CAUSES` added: Kano's S and J are evidence of the verdict)."""
     settings = settings or Settings()
     missing = [c for c in FRICTION_CAUSES if c not in settings.causes]
     if missing:
-        settings = Settings(settings.gain_threshold_percent, tuple(settings.causes) + tuple(missing),
-                            settings.process_type, settings.baselines)
+        settings = replace(settings, causes=tuple(settings.causes) + tuple(missing))
     process_type = settings.process_type or run.metadata.get("process_type", "self_regulating")
     sp = run["sp"] if "sp" in run else None
-    indicators = compute_indicators(run["op_pct"], run["pv"], sp, run.dt_s, process_type)
-    no_base = Settings(settings.gain_threshold_percent, settings.causes, settings.process_type, baselines=False)
-    ev = gather_evidence(run, no_base)
-    ev.baselines = {k: {"method": k, "index": indicators[k].value, "decision": indicators[k].decision,
-                        "detail": indicators[k].detail} for k in ("horch_ccf", "he_curve_fit")}
-    x, measured = feature_vector(indicators, ev)
-    return LoopEvidence(indicators, ev, x, measured)
+    scr = screen_evidence(run["op_pct"], run["pv"], sp, run.dt_s, process_type)
+    ev = gather_evidence(run, replace(settings, baselines=False))
+    ev.baselines = baselines_of(scr.indicators)
+    return LoopEvidence(scr.indicators, ev, scr.features, scr.measured)
+
+
+def baselines_of(indicators: dict[str, Indicator]) -> dict:
+    """Horch's and He et al.'s tests as the report's ``baselines`` (computed once, by the screen)."""
+    return {k: {"method": k, "index": indicators[k].value, "decision": indicators[k].decision,
+                "detail": indicators[k].detail} for k in ("horch_ccf", "he_curve_fit")}
 
 
 # ---- the verdict with its evidence ------------------------------------------------------------
-def stiction_verdict(le: LoopEvidence, model=None) -> dict:
+def stiction_verdict(le: LoopEvidence | ScreenEvidence, model=None) -> dict:
     """The classifier's verdict on one loop and the evidence behind it: every indicator's value,
     its published decision and its contribution to the log-odds (weight x standardised value; an
     indicator that does not apply sits at its neutral value, and its contribution is that value's
     distance from the training mean). ``probability`` is calibrated (Platt scaling of the model's own
     ``model_probability``), ``verdict`` its call against the undetermined ``band``: stiction, no_stiction or
-    undetermined. Kano's S and J from the Hammerstein fit are listed (in OP units) but are not features."""
+    undetermined."""
     model = model or _shipped_model()
     if model.features != list(FEATURE_NAMES):
         raise ValueError("the model's features are not this version's: retrain it "
@@ -167,13 +183,17 @@ def stiction_verdict(le: LoopEvidence, model=None) -> dict:
     out = {"verdict": call, "probability": _r4(p), "band": [_r4(low), _r4(high)],
            "model_probability": _r4(p_model), "threshold": _r4(model.threshold), "intercept": _r4(model.bias),
            "evidence": evidence,
-           "method": "L2 logistic regression on published indicators (docs/loop_diagnosis.md)"}
-    ev = le.evidence
-    st = next((c for c in ev.causes if c.cause == "stiction"), None) if ev.identifiable else None
-    if st is not None:
-        out["kano_s_pct"] = _r4(st.parameters["s_pct"])
-        out["kano_j_pct"] = _r4(st.parameters["j_pct"])
+           "method": "L2 logistic regression on published indicators and the dead-band screen, trained on simulated "
+                     "loops only (docs/loop_diagnosis.md)"}
     return out
+
+
+def kano_fit(ev: Evidence) -> dict | None:
+    """Kano's S and J of the valve-model fit (OP units), None when it did not run."""
+    st = next((c for c in ev.causes if c.cause == "stiction"), None) if ev.identifiable else None
+    if st is None:
+        return None
+    return {"kano_s_pct": _r4(st.parameters["s_pct"]), "kano_j_pct": _r4(st.parameters["j_pct"])}
 
 
 _MODEL = None

@@ -29,6 +29,7 @@ frozen by :mod:`.loopcheck`.
 from __future__ import annotations
 
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,6 +44,14 @@ from phfdi_base.yamlfile import read_mapping
 MIN_SAMPLES = 100
 #: gaps of up to this many missing samples are filled by linear interpolation
 MAX_FILLED_GAP = 3
+#: a text file with more data rows than this is not read whole: :data:`SAMPLED_WINDOWS` windows of
+#: :data:`WINDOW_ROWS` rows spread over it are (time and memory bounded; the diagnosis screens at most that
+#: many windows of a long record anyway, phfdi.loopdiag.windows)
+MAX_READ_ROWS = 200_000
+WINDOW_ROWS = 800
+SAMPLED_WINDOWS = 64
+#: bytes read at a time when counting a long file's lines
+CHUNK_BYTES = 1 << 24
 
 
 class LoopDataError(UserError):
@@ -175,9 +184,14 @@ def read_loop(path: str | Path, columns: ColumnMap | None = None) -> Run:
     >>> loop.names, loop.metadata["loop_tag"], len(loop)
     (['time_s', 'op_pct', 'pv'], 'FIC101', 750)
     """
-    runs, why, pieces, cuts = _stretches(Path(path), columns)
+    sampled = sampled_table(Path(path))
+    runs, why, pieces, cuts = _stretches(Path(path), columns, sampled)
     if not runs:
         raise LoopDataError(why)
+    if sampled is not None:
+        run = _windows_run(runs, sampled.metadata["sampled"])
+        check_loop_run(run)
+        return run
     run = max(runs, key=len)
     if pieces > 1:
         a, b = run.metadata["lines"]
@@ -190,18 +204,24 @@ def read_loop(path: str | Path, columns: ColumnMap | None = None) -> Run:
 
 def read_loop_segments(path: str | Path, columns: ColumnMap | None = None) -> list[Run]:
     """Every usable stretch of one loop file (at least ``MIN_SAMPLES``), not yet checked."""
-    runs, why, _, _ = _stretches(Path(path), columns)
+    runs, why, _, _ = _stretches(Path(path), columns, sampled_table(Path(path)))
     if not runs:
         raise LoopDataError(why)
     return runs
 
 
-def _stretches(path: Path, columns: ColumnMap | None) -> tuple[list[Run], str, int, list[str]]:
+def _stretches(path: Path, columns: ColumnMap | None, table=None) -> tuple[list[Run], str, int, list[str]]:
     """Runs of the stretches with at least MIN_SAMPLES samples, why there is none when so, how many
-    stretches there are in all and the gaps that cut them."""
+    stretches there are in all and the gaps that cut them (``table``: the rows already read, for a sampled
+    long file)."""
+    def mapping(header, meta):
+        return _mapping(path, columns, header, meta)
+
     try:
-        rec = records.read_record(path, lambda header, meta: _mapping(path, columns, header, meta),
-                                  policy="historian", min_samples=1)
+        if table is None:
+            rec = records.read_record(path, mapping, policy="historian", min_samples=1)
+        else:
+            rec = records.record_from_table(path, table, mapping, policy="historian", min_samples=1)
     except records.ReadError as exc:
         raise LoopDataError(str(exc)) from None
     pieces, cuts = [], []
@@ -260,6 +280,90 @@ def _loop_run(piece: records.Record, rec: records.Record) -> Run:
                "lines": [int(piece.lines[piece.lines > 0][0]), int(piece.lines.max())],
                "process_type": process_type_for(tag)})
     return run
+
+
+# ---- long files ------------------------------------------------------------------------------------
+def count_lines(path: Path) -> int:
+    """Lines of a file (its newlines, and a last line without one), read in chunks: memory bounded."""
+    n, last = 0, b"\n"
+    with open(path, "rb") as fh:
+        while chunk := fh.read(CHUNK_BYTES):
+            n += chunk.count(b"\n")
+            last = chunk[-1:]
+    return n + (last != b"\n")
+
+
+def sampled_table(path: Path):
+    """The raw table of :data:`SAMPLED_WINDOWS` windows of :data:`WINDOW_ROWS` rows spread evenly over a text
+    file with more than :data:`MAX_READ_ROWS` data rows (their line numbers the file's), or None for any other
+    file. ``metadata["sampled"]`` says what was read. One pass to count the lines, one to pick the windows'."""
+    from phfdi.records.formats import format_of
+
+    try:
+        if not path.is_file() or path.stat().st_size < MAX_READ_ROWS * 8:  # no row is shorter than 8 bytes
+            return None
+        fmt = format_of(path)
+        with open(path, "rb") as fh:
+            head = fh.read(64)
+    except (OSError, UserError):
+        return None
+    if fmt.name not in ("csv", "text"):
+        return None
+    header_lines = 5 if head.lstrip(b"\xef\xbb\xbf").startswith(b"PROCESSDATA") else 1
+    total = count_lines(path)
+    rows = total - header_lines
+    if rows <= MAX_READ_ROWS:
+        return None
+    print(f"loop-diagnose: {path}: {rows} rows, more than {MAX_READ_ROWS}: reading {SAMPLED_WINDOWS} windows of "
+          f"{WINDOW_ROWS} rows spread over it", file=sys.stderr, flush=True)  # progress: the reading takes seconds
+    starts = np.linspace(header_lines, total - WINDOW_ROWS, SAMPLED_WINDOWS).round().astype(int)
+    data, lines = _pick_lines(path, header_lines, starts)
+    table = fmt.read(path, data, None)
+    table.lines = np.asarray(lines, dtype=np.int64)[np.asarray(table.lines, dtype=np.int64) - 1]
+    table.notes = [n for n in table.notes if "the header declares" not in n]
+    table.metadata["sampled"] = {"rows": rows, "windows": SAMPLED_WINDOWS, "window_rows": WINDOW_ROWS}
+    return table
+
+
+def _pick_lines(path: Path, header_lines: int, starts: np.ndarray) -> tuple[bytes, list[int]]:
+    """The header lines and WINDOW_ROWS lines from each start (0-based line indices), and the file's line number
+    (1-based) of every line kept."""
+    want = np.zeros(0, dtype=np.int64)
+    if len(starts):
+        want = np.unique((starts[:, None] + np.arange(WINDOW_ROWS)[None, :]).ravel())
+    keep = set(range(header_lines)) | set(want.tolist())
+    out, numbers = [], []
+    with open(path, "rb") as fh:
+        for i, line in enumerate(fh):
+            if i in keep:
+                out.append(line if line.endswith(b"\n") else line + b"\n")
+                numbers.append(i + 1)
+    return b"".join(out), numbers
+
+
+def _windows_run(runs: list[Run], sampled: dict) -> Run:
+    """The stretches read from a sampled file as one run, each a window (``metadata["windows"]``: start, stop
+    and source lines), with a note saying what was read."""
+    runs = sorted(runs, key=lambda r: r.metadata["lines"][0])
+    names = [n for n in runs[0].names if all(n in r for r in runs)]
+    signals = {n: np.concatenate([r[n] for r in runs]) for n in names}
+    windows, at = [], 0
+    for r in runs:
+        windows.append((at, at + len(r), *r.metadata["lines"]))
+        at += len(r)
+    meta = dict(runs[0].metadata)
+    read = sum(len(r) for r in runs)
+    meta["notes"] = [f"the file holds {sampled['rows']} rows, more than {MAX_READ_ROWS} (read whole they would take "
+                     f"minutes and gigabytes): {sampled['windows']} windows of {sampled['window_rows']} rows spread "
+                     f"over it were read ({read} samples in {len(runs)} usable stretches)"]
+    # the windows' own reading notes, less the breaks the sampling itself made (time jumps between windows)
+    own = {n for r in runs for n in r.metadata.get("notes", [])
+           if not any(w in n for w in ("stretches", "time jump", "segment lines"))}
+    meta["notes"] += sorted(own)[:10]
+    meta["windows"] = windows
+    meta["file_rows"] = sampled["rows"]
+    meta["lines"] = [windows[0][2], windows[-1][3]]
+    return Run(signals, meta)
 
 
 def process_type_for(loop_tag: str) -> str:

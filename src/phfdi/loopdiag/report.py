@@ -78,6 +78,30 @@ def format_report(rep: dict) -> str:
     if ranking:
         top = "; ".join(f"{r['cause']} {_num(r['nrmse_validation'])}" for r in ranking[:5])
         lines.append(f"  valve models, held-out NRMSE: {top}")
+    if rep.get("valve_models") == "not fitted":
+        lines.append(f"  {rep['reason']}")
+    else:
+        lines += _valve_model_lines(rep)
+    st = rep.get("stiction")
+    if st:
+        line = (f"  stiction classifier: calibrated p = {st['probability']:.2f}, undetermined between "
+                f"{st['band'][0]:.2f} and {st['band'][1]:.2f} (the model's own p {st['model_probability']:.2f})")
+        if st.get("kano_s_pct") is not None:
+            line += (f"; Kano fit S = {st['kano_s_pct']:.3g}, J = {st['kano_j_pct']:.3g} (OP units; OP noise "
+                     f"{st['op_noise']:.3g})")
+        lines.append(line)
+    base = rep.get("baselines") or {}
+    if base:
+        lines.append("  baselines: " + "; ".join(f"{k} {v['decision']}" + (f" ({v['index']:.2f})" if v.get("index")
+                                                                             is not None else "")
+                                               for k, v in base.items()))
+    for note in rep.get("notes") or []:
+        lines.append(f"  note: {note}")
+    return "\n".join(lines)
+
+
+def _valve_model_lines(rep: dict) -> list[str]:
+    """The valve-model (Hammerstein) fit's verdict and reason."""
     verdict = rep["verdict"]
     cause = rep["cause"]
     head = f"  valve-model fit: {verdict}"
@@ -88,23 +112,7 @@ def format_report(rep: dict) -> str:
     head += f", confidence {_num(rep.get('confidence'), '.2f')}"
     if rep.get("gain_percent") is not None:
         head += f", gain {rep['gain_percent']:.0f} %"
-    lines.append(head)
-    lines.append(f"    {rep['reason']}")
-    st = rep.get("stiction")
-    if st:
-        line = (f"  stiction classifier: calibrated p = {st['probability']:.2f}, undetermined between "
-                f"{st['band'][0]:.2f} and {st['band'][1]:.2f} (the model's own p {st['model_probability']:.2f})")
-        if st.get("kano_s_pct") is not None:
-            line += f"; Kano fit S = {st['kano_s_pct']:.3g}, J = {st['kano_j_pct']:.3g} (OP units)"
-        lines.append(line)
-    base = rep.get("baselines") or {}
-    if base:
-        lines.append("  baselines: " + "; ".join(f"{k} {v['decision']}" + (f" ({v['index']:.2f})" if v.get("index")
-                                                                             is not None else "")
-                                               for k, v in base.items()))
-    for note in rep.get("notes") or []:
-        lines.append(f"  note: {note}")
-    return "\n".join(lines)
+    return [head, f"    {rep['reason']}"]
 
 
 def loop_summary(reports: list[dict]) -> list[dict]:

@@ -2,14 +2,35 @@
 
 from __future__ import annotations
 
+import sys
+from dataclasses import replace
+
+from phfdi.run import Run
 from phfdi_base.errors import UserError
 
-from .diagnose import Settings, report
-from .features import loop_evidence, stiction_verdict
+from .classifier import NO_STICTION, STICTION, UNDETERMINED
+from .diagnose import Evidence, Settings, gather_evidence, report
+from .features import ScreenEvidence, _r4, baselines_of, kano_fit, screen_evidence, stiction_verdict
+from .indicators import noise_level
 from .loopcheck import PV_FROZEN, LoopCheck, check_loop
 from .oscillation import detect_oscillation
 from .readers import ColumnMap, check_loop_run, read_loop, read_loop_segments
 from .verdict import loop_verdict
+from .vocabulary import FRICTION_CAUSES
+from .windows import (
+    PROGRESS_EVERY,
+    WHOLE_MAX,
+    WINDOW,
+    WINDOW_ALPHA,
+    record_call,
+    representative,
+    screen_windows,
+    window_bounds,
+    window_run,
+)
+
+#: the screen's calls that get the valve-model fits
+FLAGGED = (STICTION, UNDETERMINED)
 
 
 def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Settings | None = None,
@@ -53,9 +74,10 @@ def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Setting
 def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None = None) -> dict:
     """The report of one loop run: its one verdict (``report["loop_verdict"]``: stiction, no_stiction,
     undetermined, pv_frozen or not_a_closed_loop, with its evidence), the stiction classifier's answer
-    (``report["stiction"]``) and the valve-model (Hammerstein) fit (cause, S and J) it lists as evidence;
-    or ``{"file": ..., "error": message}`` when it cannot be diagnosed. A record that is not a closed loop
-    (or whose PV is frozen) is said to be one and not scored.
+    (``report["stiction"]``) and, for the loops the screen flags, the valve-model (Hammerstein) fit (cause, S and
+    J) it lists as evidence; or ``{"file": ..., "error": message}`` when it cannot be diagnosed. A record that is
+    not a closed loop (or whose PV is frozen) is said to be one and not scored. A record longer than
+    :data:`.windows.WHOLE_MAX` samples is screened in windows (:mod:`.windows`).
 
     Parameters
     ----------
@@ -77,24 +99,65 @@ def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None =
     {'s_pct': 3, 'j_pct': 1}
     """
     settings = settings or Settings()
+    if len(run) > WHOLE_MAX:
+        return diagnose_long(run, settings, figure_dir)
     check = check_loop(run["op_pct"], run["pv"], run["sp"] if "sp" in run else None)
     if check.verdict is not None:
         return structure_report(run, check, settings, figure_dir)
     try:
-        le = loop_evidence(run, settings)
-        rep = report(run, le.evidence, settings)
+        rep, scr, ev = screened_report(run, settings)
     except UserError as exc:
         return {"file": run.metadata.get("file"), "error": str(exc)}
-    if not settings.baselines:
-        rep["baselines"] = {}
-    rep["stiction"] = stiction_verdict(le)
-    rep["indicators"] = {k: v.to_dict() for k, v in le.indicators.items()}
     rep["loop_verdict"] = loop_verdict(check, rep)
     if figure_dir:
-        from .figures import plot_loop
+        from .figures import plot_loop, plot_record
 
-        rep["figure"] = str(plot_loop(run, le.evidence, rep, figure_dir))
+        rep["figure"] = str(plot_loop(run, ev, rep, figure_dir) if ev is not None else plot_record(run, rep, figure_dir))
     return rep
+
+
+def screened_report(run, settings: Settings) -> tuple[dict, ScreenEvidence, Evidence | None]:
+    """The screen of one closed loop (indicators, dead-band screen, calibrated p and its call) and, when the
+    screen flags it (or ``settings.fits`` is "all"), the valve-model fit; the report, the screen and the fit
+    (None when not run)."""
+    process_type = settings.process_type or run.metadata.get("process_type", "self_regulating")
+    sp = run["sp"] if "sp" in run else None
+    scr = screen_evidence(run["op_pct"], run["pv"], sp, run.dt_s, process_type)
+    st = stiction_verdict(scr)
+    ev = None
+    if settings.fits == "all" or (settings.fits == "flagged" and st["verdict"] in FLAGGED):
+        causes = tuple(settings.causes) + tuple(c for c in FRICTION_CAUSES if c not in settings.causes)
+        ev = gather_evidence(run, replace(settings, causes=causes, baselines=False))
+        ev.baselines = baselines_of(scr.indicators)
+        rep = report(run, ev, settings)
+        rep["valve_models"] = "fitted"
+        st.update(kano_fit(ev) or {})
+    else:
+        rep = unfitted_report(run, scr, settings, st)
+    if not settings.baselines:
+        rep["baselines"] = {}
+    st["op_noise"] = _r4(noise_level(run["op_pct"]))
+    rep["stiction"] = st
+    rep["indicators"] = {k: v.to_dict() for k, v in scr.indicators.items()}
+    return rep, scr, ev
+
+
+def unfitted_report(run, scr: ScreenEvidence, settings: Settings, st: dict) -> dict:
+    """The report of a loop the screen did not flag: its oscillation and indicators, no valve-model fit (the
+    catalogue's keys present and empty; ``valve_models`` says why)."""
+    notes = list(run.metadata.get("notes") or [])
+    low = st["band"][0]
+    why = (f"valve models not fitted: the screen found no stiction (p = {st['probability']:.2f} below "
+           f"{low:.2f}); --fits all fits them for every loop")
+    if settings.fits == "none":
+        why = "valve models not fitted (--fits none: the screen alone; a stiction call is not checked against them)"
+    return {"file": run.metadata.get("file"), "loop_tag": run.metadata.get("loop_tag"),
+            "process_type": settings.process_type or run.metadata.get("process_type"), "samples": len(run),
+            "sample_time_s": run.dt_s, "oscillation": scr.oscillation.to_dict(), "cause": "none", "family": "none",
+            "parameters": {}, "confidence": None, "verdict": "none", "reason": why, "nrmse_nominal": None,
+            "nrmse_extended": None, "gain_percent": None, "extended_cause": None, "ranking": [],
+            "baselines": baselines_of(scr.indicators), "notes": notes, "reading_notes": notes,
+            "valve_models": "not fitted"}
 
 
 def structure_report(run, check: LoopCheck, settings: Settings, figure_dir: str | None = None) -> dict:
@@ -137,3 +200,55 @@ def diagnose_file_segments(path: str, columns: ColumnMap | None = None, settings
         rep["lines"] = [a, b]
         out.append(rep)
     return out
+
+
+# ---- long records (phfdi.loopdiag.windows) ---------------------------------------------------------
+def diagnose_long(run: Run, settings: Settings, figure_dir: str | None = None) -> dict:
+    """The report of a record longer than :data:`.windows.WHOLE_MAX` samples (:mod:`.windows`)."""
+    where = run.metadata.get("file") or run.metadata.get("loop_tag") or "record"
+    progress = _stderr_progress(where) if len(window_bounds(run)) > PROGRESS_EVERY else None
+    windows = screen_windows(run, settings, progress)
+    rc = record_call(windows)
+    rep_w = representative(windows, rc["call"])
+    sub = window_run(run, rep_w["start"], rep_w["stop"])
+    rep = diagnose_run(sub, settings)
+    if "error" in rep:
+        return rep
+    samples = sum(w["stop"] - w["start"] for w in windows)
+    total = int(run.metadata.get("file_rows") or len(run))
+    note = (f"record of {total} samples: {len(windows)} windows of up to {WINDOW} samples screened "
+            f"({samples} samples, {100.0 * samples / total:.1f} %), evenly spread; stiction in {rc[STICTION]}, "
+            f"undetermined in {rc[UNDETERMINED]}, no stiction in {rc[NO_STICTION]} of {rc['scored']} scored windows; "
+            f"valve models and this report: samples {rep_w['start']}-{rep_w['stop'] - 1}")
+    rep["samples"] = total
+    rep["windows"] = {**rc, "report_window": [rep_w["start"], rep_w["stop"]], "samples_screened": samples}
+    rep["notes"] = list(run.metadata.get("notes") or []) + [note] + list(rep.get("notes") or [])
+    rep["reading_notes"] = list(run.metadata.get("notes") or [])
+    _apply_record_call(rep, rc)
+    if figure_dir:  # the report window's trends under the record's verdict
+        from .figures import plot_record
+
+        rep["figure"] = str(plot_record(sub, rep, figure_dir))
+    return rep
+
+
+def _apply_record_call(rep: dict, rc: dict) -> None:
+    """The record's call in the report's one verdict (the representative window's evidence stays)."""
+    lv = rep.get("loop_verdict") or {}
+    if rc["scored"] == 0 or rep.get("stiction") is None:
+        return
+    rep["stiction"]["verdict"] = rc["call"]
+    structure = lv.get("structure") or {}
+    check = LoopCheck(None, list(structure.get("reasons") or []))
+    rep["loop_verdict"] = loop_verdict(check, rep)
+    head = (f"{rc[STICTION]} of {rc['scored']} windows call stiction (stiction from {rc['critical']}, the count "
+            f"{WINDOW_ALPHA:.0%} of healthy loops would reach at a {rc['false_rate_assumed']:.0%} false-call rate "
+            "per window)")
+    rep["loop_verdict"]["evidence"].insert(0, head)
+
+
+def _stderr_progress(where: str):
+    def show(done: int, total: int) -> None:
+        print(f"loop-diagnose: {where}: screened {done}/{total} windows", file=sys.stderr, flush=True)
+    return show
+

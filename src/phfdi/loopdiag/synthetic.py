@@ -11,9 +11,14 @@ simulated exactly for a piecewise-constant stem position (zero-order hold):
 
 with d the dead time in samples and v0 the stem position at the start (the loop starts at rest).
 Loads enter at the process input (in % of stem travel): a random walk, a first-order filtered
-noise, steps and ramps; the recorded PV may be rounded to the historian's resolution, and the
-historian may compress PV and OP (step-hold: a value is stored only when it has moved more than a
-dead-band from the last stored one; the controller sees the uncompressed PV).
+noise, steps, ramps and an oscillation of a given waveform (an upstream loop cycling: a sine, a
+square wave, a triangle or a sawtooth); the recorded PV may be rounded to the historian's
+resolution, and the historian may compress PV and OP (step-hold: a value is stored only when it has
+moved more than a dead-band from the last stored one; the controller sees the uncompressed PV).
+Optional, for the domain-randomised training loops (:mod:`.domain`): a second lag in series with
+the first, coloured (AR(1)) measurement noise, OP rounded as the historian stores it, and a setpoint
+that wanders like a cascade master's output (an AR(1) process around the stepped setpoint). With
+these left at their defaults the record is the one the earlier simulator gave, sample for sample.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.signal import lfilter
 
 import valve_actuator.blocks  # noqa: F401  (registers the valve blocks)
 from phfdi.run import Run
@@ -64,8 +70,35 @@ class SyntheticLoop:
     pv_compression: float = 0.0  # historian compression dead-band of PV (PV units; 0: none)
     op_compression: float = 0.0  # historian compression dead-band of OP (%; 0: none)
     noise_std: float = 0.05
+    noise_pole: float = 0.0  # AR(1) pole of the measurement noise (0: white); noise_std is its stationary std
+    time_constant2_s: float = 0.0  # a second lag in series (s; 0: first order)
+    #: an oscillating load at the process input: (amplitude % of travel, period s, waveform, phase rad);
+    #: waveform one of :data:`WAVEFORMS`
+    input_oscillation: tuple[float, float, str, float] | None = None
+    op_quantum: float = 0.0  # OP as the historian stores it: rounded to this step (%; 0: not rounded)
+    sp_ar_std: float = 0.0  # a setpoint wandering like a cascade master's output: AR(1) stationary std
+    sp_ar_pole: float = 0.99  # its pole (per sample)
     seed: int = 1
     loop_tag: str = "SYN"
+
+
+#: waveforms of an oscillating load (:attr:`SyntheticLoop.input_oscillation`), each of peak 1
+WAVEFORMS = ("sine", "square", "triangle", "sawtooth")
+
+
+def waveform(name: str, phase: np.ndarray | float) -> np.ndarray | float:
+    """A periodic waveform of period 2 pi and peak 1: a sine, a square wave with soft edges (an upstream
+    sticky valve's slips seen through a lag), a triangle or a sawtooth."""
+    if name == "sine":
+        return np.sin(phase)
+    if name == "square":
+        return np.tanh(4.0 * np.sin(phase)) / math.tanh(4.0)
+    frac = np.mod(np.asarray(phase, float) / (2 * math.pi), 1.0)
+    if name == "triangle":
+        return 1.0 - 4.0 * np.abs(frac - 0.5)
+    if name == "sawtooth":
+        return 2.0 * frac - 1.0
+    raise ValueError(f"unknown waveform {name!r}; one of {WAVEFORMS}")
 
 
 def simulate_loop(spec: SyntheticLoop) -> Run:
@@ -97,6 +130,7 @@ def simulate_loop(spec: SyntheticLoop) -> Run:
     ar_gain = spec.load_ar_std * math.sqrt(max(1.0 - spec.load_ar_pole ** 2, 0.0))
     load_steps = sorted(spec.load_steps)
     step_load = 0.0
+    extra = _Extras(spec, n)
     out = {k: np.empty(n) for k in ("time_s", "op_pct", "pv", "sp", "stem_pct")}
     for k in range(n):
         t = k * spec.dt_s
@@ -105,14 +139,20 @@ def simulate_loop(spec: SyntheticLoop) -> Run:
         while load_steps and load_steps[0][0] <= t:
             step_load += load_steps.pop(0)[1]
         dist = spec.disturbance_amplitude * math.sin(2 * math.pi * t / spec.disturbance_period_s)
-        pv = spec.pv0 + x + dist + spec.noise_std * rng.standard_normal()
+        e_noise = rng.standard_normal()
+        if extra.on:
+            e_noise = extra.noise(e_noise)
+        pv = spec.pv0 + (extra.lag2(x) if extra.on else x) + dist + spec.noise_std * e_noise
         if spec.pv_quantum > 0:
             pv = spec.pv_quantum * round(pv / spec.pv_quantum)
-        op = pi.step(sp_now, pv)
+        sp_k = sp_now + extra.sp[k] if extra.on else sp_now
+        op = pi.step(sp_k, pv)
         v = valve.step(op, t) if valve is not None else op
         v_hist.append(v)
         ramp_load = sum(dv * min(max((t - t0) / dur, 0.0), 1.0) for t0, dur, dv in spec.load_ramps)
         v_in = v_hist[-1 - d] + load + ar + step_load + ramp_load
+        if extra.on:
+            v_in += extra.osc[k]
         load += spec.load_walk_std * rng.standard_normal()
         if ar_gain > 0:
             ar = spec.load_ar_pole * ar + ar_gain * rng.standard_normal()
@@ -120,8 +160,10 @@ def simulate_loop(spec: SyntheticLoop) -> Run:
             x = x + spec.gain * spec.dt_s * (v_in - spec.op0_pct)
         else:
             x = a * x + spec.gain * (1 - a) * (v_in - spec.op0_pct)
-        for key, val in (("time_s", t), ("op_pct", op), ("pv", pv), ("sp", sp_now), ("stem_pct", v)):
+        for key, val in (("time_s", t), ("op_pct", op), ("pv", pv), ("sp", sp_k), ("stem_pct", v)):
             out[key][k] = val
+    if spec.op_quantum > 0:
+        out["op_pct"] = spec.op_quantum * np.round(out["op_pct"] / spec.op_quantum)
     if spec.pv_compression > 0:
         out["pv"] = compress(out["pv"], spec.pv_compression)
     if spec.op_compression > 0:
@@ -131,6 +173,43 @@ def simulate_loop(spec: SyntheticLoop) -> Run:
             "process_type": "integrating" if spec.process == "integrating" else "self_regulating",
             "synthetic": {"valve": spec.valve, "kp": spec.kp, "ti_s": spec.ti_s}, "notes": []}
     return Run(out, meta)
+
+
+class _Extras:
+    """The optional parts of :func:`simulate_loop` (second lag, coloured noise, oscillating load, wandering
+    setpoint), kept apart so that a loop without them draws the same random numbers as before. Their own
+    random numbers come from a second stream seeded from the loop's seed."""
+
+    def __init__(self, spec: SyntheticLoop, n: int) -> None:
+        self.on = bool(spec.time_constant2_s > 0 or spec.noise_pole > 0 or spec.input_oscillation
+                       or spec.sp_ar_std > 0)
+        self.a2 = math.exp(-spec.dt_s / spec.time_constant2_s) if spec.time_constant2_s > 0 else 0.0
+        self.x2 = 0.0
+        self.pole = float(spec.noise_pole)
+        self.colour: float | None = None
+        k = np.arange(n) * spec.dt_s
+        self.osc = np.zeros(n)
+        if spec.input_oscillation:
+            amp, period_s, wave, phase = spec.input_oscillation
+            self.osc = amp * waveform(wave, 2 * math.pi * k / period_s + phase)
+        self.sp = np.zeros(n)
+        if spec.sp_ar_std > 0:
+            rng = np.random.default_rng([spec.seed, 1])
+            g = spec.sp_ar_std * math.sqrt(max(1.0 - spec.sp_ar_pole ** 2, 0.0))
+            self.sp = lfilter([g], [1.0, -spec.sp_ar_pole], rng.standard_normal(n))
+
+    def lag2(self, x: float) -> float:
+        """The second lag's output (x of the first lag in, unit gain)."""
+        self.x2 = self.a2 * self.x2 + (1.0 - self.a2) * x if self.a2 > 0 else x
+        return self.x2
+
+    def noise(self, e: float) -> float:
+        """Unit-variance AR(1) measurement noise driven by e (e itself when white)."""
+        if self.pole <= 0:
+            return e
+        # the first sample from the stationary distribution, then the recursion
+        self.colour = e if self.colour is None else self.pole * self.colour + math.sqrt(1.0 - self.pole ** 2) * e
+        return self.colour
 
 
 def compress(x: np.ndarray, deadband: float) -> np.ndarray:

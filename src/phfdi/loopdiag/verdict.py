@@ -5,14 +5,22 @@ The verdict is one of
 * ``pv_frozen`` - PV does not respond: valve stuck or transmitter failed (:mod:`.loopcheck`);
 * ``not_a_closed_loop`` - no setpoint, OP still, or PV does not follow OP (:mod:`.loopcheck`);
 * ``stiction``, ``no_stiction`` or ``undetermined`` - the stiction classifier's calibrated probability
-  against its undetermined band (:mod:`.classifier`, chosen inside the nested evaluation).
+  against its undetermined band (:mod:`.classifier`: trained, calibrated and its operating point set on
+  simulated loops only).
 
-How the valve-model (Hammerstein) fit is reconciled: its held-out gains of the friction models are two of
-the classifier's inputs, so its weight in the verdict is the one the training data gave it (0 on the
-refinery records: their published direction did not help there), and the probability already holds it.
-What it names is listed as evidence beside the verdict, with whether it agrees; it does not overrule the
-probability, because on the refinery records the named cause is not reliable (docs/loop_diagnosis.md:
-of 9 stiction files flagged at 10 %, 5 were named dead-zone). There is one verdict, never two.
+How the valve-model (Hammerstein) fit is reconciled. It runs on the loops the screen flags, and what it names is
+listed as evidence beside the verdict, with whether it agrees. It can only take confidence away: a "stiction"
+call whose valve-model evidence contradicts it becomes ``undetermined``, with the reason, when
+
+* the fit names another valve nonlinearity (dead-zone, quantisation, saturation) as the cause, i.e. that model
+  beats the linear one by the gain threshold and the friction models (Kano's stiction, backlash) do not come
+  within the tie tolerance of it; or
+* Kano's S of the fit is below :data:`KANO_S_NOISE` times OP's noise level: a stiction that small cannot hold
+  the valve while OP travels, so the indicators must be reading something else.
+
+A fit that finds no valve nonlinearity at all does not overrule the indicators: on simulated sticky loops the
+fit beats the linear model by 10 % on only about a third of them (docs/loop_diagnosis.md). There is one verdict,
+never two.
 """
 
 from __future__ import annotations
@@ -22,11 +30,31 @@ from .loopcheck import NOT_A_CLOSED_LOOP, PV_FROZEN, LoopCheck
 from .vocabulary import FRICTION_CAUSES
 
 VERDICTS = (STICTION, NO_STICTION, UNDETERMINED, PV_FROZEN, NOT_A_CLOSED_LOOP)
+#: Kano's S below this many OP noise levels (MAD of OP's changes / sqrt 2) contradicts a stiction call
+KANO_S_NOISE = 3.0
+
+
+def contradiction(rep: dict) -> tuple[str, str] | None:
+    """Why the valve-model fit contradicts a stiction call (module docstring), short and in full, or None."""
+    if rep.get("valve_models") != "fitted":
+        return None
+    cause, gain = rep.get("cause"), rep.get("gain_percent")
+    if rep.get("family") == "actuator" and rep.get("verdict") == "explained" and cause not in FRICTION_CAUSES:
+        return (f"the valve-model fit names {cause}, not friction",
+                f"the valve-model fit names {cause}, not friction: it cuts the held-out error by {gain:.0f} % and "
+                "neither Kano's stiction nor a backlash comes as close")
+    st = rep.get("stiction") or {}
+    s, noise = st.get("kano_s_pct"), st.get("op_noise")
+    if s is not None and noise and s < KANO_S_NOISE * noise:
+        return (f"Kano's S ({s:.3g}) is within OP's noise",
+                f"Kano's S from the valve-model fit, {s:.3g}, is below {KANO_S_NOISE:g} times OP's noise level "
+                f"({noise:.3g}): a stiction that small cannot hold the valve while OP travels")
+    return None
 
 
 def valve_model_evidence(rep: dict, verdict: str) -> dict | None:
     """What the valve-model fit says and whether it agrees with ``verdict`` (None when it did not run)."""
-    if rep.get("family") is None or rep.get("gain_percent") is None:
+    if rep.get("valve_models") == "not fitted" or rep.get("family") is None or rep.get("gain_percent") is None:
         return None
     cause, family, gain = rep.get("cause"), rep.get("family"), rep.get("gain_percent")
     if family == "actuator" and cause in FRICTION_CAUSES:
@@ -54,10 +82,14 @@ def loop_verdict(check: LoopCheck, rep: dict) -> dict:
     st = rep["stiction"]
     verdict, p = st["verdict"], st["probability"]
     low, high = st["band"]
-    if verdict == STICTION:
+    why = contradiction(rep) if verdict == STICTION else None
+    if why is not None:
+        verdict = UNDETERMINED
+        summary = f"undetermined, p = {p:.2f}: the indicators say stiction, but {why[0]}"
+    elif verdict == STICTION:
         summary = f"stiction, p = {p:.2f} (confident from {high:.2f})"
     elif verdict == NO_STICTION:
-        summary = f"no stiction, p = {p:.2f} (confident below {low:.2f})"
+        summary = f"no stiction found, p = {p:.2f} (below {low:.2f})"
     else:
         summary = f"undetermined, p = {p:.2f} (between {low:.2f} and {high:.2f}: the evidence does not decide)"
     evidence = ["indicators (value, contribution to the log-odds): "
@@ -66,6 +98,8 @@ def loop_verdict(check: LoopCheck, rep: dict) -> dict:
     valve = valve_model_evidence(rep, verdict)
     if valve is not None:
         evidence.append(f"valve-model fit: {valve['says']} ({valve['agreement']})")
+    if why is not None:
+        evidence.insert(0, f"undetermined because {why[1]}")
     evidence += list(check.reasons)
     return {"verdict": verdict, "summary": summary, "probability": p, "band": [low, high], "evidence": evidence,
-            "valve_model": valve, "structure": check.to_dict()}
+            "valve_model": valve, "contradiction": None if why is None else why[1], "structure": check.to_dict()}

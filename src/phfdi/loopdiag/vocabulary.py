@@ -20,7 +20,8 @@ Examples
 
 from __future__ import annotations
 
-__all__ = ["ACTUATOR_CAUSES", "FRICTION_CAUSES", "OTHER_NONLINEARITIES", "TRAINING_DRAWS", "WIDTH_SEARCH_SPAN"]
+__all__ = ["ACTUATOR_CAUSES", "DOMAIN_DRAWS", "FRICTION_CAUSES", "OTHER_NONLINEARITIES", "TRAINING_DRAWS",
+           "WIDTH_SEARCH_SPAN"]
 
 #: causes of the actuator family the Hammerstein fit tries, in catalogue order (simplest first breaks ties)
 ACTUATOR_CAUSES = ("backlash", "deadzone", "saturation", "quantization", "stiction")
@@ -45,4 +46,15 @@ TRAINING_DRAWS: dict[str, dict] = {
     "quantization": {"step_pct": (0.3, 2.0)},
     "saturation": {"low_pct": 0.0, "high_pct": {"base": 50.0, "above": (0.5, 5.0)}},
     "backlash": {"width_pct": (0.3, 6.0)},
+}
+
+#: the domain-randomised loops' valves (:mod:`phfdi.loopdiag.domain`, the stiction verdict's training data), as
+#: :data:`TRAINING_DRAWS`; saturation's high limit is ``above`` the loop's working point. Sticky valves from 0.3
+#: to 8 % of travel (the refinery's limit cycles run on about 0.5 %; a valve sticking by 8 % is a bad one).
+DOMAIN_DRAWS: dict[str, dict] = {
+    "stiction": {"s_pct": (0.3, 8.0), "j_over_s": (0.0, 1.2)},
+    "stiction_he": {"fs_pct": (0.3, 8.0), "fd_over_fs": (0.0, 1.0)},
+    "deadzone": {"width_pct": (0.5, 4.0)},
+    "quantization": {"step_pct": (0.3, 2.0)},
+    "saturation": {"low_pct": 0.0, "above": (0.5, 5.0)},
 }

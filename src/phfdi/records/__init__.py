@@ -17,7 +17,8 @@ Examples
 from .columns import ColumnMap, ColumnSpec, ModeSpec, QualitySpec
 from .errors import ReadError
 from .policy import POLICIES
-from .reader import read_record, read_run
+from .reader import read_record, read_run, record_from_table
 from .record import Record
 
-__all__ = ["ColumnMap", "ColumnSpec", "ModeSpec", "QualitySpec", "POLICIES", "ReadError", "Record", "read_record", "read_run"]
+__all__ = ["ColumnMap", "ColumnSpec", "ModeSpec", "QualitySpec", "POLICIES", "ReadError", "Record", "read_record", "read_run",
+           "record_from_table"]

@@ -61,6 +61,32 @@ def read_record(path: str | Path, column_map: ColumnMap | dict | str | Path | Ca
         raise ValueError(f"policy must be one of {P.POLICIES}, got {policy!r}")
     path = Path(path)
     table = read_table(path, encoding)
+    return record_from_table(path, table, column_map, policy=policy, channels=channels, min_samples=min_samples,
+                             required=required)
+
+
+def record_from_table(path: str | Path, table: Table, column_map: ColumnMap | dict | str | Path | Callable | None = None,
+                      *, policy: str = "run", channels: list[str] | tuple[str, ...] | None = None,
+                      min_samples: int = 2, required: tuple[str, ...] = ()) -> Record:
+    """:func:`read_record` on a raw table already read (e.g. the rows of a long file a caller chose to read,
+    with ``table.lines`` their line numbers in the file): the same columns, policy and refusals.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from phfdi.records import record_from_table
+    >>> from phfdi.records.sources import read_table
+    >>> path = Path(tempfile.mkdtemp()) / "loop.csv"
+    >>> _ = path.write_text("time_s,PV,OP\\n0,7.0,50\\n1,7.1,51\\n2,7.2,52\\n")
+    >>> table = read_table(path, None)
+    >>> record = record_from_table(path, table, {"time_s": "time_s", "pv": "PV", "op_pct": "OP"})
+    >>> record.signals["pv"], record.lines  # the lines are the file's
+    (array([7. , 7.1, 7.2]), array([2, 3, 4]))
+    """
+    if policy not in P.POLICIES:
+        raise ValueError(f"policy must be one of {P.POLICIES}, got {policy!r}")
+    path = Path(path)
     cmap = _resolve_map(column_map, table, channels, required)
     rows = _rows(table, cmap)
     columns = {name: spec.column for name, spec in cmap.signals.items() if name != "time_s"}
