@@ -378,8 +378,30 @@ class LearnedDetector:
         self.gain = 2.0 ** (s.level / 2.0)  # DC gain of AJ
         self.fill_samples = self.swt.fill_samples + model.reference.lags
         self.bands = s.bands() + ["raw"]  # "raw": a statistic on the channel's reading itself
+        self._init_statistics(s, m)
+        self.alarms_enabled = alarms
+        self.bias = np.zeros(m)
+        self._acc = np.zeros(m)
+        self._acc_n = 0
+        self._init_energy_scale(m, s)
+        self.in_alarm = False
+        self._last_crossing = -1
+        self._holdoff = False  # an alarm cleared in this block: no new one before the next block boundary
+        self._peak = np.zeros(m)  # per channel, the largest |AJ deviation| of the alarm so far
+        self._rebase = 0  # 1: an alarm cleared in this block; 2: learning the new level over this block
+        self._alarm: dict | None = None
+        self._episode = np.zeros(len(self.stat_names))
+        self.alarms: list[dict] = []
+        self._missing_open = np.zeros(m, dtype=bool)
+        self.samples_processed = 0
+        self._times = np.full(TIME_RING, np.nan)  # times of the last TIME_RING samples (onset times)
+        self._trace: dict[str, list] | None = {"coef": [], "stat": [], "state": []} if record_trace else None
+        self._init_naming(model, alarms)
+
+    def _init_statistics(self, s: LearnedSettings, m: int) -> None:
+        """The CUSUM statistics: mean up and down per channel, then energy (up, and down where set) per channel and
+        detail band, then the repeats; each row is "value - k" against its threshold h."""
         self.energy = s.energy_variance_ratio > 1.0
-        # statistics: mean up and down per channel, then energy per channel and detail band
         names, k, h, chan, band = [], [], [], [], []
         for c, ch in enumerate(self.channels):
             for kind in ("mean_up", "mean_down"):
@@ -416,23 +438,9 @@ class LearnedDetector:
         self.stat_channel = np.array(chan)
         self.stat_band = np.array(band)
         self.cusum = CusumBank(len(names))
-        self.alarms_enabled = alarms
-        self.bias = np.zeros(m)
-        self._acc = np.zeros(m)
-        self._acc_n = 0
-        self._init_energy_scale(m, s)
-        self.in_alarm = False
-        self._last_crossing = -1
-        self._holdoff = False  # an alarm cleared in this block: no new one before the next block boundary
-        self._peak = np.zeros(m)  # per channel, the largest |AJ deviation| of the alarm so far
-        self._rebase = 0  # 1: an alarm cleared in this block; 2: learning the new level over this block
-        self._alarm: dict | None = None
-        self._episode = np.zeros(len(names))
-        self.alarms: list[dict] = []
-        self._missing_open = np.zeros(m, dtype=bool)
-        self.samples_processed = 0
-        self._times = np.full(TIME_RING, np.nan)  # times of the last TIME_RING samples (onset times)
-        self._trace: dict[str, list] | None = {"coef": [], "stat": [], "state": []} if record_trace else None
+
+    def _init_naming(self, model: LearnedModel, alarms: bool) -> None:
+        """The namer, its rings of recent rows, the confirmation state and the healthy runs' ranges."""
         # a reference that can name the fault behind an alarm (wavelet_fdi.references: ``name_fault``) gets the
         # last NAMING_RING rows and, NAMING_AFTER samples after each detection, names it (a "named" event)
         namer = NAMERS.get(getattr(model.reference, "kind", ""))
