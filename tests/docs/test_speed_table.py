@@ -46,4 +46,6 @@ def test_a_rows_figure_is_read_off_its_benchmarks_output():
     out = "replay, 4096 samples per call:   122000 samples/s (    8.2 us/sample)\n"
     assert st.KEYS["detector"].read(out) == ("122 000 samples/s", 122000.0, True)
     out = "1000 loops (0 failed) in 243.0 s on Dask (LocalCluster, 2 worker processes): 246.9 loops/minute\n"
-    assert st.KEYS["plant_wide"].read(out) == ("247 loops/min on 2 workers", 246.9, None)
+    assert st.KEYS["plant_wide"].read(out) == ("247 loops/min on 2 workers", 246.9, False)  # target >= 1000
+    out = "3000 loops (0 failed) in 132.4 s on Dask (LocalCluster, 2 worker processes): 1359.5 loops/minute\n"
+    assert st.KEYS["plant_wide"].read(out) == ("1360 loops/min on 2 workers", 1359.5, True)
