@@ -54,7 +54,7 @@ RIG_HELD_OUT = "2025.02.24-005_control_pH7_from_basic.csv"
 #: what the node and the plant may take under load (2 shared cores): generous, the test waits on conditions
 START_S, RUN_S, STOP_S = 120, 600, 120
 ALARM_KEYS = ("alarm_id", "detection_index", "onset_index", "statistic", "statistic_value", "threshold", "channels",
-              "contributions", "cleared_index", "episode_contributions")
+              "contributions", "cleared_index", "episode_contributions", "verdict", "announced", "confirmed_index")
 
 
 def json_lines(text: str) -> list[dict]:
@@ -165,13 +165,25 @@ def check_same_alarms(done: dict, received: list[dict], offline: dict, dt_ns: in
     for m in received:
         if m["state"] == 2 and m["detection_ns"]:
             raised.setdefault(m["detection_ns"], m)  # the first ALARM message of each detection: the raise
-    assert sorted(raised) == [origin + a["detection_index"] * dt_ns for a in alarms]
-    for a, (_, m) in zip(alarms, sorted(raised.items())):
+    # a reference that confirms its alarms (the estimator) raises an ALARM only for a confirmed fault, when it is
+    # confirmed; a deviation no fault explains is a WARN "outside calibration"; an unconfirming one (ARX) raises
+    # every alarm at its detection (no verdict)
+    faults = [a for a in alarms if a.get("verdict", "fault") == "fault"]
+    assert sorted(raised) == [origin + a["detection_index"] * dt_ns for a in faults]
+    for a, (_, m) in zip(faults, sorted(raised.items())):
         assert m["statistic"] == a["statistic_value"] and m["threshold"] == a["threshold"]
         assert m["statistic_name"] == a["statistic"]
         assert m["channels"] == list(a["contributions"])
         assert m["channel_shares"] == [v["share"] for v in a["contributions"].values()]
-        assert m["stamp_ns"] == m["detection_ns"]
+        assert m["stamp_ns"] == origin + a.get("confirmed_index", a["detection_index"]) * dt_ns
+    for a in alarms:
+        if "verdict" not in a or not a.get("announced", True):
+            continue  # unconfirmed references publish as above; an unannounced deviation is kept quiet
+        said = [m for m in received if m["detection_ns"] == origin + a["detection_index"] * dt_ns]
+        # the deviation, a WARN at once; its verdict outside calibration a WARN (OK had it already ended)
+        assert any(m["fault_class"] == "pending" and m["state"] == 1 for m in said), (a["alarm_id"], said)
+        if a["verdict"] == "outside calibration":
+            assert any(m["fault_class"] == "outside_calibration" and m["state"] in (0, 1) for m in said), said
 
 
 def test_a_skab_record_on_float64_topics_gives_the_offline_alarms(shared_data, tmp_path, capsys):
