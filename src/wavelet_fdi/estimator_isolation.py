@@ -28,7 +28,10 @@ Healthy, re-adapted (what the plant does where the calibration never went):
   calibration's was, and a still flask (no feed running) whose reading goes quiet.
 
 Offset, drift and the pumps are fitted in the model-trusting window (the filter's rate and walk
-uncertainty cut to ``STIFFNESS``), where a deterministic fault shows as the divergence it causes.
+uncertainty cut to ``STIFFNESS``), where a deterministic fault shows as the divergence it causes. An offset's
+or a drift's gain (what decides) maps the probe's noise into the curve where it was read, as healthy and the
+pumps do; its size is the hypothesis's own maximum-likelihood estimate, the noise mapped where the hypothesis
+puts the pH.
 
 **Confirmation** (``EstimatorReference.confirm``, written by ``phfdi calibrate --estimator``). A fault alarm
 means a fault. An alarm is confirmed when all of these hold:
@@ -223,14 +226,19 @@ def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _
         return out
     elapsed_min = (tw - tw[0]) / 60.0
 
-    def shifted(shift: np.ndarray | float) -> float:
+    def shifted(shift: np.ndarray | float, noise_where_read: bool = True) -> float:
         moved = xw.copy()
         moved[:, m] -= shift
-        return _window_nll(w.start, mean_ref, tw, moved, read_ph)
+        return _window_nll(w.start, mean_ref, tw, moved, read_ph if noise_where_read else None)
 
-    for name, cost, bounds in (("probe_offset", shifted, OFFSET_RANGE_PH),
-                               ("probe_drift", lambda r: shifted(r * elapsed_min), DRIFT_RANGE_PH_PER_MIN)):
-        f, x = _fit(cost, bounds)
+    for name, per_size in (("probe_offset", lambda b: b), ("probe_drift", lambda r: r * elapsed_min)):
+        bounds = OFFSET_RANGE_PH if name == "probe_offset" else DRIFT_RANGE_PH_PER_MIN
+        # the gain that decides: the probe's noise mapped into the curve where it was read, as for healthy and
+        # the pumps (a shift of the curve's buffer capacity must not pass for evidence)
+        f, _ = _fit(lambda v: shifted(per_size(v)), bounds)
+        # the size: the hypothesis's own maximum likelihood, the noise mapped where the reading minus the probe's
+        # error puts the pH (with the noise kept where read, a 1 pH offset hidden at pH 3 was sized 0.61; so 0.95)
+        _, x = _fit(lambda v: shifted(per_size(v), noise_where_read=False), bounds)
         out[name] = (healthy - f, x)
     for i, feed in enumerate(ref.feeds):
         if np.nanmax(np.abs(xw[:, i])) > 0:

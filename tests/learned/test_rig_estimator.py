@@ -103,12 +103,13 @@ def test_detector_settings_go_with_the_estimator_and_row_windows_do_not(tmp_path
     rig = SHARED_DATA / "ph_rig"
     if not rig.is_dir():
         pytest.skip(f"real data folder not found at {SHARED_DATA} (set PHFDI_SHARED_DATA)")
-    run = str(rig / "2025.02.24-001_add_base_pH9.5-11.5.csv")
+    # one run in which the base pump runs and one in which the acid pump does: each strength can be fitted
+    runs = [str(rig / "2025.02.24-001_add_base_pH9.5-11.5.csv"), str(rig / "2025.02.24-add_acid_pH7-3.csv")]
     out = tmp_path / "ref.json"
-    assert main(["calibrate", "--estimator", run, "--map", "ph_rig", "--rows", "100", "--out", str(out)]) != 0
+    assert main(["calibrate", "--estimator", *runs, "--map", "ph_rig", "--rows", "100", "--out", str(out)]) != 0
     assert "--rows, --from, --to and --exclude go with --learn" in capsys.readouterr().err
     assert not out.exists()
-    assert main(["calibrate", "--estimator", run, "--map", "ph_rig", "--learned", "repeat_probability=0",
+    assert main(["calibrate", "--estimator", *runs, "--map", "ph_rig", "--learned", "repeat_probability=0",
                  "--out", str(out)]) == 0
     settings = json.loads(out.read_text())["settings"]
     assert settings["repeat_probability"] == 0.0
