@@ -79,6 +79,59 @@ def read_runs(paths: Sequence[str | Path], channels: Sequence[str], column_map=N
     return [read_measured(p, column_map, channels=list(channels)) for p in paths]
 
 
+#: a reading outside this range is not a pH (a probe's range: 0 to 14)
+PH_RANGE = (0.0, 14.0)
+#: the least pH range over all runs that lets the fit see the curve (a constant reading identifies nothing)
+MIN_PH_SPAN = 0.1
+
+
+def check_excitation(records: Sequence[MeasuredRecord], start: EstimatorReference) -> None:
+    """Refuse runs the estimator cannot be identified from, naming what is missing: a reading outside 0-14 pH, a
+    feed that never runs in any run (its strength), a pH that never moves (the curve and the volume)."""
+    m = len(start.feeds)
+    for r in records:
+        ph = r.x[:, m]
+        bad = np.flatnonzero(np.isfinite(ph) & ((ph < PH_RANGE[0]) | (ph > PH_RANGE[1])))
+        if len(bad):
+            i = int(bad[0])
+            raise UserError(f"{r.path}: {r.where} {r.lines[i]}: pH {ph[i]:g} is outside 0-14 ({len(bad)} such rows): "
+                            f"not a pH reading (a wrong column or unit?)")
+    for i, feed in enumerate(start.feeds):
+        if not any(np.nanmax(np.abs(np.nan_to_num(r.x[:, i]))) > 0 for r in records):
+            raise UserError(f"feed {feed.channel}: it never runs in the calibration runs, so its strength cannot be "
+                            f"fitted (it would end at a bound); give at least one healthy run in which it runs")
+    spans = [float(np.nanmax(r.x[:, m]) - np.nanmin(r.x[:, m])) for r in records if np.isfinite(r.x[:, m]).any()]
+    if not spans or max(spans) < MIN_PH_SPAN:
+        raise UserError(f"the pH moves by less than {MIN_PH_SPAN} pH in every calibration run: the volume and the "
+                        f"strengths cannot be fitted from it; give healthy runs in which the pumps move the pH")
+
+
+def identifiability_notes(ref: EstimatorReference) -> list[str]:
+    """The fitted values that ended at a bound of the fit: not identified by these runs (said, not refused: a noise
+    term at a bound is the model saying that term is not needed)."""
+    from wavelet_fdi.estimator_fit import NOISE_BOUNDS, STRENGTH_BOUNDS_MM, VOLUME_BOUNDS_ML
+
+    notes = []
+
+    def at_bound(v: float, lo: float, hi: float) -> str | None:
+        return "lower" if v <= lo * 1.02 else "upper" if v >= hi / 1.02 else None
+
+    for f in ref.feeds:
+        side = at_bound(abs(f.strength_mM), *STRENGTH_BOUNDS_MM)
+        if side:
+            notes.append(f"{f.channel} strength {f.strength_mM:g} mM is at the fit's {side} bound: not identified by "
+                         f"these runs (does the feed change the pH in them?)")
+    side = at_bound(ref.volume_ml, *VOLUME_BOUNDS_ML)
+    if side:
+        notes.append(f"volume {ref.volume_ml:g} mL is at the fit's {side} bound: not identified by these runs")
+    for k, (lo, hi) in NOISE_BOUNDS.items():
+        side = at_bound(getattr(ref.noise, k), lo, hi)
+        if side:
+            notes.append(f"noise term {k} = {getattr(ref.noise, k):g} is at the fit's {side} bound (the runs do "
+                         f"not need {'it' if side == 'lower' else 'less of it'})")
+    return notes
+
+
 def fit_estimator(records: Sequence[MeasuredRecord], start: EstimatorReference,
                   settings: LearnedSettings | None = None, progress: Callable[[str], None] | None = None
                   ) -> LearnedModel:
@@ -86,9 +139,19 @@ def fit_estimator(records: Sequence[MeasuredRecord], start: EstimatorReference,
     (:func:`wavelet_fdi.estimator_calibration.calibrate_estimator`)."""
     if not records:
         raise UserError("the estimator needs at least one healthy run")
+    check_excitation(records, start)
     runs = [(r.time_s - r.time_s[0], r.x) for r in records]
     dt = float(np.median(np.concatenate([np.diff(t) for t, _ in runs if len(t) > 1])))
     base = settings or LearnedSettings(**ESTIMATOR_SETTINGS)
     s = LearnedSettings(**{**base.__dict__, "sample_time_s": dt})
     return calibrate_estimator(runs, start, s, {"files": [r.path for r in records],
-                                                "rows": int(sum(len(r.x) for r in records))}, progress=progress)
+                                                "rows": int(sum(len(r.x) for r in records))}, progress=progress,
+                               check_fit=refuse_unidentified)
+
+
+def refuse_unidentified(ref: EstimatorReference) -> None:
+    """Refuse a fit whose strength or volume ended at a bound of the fit (:func:`identifiability_notes`): those
+    runs did not identify it, and a reference built on it would extrapolate from a guess."""
+    hard = [n for n in identifiability_notes(ref) if not n.startswith("noise term")]
+    if hard:
+        raise UserError(f"not written: {hard[0]}" + (f" (and {len(hard) - 1} more)" if len(hard) > 1 else ""))

@@ -48,12 +48,16 @@ def fold_references(runs: Runs, start: EstimatorReference, progress: Callable[[s
 
 def calibrate_estimator(runs: Runs, start: EstimatorReference, settings: LearnedSettings,
                         source: dict | None = None, alpha: float = DEFAULT_ALPHA,
-                        progress: Callable[[str], None] | None = None) -> LearnedModel:
+                        progress: Callable[[str], None] | None = None,
+                        check_fit: Callable[[EstimatorReference], None] | None = None) -> LearnedModel:
     """The estimator's detector model: the reference fitted on all ``runs``, its band scales, confirmation
-    margins and noise band from leave-one-run-out residuals (module doc)."""
+    margins and noise band from leave-one-run-out residuals (module doc). ``check_fit`` sees the reference
+    fitted on all runs before the folds are (it raises to refuse one the runs did not identify)."""
     say = progress or (lambda _msg: None)
     say(f"fitting the estimator on {len(runs)} run(s)")
     ref = fit_reference(runs, start)
+    if check_fit is not None:
+        check_fit(ref)
     folds = fold_references(runs, start, say) if len(runs) >= 2 else [ref]
     held_out = len(runs) >= 2
     say("sampling the confirmation's null on " + ("each run held out" if held_out else "the run itself"))

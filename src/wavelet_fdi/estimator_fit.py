@@ -78,5 +78,7 @@ def fit_reference(runs: Sequence[tuple[np.ndarray, np.ndarray]], start: Estimato
     fitted = _unpack(start, res.x)
     n = sum(len(t) for t, _ in runs)
     info = {"runs": len(runs), "samples": int(n), "nll_per_sample": float(res.fun) / n,
-            "evaluations": int(res.nfev), "method": "maximum likelihood of the innovations (Powell, bounded)"}
+            "evaluations": int(res.nfev), "method": "maximum likelihood of the innovations (Powell, bounded)",
+            # the signs the plant model gave (acid -, base +): a file whose strengths disagree is refused on load
+            "strength_signs": [1 if f.strength_mM > 0 else -1 for f in start.feeds]}
     return replace(fitted, fit_info=info)

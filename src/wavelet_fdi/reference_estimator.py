@@ -225,6 +225,7 @@ class EstimatorReference:
     def from_dict(cls, d: dict, where: str = "reference") -> "EstimatorReference":
         try:
             feeds = tuple(Feed(str(f["channel"]), float(f["strength_mM"])) for f in d["feeds"])
+            cls._check_signs(d, where)
             return cls(feeds, str(d["ph_channel"]), float(d["volume_ml"]), float(d.get("buffer_mM", 0.0)),
                        float(d.get("carbonate_mM", 0.0)), NoiseModel(**{k: float(v) for k, v in d["noise"].items()}),
                        float(d.get("adapt_time_constant_s", 120.0)), int(d.get("block_samples", 32)),
@@ -235,6 +236,19 @@ class EstimatorReference:
                        checked_confirm(d.get("confirm") or {}, f"{where}: confirm"))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not an estimator reference ({exc})") from None
+
+    @staticmethod
+    def _check_signs(d: dict, where: str) -> None:
+        """A strength whose sign differs from the one its fit started from (acid -, base +: the plant model's) is a
+        hand edit that turns an acid into a base: refused naming the feed."""
+        signs = (d.get("fit") or {}).get("strength_signs")
+        if not isinstance(signs, list):
+            return
+        for f, sign in zip(d["feeds"], signs):
+            if float(f["strength_mM"]) * float(sign) < 0:
+                raise UserError(f"{where}: feed {f['channel']!r}: strength {f['strength_mM']} mM has the wrong sign "
+                                f"(fitted as {'base, +' if sign > 0 else 'acid, -'}); an acid's is negative, a base's "
+                                f"positive")
 
     # ---- the titration curve ---------------------------------------------------------------
     def x_of_ph(self, ph: np.ndarray) -> np.ndarray:

@@ -230,7 +230,7 @@ def run_learn(args: argparse.Namespace) -> int:
 
 
 def run_estimator(args: argparse.Namespace) -> int:
-    from phfdi.estimator import ESTIMATOR_SETTINGS, fit_estimator, read_runs, start_from_model
+    from phfdi.estimator import ESTIMATOR_SETTINGS, fit_estimator, identifiability_notes, read_runs, start_from_model
     from phfdi_base.errors import UserError
     from wavelet_fdi.learned_detector import LearnedSettings
 
@@ -248,8 +248,11 @@ def run_estimator(args: argparse.Namespace) -> int:
         model = fit_estimator(records, start, learned_settings(args.learned, LearnedSettings(**ESTIMATOR_SETTINGS)),
                               progress=lambda msg: print(f"phfdi calibrate: {msg} ...", file=sys.stderr, flush=True))
     store_column_map(args, model)
-    model.save(args.out, overwrite=args.overwrite)
     ref = model.reference
+    # a strength or volume at a bound was refused before the folds (phfdi.estimator.refuse_unidentified); a noise
+    # term at a bound is said
+    print_notes("calibrate", identifiability_notes(ref))  # type: ignore[arg-type]
+    model.save(args.out, overwrite=args.overwrite)
     kind = "open-loop simulation" if args.open_loop else "estimator"
     print(f"{kind} reference on {len(records)} healthy runs ({model.source['rows']} rows), "
           f"sample time {model.settings.sample_time_s:g} s; fitted by the innovations' likelihood:")
