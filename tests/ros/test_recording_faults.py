@@ -168,3 +168,24 @@ def test_a_full_disk_stops_the_recording_at_a_chunk_and_the_launch_names_it(tmp_
         assert len(bagio.load_run(fixed)) == n
     assert not processes_with(str(logs))
     assert stale_shm_files(domain_of(proc.stderr), before=before) == []
+
+
+def test_a_disk_that_fills_while_the_recorder_closes_fails_the_launch(tmp_path):
+    """The recorder here writes nothing before it closes (a chunk larger than the disk, no periodic flush), so the
+    disk fills after the run ended, while the recorder drains and closes: the launch still exits 1 naming the
+    cause. (A recorder that fell behind a fast run on a loaded machine hit the full disk while draining, and the
+    launch said so in a note and exited 0.)"""
+    from phfdi.ros.launcher import RECORDER, Launcher, loop_graph
+
+    from .conftest import SHORT_OVERRIDES
+
+    with _small_tmpfs(tmp_path / "disk", 32) as disk:
+        bag = disk / "run.mcap"
+        nodes = loop_graph(overrides=SHORT_OVERRIDES, record=bag)
+        (rec,) = [n for n in nodes if n.name == RECORDER]
+        rec.params.update(chunk_size_bytes=1 << 22, flush_period_s=3600.0)
+        result = Launcher(nodes, log_dir=tmp_path / "logs").run()
+        assert result.status == 1, (result.failure, result.notes)
+        assert result.failure == f"recorder: cannot write {bag}: No space left on device", result.notes
+        assert sorted(p.name for p in disk.iterdir()) == ["run.mcap"]  # nothing half-written beside it
+    assert not processes_with(str(tmp_path))

@@ -507,6 +507,13 @@ class Launcher:
         for group in (plant, loop, observers, recorder):
             self._stop(group)
         self._follow_others()
+        for p in recorder:
+            # a write that failed while the recorder drained or closed (the messages it had not yet taken when the
+            # run ended, its last chunk, the summary): the bag is cut short as surely as during the run
+            failed = any(e["event"] == "write_failed" for e in p.events())
+            if failed and result.status == 0 and result.failure is None:
+                result.status = 1
+                result.failure = self._describe_failure(p, result)
         for p in self.procs.values():
             if p.killed_by_us:
                 result.notes.append(f"node {p.name} did not stop within {self.stop_timeout_s:g} s and was killed")
