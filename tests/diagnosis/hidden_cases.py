@@ -288,15 +288,20 @@ HIDDEN_DRAWS = max(1, int(os.environ.get("PHFDI_HIDDEN_DRAWS", "3")))
 
 def fresh_draws(test):
     """Run a test taking ``hidden_rng`` on up to HIDDEN_DRAWS independent draws (children of the seed's generator:
-    the first draw is the seed's own, as before; the others reproducible from the same seed)."""
+    the first draw is the seed's own, as before; the others reproducible from the same seed). A test taking
+    ``tmp_path`` gets a fresh folder for each draw: a draw must not meet the files an earlier draw left."""
 
     @functools.wraps(test)
     def run(*args, **kwargs):
         rng = kwargs["hidden_rng"]
+        base_dir = kwargs.get("tmp_path")
         draws = [rng, *rng.spawn(HIDDEN_DRAWS - 1)]  # spawning leaves the first draw's stream as it was
         failures = []
         for k, draw in enumerate(draws):
             kwargs["hidden_rng"] = draw
+            if base_dir is not None:
+                kwargs["tmp_path"] = Path(base_dir) / f"draw{k + 1}"
+                kwargs["tmp_path"].mkdir(parents=True, exist_ok=False)
             try:
                 return test(*args, **kwargs)
             except AssertionError as exc:
