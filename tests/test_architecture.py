@@ -237,6 +237,70 @@ def test_checker_asks_for_a_floor_for_a_new_package(tmp_path):
         import_edges(_tree(tmp_path, files)))
 
 
+# ---- the application's inner floors ---------------------------------------------------------------------------
+#: phfdi's parts (its modules and subpackages) -> inner floor, same rule as FLOORS one level in: a part imports its
+#: own inner floor and the ones below, never one above (docs/architecture.md, "The application's inner floors").
+PHFDI_FLOORS = {
+    # 0 a run and its files, the fault vocabulary of the application
+    "run": 0, "bagread": 0, "rosbag2_meta": 0, "records": 0, "bagio": 0, "faults": 0, "inject_kinds": 0,
+    "summary": 0, "figures": 0,
+    # 1 the loop: scenarios, the in-process simulation, replay through the detector, calibration, the ROS graph
+    "scenario": 1, "loop": 1, "replay": 1, "calibration": 1, "ros": 1,
+    # 2 measured data: learned and estimator references, injected faults, the simulated rig, diagnosis
+    "learned": 2, "estimator": 2, "inject": 2, "rigsim": 2, "diagnosis": 2, "loopdiag": 2,
+    # 3 evaluation: the paper's study, the benchmarks' shared code
+    "study": 3, "benchmarks": 3,
+    # 4 the command line
+    "commands": 4, "cli": 4, "console": 4,
+}
+
+
+def phfdi_part(module: str) -> str | None:
+    """The part of phfdi a module belongs to (``phfdi.records.sources`` -> ``records``); None outside phfdi's parts."""
+    parts = module.split(".")
+    return parts[1] if parts[0] == "phfdi" and len(parts) > 1 else None
+
+
+def phfdi_parts(src: Path) -> set[str]:
+    root = src / "phfdi"
+    return {p.stem for p in root.glob("*.py") if p.stem != "__init__"} | {
+        p.name for p in root.iterdir() if (p / "__init__.py").exists()}
+
+
+def inner_floor_violations(edges: list[Edge], floors: dict[str, int] = PHFDI_FLOORS) -> list[str]:
+    """Edges between phfdi's parts that go up an inner floor, and parts without an inner floor."""
+    out = []
+    for e in edges:
+        a, b = phfdi_part(e.source), phfdi_part(e.target)
+        if a is None or b is None or a == b:
+            continue
+        missing = [p for p in (a, b) if p not in floors]
+        out += [f"phfdi.{p}: no inner floor declared in tests/test_architecture.py PHFDI_FLOORS" for p in missing]
+        if not missing and floors[b] > floors[a]:
+            out.append(f"{e.source} (line {e.line}) imports {e.target}: phfdi.{a} (inner floor {floors[a]}) may "
+                       f"not import phfdi.{b} (inner floor {floors[b]})")
+    return sorted(set(out))
+
+
+def test_every_part_of_the_application_has_an_inner_floor():
+    assert phfdi_parts(SRC) == set(PHFDI_FLOORS), "declare the inner floor of each part in PHFDI_FLOORS (and docs)"
+
+
+def test_no_import_goes_up_an_inner_floor(edges):
+    assert inner_floor_violations(edges) == []
+
+
+def test_inner_floor_checker_catches_an_import_up_and_a_part_without_a_floor(tmp_path):
+    files = {"phfdi/__init__.py": "", "phfdi/run.py": "def f():\n    from phfdi.commands import replay\n",
+             "phfdi/commands/__init__.py": "", "phfdi/commands/replay.py": "from phfdi.run import f\n",
+             "phfdi/newpart.py": "import phfdi.run\n"}
+    found = inner_floor_violations(import_edges(_tree(tmp_path, files)))
+    assert any(v.startswith("phfdi.run (line 2) imports phfdi.commands.replay: phfdi.run (inner floor 0)")
+               for v in found), found
+    assert "phfdi.newpart: no inner floor declared in tests/test_architecture.py PHFDI_FLOORS" in found
+    assert not any(v.startswith("phfdi.commands.replay") for v in found), found  # down is allowed
+
+
 # ---- short functions ------------------------------------------------------------------------------------------
 MAX_FUNCTION_LINES = 80
 #: functions still longer than MAX_FUNCTION_LINES (file, name): may only shrink, as KNOWN_UPWARD
