@@ -60,30 +60,45 @@ class FaultKind:
     unit: str
     what: str
     sizes: SizeRange | None
+    #: the classes the rig estimator's isolation (wavelet_fdi.estimator_isolation) names it by when it names it
+    #: right, the exact one first; ``{pump}`` stands for the pump the fault is on (``pump:acid_flow_ml_s``)
+    isolated_as: tuple[str, ...] = ()
+    #: the catalogued block (phfdi_base.faults) that models the same fault in simulation, in its own
+    #: parameters and units (a drift per second there, per minute here); None: no block models it
+    block: str | None = None
+
+    def isolation_classes(self, pump: str | None = None) -> list[str]:
+        """The classes a right name gives this fault (on ``pump``'s flow for a pump fault)."""
+        return [c.format(pump=pump) for c in self.isolated_as]
 
     def size_text(self) -> str:
         """'from -14 to 14 pH' (--help): the range and its unit."""
         return "none" if self.sizes is None else self.sizes.says(self.unit)
 
 
+#: Isolation classes: a slope error is locally an offset or a drift, a drift over a short window an offset; a frozen
+#: or sluggish reading loses its noise (s < 1); a pump's error is its feed's apparent strength.
+PUMP_CLASS = ("pump:{pump}_flow_ml_s",)
 KINDS: dict[str, FaultKind] = {k.name: k for k in (
-    FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH", SizeRange(-PH_MAX, PH_MAX)),
+    FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH", SizeRange(-PH_MAX, PH_MAX),
+              ("probe_offset",), "sensor_bias"),
     FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH",
-              SizeRange(-PH_MAX, PH_MAX)),
-    FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)", None),
+              SizeRange(-PH_MAX, PH_MAX), ("probe_drift", "probe_offset"), "sensor_drift"),
+    FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)", None,
+              ("probe_noise",), "blocking"),
     FaultKind("probe_noise", "sensor", "pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added",
-              SizeRange(0.0, PH_MAX, low_in=False)),
+              SizeRange(0.0, PH_MAX, low_in=False), ("probe_noise",), "sensor_noise"),
     FaultKind("probe_lag", "sensor", "s", "a first-order lag of time constant SIZE s added to the probe",
-              SizeRange(0.0, 86400.0, low_in=False)),
+              SizeRange(0.0, 86400.0, low_in=False), ("probe_noise",), "sensor_lag"),
     FaultKind("probe_gain", "sensor", "fraction", "slope error about pH 7: pH' = 7 + (1 + SIZE)(pH - 7)",
-              SizeRange(-1.0, 10.0, low_in=False)),
+              SizeRange(-1.0, 10.0, low_in=False), ("probe_offset", "probe_drift"), "sensor_gain"),
     FaultKind("pump_low", "actuator", "fraction", "the pump delivers SIZE less than recorded: "
                                                   "recorded = delivered / (1 - SIZE)",
-              SizeRange(0.0, 1.0, low_in=False, high_in=False)),
+              SizeRange(0.0, 1.0, low_in=False, high_in=False), PUMP_CLASS),
     FaultKind("pump_high", "actuator", "fraction", "the pump delivers SIZE more than recorded: "
                                                    "recorded = delivered / (1 + SIZE)",
-              SizeRange(0.0, 10.0, low_in=False)),
+              SizeRange(0.0, 10.0, low_in=False), PUMP_CLASS),
     FaultKind("pump_stuck", "actuator", "mL/s", "the pump delivers nothing while the record says SIZE mL/s "
                                                 "(only where the data's pump is off)",
-              SizeRange(0.0, 1000.0, low_in=False)),
+              SizeRange(0.0, 1000.0, low_in=False), PUMP_CLASS),
 )}

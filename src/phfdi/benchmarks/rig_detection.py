@@ -24,6 +24,7 @@ import numpy as np
 
 from phfdi.estimator import fit_estimator, start_from_model
 from phfdi.inject import inject_fault
+from phfdi.inject_kinds import KINDS
 from phfdi.learned import MeasuredRecord, read_measured
 from wavelet_fdi.healthy_range import healthy_ranges, outside_ranges
 from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, fit_reference, run_record
@@ -35,12 +36,9 @@ SIZES: dict[str, tuple[float, ...]] = {
     "probe_lag": (30.0, 10.0), "probe_gain": (0.3, 0.1), "pump_low": (0.5, 0.2), "pump_high": (0.5, 0.2),
     "pump_stuck": (3.0, 1.0)}
 ONSET_FRACTIONS = (0.35, 0.55, 0.75)
-#: the classes a right name gives each injected probe kind (the hypotheses of wavelet_fdi.estimator_isolation), the
-#: first the exact one: a slope error is locally an offset or a drift, a drift over a short window an offset; a
-#: frozen or sluggish reading loses its noise (s < 1)
-PROBE_CLASS = {"probe_bias": ("probe_offset",), "probe_drift": ("probe_drift", "probe_offset"),
-               "probe_gain": ("probe_offset", "probe_drift"), "probe_frozen": ("probe_noise",),
-               "probe_lag": ("probe_noise",), "probe_noise": ("probe_noise",)}
+#: the classes a right name gives each injected probe kind (declared with the kind: phfdi.inject_kinds), the first
+#: the exact one
+PROBE_CLASS = {name: kind.isolated_as for name, kind in KINDS.items() if kind.family == "sensor"}
 PLAIN_CUSUM_K = 0.5
 
 
@@ -71,7 +69,7 @@ class Outcome:
 
 def expected_class(kind: str, pump: str | None) -> list[str]:
     """The fault classes a right name gives an injected fault of ``kind`` (on ``pump``'s flow for the pumps)."""
-    return [f"pump:{pump}_flow_ml_s"] if kind.startswith("pump") else list(PROBE_CLASS[kind])
+    return KINDS[kind].isolation_classes(pump)
 
 
 def expected_size(kind: str, size: float) -> float | None:
