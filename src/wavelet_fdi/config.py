@@ -99,8 +99,7 @@ class DetectorSettings:
         self.channels = tuple(self.channels)
         self.statistics = tuple(self.statistics)
         self.isolation_delays_s = tuple(float(d) for d in self.isolation_delays_s)
-        for spec in setting_specs():
-            _check_range(spec, getattr(self, spec.name))
+        check_declared_ranges(self, "detector setting")
         for c in self.channels:
             if c not in CHANNELS:
                 raise UserError(f"detector channel {c!r} unknown; use {', '.join(CHANNELS)}")
@@ -171,12 +170,21 @@ class SettingSpec:
         return isinstance(self.default, tuple)
 
 
-def setting_specs(exposed_only: bool = False) -> list[SettingSpec]:
-    """Every detector setting (or only those exposed as CLI options and node parameters), in declaration order."""
-    hints = get_type_hints(DetectorSettings)
+def setting_specs(exposed_only: bool = False, of: type = DetectorSettings) -> list[SettingSpec]:
+    """Every setting a settings class declares with :func:`setting` (default: the physics detector's; the learned
+    detector's are ``of=LearnedSettings``), or only those exposed as CLI options and node parameters, in
+    declaration order."""
+    hints = get_type_hints(of)
     out = [SettingSpec(f.name, hints[f.name], f.default, f.metadata["help"], f.metadata["range"],
-                       f.metadata["option"], f.metadata["exposed"]) for f in fields(DetectorSettings)]
+                       f.metadata["option"], f.metadata["exposed"]) for f in fields(of)]
     return [s for s in out if s.exposed or not exposed_only]
+
+
+def check_declared_ranges(settings: Any, what: str) -> None:
+    """Every value of ``settings`` (a settings dataclass) within its declared range; ``what`` names the settings in
+    the message ("detector setting", "learned-detector setting")."""
+    for spec in setting_specs(of=type(settings)):
+        _check_range(spec, getattr(settings, spec.name), what)
 
 
 def settings_from_values(values: dict[str, Any], base: DetectorSettings | None = None) -> DetectorSettings:
@@ -203,29 +211,34 @@ def settings_as_params(settings: DetectorSettings) -> dict[str, Any]:
             for s in setting_specs(exposed_only=True)}
 
 
-def _check_range(spec: SettingSpec, value: Any) -> None:
+def _check_range(spec: SettingSpec, value: Any, what: str = "detector setting") -> None:
     if spec.range is None:
         return
     lo, hi = spec.range
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not (lo <= value <= hi):
-        raise UserError(f"detector setting {spec.name} must be a number in {_shown_range(spec)}, got {value!r}")
+        raise UserError(f"{what} {spec.name} must be a number in {_shown_range(spec)}, got {value!r}")
 
 
 def _shown_range(spec: SettingSpec) -> str:
     if spec.range is None:
         return ""
     lo, hi = spec.range
-    return f"{int(lo)}..{int(hi)}" if spec.type is int else f"{lo:g}..{hi:g}"
+    ends = [("" if math.isinf(v) else f"{int(v)}" if spec.type is int else f"{v:g}") for v in (lo, hi)]
+    return f"{ends[0]}..{ends[1]}"
 
 
-def settings_table_markdown() -> str:
-    """The docs table of every detector setting (docs/detector.md holds it; a test checks it is current)."""
+def settings_table_markdown(of: type = DetectorSettings, option_form: str | None = None) -> str:
+    """The docs table of every setting ``of`` declares (docs/detector.md holds the physics and the learned
+    detector's; a test checks they are current). ``option_form``: how every setting is given on the command
+    line, ``{name}`` standing for its name (the learned detector's ``--learned {name}=VALUE``); default: the
+    exposed settings' own options and node parameters."""
     lines = ["| setting | default | range | option / node parameter | what |", "|---|---|---|---|---|"]
-    for s in setting_specs():
+    for s in setting_specs(of=of):
         default = ", ".join(map(str, s.default)) if s.is_list else str(s.default).lower() if isinstance(
             s.default, bool) else f"{s.default:g}" if isinstance(s.default, float) else str(s.default)
         rng = _shown_range(s)
-        where = f"`{s.flag}`, `{s.name}`" if s.exposed else ""
+        where = f"`{option_form.format(name=s.name)}`" if option_form else f"`{s.flag}`, `{s.name}`" if s.exposed \
+            else ""
         lines.append(f"| `{s.name}` | {default} | {rng} | {where} | {s.help} |")
     return "\n".join(lines) + "\n"
 

@@ -27,8 +27,30 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_docs_table_is_the_declaration():
+    from wavelet_fdi.learned_detector import LearnedSettings
+
     text = (ROOT / "docs" / "detector.md").read_text(encoding="utf-8")
     assert settings_table_markdown() in text, "regenerate the table: wavelet_fdi.config.settings_table_markdown()"
+    assert settings_table_markdown(LearnedSettings, option_form="--learned {name}=VALUE") in text, \
+        "regenerate the learned detector's table (docs/detector.md, Learned detector settings)"
+
+
+def test_the_learned_detector_checks_its_declared_ranges():
+    """A range declared with the learned detector's setting is checked by its check(), with no second copy."""
+    from wavelet_fdi.learned_detector import LearnedSettings
+
+    ranged = [s for s in setting_specs(of=LearnedSettings) if s.range is not None]
+    assert {s.name for s in ranged} >= {"level", "block_samples", "mean_k", "outside_hold_s"}
+    for spec in ranged:
+        lo, hi = spec.range
+        below = lo - 1 if spec.type is int else lo - abs(lo) * 0.5 - 1e-3
+        with pytest.raises(UserError, match=f"learned-detector setting {spec.name} must be a number in"):
+            LearnedSettings(**{spec.name: below}).check()
+        if hi != float("inf"):
+            with pytest.raises(UserError, match=spec.name):
+                LearnedSettings(**{spec.name: hi + 1}).check()
+    with pytest.raises(UserError, match="mean_k"):
+        LearnedSettings(mean_k=float("nan")).check()  # was accepted before the declaration checked it
 
 
 def test_cli_options_are_derived_from_the_declaration():
