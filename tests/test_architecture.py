@@ -572,10 +572,14 @@ def setting_redeclarations(src: Path, names: set[str], flags: set[str],
 
 def test_detector_settings_are_declared_once():
     from wavelet_fdi.config import setting_specs
+    from wavelet_fdi.learned_detector import LearnedSettings
 
     specs = setting_specs()
     assert setting_redeclarations(SRC, {s.name for s in specs}, {s.flag for s in specs}) == {}, \
         "declare a detector setting in wavelet_fdi.config.DetectorSettings (setting(...)); derive the rest"
+    learned = setting_specs(of=LearnedSettings)
+    assert setting_redeclarations(SRC, {s.name for s in learned}, {s.flag for s in learned}) == {}, \
+        "declare a learned-detector setting in wavelet_fdi.learned_detector.LearnedSettings (setting(...))"
 
 
 def test_settings_checker_catches_a_second_declaration(tmp_path):
