@@ -77,56 +77,32 @@ class SkabFile:
 
 
 def read_skab_csv(path: str | Path) -> SkabFile:
-    """Read one SKAB file (``;``-separated, header row, ``datetime`` first); bad content is a UserError."""
+    """Read one SKAB file (``;``-separated, header row, ``datetime`` first) with the project's one reader
+    (:func:`phfdi.records.read_record`); the benchmark is stricter than the reader's policy: a cell that is not a
+    number, or a label other than 0 and 1, is refused (a UserError naming line and column), not marked missing."""
+    from phfdi.records import read_record
+
     p = Path(path)
-    try:
-        lines = p.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{p}: cannot read ({exc})") from None
-    lines = [ln for ln in lines if ln.strip()]
-    if len(lines) < 2:
-        raise UserError(f"{p}: no data rows")
-    header = [h.strip() for h in lines[0].split(";")]
-    if header[0] != "datetime":
-        raise UserError(f"{p}: first column must be 'datetime', got {header[0]!r}")
-    missing = [c for c in SENSOR_COLUMNS if c not in header]
-    if missing:
-        raise UserError(f"{p}: missing column(s) {', '.join(missing)}")
-    stamps, rows = [], []
-    for i, ln in enumerate(lines[1:], start=2):
-        cells = ln.split(";")
-        if len(cells) != len(header):
-            raise UserError(f"{p}: line {i} has {len(cells)} fields, the header {len(header)}")
-        stamps.append(cells[0].strip())
-        try:
-            rows.append([float(c) for c in cells[1:]])
-        except ValueError:
-            bad = next(j for j, c in enumerate(cells[1:], start=1) if not _is_float(c))
-            raise UserError(f"{p}: line {i}, column {header[bad]!r}: {cells[bad]!r} is not a number") from None
-    try:
-        t = np.array(stamps, dtype="datetime64[s]").astype(np.int64).astype(float)
-    except ValueError:
-        raise UserError(f"{p}: a datetime is not of the form YYYY-MM-DD hh:mm:ss") from None
-    table = np.array(rows, dtype=float)
-    col = {h: k - 1 for k, h in enumerate(header) if k}
-    values = table[:, [col[c] for c in SENSOR_COLUMNS]]
-    labels = {c: table[:, col[c]] for c in LABEL_COLUMNS if c in col}
-    if len(labels) == 1:
+    rec = read_record(p, required=SENSOR_COLUMNS)
+    if rec.wall_clock is None:
+        raise UserError(f"{p}: the time column must hold date-time stamps (datetime: YYYY-MM-DD hh:mm:ss)")
+    present = [c for c in LABEL_COLUMNS if c in rec.signals]
+    if len(present) == 1:
         raise UserError(f"{p}: has only one of the label columns {', '.join(LABEL_COLUMNS)}")
-    for c, v in labels.items():
-        if not np.isin(v, (0.0, 1.0)).all():
+    names = [*SENSOR_COLUMNS, *present]
+    table = np.column_stack([rec.signals[c] for c in names])
+    holes = np.isnan(table)
+    if holes.any():
+        row, col = np.argwhere(holes)[0]
+        raise UserError(f"{p}: line {rec.lines[row]}, column {rec.columns[names[col]]!r}: not a number")
+    for c in present:
+        if not np.isin(rec.signals[c], (0.0, 1.0)).all():
             raise UserError(f"{p}: column {c!r} must hold only 0 and 1")
-    return SkabFile(p, p.parent.name, p.stem, stamps, t, values, SENSOR_COLUMNS,
-                    labels["anomaly"].astype(np.int8) if labels else None,
-                    labels["changepoint"].astype(np.int8) if labels else None)
-
-
-def _is_float(s: str) -> bool:
-    try:
-        float(s)
-        return True
-    except ValueError:
-        return False
+    epoch_s = rec.wall_clock.timestamp() + rec.time_s
+    stamps = [str(s).replace("T", " ") for s in np.round(epoch_s).astype("int64").astype("datetime64[s]")]
+    return SkabFile(p, p.parent.name, p.stem, stamps, epoch_s, table[:, :len(SENSOR_COLUMNS)], SENSOR_COLUMNS,
+                    rec.signals["anomaly"].astype(np.int8) if present else None,
+                    rec.signals["changepoint"].astype(np.int8) if present else None)
 
 
 def _natural(p: Path) -> tuple:
