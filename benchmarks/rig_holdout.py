@@ -64,13 +64,14 @@ from pathlib import Path
 import numpy as np
 
 from phfdi.diagnosis.blackbox import fit_wiener
-from phfdi.diagnosis.data import ColumnMap, load_record
+from phfdi.diagnosis.data import diagnosis_map, load_record
 from phfdi.diagnosis.evidence import BANDS, evidence
 from phfdi.diagnosis.evidence import figure as evidence_figure
 from phfdi.diagnosis.evidence import table as evidence_table
 from phfdi.diagnosis.model import Evaluator, nominal_raw
 from phfdi.diagnosis.nested import Fold, outer_fold
 from phfdi.diagnosis.pipeline import Options
+from phfdi.records import ColumnMap
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "src" / "phfdi" / "diagnosis" / "maps" / "ph_rig.yaml"
@@ -136,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     if not files:
         print(f"rig_holdout: no runs in {folder}", file=sys.stderr)
         return 2
-    cmap = ColumnMap.from_yaml(MAP)
+    cmap = diagnosis_map(ColumnMap.load(MAP))
     groups = [re.match(GROUP, f.name).group(1) for f in files]
     nominal = nominal_raw("rig_flask", FIRST_GUESSES if args.nominal == "calibrated" else [])
     rows, fitted_in_sample = [], {f.name: [] for f in files}

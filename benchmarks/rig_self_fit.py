@@ -22,12 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.diagnosis.data import ColumnMap, load_record
+from phfdi.diagnosis.data import diagnosis_map, load_record
 from phfdi.diagnosis.evidence import BANDS, passages
 from phfdi.diagnosis.fit import Fitter, Problem, one_blas_thread
 from phfdi.diagnosis.model import nominal_raw
 from phfdi.diagnosis.pipeline import context_for
 from phfdi.diagnosis.residual import noise_floor
+from phfdi.records import ColumnMap
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "src" / "phfdi" / "diagnosis" / "maps" / "ph_rig.yaml"
@@ -45,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(files) != 1:
         print(f"rig_self_fit: {len(files)} runs in {folder} start with {args.run!r}", file=sys.stderr)
         return 2
-    rec = load_record(files[0], ColumnMap.from_yaml(MAP), args.dt)
+    rec = load_record(files[0], diagnosis_map(ColumnMap.load(MAP)), args.dt)
     nominal = nominal_raw("rig_flask")
     y, t = rec.outputs["ph_measured"], rec.time_s - rec.time_s[0]
     every = np.ones(len(rec), bool)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from phfdi.diagnosis.data import ColumnMap, load_record
+from phfdi.diagnosis.data import diagnosis_map, load_record
+from phfdi.records import ColumnMap
 from phfdi_base.errors import UserError
 
 HEADER = "Time, t (s),OP %,PV,level mm,,"
@@ -35,7 +36,7 @@ def good(tmp_path):
 
 def test_mapped_csv_units_and_uniform_time(good):
     tmp, t, op, ph, lev = good
-    rec = load_record(_write(tmp / "a.csv", t, op, ph, lev), ColumnMap.from_yaml(_map(tmp)))
+    rec = load_record(_write(tmp / "a.csv", t, op, ph, lev), diagnosis_map(ColumnMap.load(_map(tmp))))
     assert rec.dt_s == pytest.approx(1.0)
     assert np.allclose(rec.outputs["level_measured_cm"], 14.0)  # mm -> cm
     assert set(rec.inputs) == {"valve_command_pct"} and not rec.notes
@@ -44,7 +45,7 @@ def test_mapped_csv_units_and_uniform_time(good):
 def test_nonuniform_sampling_is_resampled_and_said(good):
     tmp, t, op, ph, lev = good
     jitter = t * 0.35 + np.random.default_rng(0).uniform(-0.04, 0.04, len(t))
-    rec = load_record(_write(tmp / "a.csv", jitter, op, ph, lev), ColumnMap.from_yaml(_map(tmp)))
+    rec = load_record(_write(tmp / "a.csv", jitter, op, ph, lev), diagnosis_map(ColumnMap.load(_map(tmp))))
     assert any("resampled" in n for n in rec.notes)
     assert np.allclose(np.diff(rec.time_s), rec.dt_s)
     # inputs held (zero-order hold): only values that were in the data
@@ -55,7 +56,7 @@ def test_short_nan_gap_filled_and_said(good):
     tmp, t, op, ph, lev = good
     ph = ph.copy()
     ph[100:103] = np.nan
-    rec = load_record(_write(tmp / "a.csv", t, op, ph, lev), ColumnMap.from_yaml(_map(tmp)))
+    rec = load_record(_write(tmp / "a.csv", t, op, ph, lev), diagnosis_map(ColumnMap.load(_map(tmp))))
     assert np.all(np.isfinite(rec.outputs["ph_measured"]))
     assert any("filled" in n for n in rec.notes)
 
@@ -120,8 +121,8 @@ def test_arguments_checked(run_cli, tmp_path):
 
 def test_map_needs_time_output_input(tmp_path):
     with pytest.raises(UserError, match="needs time_s"):
-        ColumnMap.from_dict({"ph_measured": "pH", "valve_command_pct": "OP"})
+        diagnosis_map(ColumnMap.from_mapping({"ph_measured": "pH", "valve_command_pct": "OP"}, "column map"))
     with pytest.raises(UserError, match="needs an input"):
-        ColumnMap.from_dict({"time_s": "t", "ph_measured": "pH"})
+        diagnosis_map(ColumnMap.from_mapping({"time_s": "t", "ph_measured": "pH"}, "column map"))
     with pytest.raises(UserError, match="cannot map onto 'temperature'"):
-        ColumnMap.from_dict({"time_s": "t", "temperature": "T"})
+        diagnosis_map(ColumnMap.from_mapping({"time_s": "t", "temperature": "T"}, "column map"))

@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from phfdi.diagnosis.data import ColumnMap, load_record
+from phfdi.diagnosis.data import diagnosis_map, load_record
 from phfdi.diagnosis.model import nominal_raw
 from phfdi.diagnosis.pipeline import Options, diagnose
+from phfdi.records import ColumnMap
 
 MAP = Path(__file__).resolve().parents[2] / "src" / "phfdi" / "diagnosis" / "maps" / "ph_rig.yaml"
 CONTROL = "2025.02.24-005_control_pH7_from_basic.csv"
@@ -23,7 +24,7 @@ def _rig(shared_data: Path, name: str):
     path = shared_data / "ph_rig" / name
     if not path.exists():
         pytest.skip(f"{path} not found")
-    return load_record(path, ColumnMap.from_yaml(MAP))
+    return load_record(path, diagnosis_map(ColumnMap.load(MAP)))
 
 
 def test_every_rig_run_reads_with_the_shipped_map(shared_data):

@@ -108,12 +108,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _map(args):
     """The diagnosis column map of --map or --column (checked: time, an input, an output), or None."""
-    from phfdi.diagnosis.data import ColumnMap
+    from phfdi.diagnosis.data import diagnosis_map
 
     cmap = column_map_from_args(args)
     if cmap is None:
         return None
-    return ColumnMap.of(cmap)
+    return diagnosis_map(cmap)
 
 
 def _groups(pattern: str, files: list[str]) -> list[str]:

@@ -22,11 +22,9 @@ error, never silently left out.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -88,38 +86,19 @@ class Record:
         return True
 
 
-class ColumnMap(records.ColumnMap):
-    """A :class:`phfdi.records.ColumnMap` checked for diagnosis: signals of known kinds, time, an input and an
-    output."""
-
-    @classmethod
-    def of(cls, cmap: records.ColumnMap) -> "ColumnMap":
-        """Any records column map, checked for diagnosis."""
-        return cls(**{f.name: getattr(cmap, f.name) for f in dataclasses.fields(cmap)}).checked()
-
-    @classmethod
-    def from_yaml(cls, path: str | Path) -> "ColumnMap":
-        return cls.load(path).checked()
-
-    @classmethod
-    def from_dict(cls, data: dict, source: str = "column map") -> "ColumnMap":
-        return cls.from_mapping(data, source).checked()
-
-    @classmethod
-    def from_args(cls, items: Sequence[str], units: Sequence[str] = (), source: str = "--column") -> "ColumnMap":
-        return super().from_args(items, units, source).checked()
-
-    def checked(self) -> "ColumnMap":
-        for signal in self.signals:
-            kind_of(signal)
-        if "time_s" not in self.signals:
-            raise UserError(f"{self.source}: the map needs time_s (the column holding time)")
-        if not any(s in OUTPUTS for s in self.signals):
-            raise UserError(f"{self.source}: the map needs an output: ph_measured or level_measured_cm")
-        if not any(is_input(s) for s in self.signals):
-            raise UserError(f"{self.source}: the map needs an input: valve_command_pct, <feed>_flow_ml_s "
-                            f"or level_controller_output_pct")
-        return self
+def diagnosis_map(cmap: records.ColumnMap) -> records.ColumnMap:
+    """``cmap`` (the one column map of :mod:`phfdi.records`) checked for diagnosis: signals of known kinds, time,
+    an input and an output; raises a UserError naming what is missing."""
+    for signal in cmap.signals:
+        kind_of(signal)
+    if "time_s" not in cmap.signals:
+        raise UserError(f"{cmap.source}: the map needs time_s (the column holding time)")
+    if not any(s in OUTPUTS for s in cmap.signals):
+        raise UserError(f"{cmap.source}: the map needs an output: ph_measured or level_measured_cm")
+    if not any(is_input(s) for s in cmap.signals):
+        raise UserError(f"{cmap.source}: the map needs an input: valve_command_pct, <feed>_flow_ml_s "
+                        f"or level_controller_output_pct")
+    return cmap
 
 
 def read_mapped(path: Path, cmap: records.ColumnMap, encoding: str | None = None) -> tuple[dict, list[str]]:
