@@ -16,7 +16,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from phfdi.learned import MeasuredRecord, read_measured
+from phfdi.learned import read_measured
+from phfdi.records import Record
 from phfdi_base.errors import UserError
 from wavelet_fdi.estimator_calibration import calibrate_estimator
 from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings
@@ -75,7 +76,7 @@ def start_from_model(model: str, ph_channel: str = PH_CHANNEL, correct: bool = T
     return EstimatorReference(tuple(feeds), ph_channel, float(spec.tank.volume_ml), correct=correct)
 
 
-def read_runs(paths: Sequence[str | Path], channels: Sequence[str], column_map=None) -> list[MeasuredRecord]:
+def read_runs(paths: Sequence[str | Path], channels: Sequence[str], column_map=None) -> list[Record]:
     return [read_measured(p, column_map, channels=list(channels)) for p in paths]
 
 
@@ -85,7 +86,7 @@ PH_RANGE = (0.0, 14.0)
 MIN_PH_SPAN = 0.1
 
 
-def check_excitation(records: Sequence[MeasuredRecord], start: EstimatorReference) -> None:
+def check_excitation(records: Sequence[Record], start: EstimatorReference) -> None:
     """Refuse runs the estimator cannot be identified from, naming what is missing: a reading outside 0-14 pH, a
     feed that never runs in any run (its strength), a pH that never moves (the curve and the volume)."""
     m = len(start.feeds)
@@ -132,7 +133,7 @@ def identifiability_notes(ref: EstimatorReference) -> list[str]:
     return notes
 
 
-def fit_estimator(records: Sequence[MeasuredRecord], start: EstimatorReference,
+def fit_estimator(records: Sequence[Record], start: EstimatorReference,
                   settings: LearnedSettings | None = None, progress: Callable[[str], None] | None = None
                   ) -> LearnedModel:
     """Fit the estimator on healthy records; its bands and confirmation margins from each record held out

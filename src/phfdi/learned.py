@@ -9,14 +9,14 @@ times in alarms are the record's seconds from its first row.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from phfdi.records import read_record
+from phfdi.records import Record, read_record
 from phfdi.records.cells import iso_stamp
 from phfdi_base.errors import UserError
 from phfdi_base.stamps import record_stamps_ns, stamps_seconds
@@ -27,30 +27,8 @@ from wavelet_fdi.learned_detector import LearnedEvent, LearnedModel, LearnedSett
 MAX_MISSING_HEALTHY = 0.2
 
 
-@dataclass
-class MeasuredRecord:
-    path: str
-    time_s: np.ndarray
-    x: np.ndarray  # (n, m)
-    channels: tuple[str, ...]
-    lines: np.ndarray
-    where: str
-    notes: list[str]
-    units: dict[str, str] = field(default_factory=dict)  # channel -> unit as read
-    wall_clock: datetime | None = None  # the wall-clock time at 0 s (date-time or epoch stamps), else None
-
-    def stamp(self, t_s: float | None) -> str | None:
-        """The ISO 8601 stamp of ``t_s`` seconds of this record (None without a wall clock)."""
-        return iso_stamp(self.wall_clock, t_s)
-
-    def when(self, t_s: float) -> str:
-        """``t_s`` for people: seconds, and the stamp when the record has a wall clock."""
-        stamp = self.stamp(t_s)
-        return f"{t_s:g} s" + (f" ({stamp})" if stamp else "")
-
-
 def read_measured(path: str | Path, column_map=None, channels: Sequence[str] | None = None,
-                  exclude: Sequence[str] = (), encoding: str | None = None) -> MeasuredRecord:
+                  exclude: Sequence[str] = (), encoding: str | None = None) -> Record:
     """The record's channels as a matrix: ``channels`` (each must exist) or every column but ``exclude``."""
 
     rec = read_record(path, column_map, channels=list(channels) if channels else None, encoding=encoding)
@@ -62,12 +40,11 @@ def read_measured(path: str | Path, column_map=None, channels: Sequence[str] | N
         raise UserError(f"{path}: --exclude {unknown[0]!r}: no such channel; it has {', '.join(rec.names)}")
     if not names:
         raise UserError(f"{path}: no channel left to monitor")
-    x = np.column_stack([rec.signals[n] for n in names]).astype(float)
-    return MeasuredRecord(str(path), np.asarray(rec.time_s, dtype=float), x, tuple(names), np.asarray(rec.lines),
-                          rec.where, rec.note_lines(), {n: rec.units.get(n, "") for n in names}, rec.wall_clock)
+    return replace(rec.select(names), path=str(path), time_s=np.asarray(rec.time_s, dtype=float),
+                   lines=np.asarray(rec.lines))
 
 
-def _check_healthy(rec: MeasuredRecord, part: slice) -> None:
+def _check_healthy(rec: Record, part: slice) -> None:
     rows = part.stop - part.start
     for c, name in enumerate(rec.channels):
         miss = ~np.isfinite(rec.x[part, c])
@@ -78,7 +55,7 @@ def _check_healthy(rec: MeasuredRecord, part: slice) -> None:
                             f"{100 * (1 - MAX_MISSING_HEALTHY):.0f} % of them")
 
 
-def time_bound(text: str, rec: MeasuredRecord, flag: str) -> float:
+def time_bound(text: str, rec: Record, flag: str) -> float:
     """A --from/--to bound in the record's seconds: a number is the record's own time (what alarms print), an
     ISO 8601 stamp is taken on the record's wall clock (only when its time column holds one)."""
     try:
@@ -101,7 +78,7 @@ def time_bound(text: str, rec: MeasuredRecord, flag: str) -> float:
     return (when - rec.wall_clock).total_seconds()
 
 
-def training_rows(rec: MeasuredRecord, rows: int | None = None, start: str | None = None,
+def training_rows(rec: Record, rows: int | None = None, start: str | None = None,
                   end: str | None = None) -> slice:
     """The healthy rows: the first ``rows`` (None: all), or those from ``start`` to ``end`` (both included;
     seconds or ISO 8601 stamps, see :func:`time_bound`). A window without a row is one line."""
@@ -122,7 +99,7 @@ def training_rows(rec: MeasuredRecord, rows: int | None = None, start: str | Non
     return slice(int(inside[0]), int(inside[-1]) + 1)  # time increases (the run policy): one stretch
 
 
-def learn_from(rec: MeasuredRecord, rows: int | slice | None = None, settings: LearnedSettings | None = None
+def learn_from(rec: Record, rows: int | slice | None = None, settings: LearnedSettings | None = None
                ) -> LearnedModel:
     """Fit the learned reference on healthy rows of a record: the first ``rows`` (None: all of it) or a slice
     (:func:`training_rows`)."""
@@ -142,12 +119,12 @@ def learn_from(rec: MeasuredRecord, rows: int | slice | None = None, settings: L
     return learn(rec.x[part], rec.channels, s, source=source)
 
 
-def row_number(rec: MeasuredRecord, index: int) -> int:
+def row_number(rec: Record, index: int) -> int:
     """The number a person finds sample ``index`` by in the file: its line (text), row (Parquet) or sample (bag)."""
     return int(rec.lines[min(max(index, 0), len(rec.lines) - 1)])
 
 
-def event_dict(e: LearnedEvent, rec: MeasuredRecord) -> dict:
+def event_dict(e: LearnedEvent, rec: Record) -> dict:
     out = {"kind": e.kind, "time": e.time_s, "stamp": rec.stamp(e.time_s),
            "line": int(rec.lines[e.index]) if 0 <= e.index < len(rec.lines) else None, "message": e.message}
     if e.alarm:
@@ -155,7 +132,7 @@ def event_dict(e: LearnedEvent, rec: MeasuredRecord) -> dict:
     return out
 
 
-def alarm_summaries(events: list[LearnedEvent], rec: MeasuredRecord) -> list[dict]:
+def alarm_summaries(events: list[LearnedEvent], rec: Record) -> list[dict]:
     """One dict per alarm (its last state: cleared or not), with the record's time and line of each step."""
     alarms: dict[int, dict] = {}
     for e in events:
@@ -185,15 +162,14 @@ def located(alarm: dict, lines: np.ndarray, where: str, wall_clock: datetime | N
     return a
 
 
-def replay_measured(rec: MeasuredRecord, model: LearnedModel, refit_rows: int | None = None
+def replay_measured(rec: Record, model: LearnedModel, refit_rows: int | None = None
                     ) -> tuple[list[LearnedEvent], np.ndarray, LearnedModel]:
     """Run the learned detector over a record (optionally re-fitting the reference on its first rows)."""
     missing = [c for c in model.channels if c not in rec.channels]
     if missing:
         raise UserError(f"{rec.path}: no column {missing[0]!r} (the reference was learned on "
                         f"{', '.join(model.channels)})")
-    order = [rec.channels.index(c) for c in model.channels]
-    rec = replace(rec, x=rec.x[:, order], channels=model.channels)
+    rec = rec.select(model.channels)
     if refit_rows is not None:
         if getattr(model.reference, "kind", "arx") != "arx":
             raise UserError(f"--refit-rows re-fits a learned (arx) reference; this one is {model.reference.kind!r} "

@@ -25,7 +25,8 @@ import numpy as np
 from phfdi.estimator import fit_estimator, start_from_model
 from phfdi.inject import inject_fault
 from phfdi.inject_kinds import KINDS
-from phfdi.learned import MeasuredRecord, read_measured
+from phfdi.learned import read_measured
+from phfdi.records import Record
 from wavelet_fdi.healthy_range import healthy_ranges, outside_ranges
 from wavelet_fdi.learned_detector import LearnedModel, LearnedSettings, calibrate_bands, fit_reference, run_record
 
@@ -101,7 +102,7 @@ def outcome(alarms: Sequence[dict], onset_s: float | None) -> Outcome:
     return out
 
 
-def learned_alarms(model: LearnedModel, rec: MeasuredRecord) -> list[dict]:
+def learned_alarms(model: LearnedModel, rec: Record) -> list[dict]:
     """Each deviation the detector raised: ``t``, when it became a fault alarm (a confirming reference: when the
     fault was confirmed, i.e. when /fault_alarm says ALARM) or was raised (others, and deviations outside
     calibration: ``verdict``), the time it cleared (``until``; the record's end if it did not), the fault
@@ -147,11 +148,11 @@ def cusum_alarm_times(residual: np.ndarray, t: np.ndarray, h: float, k: float = 
 @dataclass
 class Fold:
     held_out: str
-    detectors: dict[str, Callable[[MeasuredRecord], list[float]]]
+    detectors: dict[str, Callable[[Record], list[float]]]
     info: dict
 
 
-def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_flask",
+def build_fold(train: list[Record], held_out: str, model: str = "rig_flask",
                only: Sequence[str] | None = None) -> Fold:
     physics = only is None or bool({"estimator", "nominal estimator", "open loop",
                                     "plain CUSUM (estimator residual)"} & set(only))
@@ -163,7 +164,7 @@ def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_fla
     arx_model = calibrate_bands(fit_reference(x_all, CHANNELS, arx_settings), runs, arx_settings, files)
     oe_settings = LearnedSettings(sample_time_s=dt, form="oe")
     oe_model = calibrate_bands(fit_reference(x_all, CHANNELS, oe_settings), runs, oe_settings, files)
-    dets: dict[str, Callable[[MeasuredRecord], list[dict]]] = {
+    dets: dict[str, Callable[[Record], list[dict]]] = {
         "learned ARX": lambda rec: learned_alarms(arx_model, rec),
         "learned OE": lambda rec: learned_alarms(oe_model, rec)}
     info: dict = {}
@@ -175,7 +176,7 @@ def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_fla
         open_model = calibrate_bands(open_ref, runs, est.settings, files)
         h = plain_cusum_h()
 
-        def plain(rec: MeasuredRecord) -> list[dict]:
+        def plain(rec: Record) -> list[dict]:
             r = est.reference.new_state().residuals(rec.time_s - rec.time_s[0], rec.x)[:, 0]
             return [{"t": t, "until": t} for t in cusum_alarm_times(r, rec.time_s, h)]  # every alarm a fault
 
@@ -191,7 +192,7 @@ def build_fold(train: list[MeasuredRecord], held_out: str, model: str = "rig_fla
     return Fold(held_out, dets, info)
 
 
-def injected_cases(path: str, rec: MeasuredRecord, workdir: Path, column_map) -> list[tuple[dict, MeasuredRecord]]:
+def injected_cases(path: str, rec: Record, workdir: Path, column_map) -> list[tuple[dict, Record]]:
     """Every (kind, size, onset, pump) that changes this run, as (truth, record)."""
     from phfdi_base.errors import UserError
 
@@ -268,7 +269,7 @@ def evaluate(paths: Sequence[str], column_map, progress: Callable[[str], None] =
     return {"rows": rows, "folds": folds, "leave_out": leave_out}
 
 
-def _score_run(p: str, rec: MeasuredRecord, fold: Fold, tmp: Path, column_map, rows: list[dict],
+def _score_run(p: str, rec: Record, fold: Fold, tmp: Path, column_map, rows: list[dict],
                outside: list[str]) -> None:
     """One held-out run through the fold's detectors: healthy (``outside``: the channels that leave the training
     runs' healthy range, replay's note), then with each injected fault."""

@@ -23,7 +23,7 @@ import numpy as np
 
 from phfdi.benchmarks.rig_detection import CHANNELS, PROBE_CLASS, learned_alarms, outcome
 from phfdi.estimator import fit_estimator, start_from_model
-from phfdi.learned import MeasuredRecord
+from phfdi.records import Record
 from wavelet_fdi.learned_detector import LearnedModel
 
 #: the recorded operations replayed (the ``simulated`` calibration) and the days they run on
@@ -75,7 +75,7 @@ def calibrate(which: str, data_dir: str | None, column_map, progress: Callable[[
     return fit_estimator(records, start, progress=lambda m: progress(f"  {m}"))
 
 
-def _hours(rec: MeasuredRecord) -> float:
+def _hours(rec: Record) -> float:
     return float(rec.time_s[-1] - rec.time_s[0]) / 3600.0
 
 
@@ -111,8 +111,7 @@ def score_faults(model: LearnedModel, runs_per_kind: int, scores: Scores, progre
             run = simulate_run(op, seed, probe_fault=ProbeFault(kind, onset, size, seed=seed))
             rec = run.measured(CHANNELS)
             keep = rec.time_s <= onset + SCORED_AFTER_ONSET_S
-            rec = MeasuredRecord(rec.path, rec.time_s[keep], rec.x[keep], rec.channels, rec.lines[keep], rec.where,
-                                 rec.notes, rec.units, rec.wall_clock)
+            rec = rec.subset(keep)
             o = outcome(learned_alarms(model, rec), onset)
             found = o.alarms_before == 0 and o.first_after_s is not None
             scores.cases.append({"kind": kind, "size": size, "operation": op, "seed": seed, "onset_s": onset,

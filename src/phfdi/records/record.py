@@ -9,6 +9,7 @@ import numpy as np
 
 from phfdi.run import Run
 
+from .cells import iso_stamp
 from .errors import ReadError
 from .notes import places
 from .policy import interval_s, spans
@@ -64,6 +65,28 @@ class Record:
         return list(self.signals)
 
     @property
+    def channels(self) -> tuple[str, ...]:
+        """The signals' names in order: the columns of :attr:`x`."""
+        return tuple(self.signals)
+
+    @property
+    def x(self) -> np.ndarray:
+        """The signals as one matrix (samples x :attr:`channels`, NaN where missing): the rows a detector takes.
+        A new array at each call; :meth:`select` orders the channels."""
+        if not self.signals:
+            return np.empty((len(self), 0))
+        return np.column_stack([np.asarray(v, dtype=float) for v in self.signals.values()])
+
+    def stamp(self, t_s: float | None) -> str | None:
+        """The ISO 8601 stamp of ``t_s`` seconds of this record (None without a wall clock)."""
+        return iso_stamp(self.wall_clock, t_s)
+
+    def when(self, t_s: float) -> str:
+        """``t_s`` for people: seconds, and the stamp when the record has a wall clock."""
+        stamp = self.stamp(t_s)
+        return f"{t_s:g} s" + (f" ({stamp})" if stamp else "")
+
+    @property
     def missing(self) -> dict[str, np.ndarray]:
         """Per channel, True where the sample is missing."""
         return {k: np.isnan(v) for k, v in self.signals.items()}
@@ -95,7 +118,7 @@ class Record:
         meta = {**self.metadata, "source": self.path, "notes": self.note_lines(), "units": dict(self.units)}
         return Run({"time_s": self.time_s.copy(), **{k: v.copy() for k, v in self.signals.items()}}, meta)
 
-    def select(self, channels: list[str]) -> "Record":
+    def select(self, channels: list[str] | tuple[str, ...]) -> "Record":
         """Only these channels (in this order)."""
         return replace(self, signals={c: self.signals[c] for c in channels},
                        units={c: self.units.get(c, "") for c in channels})

@@ -147,14 +147,13 @@ class RigRun:
 
     def measured(self, channels=("acid_flow_ml_s", "base_flow_ml_s", "ph_measured")):
         """The run as :func:`phfdi.learned.read_measured` gives its CSV under the ``ph_rig`` map (the same
-        numbers, no file): a :class:`phfdi.learned.MeasuredRecord` for the detector's and the estimator's code."""
-        from phfdi.learned import MeasuredRecord
+        numbers, no file): a :class:`phfdi.records.Record` for the detector's and the estimator's code."""
+        from phfdi.records import Record
 
-        x = np.column_stack([self.recorded(c) for c in channels])
         units = {"acid_flow_ml_s": "mL/s", "base_flow_ml_s": "mL/s", "ph_measured": "pH"}
-        return MeasuredRecord(f"rig-sim:{self.operation.name}:seed{self.seed}:day{self.day.number}",
-                              np.round(self.time_s, 3), x, tuple(channels), np.arange(2, len(self) + 2), "line", [],
-                              {c: units[c] for c in channels}, None)
+        return Record(f"rig-sim:{self.operation.name}:seed{self.seed}:day{self.day.number}",
+                      np.round(self.time_s, 3), {c: np.asarray(self.recorded(c), dtype=float) for c in channels},
+                      {c: units[c] for c in channels}, {c: c for c in channels}, np.arange(2, len(self) + 2), "line")
 
     def meta(self) -> dict:
         """What made this run (operation drawn, day, seed, fault truth): the OUT.rigsim.json sidecar."""
