@@ -162,6 +162,15 @@ def located(alarm: dict, lines: np.ndarray, where: str, wall_clock: datetime | N
     return a
 
 
+def outside_healthy_range(model: LearnedModel, rec: Record) -> list[dict]:
+    """Where the record leaves the healthy range of the reference's calibration runs
+    (:func:`wavelet_fdi.healthy_range.outside_ranges`; none for a reference file from before the ranges were
+    kept): there the reference extrapolates."""
+    from wavelet_fdi.healthy_range import outside_ranges
+
+    return outside_ranges(model.source.get("healthy_ranges") or {}, rec.x, rec.channels)
+
+
 def replay_measured(rec: Record, model: LearnedModel, refit_rows: int | None = None
                     ) -> tuple[list[LearnedEvent], np.ndarray, LearnedModel]:
     """Run the learned detector over a record (optionally re-fitting the reference on its first rows)."""

@@ -224,11 +224,11 @@ def run_learned(args: argparse.Namespace) -> int:
 
 
 def outside_healthy_range(model, rec) -> list[dict]:
-    """Where the record leaves the healthy range of the reference's calibration runs, each said in one note (none
-    for a reference file from before the ranges were kept)."""
-    from wavelet_fdi.healthy_range import describe, outside_ranges
+    """phfdi.learned.outside_healthy_range, each stretch said in one note."""
+    from phfdi.learned import outside_healthy_range as outside_of
+    from wavelet_fdi.healthy_range import describe
 
-    outside = outside_ranges(model.source.get("healthy_ranges") or {}, rec.x, rec.channels)
+    outside = outside_of(model, rec)
     print_notes("replay", [describe(o) for o in outside])
     return outside
 
