@@ -199,13 +199,13 @@ def test_project_readers_raise_only_user_errors(seeds, data):
 @given(data=st.data())
 def test_yaml_files_raise_only_user_errors(seeds, data):
     """Scenarios, column maps (both forms), a calibration."""
-    from phfdi.loopdiag.readers import ColumnMap as LoopMap
+    from phfdi.loopdiag.readers import parse_loop_columns
     from phfdi.records import ColumnMap
     from phfdi.scenario import load_scenario
     from wavelet_fdi.config import Calibration
 
     path = _variant(data.draw, seeds, ["scenario.yaml", "map.yaml", "loopmap.yaml", "calibration.yaml"])
-    loader = {"scenario.yaml": load_scenario, "map.yaml": ColumnMap.load, "loopmap.yaml": LoopMap.parse,
+    loader = {"scenario.yaml": load_scenario, "map.yaml": ColumnMap.load, "loopmap.yaml": parse_loop_columns,
               "calibration.yaml": Calibration.load}[path.name]
     try:
         loader(str(path))

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from phfdi.loopdiag.readers import (
-    ColumnMap,
     LoopDataError,
     guess_columns,
+    parse_loop_columns,
     process_type_for,
     read_loop,
     read_loop_segments,
@@ -47,12 +47,12 @@ def test_csv_with_mapping_string_and_yaml(tmp_path):
                                                          for ti in t]
     path = tmp_path / "x.csv"
     path.write_text("\n".join(rows))
-    cmap = ColumnMap.parse("op=FIC1.OUT,pv=FIC1.MEAS,sp=FIC1.SET,time=Timestamp")
+    cmap = parse_loop_columns("op=FIC1.OUT,pv=FIC1.MEAS,sp=FIC1.SET,time=Timestamp")
     run = read_loop(path, cmap)
     assert run.dt_s == 5.0 and run["sp"][3] == 3.0 and run["pv"][0] == pytest.approx(4.0)
     yml = tmp_path / "map.yaml"
     yml.write_text("columns: {op: FIC1.OUT, pv: FIC1.MEAS}\nloop_tag: FIC1\nsample_time_s: 5\n")
-    run2 = read_loop(path, ColumnMap.parse(str(yml)))
+    run2 = read_loop(path, parse_loop_columns(str(yml)))
     assert run2.metadata["loop_tag"] == "FIC1" and "sp" not in run2
     assert np.allclose(run2["op_pct"], run["op_pct"])
 
@@ -101,7 +101,7 @@ def test_wrong_columns_and_uneven_time(tmp_path):
     with pytest.raises(LoopDataError, match="cannot tell the OP and PV"):
         read_loop(path)
     with pytest.raises(LoopDataError, match="column 'zz': no such column"):
-        read_loop(path, ColumnMap.parse("op=zz,pv=b,time=a"))
+        read_loop(path, parse_loop_columns("op=zz,pv=b,time=a"))
     uneven = tmp_path / "u.csv"
     uneven.write_text("time_s,op_pct,pv\n" + "\n".join(f"{k + (5 if k > 100 else 0)},{k % 9},{k % 4}"
                                                        for k in range(200)))
@@ -113,9 +113,9 @@ def test_wrong_columns_and_uneven_time(tmp_path):
 
 def test_mapping_errors_name_the_key():
     with pytest.raises(Exception, match="unknown key 'opp'"):
-        ColumnMap.parse("opp=a,pv=b")
+        parse_loop_columns("opp=a,pv=b")
     with pytest.raises(Exception, match="needs op"):
-        ColumnMap.parse("pv=b")
+        parse_loop_columns("pv=b")
 
 
 def test_process_type_from_tag():

@@ -97,13 +97,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from phfdi.loopdiag.diagnose import Settings
     from phfdi.loopdiag.plantwide import diagnose_jobs, expand, format_worst, write_table
-    from phfdi.loopdiag.readers import ColumnMap
+    from phfdi.loopdiag.readers import parse_loop_columns
     from phfdi.loopdiag.report import format_report, format_summary, to_json
     from phfdi.loopdiag.vocabulary import ACTUATOR_CAUSES
     from phfdi_base.errors import UserError
     from phfdi_base.outputs import output_folder, write_text
 
-    columns = ColumnMap.parse(args.columns) if args.columns else None
+    columns = parse_loop_columns(args.columns) if args.columns else None
     settings = Settings(baselines=not args.no_baselines,
                         process_type=None if args.process == "auto" else args.process, fits=args.fits)
     if args.gain_threshold is not None:

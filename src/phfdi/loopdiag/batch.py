@@ -6,12 +6,13 @@ import sys
 from pathlib import Path
 from typing import Callable, Iterable
 
+from phfdi import records
+
 from .diagnose import Settings
-from .readers import ColumnMap
 from .single import diagnose_file, diagnose_file_segments, diagnose_run  # noqa: F401 - the batch's public API
 
 
-def diagnose_files(paths: Iterable[str], columns: ColumnMap | None = None, settings: Settings | None = None,
+def diagnose_files(paths: Iterable[str], columns: records.ColumnMap | None = None, settings: Settings | None = None,
                    workers: int | None = None, progress: Callable[[int, int, str], None] | None = None,
                    figure_dir: str | None = None, each_segment: bool = False,
                    scheduler: str | None = None) -> list[dict]:

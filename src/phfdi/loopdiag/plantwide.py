@@ -21,13 +21,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from phfdi import records
 from phfdi.records.formats import firsts, historian_suffixes, is_format
 from phfdi.records.sources import refuse_nul_filled
 from phfdi_base.errors import UserError
 from phfdi_base.outputs import staged, write_text
 
 from .diagnose import Settings
-from .readers import ColumnMap, read_loop
+from .readers import loop_column_map, read_loop
 
 _ROLE = {"OP": "op", "MV": "op", "OUT": "op", "PV": "pv", "SP": "sp", "SV": "sp", "MODE": "mode"}
 _TIME = ("time_s", "timestamp", "time", "datetime", "date", "tagname")
@@ -38,7 +39,7 @@ class Job:
     """One loop to diagnose: a file, and for a wide export the columns of one loop."""
 
     path: str
-    columns: ColumnMap | None = None
+    columns: records.ColumnMap | None = None
     loop_tag: str | None = None
 
     @property
@@ -66,7 +67,7 @@ def _csv_header(path: Path) -> list[str]:
     return next(csv.reader(io.StringIO(first), delimiter=delim), [])  # an empty file: no header, one plain job
 
 
-def expand(inputs: list[str], columns: ColumnMap | None = None) -> list[Job]:
+def expand(inputs: list[str], columns: records.ColumnMap | None = None) -> list[Job]:
     """Jobs for files, folders and wide exports (a column map applies to every plain file)."""
     jobs: list[Job] = []
     for item in inputs:
@@ -83,7 +84,7 @@ def expand(inputs: list[str], columns: ColumnMap | None = None) -> list[Job]:
     return jobs
 
 
-def _jobs_of_file(f: Path, columns: ColumnMap | None) -> list[Job]:
+def _jobs_of_file(f: Path, columns: records.ColumnMap | None) -> list[Job]:
     if columns is not None or not is_format(f, "csv") or not f.is_file():
         return [Job(str(f), columns)]
     try:
@@ -95,8 +96,8 @@ def _jobs_of_file(f: Path, columns: ColumnMap | None) -> list[Job]:
     if len(loops) < 2:
         return [Job(str(f))]
     time_col = next((h for h in header if h.strip().lower() in _TIME), None)
-    return [Job(str(f), ColumnMap(op=c["op"], pv=c["pv"], sp=c.get("sp"), time=time_col, loop_tag=tag,
-                                  mode=c.get("mode")), tag)
+    return [Job(str(f), loop_column_map(c["op"], c["pv"], c.get("sp"), time_col, loop_tag=tag, mode=c.get("mode")),
+                tag)
             for tag, c in sorted(loops.items())]
 
 

@@ -9,7 +9,7 @@ Two formats:
   ``.MODE``, flags), descriptions, the publisher's solver settings, then rows
   of timestamp, MV (= OP), PV, SV (= SP), MODE and four flags;
 * CSV (comma, semicolon or tab) with a header line and a column mapping
-  (:class:`ColumnMap`): given on the command line, in a small YAML file, or
+  (the one :class:`phfdi.records.ColumnMap`, from :func:`parse_loop_columns`): given on the command line, in a small YAML file, or
   guessed from names (``time_s``/``op_pct``/``pv``/``sp`` as phfdi writes
   them, or tags ending in ``.OP``/``.MV``, ``.PV``, ``.SP``/``.SV``).
 
@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import re
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -58,69 +57,57 @@ class LoopDataError(UserError):
     """A loop file that cannot be diagnosed; the message names file and problem."""
 
 
-@dataclass
-class ColumnMap:
-    """Which file columns hold time, OP, PV and SP (names as in the header).
+#: the loop mapping's short keys -> the loop run's signals (``--columns op=FIC1.OP,pv=FIC1.PV,...``)
+LOOP_KEYS = {"op": "op_pct", "pv": "pv", "sp": "sp", "time": "time_s"}
+#: the mapping's other keys, as phfdi.records.ColumnMap takes them
+LOOP_OPTIONS = ("mode", "sample_time_s", "loop_tag", "time_format")
 
-    ``time`` None: no time column; ``sample_time_s`` gives the spacing.
-    ``sp`` None: no setpoint column (the control error is then PV about its mean).
-    """
 
-    op: str
-    pv: str
-    sp: str | None = None
-    time: str | None = None
-    sample_time_s: float | None = None
-    loop_tag: str | None = None
-    time_format: str | None = None
-    mode: str | None = None
+def loop_column_map(op: str, pv: str, sp: str | None = None, time: str | None = None, *,
+                    source: str = "column mapping", **options) -> records.ColumnMap:
+    """The one column map (:class:`phfdi.records.ColumnMap`, signals ``op_pct``, ``pv``, ``sp``, ``time_s``) of
+    a loop whose OP, PV, SP and time sit in these columns; ``options``: ``mode``, ``sample_time_s``,
+    ``loop_tag``, ``time_format`` (None or empty: not given).
 
-    @classmethod
-    def parse(cls, text: str) -> "ColumnMap":
-        """From ``op=FIC1.OP,pv=FIC1.PV,sp=FIC1.SP,time=Timestamp`` or a YAML file name."""
-        if text.endswith((".yaml", ".yml")):
-            return cls.from_yaml(text)
-        items: dict[str, str] = {}
-        for part in filter(None, (p.strip() for p in text.split(","))):
-            key, sep, value = part.partition("=")
-            if not sep or not value:
-                raise UserError(f"column mapping {part!r}: expected KEY=COLUMN (keys: op, pv, sp, time)")
-            items[key.strip()] = value.strip()
-        return cls._from_items(items, f"--columns {text!r}")
+    ``time`` None: no time column; ``sample_time_s`` gives the spacing. ``sp`` None: no setpoint column (the
+    control error is then PV about its mean)."""
+    data: dict = {"op_pct": op, "pv": pv}
+    data.update({LOOP_KEYS[k]: v for k, v in (("sp", sp), ("time", time)) if v})
+    data.update({k: v for k, v in options.items() if k in LOOP_OPTIONS and v not in (None, "")})
+    return records.ColumnMap.from_mapping(data, source)
 
-    @classmethod
-    def from_yaml(cls, path: str | Path) -> "ColumnMap":
-        path = Path(path)
+
+def parse_loop_columns(text: str) -> records.ColumnMap:
+    """The loop's column map from ``op=FIC1.OP,pv=FIC1.PV,sp=FIC1.SP,time=Timestamp`` or a YAML file name
+    (``columns: {op: ..., pv: ...}`` and, beside it, ``sample_time_s``, ``loop_tag``, ``time_format``, ``mode``)."""
+    if text.endswith((".yaml", ".yml")):
+        path = Path(text)
         data = read_mapping(path, "column mapping file", "a mapping with 'columns' (op, pv, sp, time)")
         items = dict(data.get("columns") or {})
-        for key in ("sample_time_s", "loop_tag", "time_format", "mode"):
-            if key in data:
-                items[key] = data[key]
-        return cls._from_items(items, str(path))
+        items.update({k: data[k] for k in LOOP_OPTIONS if k in data})
+        return _from_items(items, str(path))
+    items: dict[str, str] = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        key, sep, value = part.partition("=")
+        if not sep or not value:
+            raise UserError(f"column mapping {part!r}: expected KEY=COLUMN (keys: op, pv, sp, time)")
+        items[key.strip()] = value.strip()
+    return _from_items(items, f"--columns {text!r}")
 
-    @classmethod
-    def _from_items(cls, items: dict, where: str) -> "ColumnMap":
-        allowed = {"op", "pv", "sp", "time", "mode", "sample_time_s", "loop_tag", "time_format"}
-        unknown = sorted(set(items) - allowed)
-        if unknown:
-            raise UserError(f"{where}: unknown key {unknown[0]!r}; allowed: op, pv, sp, time, mode, sample_time_s, "
-                            "loop_tag, time_format")
-        missing = [k for k in ("op", "pv") if not items.get(k)]
-        if missing:
-            raise UserError(f"{where}: the mapping needs {' and '.join(missing)} (the columns of OP and PV)")
-        st = items.get("sample_time_s")
-        return cls(op=str(items["op"]), pv=str(items["pv"]), sp=_opt_str(items.get("sp")),
-                   time=_opt_str(items.get("time")), sample_time_s=None if st is None else float(st),
-                   loop_tag=_opt_str(items.get("loop_tag")), time_format=_opt_str(items.get("time_format")),
-                   mode=_opt_str(items.get("mode")))
 
-    def to_records(self) -> records.ColumnMap:
-        """The same mapping as a :class:`phfdi.records.ColumnMap` (signals op_pct, pv, sp)."""
-        data: dict = {"op_pct": self.op, "pv": self.pv}
-        data.update({k: v for k, v in (("sp", self.sp), ("time_s", self.time)) if v})
-        data.update({k: v for k, v in (("sample_time_s", self.sample_time_s), ("loop_tag", self.loop_tag),
-                                       ("time_format", self.time_format), ("mode", self.mode)) if v})
-        return records.ColumnMap.from_mapping(data, "column mapping")
+def _from_items(items: dict, where: str) -> records.ColumnMap:
+    allowed = {*LOOP_KEYS, *LOOP_OPTIONS}
+    unknown = sorted(set(items) - allowed)
+    if unknown:
+        raise UserError(f"{where}: unknown key {unknown[0]!r}; allowed: op, pv, sp, time, mode, sample_time_s, "
+                        "loop_tag, time_format")
+    missing = [k for k in ("op", "pv") if not items.get(k)]
+    if missing:
+        raise UserError(f"{where}: the mapping needs {' and '.join(missing)} (the columns of OP and PV)")
+    st = items.get("sample_time_s")
+    return loop_column_map(str(items["op"]), str(items["pv"]), _opt_str(items.get("sp")), _opt_str(items.get("time")),
+                           sample_time_s=None if st is None else float(st), loop_tag=_opt_str(items.get("loop_tag")),
+                           time_format=_opt_str(items.get("time_format")), mode=_opt_str(items.get("mode")))
 
 
 def _opt_str(v) -> str | None:
@@ -138,7 +125,7 @@ _SUFFIXES = {"op": (".op", ".mv", ".out", "_op", "_mv"), "pv": (".pv", "_pv"), "
              "mode": (".mode", "_mode")}
 
 
-def guess_columns(header: list[str]) -> ColumnMap | None:
+def guess_columns(header: list[str]) -> records.ColumnMap | None:
     """A mapping from conventional names, or None when OP or PV cannot be told."""
     low = {h.strip().lower(): h for h in header}
     found: dict[str, str] = {}
@@ -157,12 +144,12 @@ def guess_columns(header: list[str]) -> ColumnMap | None:
     tag = None
     if "." in found["pv"]:
         tag = found["pv"].rsplit(".", 1)[0]
-    return ColumnMap(op=found["op"], pv=found["pv"], sp=found.get("sp"), time=found.get("time"), loop_tag=tag,
-                     mode=found.get("mode"))
+    return loop_column_map(found["op"], found["pv"], found.get("sp"), found.get("time"), loop_tag=tag,
+                           mode=found.get("mode"))
 
 
 # ---- reading -------------------------------------------------------------------------------
-def read_loop(path: str | Path, columns: ColumnMap | None = None) -> Run:
+def read_loop(path: str | Path, columns: records.ColumnMap | None = None) -> Run:
     """The longest usable stretch of one loop file (plant_loops export or CSV), checked for diagnosis.
 
     Raises
@@ -202,7 +189,7 @@ def read_loop(path: str | Path, columns: ColumnMap | None = None) -> Run:
     return run
 
 
-def read_loop_segments(path: str | Path, columns: ColumnMap | None = None) -> list[Run]:
+def read_loop_segments(path: str | Path, columns: records.ColumnMap | None = None) -> list[Run]:
     """Every usable stretch of one loop file (at least ``MIN_SAMPLES``), not yet checked."""
     runs, why, _, _ = _stretches(Path(path), columns, sampled_table(Path(path)))
     if not runs:
@@ -210,7 +197,7 @@ def read_loop_segments(path: str | Path, columns: ColumnMap | None = None) -> li
     return runs
 
 
-def _stretches(path: Path, columns: ColumnMap | None, table=None) -> tuple[list[Run], str, int, list[str]]:
+def _stretches(path: Path, columns: records.ColumnMap | None, table=None) -> tuple[list[Run], str, int, list[str]]:
     """Runs of the stretches with at least MIN_SAMPLES samples, why there is none when so, how many
     stretches there are in all and the gaps that cut them (``table``: the rows already read, for a sampled
     long file)."""
@@ -239,18 +226,25 @@ def _stretches(path: Path, columns: ColumnMap | None, table=None) -> tuple[list[
     return runs, why, len(pieces), cuts
 
 
-def _mapping(path: Path, columns: ColumnMap | None, header: list[str], meta: dict) -> records.ColumnMap:
+def _mapping(path: Path, columns: records.ColumnMap | None, header: list[str], meta: dict) -> records.ColumnMap:
     """The given mapping, else one guessed from the header (the export's tags, or conventional names)."""
     cmap = columns or guess_columns([h for h in header if h != "timestamp"] if "declared_rows" in meta else header)
     if cmap is None:
         raise LoopDataError(f"{path}: cannot tell the OP and PV columns from the header "
                             f"({', '.join(header)}); give --columns op=NAME,pv=NAME[,sp=NAME,time=NAME]")
+    missing = [s for s in ("op_pct", "pv") if s not in cmap.signals]
+    if missing:
+        raise LoopDataError(f"{path}: {cmap.source} maps no {' and no '.join(missing)} (the columns of OP and PV)")
     if "declared_rows" in meta:  # the plant_loops export: stamps in the first column, the loop's tag in the title
-        cmap = ColumnMap(cmap.op, cmap.pv, cmap.sp, cmap.time or "timestamp", cmap.sample_time_s,
-                         columns.loop_tag if columns else None, cmap.time_format, cmap.mode)
+        data = cmap.to_mapping()
+        data.setdefault("time_s", "timestamp")
+        data.pop("loop_tag", None)
+        if columns is not None and columns.loop_tag:
+            data["loop_tag"] = columns.loop_tag
+        cmap = records.ColumnMap.from_mapping(data, cmap.source)
     if cmap.time is None and cmap.sample_time_s is None:
         raise LoopDataError(f"{path}: no time column; give time=NAME in the mapping or sample_time_s")
-    return cmap.to_records()
+    return cmap
 
 
 def _split_at_gaps(grid: records.Record) -> tuple[list[records.Record], list[str]]:

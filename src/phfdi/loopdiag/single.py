@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from dataclasses import replace
 
+from phfdi import records
 from phfdi.run import Run
 from phfdi_base.errors import UserError
 
@@ -14,7 +15,7 @@ from .features import ScreenEvidence, _r4, baselines_of, kano_fit, screen_eviden
 from .indicators import noise_level
 from .loopcheck import PV_FROZEN, LoopCheck, check_loop
 from .oscillation import detect_oscillation
-from .readers import ColumnMap, check_loop_run, read_loop, read_loop_segments
+from .readers import check_loop_run, read_loop, read_loop_segments
 from .verdict import loop_verdict
 from .vocabulary import FRICTION_CAUSES
 from .windows import (
@@ -33,7 +34,7 @@ from .windows import (
 FLAGGED = (STICTION, UNDETERMINED)
 
 
-def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Settings | None = None,
+def diagnose_file(path: str, columns: records.ColumnMap | None = None, settings: Settings | None = None,
                   figure_dir: str | None = None) -> dict:
     """The report of one file (its longest usable stretch), or ``{"file": ..., "error": message}``.
 
@@ -41,7 +42,7 @@ def diagnose_file(path: str, columns: ColumnMap | None = None, settings: Setting
     ----------
     path : str
         A plant_loops export or a CSV with time, OP, PV (and SP) columns.
-    columns : ColumnMap, optional
+    columns : phfdi.records.ColumnMap, optional
         Which column is which (default: guessed from the header).
     settings : Settings, optional
     figure_dir : str, optional
@@ -181,7 +182,7 @@ def structure_report(run, check: LoopCheck, settings: Settings, figure_dir: str 
     return rep
 
 
-def diagnose_file_segments(path: str, columns: ColumnMap | None = None, settings: Settings | None = None,
+def diagnose_file_segments(path: str, columns: records.ColumnMap | None = None, settings: Settings | None = None,
                            figure_dir: str | None = None) -> list[dict]:
     """One report per usable stretch of the file (each with its source lines), or one error."""
     try:
