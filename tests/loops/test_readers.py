@@ -162,3 +162,15 @@ def test_historian_manual_mode_and_clock_reset_make_stretches(tmp_path):
     modes = [1] * 60 + [0] * 300 + [1] * 50
     with pytest.raises(LoopDataError, match="no usable stretch of 100 samples"):
         read_loop(export_rows(tmp_path / "m.txt", stamps, pv, modes))
+
+
+def test_a_records_column_map_without_op_is_refused_in_one_line(tmp_path):
+    """read_loop takes the one phfdi.records.ColumnMap; a map that names no OP column cannot make a loop."""
+    from phfdi.records import ColumnMap
+
+    path = tmp_path / "w.csv"
+    path.write_text("a,b,c\n" + "\n".join(f"{k},{k},{k}" for k in range(200)))
+    with pytest.raises(LoopDataError, match="maps no op_pct"):
+        read_loop(path, ColumnMap.from_mapping({"time_s": "a", "pv": "b"}))
+    run = read_loop(path, parse_loop_columns("op=c,pv=b,time=a"))
+    assert run.names == ["time_s", "op_pct", "pv"]
