@@ -547,6 +547,41 @@ def test_table_read_checker_catches_a_reader_of_its_own(tmp_path):
     assert table_reads(tmp_path) == {"phfdi.tool": ["line 3"]}
 
 
+#: the delimiters a hand-written table parser splits its lines on
+DELIMITERS = frozenset({";", ",", "\t", "|"})
+
+
+def hand_split_tables(src: Path, allowed: tuple[str, ...] = FILE_FORMAT_MODULES) -> dict[str, list[str]]:
+    """module -> functions outside the format modules that split a text's lines and then each line on a
+    delimiter: a table parsed by hand (SKAB's files were, until they went through read_record)."""
+    out: dict[str, list[str]] = {}
+    for module, path in project_modules(src).items():
+        if module.startswith(tuple(f"{a}." for a in allowed)) or module in allowed:
+            continue
+        for fn in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            calls = [n for n in ast.walk(fn) if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)]
+            lines = any(c.func.attr == "splitlines" for c in calls)
+            cells = [c for c in calls if c.func.attr == "split" and c.args and isinstance(c.args[0], ast.Constant)
+                     and c.args[0].value in DELIMITERS]
+            if lines and cells:
+                out.setdefault(module, []).append(f"{fn.name} (line {cells[0].lineno})")
+    return out
+
+
+def test_no_table_is_parsed_by_hand():
+    assert hand_split_tables(SRC) == {}, "read the file with phfdi.records.read_record (a format of its own: " \
+                                         "register_format)"
+
+
+def test_hand_split_checker_catches_a_parser_of_its_own(tmp_path):
+    parser = "def read(p):\n    rows = [ln.split(';') for ln in p.read_text().splitlines()]\n    return rows\n"
+    _tree(tmp_path, {"phfdi/__init__.py": "", "phfdi/records/__init__.py": "", "phfdi/records/text.py": parser,
+                     "phfdi/bench.py": parser, "phfdi/words.py": "def f(s):\n    return s.split(',')\n"})
+    assert hand_split_tables(tmp_path) == {"phfdi.bench": ["read (line 2)"]}
+
+
 # ---- detector settings declared once ---------------------------------------------------------------------
 #: modules with options of the same name that are not the detector's: the paper's offline wavelet analysis
 OWN_WAVELET_OPTIONS = {"phfdi.commands.analyze": "the offline analysis's wavelet and level"}
