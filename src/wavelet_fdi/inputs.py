@@ -337,3 +337,16 @@ class InputRegularizer:
             lst.append(others.get(f, math.nan))
         if real:
             self._last_inputs = (cmd, ocmd, dict(others))
+
+
+#: the input guard's counters that mean bad input (not the samples it counted, not the gaps it bridged), in its
+#: order: what the detector node reports at once when one grows and what replay lists as input problems
+INPUT_PROBLEMS: tuple[str, ...] = tuple(c for c in InputRegularizer.COUNTERS
+                                        if c not in ("samples_received", "samples_used", "gaps_bridged"))
+
+
+def input_problems(diagnostics: dict, extra: tuple[str, ...] = ()) -> dict[str, int]:
+    """The bad-input counters of a detector's diagnostics (:data:`INPUT_PROBLEMS`, then ``extra``) that are not
+    zero, in the diagnostics' order."""
+    names = set(INPUT_PROBLEMS) | set(extra)
+    return {k: v for k, v in diagnostics.items() if k in names and v}

@@ -63,6 +63,7 @@ from .alarm_messages import severity_of
 from .channel_map import load_channel_map
 from .config import Calibration, load_default_calibration, setting_specs, settings_from_values
 from .detector import StreamingDetector
+from .inputs import INPUT_PROBLEMS
 from .map_inputs import MappedInputs
 from .node_base import STATE_OF_LEVEL, DetectorNodeBase, next_multiple
 from .reference import KnownStart
@@ -113,10 +114,8 @@ PHYSICS_CHANNELS = ("ph_measured", "level_measured_cm", "valve_command_pct", "le
 MAP_TICK_S, MAP_REPORT_S = 0.2, 1.0
 
 #: diagnostics counters that mean bad input (a growth is reported at once)
-PROBLEM_COUNTERS = ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
-                    "gap_resets", "time_resets", "nonfinite_ph", "out_of_range_ph", "bad_level",
-                    "nonfinite_command", "nonfinite_outlet_command", "command_stale_episodes",
-                    "commands_missing", "late_controller_outputs", "unpaired_controller_outputs", "core_errors")
+PROBLEM_COUNTERS = (*INPUT_PROBLEMS, "commands_missing", "late_controller_outputs", "unpaired_controller_outputs",
+                    "core_errors")
 LAG_WINDOW = 4096  # samples whose processing lag the statistics cover
 
 

@@ -307,11 +307,11 @@ def replay_json(file: str, samples: int, notes: list[str], diagnostics: dict, al
 
 
 def input_problems(diagnostics: dict) -> dict:
-    """The detector's bad-input counters that are not zero."""
-    return {k: v for k, v in diagnostics.items()
-            if k in ("bad_time", "duplicate_stamps", "out_of_order", "extra_samples", "missing_samples",
-                     "gap_resets", "time_resets", "nonfinite_ph", "out_of_range_ph", "nonfinite_command",
-                     "command_stale_episodes", "reference_resets") and v}
+    """The detector's bad-input counters that are not zero (wavelet_fdi.inputs.INPUT_PROBLEMS), and the
+    reference's resets."""
+    from wavelet_fdi.inputs import input_problems as problems
+
+    return problems(diagnostics, extra=("reference_resets",))
 
 
 def _replay_scenario(bag: str, fallback: str | None):
