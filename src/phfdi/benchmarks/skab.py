@@ -24,6 +24,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
+from phfdi.records import read_record
 from phfdi_base.errors import UserError
 from wavelet_fdi.learned_detector import LearnedSettings, fit_reference, learn, run_record
 from wavelet_fdi.peers import Peer, calibrate_peers, multichannel_states
@@ -80,8 +81,6 @@ def read_skab_csv(path: str | Path) -> SkabFile:
     """Read one SKAB file (``;``-separated, header row, ``datetime`` first) with the project's one reader
     (:func:`phfdi.records.read_record`); the benchmark is stricter than the reader's policy: a cell that is not a
     number, or a label other than 0 and 1, is refused (a UserError naming line and column), not marked missing."""
-    from phfdi.records import read_record
-
     p = Path(path)
     rec = read_record(p, required=SENSOR_COLUMNS)
     if rec.wall_clock is None:

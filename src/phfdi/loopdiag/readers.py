@@ -64,16 +64,17 @@ LOOP_OPTIONS = ("mode", "sample_time_s", "loop_tag", "time_format")
 
 
 def loop_column_map(op: str, pv: str, sp: str | None = None, time: str | None = None, *,
-                    source: str = "column mapping", **options) -> records.ColumnMap:
+                    mode: str | None = None, sample_time_s: float | None = None, loop_tag: str | None = None,
+                    time_format: str | None = None, source: str = "column mapping") -> records.ColumnMap:
     """The one column map (:class:`phfdi.records.ColumnMap`, signals ``op_pct``, ``pv``, ``sp``, ``time_s``) of
-    a loop whose OP, PV, SP and time sit in these columns; ``options``: ``mode``, ``sample_time_s``,
-    ``loop_tag``, ``time_format`` (None or empty: not given).
+    a loop whose OP, PV, SP and time sit in these columns (None or empty: not given).
 
     ``time`` None: no time column; ``sample_time_s`` gives the spacing. ``sp`` None: no setpoint column (the
     control error is then PV about its mean)."""
     data: dict = {"op_pct": op, "pv": pv}
     data.update({LOOP_KEYS[k]: v for k, v in (("sp", sp), ("time", time)) if v})
-    data.update({k: v for k, v in options.items() if k in LOOP_OPTIONS and v not in (None, "")})
+    options = {"mode": mode, "sample_time_s": sample_time_s, "loop_tag": loop_tag, "time_format": time_format}
+    data.update({k: v for k, v in options.items() if v not in (None, "")})
     return records.ColumnMap.from_mapping(data, source)
 
 
