@@ -241,16 +241,22 @@ def _named_lines(iso: dict, verdict: str | None, u: str) -> list[str]:
     began = "" if iso.get("start_time") is None else f" from about {iso['start_time']:g} {u}"
     size = f"{iso['size']:g} {iso['unit']}".strip()
     conf = iso.get("confirmation") or {}
-    change = ", ".join(f"{exceedance(v, conf['thresholds'][k], '>' if v > conf['thresholds'][k] else '<=')}"
+    # each statistic against its margin: the change over the window, the jump at its start (an offset's)
+    change = ", ".join(f"{_STATISTIC_WORDS.get(k, k)} "
+                       f"{exceedance(v, conf['thresholds'][k], '>' if v > conf['thresholds'][k] else '<=')}"
                        for k, v in (conf.get("statistics") or {}).items() if k in conf.get("thresholds", {}))
     if verdict == "outside calibration":
         why = ("no healthy re-adaptation fits either" if iso["fault_class"] == "unexplained"
                else f"best explained as healthy operation re-adapted: {iso['description']} ({size})")
-        return [f"  outside calibration, not a fault: the innovations' change against the run's own past {change} "
-                f"(the margin); {why}"]
+        return [f"  outside calibration, not a fault: the innovations' change against the run's own past: {change} "
+                f"(the margins); {why}"]
     out = [f"  named: {iso['family']} fault, {iso['description']} ({size}{began}; "
            f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)"]
     if change:
-        out.append(f"  confirmed: the innovations' change against the run's own past {change} (the margin), and the "
-                   f"probe fault fits better than any feed's re-adapted strength")
+        out.append(f"  confirmed: the innovations' change against the run's own past: {change} (the margins), and "
+                   f"the probe fault fits better than any feed's re-adapted strength")
     return out
+
+
+#: the confirmation's statistics as a report names them (wavelet_fdi.estimator_isolation)
+_STATISTIC_WORDS = {"change": "over the window", "jump": "at its start"}

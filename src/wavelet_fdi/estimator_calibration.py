@@ -66,9 +66,10 @@ def calibrate_estimator(runs: Runs, start: EstimatorReference, settings: Learned
         nulls += null_statistics(fold, t, rows)
     confirm = confirmation_thresholds(nulls, alpha)
     confirm.update(held_out=held_out,
-                   design=(f"a healthy deviation confirmed as a fault with probability {alpha:.2g}, the change "
-                           f"statistic's null measured on {'leave-one-run-out' if held_out else 'in-sample'} "
-                           f"residuals of {len(runs)} run(s), its tail beyond the 90th percentile exponential"))
+                   design=(f"a healthy deviation confirmed as a fault with probability {alpha:.2g} at most, split "
+                           f"equally among the statistics {', '.join(confirm['thresholds'])}; each null measured "
+                           f"on {'leave-one-run-out' if held_out else 'in-sample'} residuals of {len(runs)} run(s), "
+                           f"its tail beyond the 90th percentile exponential"))
     ref = replace(ref, confirm=confirm)
     return calibrate_bands(ref, runs, settings, {**(source or {}), "bands_from": "leave-one-run-out residuals"
                                                  if held_out else "the run's own residuals"}, folds)

@@ -42,16 +42,21 @@ means a fault. An alarm is confirmed when all of these hold:
    beyond a calibrated margin. The innovations are normalised by the filter's own predicted variance, which grows
    where the pumps move the pH fast or the curve is steep, and the run is compared with itself in the same pump
    state, so neither a day noisier than the calibration's nor the pumps' stroke ripple reads as a change; a probe
-   that jumps, drifts, freezes, lags or turns noisy does change it;
+   that jumps, drifts, freezes, lags or turns noisy does change it; or, for a probe offset only, ``jump``
+   (:func:`jump_statistic`): the same test, one-sided, on the window's first ``JUMP_SAMPLES`` innovations, where a
+   probe that jumped puts its evidence before the filter follows it (and before a controller acting on the
+   reading moves the pH back), where the reading itself stepped once, by at least ``STEP_SHARE`` of the offset
+   named (:func:`_reading_stepped`);
 2. the sensor hypothesis that fits best beats every healthy re-adaptation (a feed's strength) in the likelihood
    of the window, and gains more over healthy than a one-parameter fit of a well-specified model
-   gains by chance with probability ``alpha`` (half the chi-square(1) quantile);
+   gains by chance with probability ``alpha`` / 2 (half the chi-square(1) quantile);
 3. a probe that lost its noise is not confirmed while no feed runs (a still flask reads quiet too).
 
-The margin of 1 is the value healthy operation exceeds with probability ``alpha`` (:data:`DEFAULT_ALPHA`, 1e-3 per
-deviation): the statistic is sampled on leave-one-run-out residuals of the calibration runs (each run by the
-reference fitted on the others) at every block, in the windows both kinds of alarm have, and its tail beyond the
-90th percentile taken as exponential (:func:`confirmation_thresholds`). An alarm not confirmed is a deviation no
+Each margin of 1 (change, jump) is the value healthy operation exceeds with probability ``alpha`` / 2
+(:data:`DEFAULT_ALPHA`, 1e-3 per deviation, split equally between the two: Bonferroni): each statistic is
+sampled on leave-one-run-out residuals of the calibration runs (each run by the reference fitted on the others)
+at every block, in the windows both kinds of alarm have, and its tail beyond the 90th percentile taken as
+exponential (:func:`confirmation_thresholds`). An alarm not confirmed is a deviation no
 fault explains: the detector reports it as "outside calibration" (WARN), never as a fault, with its best healthy
 explanation.
 
@@ -104,8 +109,18 @@ STATE_MIN_SAMPLES = 16
 #: the span of a pump's recent mean flow that the change test's pump state holds (s): three times the rig's mixing
 #: zone's time constant as fitted (5-11 s, docs/diagnosis.md)
 SETTLE_S = 30.0
-#: the confirmation's statistics (module doc)
-CONFIRM_STATISTICS = ("change",)
+#: the confirmation's statistics (module doc); the design probability is split equally among them (Bonferroni)
+CONFIRM_STATISTICS = ("change", "jump")
+#: the fault hypotheses each confirmation statistic is evidence for: a scale change over the window is made by
+#: every probe fault; large innovations at its start only by one that jumped (a drift starts small, a frozen or
+#: noisy probe changes the whole window)
+CONFIRMS = {"change": ("probe_offset", "probe_drift", "probe_noise"), "jump": ("probe_offset",)}
+#: the jump confirms an offset only where the reading stepped once at the window's start: by at least this share of
+#: the offset named, and no other step of it as large as this share of that step
+STEP_SHARE = 0.5
+#: the innovations at the window's start that the jump statistic reads (samples): chosen before any run was scored
+#: with it, as the head of a window whose change time is placed within 2 samples of a jump (change_index)
+JUMP_SAMPLES = 8
 #: the sensor fault hypotheses (what a confirmed alarm is named by)
 SENSOR_CLASSES = ("probe_offset", "probe_drift", "probe_noise")
 #: the null's tail: exponential beyond this quantile (a generalised Pareto tail of shape 0)
@@ -222,6 +237,7 @@ def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _
     f, x = _fit(noise_cost, log_range)  # type: ignore[arg-type]
     out["probe_noise"] = (healthy_tracking - f, math.exp(x))
     out["noise_vs_run"] = (change_statistic(tracking, t_s, rows, w), 0.0)
+    out["jump_vs_run"] = (jump_statistic(tracking, t_s, rows, w), 0.0)
     if noise_only:
         return out
     elapsed_min = (tw - tw[0]) / 60.0
@@ -273,6 +289,25 @@ def pump_states(t_s: np.ndarray, flows: np.ndarray) -> np.ndarray:
     return (code * (256 ** np.arange(q.shape[1]))).sum(axis=1)
 
 
+def _innovations_by_state(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """From the stretch before the window to its end: the filter's standardised innovations (tracking, nothing
+    adapting, no limit), the reading's second difference, each row's pump state (:func:`pump_states`) and its
+    record index."""
+    m = len(tracking.feeds)
+    raw = replace(tracking, clip_sigma=0.0)
+    stream = w.before.fork(raw)
+    r = stream.residuals(t_s[w.pre:w.b], rows[w.pre:w.b])[:, 0]
+    lead = max(0, w.pre - int(4 * SETTLE_S / max(float(np.median(np.diff(t_s[w.pre:w.b]))), 1e-3)))
+    states = pump_states(t_s[lead:w.b], np.asarray(rows[lead:w.b], dtype=float)[:, :m])[w.pre - lead:]
+    # the reading's own second difference: what a probe that froze or turned sluggish loses, a still or slowly
+    # curving pH does not (the innovations stay near their scale then: the filter follows the reading)
+    ph = np.asarray(rows[w.pre:w.b], dtype=float)[:, m]
+    d2 = np.full(len(ph), np.nan)
+    d2[2:] = ph[2:] - 2.0 * ph[1:-1] + ph[:-2]
+    return r, d2, states, np.arange(w.pre, w.b)
+
+
 def change_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window) -> float:
     """How far the window's innovations changed scale against the run's own stretch before it, pump state by pump
     state (:func:`pump_states`): the profile likelihood ratio of one factor s on the window's variance, each pump
@@ -281,26 +316,30 @@ def change_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.nda
     same on the reading's second difference; the larger. A window sample whose pump state the stretch before did
     not show at least ``STATE_MIN_SAMPLES`` times says nothing (its state's noise is unknown to the run); none
     left: 0."""
-    m = len(tracking.feeds)
-    raw = replace(tracking, clip_sigma=0.0)
-    stream = w.before.fork(raw)
-    r = stream.residuals(t_s[w.pre:w.b], rows[w.pre:w.b])[:, 0]
-    lead = max(0, w.pre - int(4 * SETTLE_S / max(float(np.median(np.diff(t_s[w.pre:w.b]))), 1e-3)))
-    states = pump_states(t_s[lead:w.b], np.asarray(rows[lead:w.b], dtype=float)[:, :m])[w.pre - lead:]
-    k = np.arange(w.pre, w.b)
-    # the reading's own second difference: what a probe that froze or turned sluggish loses, a still or slowly
-    # curving pH does not (the innovations stay near their scale then: the filter follows the reading)
-    ph = np.asarray(rows[w.pre:w.b], dtype=float)[:, m]
-    d2 = np.full(len(ph), np.nan)
-    d2[2:] = ph[2:] - 2.0 * ph[1:-1] + ph[:-2]
+    r, d2, states, k = _innovations_by_state(tracking, t_s, rows, w)
     before, window = k < w.lo, k >= w.a
     return max(_scale_change(r ** 2, before, window, states), _scale_change(d2 ** 2, before, window, states))
 
 
-def _scale_change(square: np.ndarray, before: np.ndarray, window: np.ndarray, states: np.ndarray) -> float:
+def jump_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window) -> float:
+    """The same scale change as :func:`change_statistic`, on the innovations of the window's first
+    ``JUMP_SAMPLES`` only (from the change time): where an abrupt fault (a probe that jumped) puts its evidence
+    before the tracking filter follows it. Over the whole window those few large innovations are diluted among
+    the ones after them; a controller that moves the pH back after a biased reading hides the rest (on the
+    closed-loop rig run a 0.4 pH bias gave a change of 21.9 against a margin of 86.2)."""
+    r, _, states, k = _innovations_by_state(tracking, t_s, rows, w)
+    before, head = k < w.lo, (k >= w.a) & (k < w.a + JUMP_SAMPLES)
+    # one-sided: a jump is large innovations; a few quiet ones are what any pause of the pumps gives (a probe that
+    # froze is the whole window's change)
+    return _scale_change(r ** 2, before, head, states, upward=True)
+
+
+def _scale_change(square: np.ndarray, before: np.ndarray, window: np.ndarray, states: np.ndarray,
+                  upward: bool = False) -> float:
     """The profile likelihood ratio of one factor s^2 on the window's mean square (Gaussian values), each pump
     state with a variance of its own estimated from both stretches; states with fewer than
-    ``STATE_MIN_SAMPLES`` usable samples before the window are left out (none left: 0)."""
+    ``STATE_MIN_SAMPLES`` usable samples before the window are left out (none left: 0). ``upward``: s^2 >= 1 only
+    (one-sided: a rise in scale)."""
     ok = np.isfinite(square)
     before, window = before & ok, window & ok
     sums = []
@@ -319,14 +358,14 @@ def _scale_change(square: np.ndarray, before: np.ndarray, window: np.ndarray, st
         var = (s_b + s_w / s2) / (n_b + n_w)
         return float(0.5 * np.sum((n_b + n_w) * np.log(np.maximum(var, floor)) + n_w * log_s2))
 
-    res = minimize_scalar(profile, bounds=(math.log(1e-4), math.log(1e4)), method="bounded",
+    res = minimize_scalar(profile, bounds=(0.0 if upward else math.log(1e-4), math.log(1e4)), method="bounded",
                           options={"xatol": 1e-4})
     return max(0.0, profile(0.0) - float(res.fun))
 
 
 def confirmation_statistics(evidence: dict) -> dict[str, float]:
-    """The confirmation's statistics (module doc) from a window's hypotheses: ``change``."""
-    return {"change": evidence["noise_vs_run"][0]}
+    """The confirmation's statistics (module doc) from a window's hypotheses: ``change`` and ``jump``."""
+    return {"change": evidence["noise_vs_run"][0], "jump": evidence["jump_vs_run"][0]}
 
 
 def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_index: int,
@@ -348,8 +387,7 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     conf = dict(ref.confirm or {})
     ev = _hypotheses(ref, t_s, rows, w, noise_only=noise_alarm)
     evidence = {name: {"log_likelihood_gain": round(g, 3), "size": round(x, 4), "unit": _unit(name)}
-                for name, (g, x) in ev.items() if name != "noise_vs_run"
-                and not name.startswith("t_")}
+                for name, (g, x) in ev.items() if not name.endswith("_vs_run")}
     result = {"window": [int(w.a), int(w.b)], "start_time": float(t_s[w.a]), "evidence": evidence}
     named = _best(ev, [k for k in ev if k in SENSOR_CLASSES or k.startswith("pump:")])
     if not conf.get("thresholds"):
@@ -357,11 +395,15 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     stats = confirmation_statistics(ev)
     margins = conf["thresholds"]
     ratios = {k: v / margins[k] for k, v in stats.items() if margins.get(k, 0) > 0}
-    confirmed_by = [k for k, r in ratios.items() if r > 1.0]
+    sensor = _best(ev, [k for k in SENSOR_CLASSES if k in ev])
+    # a statistic confirms only the faults that make it: a jump at the window's start is a step's (an offset's),
+    # and only where the reading itself stepped once, by at least half the offset named (a model that parted from
+    # the plant slowly is fitted by an offset too, with no step in the reading; a steep passage steps many times)
+    stepped = "probe_offset" in ev and _reading_stepped(ref, rows, w, ev["probe_offset"][1])
+    confirmed_by = [k for k, r in ratios.items() if r > 1.0 and sensor in CONFIRMS[k] and (k != "jump" or stepped)]
     confirmation = {"statistics": {k: round(v, 3) for k, v in stats.items()},
                     "thresholds": {k: margins[k] for k in stats if k in margins},
                     "confirmed_by": confirmed_by, "alpha_per_test": conf.get("alpha_per_test")}
-    sensor = _best(ev, [k for k in SENSOR_CLASSES if k in ev])
     healthy_ones = [k for k in ev if k.startswith("pump:") and ev[k][0] > 0]
     explanation = _best(ev, healthy_ones) if healthy_ones else None
     # a fault: the window changed beyond the margin AND a sensor fault explains it better than any healthy
@@ -380,6 +422,18 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
         return {**result, **_naming(sensor, ev), "confirmed": True, "confirmation": confirmation}
     named = explanation or "unexplained"
     return {**result, **_naming(named, ev), "confirmed": False, "confirmation": confirmation}
+
+
+def _reading_stepped(ref: EstimatorReference, rows: np.ndarray, w: _Window, offset_ph: float) -> bool:
+    """Whether the pH reading stepped once at the window's start: over its first ``JUMP_SAMPLES`` (and the two
+    samples before, the change time's uncertainty) the largest sample-to-sample change is at least ``STEP_SHARE`` of
+    the offset named, and no other change is as large as ``STEP_SHARE`` of it (a steep passage moves the reading
+    by large steps one after another; a probe that jumped moves it once)."""
+    ph = np.asarray(rows[max(w.a - 3, 0):w.a + JUMP_SAMPLES], dtype=float)[:, len(ref.feeds)]
+    steps = np.sort(np.nan_to_num(np.abs(np.diff(ph))))[::-1]
+    if not len(steps) or steps[0] < STEP_SHARE * abs(offset_ph):
+        return False
+    return len(steps) < 2 or steps[1] < STEP_SHARE * steps[0]
 
 
 def _feeds_ran(ref: EstimatorReference, rows: np.ndarray, w: _Window) -> bool:
@@ -443,8 +497,11 @@ def tail_threshold(values: Sequence[float], alpha: float, quantile: float = TAIL
 
 
 def confirmation_thresholds(nulls: Sequence[dict[str, float]], alpha: float = DEFAULT_ALPHA) -> dict:
-    """Each statistic's margin (:func:`tail_threshold`) from the pooled null values."""
-    tails = {k: tail_threshold([d[k] for d in nulls if k in d], alpha) for k in CONFIRM_STATISTICS
-             if sum(1 for d in nulls if k in d) >= 20}
+    """Each statistic's margin (:func:`tail_threshold`) from the pooled null values, at ``alpha`` split equally
+    among the statistics that have a null (Bonferroni: a healthy deviation passes any of them with probability at
+    most ``alpha``)."""
+    have = [k for k in CONFIRM_STATISTICS if sum(1 for d in nulls if k in d) >= 20]
+    per_test = alpha / max(len(have), 1)
+    tails = {k: tail_threshold([d[k] for d in nulls if k in d], per_test) for k in have}
     return {"thresholds": {k: t["threshold"] for k, t in tails.items()}, "null_tail": tails,
-            "alpha_per_test": alpha}
+            "alpha_per_test": per_test, "alpha": alpha}

@@ -58,8 +58,11 @@ def _verdicts(model: LearnedModel, t: np.ndarray, rows: np.ndarray) -> list[dict
 def test_the_calibration_states_its_design_and_margin(calibrated):
     _, model = calibrated
     conf = model.reference.confirm
-    assert conf["held_out"] is True and conf["alpha_per_test"] == pytest.approx(1e-3)
-    assert conf["thresholds"]["change"] > 0 and conf["null_tail"]["change"]["n"] >= 100
+    # the design rate 1e-3 split equally between the two statistics (Bonferroni)
+    assert conf["held_out"] is True and conf["alpha"] == pytest.approx(1e-3)
+    assert conf["alpha_per_test"] == pytest.approx(5e-4)
+    for statistic in ("change", "jump"):
+        assert conf["thresholds"][statistic] > 0 and conf["null_tail"][statistic]["n"] >= 100
     assert model.source["bands_from"] == "leave-one-run-out residuals"
     back = LearnedModel.from_dict(model.to_dict())
     assert back.reference.confirm == model.reference.confirm
@@ -146,3 +149,33 @@ def test_deviations_no_fault_explains_are_announced_once_per_hold(calibrated, mo
         assert announced == expect_announced, [(a["detection_index"], a["verdict"], a["announced"]) for a in raised]
         quiet = [e for e in events if not e.announce]
         assert all(e.kind in ("deviation", "outside_calibration", "cleared") for e in quiet)
+
+
+def test_the_jump_statistic_is_one_sided_and_the_scale_change_is_not():
+    """A few large innovations at the window's start raise the jump; a few quiet ones (any pause of the pumps)
+    do not, though the two-sided change sees both (values drawn from the test's own generator)."""
+    from wavelet_fdi.estimator_isolation import _scale_change
+
+    rng = np.random.default_rng(7)
+    square = rng.standard_normal(300) ** 2
+    states = np.zeros(300, dtype=int)
+    before, head = np.arange(300) < 280, np.arange(300) >= 280
+    loud, quiet = square.copy(), square.copy()
+    loud[280:288] *= 100.0  # innovations 10 times their scale
+    quiet[280:288] *= 0.01
+    assert _scale_change(loud, before, head & (np.arange(300) < 288), states, upward=True) > 50.0
+    assert _scale_change(quiet, before, head & (np.arange(300) < 288), states, upward=True) == pytest.approx(0.0, abs=1e-6)
+    assert _scale_change(quiet, before, head & (np.arange(300) < 288), states) > 10.0
+
+
+def test_the_design_rate_is_split_between_the_statistics():
+    """Two statistics with the same null get the same margin, each at alpha / 2: the margin of one statistic
+    alone at alpha / 2 (Bonferroni: a healthy deviation passes either with probability at most alpha)."""
+    from wavelet_fdi.estimator_isolation import confirmation_thresholds, tail_threshold
+
+    rng = np.random.default_rng(11)
+    values = rng.exponential(3.0, 500)
+    conf = confirmation_thresholds([{"change": v, "jump": v} for v in values], alpha=1e-3)
+    alone = tail_threshold(values, 5e-4)["threshold"]
+    assert conf["alpha_per_test"] == pytest.approx(5e-4)
+    assert conf["thresholds"] == {"change": alone, "jump": alone}

@@ -52,9 +52,13 @@ def test_a_hidden_probe_fault_is_found_after_its_onset(fold, capsys, kind, size,
     faulty = out / f"{kind}.csv"
     assert main(["inject", str(record), "--map", "ph_rig", "--fault", kind, "--onset", str(onset), "--size", size,
                  "--out", str(faulty)]) == 0
-    alarms = _alarms(capsys, faulty, ref)
-    assert alarms, f"{kind}: no alarm"
-    assert alarms[0]["detection_time"] >= onset, f"{kind}: an alarm before the onset"
+    everything = _alarms(capsys, faulty, ref)
+    assert everything and everything[0]["detection_time"] >= onset, f"{kind}: a deviation before the onset"
+    # every deviation was judged (the record goes on long after each), also one that cleared before its verdict
+    assert "pending" not in [a.get("verdict") for a in everything]
+    # the fault alarms (ALARM); a deviation the verdict leaves outside calibration (WARN) may come first
+    alarms = [a for a in everything if a.get("verdict", "fault") == "fault"]
+    assert alarms, f"{kind}: no fault alarm, only {[a.get('verdict') for a in everything]}"
     assert alarms[0]["detection_time"] - onset < within_s
     # named, and named a sensor fault, in the summary whether the alarm cleared before the record ended or not
     assert (alarms[0].get("isolation") or {}).get("family") == "sensor", alarms[0].get("isolation")

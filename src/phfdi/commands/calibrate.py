@@ -277,11 +277,13 @@ def print_confirmation(ref) -> None:
     conf = getattr(ref, "confirm", None) or {}
     if not conf.get("thresholds"):
         return
-    tail = conf["null_tail"]["change"]
+    tails = conf["null_tail"]
+    margins = " or ".join(f"its {k} statistic exceeds {conf['thresholds'][k]:.2f}" for k in conf["thresholds"])
+    n = min(t["n"] for t in tails.values())
     print(f"  fault confirmation: a deviation is a fault alarm when the innovations' change against the run's own "
-          f"past exceeds {conf['thresholds']['change']:.2f} and a probe fault explains it better than any feed's "
-          f"apparent strength; healthy operation exceeds that margin with probability {conf['alpha_per_test']:g} "
-          f"({tail['n']} null values from {'each run held out' if conf.get('held_out') else 'the one run itself'}); "
+          f"past says so ({margins}) and a probe fault explains it better than any feed's apparent strength; "
+          f"healthy operation exceeds each margin with probability {conf['alpha_per_test']:g} "
+          f"({n} null values each, from {'each run held out' if conf.get('held_out') else 'the one run itself'}); "
           f"else it is a deviation outside calibration (WARN)")
     if not conf.get("held_out"):
         print("  note: one calibration run: the scales and the margin come from that run itself, not from a day it did "
