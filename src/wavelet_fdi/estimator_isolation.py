@@ -236,8 +236,9 @@ def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _
 
     f, x = _fit(noise_cost, log_range)  # type: ignore[arg-type]
     out["probe_noise"] = (healthy_tracking - f, math.exp(x))
-    out["noise_vs_run"] = (change_statistic(tracking, t_s, rows, w), 0.0)
-    out["jump_vs_run"] = (jump_statistic(tracking, t_s, rows, w), 0.0)
+    seen = _innovations_by_state(tracking, t_s, rows, w)  # once for both statistics (the null samples thousands)
+    out["noise_vs_run"] = (change_statistic(tracking, t_s, rows, w, seen), 0.0)
+    out["jump_vs_run"] = (jump_statistic(tracking, t_s, rows, w, seen), 0.0)
     if noise_only:
         return out
     elapsed_min = (tw - tw[0]) / 60.0
@@ -308,26 +309,28 @@ def _innovations_by_state(tracking: EstimatorReference, t_s: np.ndarray, rows: n
     return r, d2, states, np.arange(w.pre, w.b)
 
 
-def change_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window) -> float:
+def change_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window,
+                     seen: tuple | None = None) -> float:
     """How far the window's innovations changed scale against the run's own stretch before it, pump state by pump
     state (:func:`pump_states`): the profile likelihood ratio of one factor s on the window's variance, each pump
     state keeping a variance of its own (estimated on both stretches), from the filter's standardised innovations
     (tracking, nothing adapting, no limit: they are normalised by the filter's own predicted variance), and the
     same on the reading's second difference; the larger. A window sample whose pump state the stretch before did
     not show at least ``STATE_MIN_SAMPLES`` times says nothing (its state's noise is unknown to the run); none
-    left: 0."""
-    r, d2, states, k = _innovations_by_state(tracking, t_s, rows, w)
+    left: 0. ``seen``: :func:`_innovations_by_state` of this window, when already computed."""
+    r, d2, states, k = seen or _innovations_by_state(tracking, t_s, rows, w)
     before, window = k < w.lo, k >= w.a
     return max(_scale_change(r ** 2, before, window, states), _scale_change(d2 ** 2, before, window, states))
 
 
-def jump_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window) -> float:
+def jump_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window,
+                   seen: tuple | None = None) -> float:
     """The same scale change as :func:`change_statistic`, on the innovations of the window's first
     ``JUMP_SAMPLES`` only (from the change time): where an abrupt fault (a probe that jumped) puts its evidence
     before the tracking filter follows it. Over the whole window those few large innovations are diluted among
     the ones after them; a controller that moves the pH back after a biased reading hides the rest (on the
     closed-loop rig run a 0.4 pH bias gave a change of 21.9 against a margin of 86.2)."""
-    r, _, states, k = _innovations_by_state(tracking, t_s, rows, w)
+    r, _, states, k = seen or _innovations_by_state(tracking, t_s, rows, w)
     before, head = k < w.lo, (k >= w.a) & (k < w.a + JUMP_SAMPLES)
     # one-sided: a jump is large innovations; a few quiet ones are what any pause of the pumps gives (a probe that
     # froze is the whole window's change)
