@@ -118,3 +118,21 @@ def test_detector_settings_go_with_the_estimator_and_row_windows_do_not(tmp_path
     settings = json.loads(out.read_text())["settings"]
     assert settings["repeat_probability"] == 0.0
     assert settings["energy_variance_ratio"] == 4.0  # the estimator's other settings kept
+
+
+def test_a_small_bias_the_controller_hides_is_a_confirmed_fault(fold, capsys):
+    """A 0.4 pH bias hidden in the closed-loop run three quarters through: the controller moves the pH back within
+    seconds and the filter follows, so over the verdict's window the innovations hardly change (without the jump
+    at the window's start this was a deviation outside calibration); named a probe offset of about 0.4 pH."""
+    record, ref, out = fold
+    onset = 754.22  # the benchmark's third onset on this run (benchmarks/rig_detection.py, ONSET_FRACTIONS)
+    faulty = out / "small_bias.csv"
+    assert main(["inject", str(record), "--map", "ph_rig", "--fault", "probe_bias", "--onset", str(onset),
+                 "--size", "0.4", "--out", str(faulty)]) == 0
+    everything = _alarms(capsys, faulty, ref)
+    assert everything and everything[0]["detection_time"] >= onset, everything[:1]
+    faults = [a for a in everything if a.get("verdict") == "fault"]
+    assert faults, [a.get("verdict") for a in everything]
+    iso = faults[0]["isolation"]
+    assert iso["fault_class"] == "probe_offset" and 0.3 < iso["size"] < 0.5, iso
+    assert "jump" in iso["confirmation"]["confirmed_by"], iso["confirmation"]
