@@ -237,6 +237,10 @@ def _alarm_lines(a: dict, u: str) -> list[str]:
     return out
 
 
+#: the confirmation's statistics as a report names them (wavelet_fdi.estimator_isolation)
+_STATISTIC_WORDS = {"change": "over the window", "jump": "at its start"}
+
+
 def _named_lines(iso: dict, verdict: str | None, u: str) -> list[str]:
     began = "" if iso.get("start_time") is None else f" from about {iso['start_time']:g} {u}"
     size = f"{iso['size']:g} {iso['unit']}".strip()
@@ -257,6 +261,3 @@ def _named_lines(iso: dict, verdict: str | None, u: str) -> list[str]:
                    f"the probe fault fits better than any feed's re-adapted strength")
     return out
 
-
-#: the confirmation's statistics as a report names them (wavelet_fdi.estimator_isolation)
-_STATISTIC_WORDS = {"change": "over the window", "jump": "at its start"}

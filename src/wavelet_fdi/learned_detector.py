@@ -540,13 +540,13 @@ class LearnedDetector:
             a["isolation"] = iso
             self._to_name.remove(a)
             self._named.append(a["alarm_id"])
-            when = float(self._ring_t[(end - 1) % NAMING_RING])
             if self.confirming:
                 # made at this block boundary: a deviation that cleared after its window ended but before the
                 # boundary has its clearing event out already, so the verdict comes after it, not before
                 at = max(end - 1, int(a.get("cleared_index", -1)))
                 events += self._verdict(a, iso, float(self._ring_t[at % NAMING_RING]), at)
                 continue
+            when = float(self._ring_t[(end - 1) % NAMING_RING])
             events.append(LearnedEvent("named", when, end - 1, "ERROR" if self.in_alarm else "OK",
                                        f"alarm {a['alarm_id']} named: {iso['family']} fault, {iso['description']} "
                                        f"({iso['size']:g} {iso['unit']})", dict(a)))
