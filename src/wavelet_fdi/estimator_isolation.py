@@ -49,16 +49,25 @@ means a fault. An alarm is confirmed when all of these hold:
    named (:func:`_reading_stepped`);
 2. the sensor hypothesis that fits best beats every healthy re-adaptation (a feed's strength) in the likelihood
    of the window, and gains more over healthy than a one-parameter fit of a well-specified model
-   gains by chance with probability ``alpha`` / 2 (half the chi-square(1) quantile);
+   gains by chance with the probability each test has (half the chi-square(1) quantile);
 3. a probe that lost its noise is not confirmed while no feed runs (a still flask reads quiet too).
 
-Each margin of 1 (change, jump) is the value healthy operation exceeds with probability ``alpha`` / 2
-(:data:`DEFAULT_ALPHA`, 1e-3 per deviation, split equally between the two: Bonferroni): each statistic is
-sampled on leave-one-run-out residuals of the calibration runs (each run by the reference fitted on the others)
-at every block, in the windows both kinds of alarm have, and its tail beyond the 90th percentile taken as
-exponential (:func:`confirmation_thresholds`). An alarm not confirmed is a deviation no
-fault explains: the detector reports it as "outside calibration" (WARN), never as a fault, with its best healthy
-explanation.
+**Looks.** A deviation is first judged ``AFTER_DETECTION_SAMPLES`` (64) after its detection. One that no fault
+explained then and that is still up is looked at again, its window kept longer after the detection (from the same
+start): 128, 256 and 512 samples (:data:`LOOK_AFTER_SAMPLES`), each time all three conditions above with the
+change over the longer window as ``change@N`` against its own margin. Why: the change's evidence from a fault
+grows with the samples it has been in the window, and a fault that starts small (a drift) or a noise change
+against a short stretch of the run in the same pump state had not yet passed the first margin (a probe turning
+noisy on the closed-loop rig run: change 76.7 at the first look, 163 at the second). A look that confirms
+makes the deviation a fault alarm; the WARN before it stays in the log.
+
+Each margin (change, jump, change@128, change@256, change@512) is the value healthy operation exceeds with
+probability ``alpha`` / 5 (:data:`DEFAULT_ALPHA`, 1e-3 per deviation, split equally among the five tests a
+deviation can pass: Bonferroni): each statistic is sampled on leave-one-run-out residuals of the calibration runs
+(each run by the reference fitted on the others) at every block, in the windows both kinds of alarm have (a later
+look's where the run goes on that long), and its tail beyond the 90th percentile taken as exponential
+(:func:`confirmation_thresholds`). An alarm not confirmed is a deviation no fault explains: the detector reports
+it as "outside calibration" (WARN), never as a fault, with its best healthy explanation.
 
 Tried and not kept (2026-12-05, docs/detector.md): the offset and drift likelihood ratios over the pumps' as
 confirmation statistics with margins from the same held-out null (their null depends on the operation: its 99th
@@ -83,6 +92,12 @@ from .statistics import parse_statistic
 
 #: samples after the detection that the window keeps (when the record has them)
 AFTER_DETECTION_SAMPLES = 64
+#: the looks at a deviation that no fault explained yet and that is still up: the window then keeps this many
+#: samples after the detection, each look twice the last (the change statistic's evidence grows with the samples a
+#: fault has been in the window, a healthy window's only as far as the model parts from the plant); the first is
+#: AFTER_DETECTION_SAMPLES. Each look is one more test the design probability is split among (Bonferroni), and
+#: four looks end about three minutes after a detection on the rig
+LOOK_AFTER_SAMPLES = (AFTER_DETECTION_SAMPLES, 128, 256, 512)
 #: how far before the detector's onset the change time is looked for (samples): the onset is the statistic's
 #: last zero seen through the causal filter bank, up to its length (22 samples for sym4, level 2) after the change
 ONSET_LOOKBACK_SAMPLES = 32
@@ -109,12 +124,15 @@ STATE_MIN_SAMPLES = 16
 #: the span of a pump's recent mean flow that the change test's pump state holds (s): three times the rig's mixing
 #: zone's time constant as fitted (5-11 s, docs/diagnosis.md)
 SETTLE_S = 30.0
-#: the confirmation's statistics (module doc); the design probability is split equally among them (Bonferroni)
-CONFIRM_STATISTICS = ("change", "jump")
+#: the confirmation's statistics (module doc); the design probability is split equally among them (Bonferroni):
+#: at the first look the change and the jump, at each later look the change over the longer window
+#: (``change@N``, N samples after the detection: :data:`LOOK_AFTER_SAMPLES`)
+CONFIRM_STATISTICS = ("change", "jump", *(f"change@{n}" for n in LOOK_AFTER_SAMPLES[1:]))
 #: the fault hypotheses each confirmation statistic is evidence for: a scale change over the window is made by
 #: every probe fault; large innovations at its start only by one that jumped (a drift starts small, a frozen or
 #: noisy probe changes the whole window)
-CONFIRMS = {"change": ("probe_offset", "probe_drift", "probe_noise"), "jump": ("probe_offset",)}
+CONFIRMS = {"change": ("probe_offset", "probe_drift", "probe_noise"), "jump": ("probe_offset",),
+            **{f"change@{n}": ("probe_offset", "probe_drift", "probe_noise") for n in LOOK_AFTER_SAMPLES[1:]}}
 #: the jump confirms an offset only where the reading stepped once at the window's start: by at least this share of
 #: the offset named, and no other step of it as large as this share of that step
 STEP_SHARE = 0.5
@@ -182,7 +200,7 @@ class _Window:
 
 
 def _window(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_index: int, detection_index: int,
-            noise_alarm: bool) -> _Window:
+            noise_alarm: bool, after: int = AFTER_DETECTION_SAMPLES) -> _Window:
     n = len(rows)
     onset = max(1, min(int(onset_index), n - 1))
     det = min(n - 1, max(int(detection_index), onset))
@@ -200,7 +218,7 @@ def _window(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     k = None if noise_alarm else change_index(run.fork().residuals(t_s[lo:det + 1], rows[lo:det + 1])[:, 0])
     a = onset if k is None else lo + k
     run.residuals(t_s[lo:a], rows[lo:a])
-    return _Window(a, min(n, det + AFTER_DETECTION_SAMPLES), run, before, pre, lo)
+    return _Window(a, min(n, det + after), run, before, pre, lo)
 
 
 def _fit(cost, bounds: tuple[float, float]) -> tuple[float, float]:
@@ -239,6 +257,7 @@ def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _
     seen = _innovations_by_state(tracking, t_s, rows, w)  # once for both statistics (the null samples thousands)
     out["noise_vs_run"] = (change_statistic(tracking, t_s, rows, w, seen), 0.0)
     out["jump_vs_run"] = (jump_statistic(tracking, t_s, rows, w, seen), 0.0)
+    out["compared_vs_run"] = (float(_compared_samples(seen, w)), 0.0)
     if noise_only:
         return out
     elapsed_min = (tw - tw[0]) / 60.0
@@ -323,6 +342,15 @@ def change_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.nda
     return max(_scale_change(r ** 2, before, window, states), _scale_change(d2 ** 2, before, window, states))
 
 
+def _compared_samples(seen: tuple, w: _Window) -> int:
+    """The window's samples the change statistic compares with the run's own past: those in a pump state the
+    stretch before showed at least ``STATE_MIN_SAMPLES`` times."""
+    r, _, states, k = seen
+    before, window = (k < w.lo) & np.isfinite(r), (k >= w.a) & np.isfinite(r)
+    known, counts = np.unique(states[before], return_counts=True)
+    return int(np.isin(states[window], known[counts >= STATE_MIN_SAMPLES]).sum())
+
+
 def jump_statistic(tracking: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window,
                    seen: tuple | None = None) -> float:
     """The same scale change as :func:`change_statistic`, on the innovations of the window's first
@@ -366,13 +394,24 @@ def _scale_change(square: np.ndarray, before: np.ndarray, window: np.ndarray, st
     return max(0.0, profile(0.0) - float(res.fun))
 
 
-def confirmation_statistics(evidence: dict) -> dict[str, float]:
-    """The confirmation's statistics (module doc) from a window's hypotheses: ``change`` and ``jump``."""
-    return {"change": evidence["noise_vs_run"][0], "jump": evidence["jump_vs_run"][0]}
+def confirmation_statistics(evidence: dict, after: int = AFTER_DETECTION_SAMPLES) -> dict[str, float]:
+    """The confirmation's statistics (module doc) from a window's hypotheses: at the first look ``change`` and
+    ``jump``; at a later one (``after`` samples after the detection) the change over that window, ``change@after``
+    (the jump reads the window's first samples, which a later look does not change)."""
+    if after == AFTER_DETECTION_SAMPLES:
+        return {"change": evidence["noise_vs_run"][0], "jump": evidence["jump_vs_run"][0]}
+    return {f"change@{after}": evidence["noise_vs_run"][0]}
+
+
+def look_schedule(confirm: dict | None) -> tuple[int, ...]:
+    """The looks (samples after a detection) a calibration has margins for: the first always, a later one where
+    its ``change@N`` margin was calibrated (files written before 2026-12-06 have none: one look)."""
+    margins = (confirm or {}).get("thresholds") or {}
+    return (AFTER_DETECTION_SAMPLES, *(n for n in LOOK_AFTER_SAMPLES[1:] if f"change@{n}" in margins))
 
 
 def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_index: int,
-            detection_index: int, statistic: str = "") -> dict:
+            detection_index: int, statistic: str = "", after: int = AFTER_DETECTION_SAMPLES) -> dict:
     """Family, class and size of the fault behind an alarm, and whether one explains it (module docstring).
 
     ``rows``/``t_s``: the record from its start (the filter is re-run to the onset to get its state there).
@@ -380,13 +419,16 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     noise, only the noise hypothesis is fitted: a pump delivering other than recorded changes what the pH does,
     never how noisy its reading is.
 
+    ``after``: the look, the samples after the detection the window keeps (:data:`LOOK_AFTER_SAMPLES`; the
+    window's start is found as at the first look, from the rows up to the detection).
+
     Returns ``confirmed`` (True when the reference has no confirmation margins: every alarm is named as before)
     and, with margins, ``confirmation``: each statistic, its margin and which confirmed. An alarm not confirmed
     is named by the healthy explanation that fits best: a feed's apparent strength (``pump:<channel>``, "outside
     calibration") or none (``unexplained``).
     """
     noise_alarm = bool(statistic) and parse_statistic(statistic)[2] in NOISE_STATISTICS
-    w = _window(ref, t_s, rows, onset_index, detection_index, noise_alarm)
+    w = _window(ref, t_s, rows, onset_index, detection_index, noise_alarm, after)
     conf = dict(ref.confirm or {})
     ev = _hypotheses(ref, t_s, rows, w, noise_only=noise_alarm)
     evidence = {name: {"log_likelihood_gain": round(g, 3), "size": round(x, 4), "unit": _unit(name)}
@@ -395,7 +437,7 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     named = _best(ev, [k for k in ev if k in SENSOR_CLASSES or k.startswith("pump:")])
     if not conf.get("thresholds"):
         return {**result, **_naming(named, ev), "confirmed": True}
-    stats = confirmation_statistics(ev)
+    stats = confirmation_statistics(ev, after)
     margins = conf["thresholds"]
     ratios = {k: v / margins[k] for k, v in stats.items() if margins.get(k, 0) > 0}
     sensor = _best(ev, [k for k in SENSOR_CLASSES if k in ev])
@@ -403,7 +445,8 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     # and only where the reading itself stepped once, by at least half the offset named (a model that parted from
     # the plant slowly is fitted by an offset too, with no step in the reading; a steep passage steps many times)
     stepped = "probe_offset" in ev and _reading_stepped(ref, rows, w, ev["probe_offset"][1])
-    confirmed_by = [k for k, r in ratios.items() if r > 1.0 and sensor in CONFIRMS[k] and (k != "jump" or stepped)]
+    confirmed_by = [k for k, r in ratios.items()
+                    if r > 1.0 and sensor in CONFIRMS.get(k, ()) and (k != "jump" or stepped)]
     confirmation = {"statistics": {k: round(v, 3) for k, v in stats.items()},
                     "thresholds": {k: margins[k] for k in stats if k in margins},
                     "confirmed_by": confirmed_by, "alpha_per_test": conf.get("alpha_per_test")}
@@ -424,7 +467,14 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     if confirmed_by and not beaten and not still and not weak:
         return {**result, **_naming(sensor, ev), "confirmed": True, "confirmation": confirmation}
     named = explanation or "unexplained"
-    return {**result, **_naming(named, ev), "confirmed": False, "confirmation": confirmation}
+    # a later look only where this one compared the window with the run's own past, on at least as many samples
+    # as a pump state needs before the window to be compared at all: a deviation in pump states the run had not
+    # shown before is an operation new to the run (what a longer window adds there is the model parting from a
+    # plant in a state nobody calibrated, not evidence of a fault: docs/detector.md)
+    compared = int(ev["compared_vs_run"][0])
+    confirmation["compared_samples"] = compared
+    return {**result, **_naming(named, ev), "confirmed": False, "confirmation": confirmation,
+            "look_again": compared >= STATE_MIN_SAMPLES}
 
 
 def _reading_stepped(ref: EstimatorReference, rows: np.ndarray, w: _Window, offset_ph: float) -> bool:
@@ -475,12 +525,23 @@ def null_statistics(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray,
     from the change time found in the lookback; a noise statistic's: from its onset; :data:`NULL_ONSET_LAGS`):
     the null distribution the margin comes from."""
     block = ref.block_samples
+    tracking = replace(ref, adapt_time_constant_s=0.0)  # as _hypotheses runs it
     out = []
     for det in range(4 * block, len(rows) - 1, every_blocks * block):
         for kind, lags in NULL_ONSET_LAGS.items():
             for lag in lags:
                 w = _window(ref, t_s, rows, det - lag, det, kind == "noise")
-                out.append(confirmation_statistics(_hypotheses(ref, t_s, rows, w, noise_only=True)))
+                values = confirmation_statistics(_hypotheses(ref, t_s, rows, w, noise_only=True))
+                # the later looks: the same window kept longer, where the run has the rows (a look the record
+                # ends before is never made); the innovations once, to the longest, each shorter look their prefix
+                later = [after for after in LOOK_AFTER_SAMPLES[1:] if det + after <= len(rows)]
+                if later:
+                    seen = _innovations_by_state(tracking, t_s, rows, replace(w, b=det + later[-1]))
+                    for after in later:
+                        keep = seen[3] < det + after
+                        values[f"change@{after}"] = change_statistic(tracking, t_s, rows, replace(w, b=det + after),
+                                                                     tuple(v[keep] for v in seen))
+                out.append(values)
     return out
 
 

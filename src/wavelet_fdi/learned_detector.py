@@ -46,7 +46,7 @@ from .filterbank import CausalSwt, wavelet_filters
 from .healthy_range import checked_ranges, healthy_ranges, outside_masks
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
-from .references import NAMERS, Reference, reference_from_dict
+from .references import LOOKS, NAMERS, Reference, reference_from_dict
 from .repeat_test import RepeatTest
 from .statistics import CusumBank, energy_decrease_reference, energy_reference
 
@@ -445,6 +445,11 @@ class LearnedDetector:
         self._ring_x = np.full((NAMING_RING, len(self.inputs)), np.nan) if self.namer else np.empty((0, 0))
         self._to_name: list[dict] = []
         self._named: list[int] = []
+        # a deviation not confirmed that stays up is looked at again with more rows after its detection (the
+        # reference's looks; its confirmation has a margin for each): the ones waiting for their next look
+        looks = LOOKS.get(getattr(model.reference, "kind", ""))
+        self._looks: tuple[int, ...] = tuple(looks(model.reference)) if looks and self.namer else (NAMING_AFTER,)
+        self._relook: list[dict] = []
         # a confirming reference (its namer says whether a fault explains an alarm): alarms start as deviations
         self.confirming = self.namer is not None and bool(getattr(model.reference, "confirm", None))
         self._last_outside_t = -math.inf  # the last deviation outside calibration (the announcements' hold)
@@ -528,6 +533,8 @@ class LearnedDetector:
         for a in self.alarms[len(self._named_ids()):]:
             self._to_name.append(a)
         events = []
+        for a in list(self._relook):
+            events += self._look_again(a, upto)
         for a in list(self._to_name):
             end = a["detection_index"] + NAMING_AFTER
             if end > upto and not final:
@@ -545,12 +552,49 @@ class LearnedDetector:
                 # boundary has its clearing event out already, so the verdict comes after it, not before
                 at = max(end - 1, int(a.get("cleared_index", -1)))
                 events += self._verdict(a, iso, float(self._ring_t[at % NAMING_RING]), at)
+                self._wait_for_next_look(a, iso, 0, end)
                 continue
             when = float(self._ring_t[(end - 1) % NAMING_RING])
             events.append(LearnedEvent("named", when, end - 1, "ERROR" if self.in_alarm else "OK",
                                        f"alarm {a['alarm_id']} named: {iso['family']} fault, {iso['description']} "
                                        f"({iso['size']:g} {iso['unit']})", dict(a)))
         return events
+
+    def _wait_for_next_look(self, a: dict, iso: dict, look: int, end: int) -> None:
+        """After look ``look`` (its window ended at global index ``end``): a deviation no fault explained that is
+        still up then waits for the next look, if the reference has one and the namer did not say another look
+        cannot help (``look_again``)."""
+        cleared = a.get("cleared_index")
+        again = not iso.get("confirmed", True) and iso.get("look_again", True)
+        if again and look + 1 < len(self._looks) and (cleared is None or cleared >= end):
+            a["look"] = look + 1
+            self._relook.append(a)
+
+    def _look_again(self, a: dict, upto: int) -> list[LearnedEvent]:
+        """The next look at a deviation not confirmed so far, once its longer window ended by global index
+        ``upto`` (a record that ends first leaves the last look's verdict standing). A look that confirms it turns
+        it into a fault alarm (the WARN before it stays in the log); one that does not is only recorded on the
+        deviation (``looks``)."""
+        look = int(a["look"])
+        after = self._looks[look]
+        end = a["detection_index"] + after
+        if end > upto:
+            return []
+        self._relook.remove(a)
+        first = max(0, end - NAMING_WINDOW)
+        k = (np.arange(first, end)) % NAMING_RING
+        assert self.namer is not None, "looks are made only by a reference that names faults"
+        iso = self.namer(self._ring_t[k], self._ring_x[k], a["onset_index"] - first, a["detection_index"] - first,
+                         a["statistic"], after=after)
+        conf = iso.get("confirmation") or {}
+        a.setdefault("looks", []).append({"after_samples": after, "confirmed": bool(iso.get("confirmed")),
+                                          "statistics": conf.get("statistics")})
+        if not iso.get("confirmed"):
+            self._wait_for_next_look(a, iso, look, end)
+            return []
+        a["isolation"] = iso
+        at = max(end - 1, int(a.get("cleared_index", -1)))
+        return self._verdict(a, iso, float(self._ring_t[at % NAMING_RING]), at)
 
     def _verdict(self, a: dict, iso: dict, t_s: float, index: int) -> list[LearnedEvent]:
         """A deviation checked: a fault alarm (ERROR, always announced; followed by its clearing when the

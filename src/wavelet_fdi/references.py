@@ -38,7 +38,7 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 
-from .estimator_isolation import isolate
+from .estimator_isolation import isolate, look_schedule
 from .reference_estimator import EstimatorReference
 from .reference_learned import LearnedReference
 from .reference_oe import OutputErrorReference
@@ -70,6 +70,9 @@ KINDS: dict[str, Any] = {"arx": LearnedReference, "oe": OutputErrorReference, "e
 #: kinds whose alarms can be named (family, class, size): namer(reference, t_s, rows, onset_index,
 #: detection_index, statistic) -> dict, called by the detector on the rows it kept (LearnedDetector)
 NAMERS: dict[str, Any] = {"estimator": isolate}
+#: kinds whose namer looks again at a deviation it did not confirm while it stays up: looks(reference) -> the
+#: samples after the detection each look's window keeps, the first look's first (one look: never again)
+LOOKS: dict[str, Any] = {"estimator": lambda ref: look_schedule(ref.confirm)}
 
 
 def reference_from_dict(d: dict, where: str = "reference") -> Reference:
