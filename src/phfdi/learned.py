@@ -229,6 +229,9 @@ def _alarm_lines(a: dict, u: str) -> list[str]:
                    f"or an operation the calibration never saw)")
     if iso:
         out += _named_lines(iso, verdict, u)
+    looked = [lk["after_samples"] for lk in a.get("looks") or [] if not lk.get("confirmed")]
+    if looked:  # a deviation still up was looked at again with the rows after it: not confirmed then either
+        out.append(f"  looked at again {', '.join(map(str, looked))} samples after the detection: not confirmed")
     if a.get("cleared_time") is not None:
         ep = a.get("episode_contributions") or {}
         stamp = f" ({a['cleared_stamp']})" if a.get("cleared_stamp") else ""
@@ -241,12 +244,20 @@ def _alarm_lines(a: dict, u: str) -> list[str]:
 _STATISTIC_WORDS = {"change": "over the window", "jump": "at its start"}
 
 
+def _statistic_words(name: str) -> str:
+    """A confirmation statistic as a report names it; ``change@N``: a later look's change (its window kept N
+    samples after the detection)."""
+    if name.startswith("change@"):
+        return f"over the window to {name[7:]} samples after the detection"
+    return _STATISTIC_WORDS.get(name, name)
+
+
 def _named_lines(iso: dict, verdict: str | None, u: str) -> list[str]:
     began = "" if iso.get("start_time") is None else f" from about {iso['start_time']:g} {u}"
     size = f"{iso['size']:g} {iso['unit']}".strip()
     conf = iso.get("confirmation") or {}
     # each statistic against its margin: the change over the window, the jump at its start (an offset's)
-    change = ", ".join(f"{_STATISTIC_WORDS.get(k, k)} "
+    change = ", ".join(f"{_statistic_words(k)} "
                        f"{exceedance(v, conf['thresholds'][k], '>' if v > conf['thresholds'][k] else '<=')}"
                        for k, v in (conf.get("statistics") or {}).items() if k in conf.get("thresholds", {}))
     if verdict == "outside calibration":

@@ -136,3 +136,30 @@ def test_a_small_bias_the_controller_hides_is_a_confirmed_fault(fold, capsys):
     iso = faults[0]["isolation"]
     assert iso["fault_class"] == "probe_offset" and 0.3 < iso["size"] < 0.5, iso
     assert "jump" in iso["confirmation"]["confirmed_by"], iso["confirmation"]
+
+
+def test_a_noisy_probe_the_first_look_leaves_open_is_confirmed_at_a_later_one(fold, capsys):
+    """A probe turning noisy (0.15 pH added) three quarters through the closed-loop run: 64 samples after its
+    detection the change against the run's own past (in the same pump state) is below its margin, and the
+    deviation is outside calibration (WARN); still up, it is looked at again with a longer window, where the
+    change is beyond the margin of that look: a confirmed probe-noise fault, the look that confirmed it named."""
+    record, ref, out = fold
+    onset = 754.22  # the benchmark's third onset on this run (benchmarks/rig_detection.py, ONSET_FRACTIONS)
+    faulty = out / "noise_late.csv"
+    assert main(["inject", str(record), "--map", "ph_rig", "--fault", "probe_noise", "--onset", str(onset),
+                 "--size", "0.15", "--out", str(faulty)]) == 0
+    everything = _alarms(capsys, faulty, ref)
+    assert everything and everything[0]["detection_time"] >= onset, everything[:1]
+    faults = [a for a in everything if a.get("verdict") == "fault"]
+    assert faults, [a.get("verdict") for a in everything]
+    first = faults[0]
+    assert first["isolation"]["fault_class"] == "probe_noise" and first["isolation"]["size"] > 1.5, first["isolation"]
+    confirmed_by = first["isolation"]["confirmation"]["confirmed_by"]
+    assert confirmed_by and all(k.startswith("change@") for k in confirmed_by), confirmed_by
+    assert first["looks"][-1]["confirmed"] and not any(lk["confirmed"] for lk in first["looks"][:-1])
+    assert first["confirmed_time"] > first["detection_time"] + 64 * 0.3  # after the first look's 64 samples
+    # the report names the look that confirmed it, its change against that look's margin
+    from phfdi.learned import format_alarms
+
+    after = confirmed_by[0].split("@")[1]
+    assert f"over the window to {after} samples after the detection" in format_alarms([first])

@@ -278,12 +278,18 @@ def print_confirmation(ref) -> None:
     if not conf.get("thresholds"):
         return
     tails = conf["null_tail"]
-    margins = " or ".join(f"its {k} statistic exceeds {conf['thresholds'][k]:.2f}" for k in conf["thresholds"])
+    first = {k: v for k, v in conf["thresholds"].items() if not k.startswith("change@")}
+    later = {k[7:]: v for k, v in conf["thresholds"].items() if k.startswith("change@")}
+    margins = " or ".join(f"its {k} statistic exceeds {v:.2f}" for k, v in first.items())
+    if later:
+        margins += (f"; a deviation still up and not confirmed is looked at again {', '.join(later)} samples after "
+                    f"its detection, each look's change over its window against its own margin "
+                    f"({', '.join(f'{v:.2f}' for v in later.values())})")
     n = min(t["n"] for t in tails.values())
     print(f"  fault confirmation: a deviation is a fault alarm when the innovations' change against the run's own "
           f"past says so ({margins}) and a probe fault explains it better than any feed's apparent strength; "
           f"healthy operation exceeds each margin with probability {conf['alpha_per_test']:g} "
-          f"({n} null values each, from {'each run held out' if conf.get('held_out') else 'the one run itself'}); "
+          f"(at least {n} null values each, from {'each run held out' if conf.get('held_out') else 'the one run itself'}); "
           f"else it is a deviation outside calibration (WARN)")
     if not conf.get("held_out"):
         print("  note: one calibration run: the scales and the margin come from that run itself, not from a day it did "
