@@ -163,3 +163,24 @@ def test_a_noisy_probe_the_first_look_leaves_open_is_confirmed_at_a_later_one(fo
 
     after = confirmed_by[0].split("@")[1]
     assert f"over the window to {after} samples after the detection" in format_alarms([first])
+
+
+def test_a_later_look_gives_the_same_events_whatever_the_chunking(fold):
+    """The later looks are made at global block boundaries, as the first: one row at a time (as a node receives
+    a live plant's samples) gives the same events, in the same order, as the whole record at once."""
+    from phfdi.commands.common import shipped_map
+    from phfdi.learned import read_measured
+    from wavelet_fdi.learned_detector import LearnedModel, run_record
+
+    record, ref, out = fold
+    faulty = out / "noise_chunks.csv"
+    assert main(["inject", str(record), "--map", "ph_rig", "--fault", "probe_noise", "--onset", "754.22",
+                 "--size", "0.15", "--out", str(faulty)]) == 0
+    model = LearnedModel.load(ref)
+    rec = read_measured(faulty, shipped_map("ph_rig"), channels=list(model.channels))
+    whole, _, det = run_record(model, rec.time_s, rec.x, chunk=None)
+    assert any(a.get("looks") for a in det.alarms), "no deviation was looked at again: nothing tested"
+    for chunk in (1, 97):
+        again, _, _ = run_record(model, rec.time_s, rec.x, chunk=chunk)
+        assert [(e.kind, e.index, e.message, e.announce) for e in again] == \
+            [(e.kind, e.index, e.message, e.announce) for e in whole]
