@@ -243,7 +243,7 @@ def test_checker_asks_for_a_floor_for_a_new_package(tmp_path):
 PHFDI_FLOORS = {
     # 0 a run and its files, the fault vocabulary of the application
     "run": 0, "bagread": 0, "rosbag2_meta": 0, "records": 0, "bagio": 0, "faults": 0, "inject_kinds": 0,
-    "summary": 0, "figures": 0,
+    "summary": 0, "figures": 0, "alarm_text": 0,
     # 1 the loop: scenarios, the in-process simulation, replay through the detector, calibration, the ROS graph
     "scenario": 1, "loop": 1, "replay": 1, "calibration": 1, "ros": 1,
     # 2 measured data: learned and estimator references, injected faults, the simulated rig, diagnosis

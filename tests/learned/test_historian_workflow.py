@@ -164,8 +164,8 @@ def test_alarms_carry_the_records_stamps(export, tmp_path, capsys):
 def test_offline_and_live_name_the_same_line(export, tmp_path, capsys):
     """One numbering: the node counts samples from 0; what it reports is mapped to the source file's line (the
     number an editor and a spreadsheet show, header = line 1) and stamp, as the offline replay gives them."""
+    from phfdi.alarm_text import format_alarms
     from phfdi.commands.replay import _located_live
-    from phfdi.learned import format_alarms
 
     ref = tmp_path / "ref.json"
     assert main(["calibrate", "--learn", str(export["faulty"]), "--rows", "800", "--map", str(export["map"]),

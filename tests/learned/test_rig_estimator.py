@@ -159,7 +159,7 @@ def test_a_noisy_probe_the_first_look_leaves_open_is_confirmed_at_a_later_one(fo
     assert first["looks"][-1]["confirmed"] and not any(lk["confirmed"] for lk in first["looks"][:-1])
     assert first["confirmed_time"] > first["detection_time"] + 64 * 0.3  # after the first look's 64 samples
     # the report names the look that confirmed it, its change against that look's margin
-    from phfdi.learned import format_alarms
+    from phfdi.alarm_text import format_alarms
 
     after = confirmed_by[0].split("@")[1]
     assert f"over the window to {after} samples after the detection" in format_alarms([first])

@@ -170,7 +170,7 @@ def _replay_and_compare(run_, received, out: Path, no_ros: bool):
     """Offline replay; whether its alarms equal those received live (True without a live run), and the detector."""
     import json
 
-    from .replay import format_alarms
+    from phfdi.alarm_text import format_alarms
 
     _say("\n[3/4] offline replay of " + ("the run" if no_ros else "the bag") + " through the same detector core:")
     t0 = time.perf_counter()

@@ -7,6 +7,8 @@ import json
 import sys
 import time
 
+from phfdi.alarm_text import format_alarms, input_problems
+
 from .calibrate import add_detector_args, settings_from_args
 from .common import (
     EPILOG_FORMAT,
@@ -196,7 +198,6 @@ def _read_with_stored_map(args: argparse.Namespace, model, cmap, columns_said: s
 def run_learned(args: argparse.Namespace) -> int:
     """The record through the learned reference and the multichannel detector."""
     from phfdi.learned import alarm_summaries, event_dict, replay_measured
-    from phfdi.learned import format_alarms as format_learned
     from wavelet_fdi.learned_detector import LearnedModel
 
     model = LearnedModel.load(args.reference)
@@ -216,7 +217,7 @@ def run_learned(args: argparse.Namespace) -> int:
                           "channels": list(model.channels), "columns": columns_said, "notes": rec.notes, "input_problems": inputs,
                           "outside_healthy_range": outside, "alarm_rows": int(states.sum()), "alarms": alarms}, indent=2))
         return 0
-    print(format_learned(alarms))
+    print(format_alarms(alarms))
     for e in inputs:
         stamp = f"{e['stamp']}, " if e["stamp"] else ""
         print(f"input: {e['message']} ({stamp}{rec.where} {e['line']})")
@@ -237,7 +238,6 @@ def run_live_learned(args: argparse.Namespace) -> int:
     """A bag of a measured record (phfdi bag from-csv) through the learned detector NODE over ROS."""
     from pathlib import Path
 
-    from phfdi.learned import format_alarms as format_learned
     from phfdi.ros.launcher import OBSERVER, NodeSpec
     from phfdi.ros.player import PLAYER
     from phfdi_base.topics import DETECTOR, MEASURED_SAMPLE
@@ -272,7 +272,7 @@ def run_live_learned(args: argparse.Namespace) -> int:
                           "channels": list(model.channels), "outside_healthy_range": outside, "alarms": alarms},
                          indent=2))
     else:
-        print(format_learned(alarms))
+        print(format_alarms(alarms))
     return result.status
 
 
@@ -304,14 +304,6 @@ def replay_json(file: str, samples: int, notes: list[str], diagnostics: dict, al
     """--json output: the file, what the reader repaired, what the detector counted as bad input, the alarms."""
     return {"file": file, "samples": samples, "notes": notes, "input_problems": input_problems(diagnostics),
             "alarms": alarms}
-
-
-def input_problems(diagnostics: dict) -> dict:
-    """The detector's bad-input counters that are not zero (wavelet_fdi.inputs.INPUT_PROBLEMS), and the
-    reference's resets."""
-    from wavelet_fdi.inputs import input_problems as problems
-
-    return problems(diagnostics, extra=("reference_resets",))
 
 
 def _replay_scenario(bag: str, fallback: str | None):
@@ -424,39 +416,3 @@ def _play_live(args: argparse.Namespace, nodes: list, spec, say, on_event) -> tu
             + (f"; node logs: {result.log_dir}" if result.log_dir else ""))
         return result, None, elapsed
     return result, done[-1], elapsed
-
-
-def format_alarms(alarms: list, diagnostics: dict) -> str:
-    """Alarms (the detector's Alarm objects, or their summaries with an alarm_id) as lines for people."""
-    from wavelet_fdi.alarm_messages import exceedance
-
-    lines = []
-    if not alarms:
-        lines.append("no alarm")
-    for i, a in enumerate(alarms, 1):
-        s = a.summary() if hasattr(a, "summary") else a
-        alarm_id = getattr(a, "alarm_id", None) or s.get("alarm_id", i)
-        p = s["parameter"]
-        what = s["fault_class"]
-        if what != "pending":
-            what += f" (confidence {s['confidence']:.2f})"
-        if p and s["fault_class"] not in ("pending", "unknown"):
-            what += f", {p['name']} = {p['value']:.3g} {p['unit']}"
-        elif p and s["fault_class"] == "unknown":
-            what += f"; closest: {p['fault_class']}"
-        lines.append(f"alarm {alarm_id}: {what}")
-        lines.append(f"  onset {s['onset_time']:g} s, detected {s['detection_time']:g} s by {s['statistic']} "
-                     f"({exceedance(s['statistic_value'], s['threshold'], '> threshold')}), dominant band "
-                     f"{s['dominant_level']}, severity {s['severity']:.3g} pH RMS")
-        if s["cleared_time"] is not None:
-            end = s.get("episode_end_time")
-            lines.append(f"  cleared {s['cleared_time']:g} s"
-                         + (f"; episode {s['onset_time']:g} s to {end:g} s" if end is not None else ""))
-    problems = input_problems(diagnostics)
-    if problems:
-        lines.append("input problems: " + ", ".join(f"{k} {v}" for k, v in problems.items()))
-    held = problems.get("nonfinite_ph", 0) + problems.get("out_of_range_ph", 0)
-    if held:
-        lines.append(f"  {held} pH samples missing or out of range: no residual there, the statistics held "
-                     f"(not fed as numbers)")
-    return "\n".join(lines)
