@@ -63,8 +63,12 @@ PARAMS = (
               "('' = /measured/sample; docs/ros_graph.md)"),
     ParamSpec("silent_after_s", 10.0, "wall time after which a mapped topic that delivers nothing is reported",
               (0.1, 3600.0)),
-    ParamSpec("diagnostics_period_s", 5.0, "wall time between the channel map's /diagnostics reports",
+    # wall time: a topic that went silent moves no record time (the physics nodes' diagnostics_period_s counts
+    # simulated time, so this one has a name of its own)
+    ParamSpec("channel_map_report_period_s", 5.0, "wall time between the channel map's /diagnostics reports",
               (0.1, 3600.0)),
+    ParamSpec("diagnostics_period_s", 0.0, "the old name of channel_map_report_period_s (before 2026-12-06): a value "
+                                           "above 0 is taken for it, with a warning; 0: not set", (0.0, 3600.0)),
     # as the physics detector's (wavelet_fdi.node): on the stream's own time, so a replay faster than real time
     # gives the heartbeats the plant's time would have
     ParamSpec("heartbeat_period_s", 60.0, "publish the state on /fault_alarm every this many s of the record's time "
@@ -129,8 +133,17 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._pub_map_diag = self.diagnostics_publisher()
         steady = Clock(clock_type=ClockType.STEADY_TIME)  # waits are wall time, also under use_sim_time
         self.create_timer(TICK_S, inputs.tick, clock=steady)
-        self.create_timer(self.param("diagnostics_period_s"), self._report_map, clock=steady)
+        self.create_timer(self._report_period_s(), self._report_map, clock=steady)
         self._problems_said = 0
+
+    def _report_period_s(self) -> float:
+        """channel_map_report_period_s, or the old name's value (set by a launch file written before the rename)."""
+        old = float(self.param("diagnostics_period_s"))
+        if old > 0.0:
+            self.get_logger().warning(f"parameter diagnostics_period_s = {old:g} is now channel_map_report_period_s "
+                                      f"(wall time between the channel map's reports); taken as that")
+            return old
+        return float(self.param("channel_map_report_period_s"))
 
     def _report_map(self) -> None:
         """The channel map's status on /diagnostics (periodically; at once when a new problem is seen)."""

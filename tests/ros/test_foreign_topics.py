@@ -108,8 +108,11 @@ def run_foreign_plant(tmp_path: Path, ref: Path | None, cmap_path: Path, rows: n
     env = graph_env(lease.domain_id)
     detector = plant = None
     try:
+        # the channel map's reports every half second (the learned node's name for it; the physics node's counts
+        # simulated time)
+        report = "diagnostics_period_s" if ref is None else "channel_map_report_period_s"
         detector = subprocess.Popen(node_cmd(module, **node_args, channel_map_file=cmap_path, graph_nodes="[detector]",
-                                             **{"diagnostics_period_s": 0.5, **(node_params or {})}),
+                                             **{report: 0.5, **(node_params or {})}),
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=tmp_path)
         started, out0 = wait_for_event(detector, "startup", START_S)  # connected
         plant = subprocess.Popen([sys.executable, "-m", "tests.ros.foreign_plant", str(lease.domain_id), str(spec)],
@@ -363,11 +366,15 @@ def test_a_topic_of_the_wrong_type_and_a_silent_topic_are_named_once_and_the_nod
     rows[:, 0] = np.arange(100.0)
     wrong = "/abc/b is published as std_msgs/msg/Float32; the channel map says std_msgs/msg/Float64: channel b gets nothing"
     silent = "/abc/c has published nothing for"
+    # the report period under its old name (a launch file written before the rename): taken, with a warning
+    renamed = "parameter diagnostics_period_s = 0.5 is now channel_map_report_period_s"
     done, heard, err = run_foreign_plant(
-        tmp_path, abc_reference, cmap, rows[:, :2], node_params={"silent_after_s": 1.0, "diagnostics_period_s": 0.5},
+        tmp_path, abc_reference, cmap, rows[:, :2],
+        node_params={"silent_after_s": 1.0, "channel_map_report_period_s": 60.0, "diagnostics_period_s": 0.5},
         plant_spec={"topics": ["/abc/a", "/abc/b"], "float32": ["/abc/b"], "pace_hz": 25, "wait_samples": 0},
-        expect_stderr=(wrong, silent))
+        expect_stderr=(wrong, silent, renamed))
     assert err.count(wrong) == 1 and err.count(silent) == 1 and "Traceback" not in err
+    assert err.count(renamed) == 1
     counts = done["channel_map"]["counts"]
     # 25 values a second of /abc/a on a grid of 1 s (the reference's sample time): the latest of each second is
     # the sample's, the others superseded
