@@ -244,7 +244,6 @@ def run_live_learned(args: argparse.Namespace) -> int:
     from wavelet_fdi.healthy_range import describe
     from wavelet_fdi.learned_detector import LearnedModel
 
-
     model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
     _check_live_bag(args, MEASURED_SAMPLE.name, "write the record with phfdi bag from-csv")
     say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
@@ -365,7 +364,6 @@ def run_live(args: argparse.Namespace) -> int:
     else:
         print(format_alarms(alarms, report["diagnostics"]))
     return result.status
-
 
 
 def _check_live_bag(args: argparse.Namespace, topic: str, hint: str) -> None:
