@@ -158,7 +158,10 @@ def test_a_full_disk_stops_the_recording_at_a_chunk_and_the_launch_names_it(tmp_
         counts = {t["topic"]: t["count"] for t in info["topics"]}
         n = counts[T.MEASUREMENT.name]
         assert 50 < n < 601, counts  # stopped in the middle, by the disk
-        assert all(n - 2 <= counts[t] <= n for t in PER_SAMPLE), counts  # whole chunks: no topic far behind
+        # whole chunks: no topic far behind or ahead. The recorder takes each topic from its own subscription, so
+        # a chunk can close with a sample's controller output in it and that sample's measurement not yet (seen on
+        # a fresh clone: measurement 330, controller output and valve state 331)
+        assert all(abs(counts[t] - n) <= 2 for t in PER_SAMPLE), counts
         # readable: recovered elsewhere it is a finished bag of every message up to the last complete chunk
         fixed = tmp_path / "fixed.mcap"
         rec = subprocess.run(phfdi_cmd("bag", "recover", str(bag), str(fixed)), capture_output=True, text=True,
