@@ -120,20 +120,33 @@ def test_detector_settings_go_with_the_estimator_and_row_windows_do_not(tmp_path
     assert settings["energy_variance_ratio"] == 4.0  # the estimator's other settings kept
 
 
+#: the benchmark's third onset on the held-out run (benchmarks/rig_detection.py, ONSET_FRACTIONS), three quarters in
+LATE_ONSET_S = 754.22
+
+
+def _injected(fold, kind: str, size: str, name: str):
+    """The held-out run with ``kind`` of ``size`` hidden from LATE_ONSET_S by phfdi inject (the truth file apart)."""
+    record, _, out = fold
+    faulty = out / f"{name}.csv"
+    assert main(["inject", str(record), "--map", "ph_rig", "--fault", kind, "--onset", str(LATE_ONSET_S),
+                 "--size", size, "--out", str(faulty)]) == 0
+    return faulty
+
+
+def _first_fault(fold, capsys, kind: str, size: str, name: str) -> dict:
+    """The first fault alarm (ALARM) replay gives on the injected run; no deviation before the onset."""
+    everything = _alarms(capsys, _injected(fold, kind, size, name), fold[1])
+    assert everything and everything[0]["detection_time"] >= LATE_ONSET_S, everything[:1]
+    faults = [a for a in everything if a.get("verdict") == "fault"]
+    assert faults, [a.get("verdict") for a in everything]
+    return faults[0]
+
+
 def test_a_small_bias_the_controller_hides_is_a_confirmed_fault(fold, capsys):
     """A 0.4 pH bias hidden in the closed-loop run three quarters through: the controller moves the pH back within
     seconds and the filter follows, so over the verdict's window the innovations hardly change (without the jump
     at the window's start this was a deviation outside calibration); named a probe offset of about 0.4 pH."""
-    record, ref, out = fold
-    onset = 754.22  # the benchmark's third onset on this run (benchmarks/rig_detection.py, ONSET_FRACTIONS)
-    faulty = out / "small_bias.csv"
-    assert main(["inject", str(record), "--map", "ph_rig", "--fault", "probe_bias", "--onset", str(onset),
-                 "--size", "0.4", "--out", str(faulty)]) == 0
-    everything = _alarms(capsys, faulty, ref)
-    assert everything and everything[0]["detection_time"] >= onset, everything[:1]
-    faults = [a for a in everything if a.get("verdict") == "fault"]
-    assert faults, [a.get("verdict") for a in everything]
-    iso = faults[0]["isolation"]
+    iso = _first_fault(fold, capsys, "probe_bias", "0.4", "small_bias")["isolation"]
     assert iso["fault_class"] == "probe_offset" and 0.3 < iso["size"] < 0.5, iso
     assert "jump" in iso["confirmation"]["confirmed_by"], iso["confirmation"]
 
@@ -143,16 +156,7 @@ def test_a_noisy_probe_the_first_look_leaves_open_is_confirmed_at_a_later_one(fo
     detection the change against the run's own past (in the same pump state) is below its margin, and the
     deviation is outside calibration (WARN); still up, it is looked at again with a longer window, where the
     change is beyond the margin of that look: a confirmed probe-noise fault, the look that confirmed it named."""
-    record, ref, out = fold
-    onset = 754.22  # the benchmark's third onset on this run (benchmarks/rig_detection.py, ONSET_FRACTIONS)
-    faulty = out / "noise_late.csv"
-    assert main(["inject", str(record), "--map", "ph_rig", "--fault", "probe_noise", "--onset", str(onset),
-                 "--size", "0.15", "--out", str(faulty)]) == 0
-    everything = _alarms(capsys, faulty, ref)
-    assert everything and everything[0]["detection_time"] >= onset, everything[:1]
-    faults = [a for a in everything if a.get("verdict") == "fault"]
-    assert faults, [a.get("verdict") for a in everything]
-    first = faults[0]
+    first = _first_fault(fold, capsys, "probe_noise", "0.15", "noise_late")
     assert first["isolation"]["fault_class"] == "probe_noise" and first["isolation"]["size"] > 1.5, first["isolation"]
     confirmed_by = first["isolation"]["confirmation"]["confirmed_by"]
     assert confirmed_by and all(k.startswith("change@") for k in confirmed_by), confirmed_by
@@ -172,12 +176,9 @@ def test_a_later_look_gives_the_same_events_whatever_the_chunking(fold):
     from phfdi.learned import read_measured
     from wavelet_fdi.learned_detector import LearnedModel, run_record
 
-    record, ref, out = fold
-    faulty = out / "noise_chunks.csv"
-    assert main(["inject", str(record), "--map", "ph_rig", "--fault", "probe_noise", "--onset", "754.22",
-                 "--size", "0.15", "--out", str(faulty)]) == 0
-    model = LearnedModel.load(ref)
-    rec = read_measured(faulty, shipped_map("ph_rig"), channels=list(model.channels))
+    model = LearnedModel.load(fold[1])
+    rec = read_measured(_injected(fold, "probe_noise", "0.15", "noise_chunks"), shipped_map("ph_rig"),
+                        channels=list(model.channels))
     whole, _, det = run_record(model, rec.time_s, rec.x, chunk=None)
     assert any(a.get("looks") for a in det.alarms), "no deviation was looked at again: nothing tested"
     for chunk in (1, 97):
