@@ -410,13 +410,13 @@ def _catalogued_params() -> dict[str, set[str]]:
     return out
 
 
-#: the loop diagnosis's own vocabulary (names and ranges in % of each loop's OP span, not the catalogue's physical
-#: ranges; docs/architecture.md): the one module besides the catalogue that bounds a valve fault's parameters
+#: the loop diagnosis's own vocabulary (its cause lists; the causes' ranges in % of each loop's OP span are declared
+#: with each fault in the catalogue, ``loop=LoopDraws(...)``, and read there: docs/architecture.md)
 LOOP_VOCABULARY = "phfdi.loopdiag.vocabulary"
 
 
 def test_fault_parameters_are_bounded_only_in_the_catalogue():
-    found = own_fault_bounds(SRC, _catalogued_params(), LOOP_VOCABULARY)
+    found = own_fault_bounds(SRC, _catalogued_params())  # the loop diagnosis's vocabulary included
     assert {m: v for m, v in found.items() if m not in KNOWN_OWN_BOUNDS} == {}, \
         "read the bounds from the fault catalogue (phfdi_base.faults, declared with the block)"
     assert sorted(KNOWN_OWN_BOUNDS - set(found)) == [], "these read the catalogue now: remove them from KNOWN_OWN_BOUNDS"
@@ -453,20 +453,27 @@ def loop_cause_lists(src: Path, causes: set[str], vocabulary: str = LOOP_VOCABUL
 
 
 def test_the_loop_diagnosis_names_its_causes_in_its_vocabulary_only():
-    """Loop diagnosis declares its causes and their relative ranges once (phfdi.loopdiag.vocabulary): each is a
-    registered block whose parameters it names, and no other module lists them again."""
-    import valve_actuator.blocks  # noqa: F401  (registers the blocks)
+    """Loop diagnosis declares its cause lists once (phfdi.loopdiag.vocabulary) and no other module lists them
+    again; every cause, and every valve its training loops draw, is a catalogued fault whose entry declares the
+    draws (``loop=LoopDraws``) over its block's own parameters."""
+    from phfdi.faults import catalogue
     from phfdi.loopdiag.hammerstein import FITTERS
-    from phfdi.loopdiag.vocabulary import ACTUATOR_CAUSES, FRICTION_CAUSES, OTHER_NONLINEARITIES, TRAINING_DRAWS
-    from phfdi_base.blocks import BLOCKS
+    from phfdi.loopdiag.vocabulary import (
+        ACTUATOR_CAUSES,
+        DOMAIN_DRAWS,
+        FRICTION_CAUSES,
+        OTHER_NONLINEARITIES,
+        TRAINING_DRAWS,
+    )
 
     causes = set(ACTUATOR_CAUSES)
     assert set(FITTERS) == causes and set(FRICTION_CAUSES) | set(OTHER_NONLINEARITIES) == causes
-    assert set(TRAINING_DRAWS) <= set(BLOCKS), "loop causes are blocks the simulator runs"
-    catalogued = _catalogued_params()
-    for cause, draws in TRAINING_DRAWS.items():
-        own = [k for k in draws if k.endswith("_pct")]
-        assert set(own) <= catalogued.get(cause, set(own)), f"{cause}: {own} are not its catalogued parameters"
+    drawn = {f.block: f for f in catalogue().values() if f.loop is not None}
+    assert causes <= set(TRAINING_DRAWS) <= set(drawn), "every loop cause is a catalogued fault with its draws"
+    assert set(OTHER_NONLINEARITIES) <= set(DOMAIN_DRAWS) <= set(drawn)
+    for cause, draws in [*TRAINING_DRAWS.items(), *DOMAIN_DRAWS.items()]:
+        own = {k for k in draws if k.endswith("_pct")}
+        assert own <= {p.name for p in drawn[cause].params}, f"{cause}: {own} are not its catalogued parameters"
     assert loop_cause_lists(SRC, causes | {"stiction_he"}) == {}
 
 

@@ -11,13 +11,16 @@ A core declares the fault its block models next to the block itself::
     class Backlash: ...
 
 and everything else reads it from :data:`FAULTS`: the named presets (``--fault NAME``), the isolation's
-hypotheses, the diagnosis's candidates, the evaluation's severities, the paper set and the command line's
-help. Adding a block with a ``fault=`` of one's own makes it show up in all of them with no other edit.
+hypotheses, the diagnosis's candidates, the evaluation's severities, the paper set, the loop diagnosis's
+training draws and the command line's help. Adding a block with a ``fault=`` of one's own makes it show up in
+all of them with no other edit.
 
 Each parameter has one physical range (``bounds``: what the device can have) and the sub-range a fit
 searches (``search``, within ``bounds``; the data may narrow it further, e.g. a delay shorter than a fifth
 of the record). Where the diagnosis fits a parameter differently from the isolation (another scale, or
 a range that must include "no fault"), its sub-range is declared in the same entry as ``diagnosis``.
+A fault the loop diagnosis (plant historian loops) draws declares those draws in the same entry too
+(``loop=LoopDraws(...)``): there a valve's size is relative to the loop's OP travel, not the pH valve's.
 
 This module imports nothing of the project: the cores fill the registry, the application reads it.
 """
@@ -26,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["FAULTS", "SITES", "Fault", "FaultParam", "Range", "faults", "register_fault"]
+__all__ = ["FAULTS", "SITES", "Fault", "FaultParam", "LoopDraws", "Range", "faults", "register_fault"]
 
 #: where a fault acts: the valve stem position, the valve's flow, or the pH probe (as in a scenario's
 #: ``faults: - where:``; the plant and its feeds are extended by the diagnosis's process candidates)
@@ -117,6 +120,31 @@ class FaultParam:
 
 
 @dataclass(frozen=True)
+class LoopDraws:
+    """The fault as the loop diagnosis's simulated training loops draw it (:mod:`phfdi.loopdiag`): each
+    parameter in % of the loop's OP travel, not in the pH valve's units, because a historian loop's valve
+    has no other scale.
+
+    Parameters
+    ----------
+    training, domain : dict
+        parameter -> a (low, high) drawn log-uniform, a ratio to the main parameter (``*_over_*``, (low, high)
+        drawn uniform), a fixed value, or a dict of such (a limit ``above`` a base or the working point), for
+        the per-class generator (``training``: :mod:`phfdi.loopdiag.training`) and the domain-randomised one
+        that trains the stiction verdict (``domain``: :mod:`phfdi.loopdiag.domain`).
+
+    Examples
+    --------
+    >>> from phfdi_base import LoopDraws
+    >>> LoopDraws(training={"width_pct": (0.3, 6.0)}, domain={"width_pct": (0.3, 8.0)}).domain["width_pct"]
+    (0.3, 8.0)
+    """
+
+    training: dict = field(default_factory=dict)
+    domain: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Fault:
     """A fault a block models: preset name, site, parameters (main first), severities.
 
@@ -140,6 +168,12 @@ class Fault:
         False keeps it out of the online isolation (a fault its bank cannot re-simulate).
     preset : bool
         False keeps it out of ``--fault``.
+    candidate : bool
+        False keeps it out of the model diagnosis's causes and candidates (``phfdi diagnose``): a fault only
+        the loop diagnosis draws (``stiction_he``, ``quantization``), or only injection and the rig simulator
+        use.
+    loop : LoopDraws, optional
+        How the loop diagnosis's training loops draw it (None: they do not).
 
     ``block``, the registered block type (the diagnosis's cause), is filled in by
     :func:`phfdi_base.blocks.register_block`.
@@ -162,6 +196,8 @@ class Fault:
     onset_s: float = 7000.0
     isolate: bool = True
     preset: bool = True
+    candidate: bool = True
+    loop: LoopDraws | None = field(default=None, compare=False)
     block: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:

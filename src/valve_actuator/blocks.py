@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, field
 
 from phfdi_base.blocks import register_block
-from phfdi_base.faults import FAULTS, Fault, FaultParam, Range
+from phfdi_base.faults import FAULTS, Fault, FaultParam, LoopDraws, Range
 
 #: the valve's stroke, % of span: the physical bounds of a position or a band on it (a band wider than the
 #: stroke leaves no travel). The fits search sub-ranges (``search``): a dead-band or stick band log-spaced
@@ -36,7 +36,7 @@ def _positive(name: str, value: float, allow_zero: bool = True) -> None:
     "backlash", site="valve",
     description="backlash (dead-band) of 0.7 % of span on the acid valve stem (paper Fig. 18-20)",
     params=(FaultParam("width_pct", "% of span", SPAN, paper=0.7, search=Range(0.05, 20.0, log=True)),),
-    severities=(0.35, 0.7, 1.4)))
+    severities=(0.35, 0.7, 1.4), loop=LoopDraws(training={"width_pct": (0.3, 6.0)})))
 @dataclass
 class Backlash:
     """Backlash (dead-band) of total width ``width_pct``.
@@ -137,7 +137,8 @@ class CoulombViscousFriction:
     params=(FaultParam("width_pct", "% of span", (0.0, 200.0), paper=100.0, search=Range(0.5, 199.0, log=True),
                        diagnosis=Range(0.0, 100.0)),
             FaultParam("center_pct", "% of span", SPAN, paper=0.0)),
-    severities=(50.0, 100.0, 150.0)))
+    severities=(50.0, 100.0, 150.0),
+    loop=LoopDraws(training={"width_pct": (0.5, 4.0)}, domain={"width_pct": (0.5, 4.0)})))
 @dataclass
 class DeadZone:
     """Dead-zone of width ``width_pct`` around ``center_pct``.
@@ -185,7 +186,11 @@ class DeadZone:
     params=(FaultParam("high_pct", "% of span", SPAN, paper=50.0, search=Range(1.0, 99.0),
                        diagnosis=Range(1.0, 100.0)),
             FaultParam("low_pct", "% of span", SPAN, paper=0.0)),
-    severities=(60.0, 50.0, 40.0)))
+    severities=(60.0, 50.0, 40.0),
+    # a loop's valve saturates a little above where the loop works: the high limit is a base (per-class
+    # generator) or the loop's working point (domain generator) plus a log-uniform draw ``above`` it
+    loop=LoopDraws(training={"low_pct": 0.0, "high_pct": {"base": 50.0, "above": (0.5, 5.0)}},
+                   domain={"low_pct": 0.0, "above": (0.5, 5.0)})))
 @dataclass
 class Saturation:
     """Saturation: the stem cannot travel below ``low_pct`` or above ``high_pct``.
@@ -219,7 +224,11 @@ class Saturation:
     "stiction", site="valve", description="stiction, Kano model S = 1.5 %, J = 0.5 % of span",
     params=(FaultParam("s_pct", "% of span", SPAN, paper=1.5, search=Range(0.1, 20.0, log=True)),
             FaultParam("j_pct", "% of span", SPAN, paper=0.5, search=Range(0.0, 20.0))),
-    severities=(0.75, 1.5, 3.0), scale_with_main=("j_pct",)))
+    severities=(0.75, 1.5, 3.0), scale_with_main=("j_pct",),
+    # historian loops: Kano's S up to 6 % (per class) or 8 % (domain: a valve sticking by 8 % is a bad one; the
+    # refinery's limit cycles run on about 0.5 %), J a ratio of S
+    loop=LoopDraws(training={"s_pct": (0.3, 6.0), "j_over_s": (0.0, 1.2)},
+                   domain={"s_pct": (0.3, 8.0), "j_over_s": (0.0, 1.2)})))
 @dataclass
 class Stiction:
     """Valve stiction, the two-parameter data-driven model of Kano et al. (2004).
@@ -280,7 +289,14 @@ class Stiction:
         return self._y
 
 
-@register_block("stiction_he")
+@register_block("stiction_he", fault=Fault(
+    "stiction_he", site="valve", description="stiction, He et al.'s model fs = 1.5 %, fd = 0.5 % of span",
+    params=(FaultParam("fs_pct", "% of span", SPAN, paper=1.5), FaultParam("fd_pct", "% of span", SPAN, paper=0.5)),
+    # the loop diagnosis's other sticky valve (half of its training loops' sticky valves); Kano's model is the
+    # one the isolation, the presets and the diagnosis fit
+    isolate=False, preset=False, candidate=False,
+    loop=LoopDraws(training={"fs_pct": (0.3, 6.0), "fd_over_fs": (0.0, 1.0)},
+                   domain={"fs_pct": (0.3, 8.0), "fd_over_fs": (0.0, 1.0)})))
 @dataclass
 class HeStiction:
     """Valve stiction, the two-parameter model of He, Wang, Pottmann & Qin (2007), Ind. Eng. Chem.
@@ -373,7 +389,12 @@ class Blocking:
         return self._y if self.severity > 0.0 else x
 
 
-@register_block("quantization")
+@register_block("quantization", fault=Fault(
+    "quantization", site="valve", description="stem resolution of 1 % of span",
+    params=(FaultParam("step_pct", "% of span", SPAN, paper=1.0), FaultParam("offset_pct", "% of span", SPAN, paper=0.0)),
+    # a cause the loop diagnosis fits and draws; not a fault of the pH loop's presets, isolation or diagnosis
+    isolate=False, preset=False, candidate=False,
+    loop=LoopDraws(training={"step_pct": (0.3, 2.0)}, domain={"step_pct": (0.3, 2.0)})))
 @dataclass
 class Quantization:
     """Position resolution: the stem settles on levels ``step_pct`` apart.

@@ -147,6 +147,23 @@ def test_a_fault_outside_its_bounds_or_at_an_unknown_site_is_refused():
         Fault("x", site="valve_stem", description="")
 
 
+def test_a_loop_only_valve_is_catalogued_with_its_draws_and_kept_out_of_the_ph_loops_answers():
+    """He's stiction and quantization are faults of the catalogue (issue 37): their entries carry the loop
+    diagnosis's draws; candidate=False keeps them out of phfdi diagnose's causes, as isolate and preset keep them
+    out of the isolation and --fault."""
+    from phfdi.diagnosis.catalogue import _others
+    from phfdi.diagnosis.report import causes
+    from phfdi.loopdiag.vocabulary import DOMAIN_DRAWS, TRAINING_DRAWS
+
+    for name, main_param in (("stiction_he", "fs_pct"), ("quantization", "step_pct")):
+        f = catalogue()[name]
+        assert f.block == name and f.main.name == main_param and f.loop is not None
+        assert TRAINING_DRAWS[name] is f.loop.training and DOMAIN_DRAWS[name] is f.loop.domain
+        assert name not in causes() and name not in _others(("valve", "valve_flow", "ph_sensor"))
+        assert name not in classes() and name not in fault_library()
+    assert "stiction" in causes() and catalogue()["stiction"].loop.domain["s_pct"] == (0.3, 8.0)
+
+
 def test_a_fault_answers_to_its_preset_name_and_its_blocks():
     from phfdi.diagnosis.catalogue import Context
     from phfdi.diagnosis.catalogue import catalogue as candidates

@@ -516,7 +516,7 @@ TAILORED = ("stiction", "backlash", "deadzone", "saturation", "coulomb_viscous_f
 def _others(sites: tuple[str, ...]) -> tuple[str, ...]:
     """Blocks of catalogued faults at ``sites`` with no tailored candidate (a block of one's own)."""
     return tuple(f.block for f in fault_catalogue().values()
-                 if f.site in sites and f.params and f.block not in TAILORED)
+                 if f.candidate and f.site in sites and f.params and f.block not in TAILORED)
 
 
 def catalogued_candidates(ctx: Context, sites: tuple[str, ...]) -> list[Candidate]:

@@ -86,7 +86,7 @@ def causes() -> dict[str, str]:
     """:data:`CAUSES` and, before ``none``, each catalogued fault's block not in it (a block of one's own)."""
     out = {k: v for k, v in CAUSES.items() if k != "none"}
     for f in catalogue().values():
-        if f.params:  # a fault without parameters (a seized stem) is not fitted
+        if f.candidate and f.params:  # a fault without parameters (a seized stem) is not fitted
             out.setdefault(f.block, SITE_FAMILY[f.site])
     out["none"] = CAUSES["none"]
     return out
