@@ -2,7 +2,7 @@
 probe faults found.
 
 Usage: PHFDI_SHARED_DATA=../shared/data .venv/bin/python benchmarks/rig_unseen.py [--hours 10] [--runs-per-kind 12]
-       [--calibrations real simulated] [--json OUT.json]
+       [--calibrations real simulated] [--seed-offset N] [--json OUT.json]
 (about 5 minutes on this 2-core machine). Method: src/phfdi/benchmarks/rig_unseen.py.
 """
 
@@ -25,12 +25,18 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=10.0, help="simulated healthy hours per calibration (default 10)")
     ap.add_argument("--runs-per-kind", type=int, default=12, help="faulty runs per probe fault kind (default 12)")
     ap.add_argument("--calibrations", nargs="+", default=["real", "simulated"], choices=["real", "simulated"])
+    ap.add_argument("--seed-offset", type=int, default=0, metavar="N",
+                    help="move every run's seed by N: other simulated days and draws, never scored before (default 0: "
+                         "the runs of docs/detector.md's tables)")
     ap.add_argument("--json", default=None, help="write every case and the summary here")
     ap.add_argument("--quiet", action="store_true", help="no line per run")
     args = ap.parse_args()
     t0 = time.perf_counter()
     say = (lambda s: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
-    result = evaluate(args.calibrations, args.hours, args.runs_per_kind, args.data, shipped_map("ph_rig"), say)
+    if args.seed_offset < 0:
+        raise SystemExit("--seed-offset must be 0 or more")
+    result = evaluate(args.calibrations, args.hours, args.runs_per_kind, args.data, shipped_map("ph_rig"), say,
+                      args.seed_offset)
     print(f"{time.perf_counter() - t0:.0f} s; load average {os.getloadavg()[0]:.1f}")
     for r in result["results"]:
         which = "five recorded runs" if r["calibration"] == "real" else "recorded operations on simulated days"
