@@ -81,9 +81,9 @@ class FaultKind:
 PUMP_CLASS = ("pump:{pump}_flow_ml_s",)
 KINDS: dict[str, FaultKind] = {k.name: k for k in (
     FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH", SizeRange(-PH_MAX, PH_MAX),
-              ("probe_offset",), "sensor_bias"),
+              ("probe_bias",), "sensor_bias"),
     FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH",
-              SizeRange(-PH_MAX, PH_MAX), ("probe_drift", "probe_offset"), "sensor_drift"),
+              SizeRange(-PH_MAX, PH_MAX), ("probe_drift", "probe_bias"), "sensor_drift"),
     FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)", None,
               ("probe_noise",), "blocking"),
     FaultKind("probe_noise", "sensor", "pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added",
@@ -91,7 +91,7 @@ KINDS: dict[str, FaultKind] = {k.name: k for k in (
     FaultKind("probe_lag", "sensor", "s", "a first-order lag of time constant SIZE s added to the probe",
               SizeRange(0.0, 86400.0, low_in=False), ("probe_noise",), "sensor_lag"),
     FaultKind("probe_gain", "sensor", "fraction", "slope error about pH 7: pH' = 7 + (1 + SIZE)(pH - 7)",
-              SizeRange(-1.0, 10.0, low_in=False), ("probe_offset", "probe_drift"), "sensor_gain"),
+              SizeRange(-1.0, 10.0, low_in=False), ("probe_bias", "probe_drift"), "sensor_gain"),
     FaultKind("pump_low", "actuator", "fraction", "the pump delivers SIZE less than recorded: "
                                                   "recorded = delivered / (1 - SIZE)",
               SizeRange(0.0, 1.0, low_in=False, high_in=False), PUMP_CLASS),

@@ -13,7 +13,7 @@ start as ``start_time`` (in ``t_s``'s time).
 
 Fault hypotheses (sensor):
 
-* ``probe_offset``: the reading is off by b pH from the start (a bias; locally also a slope error);
+* ``probe_bias``: the reading is off by b pH from the start (a bias; locally also a slope error);
 * ``probe_drift``: the reading walks off at r pH/min from the start;
 * ``probe_noise``: the reading's noise is s times the healthy one (s > 1: a noisy probe; s < 1: a probe that
   froze or turned sluggish and lost its noise), fitted with the filter tracking as it runs (in the
@@ -42,7 +42,7 @@ means a fault. An alarm is confirmed when all of these hold:
    beyond a calibrated margin. The innovations are normalised by the filter's own predicted variance, which grows
    where the pumps move the pH fast or the curve is steep, and the run is compared with itself in the same pump
    state, so neither a day noisier than the calibration's nor the pumps' stroke ripple reads as a change; a probe
-   that jumps, drifts, freezes, lags or turns noisy does change it; or, for a probe offset only, ``jump``
+   that jumps, drifts, freezes, lags or turns noisy does change it; or, for a probe bias only, ``jump``
    (:func:`jump_statistic`): the same test, one-sided, on the window's first ``JUMP_SAMPLES`` innovations, where a
    probe that jumped puts its evidence before the filter follows it (and before a controller acting on the
    reading moves the pH back), where the reading itself stepped once, by at least ``STEP_SHARE`` of the offset
@@ -131,8 +131,8 @@ CONFIRM_STATISTICS = ("change", "jump", *(f"change@{n}" for n in LOOK_AFTER_SAMP
 #: the fault hypotheses each confirmation statistic is evidence for: a scale change over the window is made by
 #: every probe fault; large innovations at its start only by one that jumped (a drift starts small, a frozen or
 #: noisy probe changes the whole window)
-CONFIRMS = {"change": ("probe_offset", "probe_drift", "probe_noise"), "jump": ("probe_offset",),
-            **{f"change@{n}": ("probe_offset", "probe_drift", "probe_noise") for n in LOOK_AFTER_SAMPLES[1:]}}
+CONFIRMS = {"change": ("probe_bias", "probe_drift", "probe_noise"), "jump": ("probe_bias",),
+            **{f"change@{n}": ("probe_bias", "probe_drift", "probe_noise") for n in LOOK_AFTER_SAMPLES[1:]}}
 #: the jump confirms an offset only where the reading stepped once at the window's start: by at least this share of
 #: the offset named, and no other step of it as large as this share of that step
 STEP_SHARE = 0.5
@@ -140,7 +140,7 @@ STEP_SHARE = 0.5
 #: with it, as the head of a window whose change time is placed within 2 samples of a jump (change_index)
 JUMP_SAMPLES = 8
 #: the sensor fault hypotheses (what a confirmed alarm is named by)
-SENSOR_CLASSES = ("probe_offset", "probe_drift", "probe_noise")
+SENSOR_CLASSES = ("probe_bias", "probe_drift", "probe_noise")
 #: the null's tail: exponential beyond this quantile (a generalised Pareto tail of shape 0)
 TAIL_QUANTILE = 0.9
 #: the design: the probability that the confirmation takes a healthy deviation for a fault
@@ -267,8 +267,8 @@ def _hypotheses(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _
         moved[:, m] -= shift
         return _window_nll(w.start, mean_ref, tw, moved, read_ph if noise_where_read else None)
 
-    for name, per_size in (("probe_offset", lambda b: b), ("probe_drift", lambda r: r * elapsed_min)):
-        bounds = OFFSET_RANGE_PH if name == "probe_offset" else DRIFT_RANGE_PH_PER_MIN
+    for name, per_size in (("probe_bias", lambda b: b), ("probe_drift", lambda r: r * elapsed_min)):
+        bounds = OFFSET_RANGE_PH if name == "probe_bias" else DRIFT_RANGE_PH_PER_MIN
         # the gain that decides: the probe's noise mapped into the curve where it was read, as for healthy and
         # the pumps (a shift of the curve's buffer capacity must not pass for evidence)
         f, _ = _fit(lambda v: shifted(per_size(v)), bounds)
@@ -444,7 +444,7 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     # a statistic confirms only the faults that make it: a jump at the window's start is a step's (an offset's),
     # and only where the reading itself stepped once, by at least half the offset named (a model that parted from
     # the plant slowly is fitted by an offset too, with no step in the reading; a steep passage steps many times)
-    stepped = "probe_offset" in ev and _reading_stepped(ref, rows, w, ev["probe_offset"][1])
+    stepped = "probe_bias" in ev and _reading_stepped(ref, rows, w, ev["probe_bias"][1])
     confirmed_by = [k for k, r in ratios.items()
                     if r > 1.0 and sensor in CONFIRMS.get(k, ()) and (k != "jump" or stepped)]
     confirmation = {"statistics": {k: round(v, 3) for k, v in stats.items()},
@@ -500,7 +500,7 @@ def _best(ev: dict, names: Sequence[str]) -> str:
 
 
 def _unit(name: str) -> str:
-    return {"probe_offset": "pH", "probe_drift": "pH/min", "probe_noise": "x healthy noise"}.get(name, "x recorded")
+    return {"probe_bias": "pH", "probe_drift": "pH/min", "probe_noise": "x healthy noise"}.get(name, "x recorded")
 
 
 def _naming(name: str, ev: dict) -> dict:
@@ -513,7 +513,7 @@ def _naming(name: str, ev: dict) -> dict:
         family, what = "actuator", f"{name[5:]} delivers other than recorded (or runs where the calibration never did)"
     else:
         family = "sensor"
-        what = {"probe_offset": "probe offset", "probe_drift": "probe drift", "probe_noise": "probe noise"}[name]
+        what = {"probe_bias": "probe bias", "probe_drift": "probe drift", "probe_noise": "probe noise"}[name]
     return {"family": family, "fault_class": name, "description": what, "size": round(size, 4),
             "unit": _unit(name), "log_likelihood_gain": round(gain, 3)}
 

@@ -14,7 +14,7 @@ def test_every_injected_kind_has_a_class_a_right_name_gives():
         if pump:
             assert classes == ["pump:acid_flow_ml_s"]
         else:  # the exact hypothesis first, then the ones a right-family name may give
-            assert classes and set(classes) <= {"probe_offset", "probe_drift", "probe_noise"}, (kind, classes)
+            assert classes and set(classes) <= {"probe_bias", "probe_drift", "probe_noise"}, (kind, classes)
 
 
 @pytest.mark.parametrize("kind,size,true", [("probe_bias", 0.3, 0.3), ("pump_low", 0.2, 0.8), ("pump_high", 0.5, 1.5),
@@ -24,14 +24,14 @@ def test_the_true_size_in_the_named_classs_unit(kind, size, true):
 
 
 def test_the_first_alarm_after_the_onset_gives_the_name_and_only_right_classes_give_a_size():
-    alarms = [{"t": 5.0, "family": "sensor", "fault_class": "probe_offset", "size": 9.0},
+    alarms = [{"t": 5.0, "family": "sensor", "fault_class": "probe_bias", "size": 9.0},
               {"t": 12.0, "family": "actuator", "fault_class": "pump:base_flow_ml_s", "size": 0.45},
-              {"t": 20.0, "family": "sensor", "fault_class": "probe_offset", "size": 1.0}]
+              {"t": 20.0, "family": "sensor", "fault_class": "probe_bias", "size": 1.0}]
     o = outcome(alarms, 10.0)
     assert (o.alarms_before, o.first_after_s, o.fault_class, o.size) == (1, 12.0, "pump:base_flow_ml_s", 0.45)
     rows = [{"size": 0.5, "class": "pump:base_flow_ml_s", "class_named": "pump:base_flow_ml_s", "size_named": s}
             for s in (0.4, 0.45, 0.7)]
-    rows.append({"size": 0.5, "class": "pump:base_flow_ml_s", "class_named": "probe_offset", "size_named": 3.0})
+    rows.append({"size": 0.5, "class": "pump:base_flow_ml_s", "class_named": "probe_bias", "size_named": 3.0})
     assert _class_and_size(rows, "pump_low") == {"class_right": 3, "median_size_named": 0.45, "size_expected": 0.5}
     assert _class_and_size([], "pump_low") == {"class_right": 0, "median_size_named": None, "size_expected": None}
 

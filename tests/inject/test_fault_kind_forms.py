@@ -30,7 +30,7 @@ def test_every_kind_is_named_by_classes_the_isolation_has(name):
 
 def test_the_rig_benchmark_reads_the_declaration():
     assert set(PROBE_CLASS) == {n for n, k in KINDS.items() if k.family == "sensor"}
-    assert expected_class("probe_drift", None) == ["probe_drift", "probe_offset"]  # the exact class first
+    assert expected_class("probe_drift", None) == ["probe_drift", "probe_bias"]  # the exact class first
     assert expected_class("pump_low", "base") == ["pump:base_flow_ml_s"]
 
 

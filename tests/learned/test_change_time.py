@@ -61,4 +61,4 @@ def test_the_naming_window_starts_at_the_jump_not_at_the_detectors_onset():
     iso = named[0].alarm["isolation"]
     assert named[0].alarm["onset_index"] > onset  # the statistic's onset: late
     assert abs(iso["window"][0] - onset) <= 2, iso["window"]
-    assert iso["fault_class"] == "probe_offset" and abs(iso["size"] - 0.5) < 0.1, iso
+    assert iso["fault_class"] == "probe_bias" and abs(iso["size"] - 0.5) < 0.1, iso

@@ -77,7 +77,7 @@ def test_the_unseen_operation_healthy_raises_no_fault_alarm(calibrated):
         assert not [a for a in _verdicts(model, t, rows) if a["verdict"] == "fault"]
 
 
-def test_a_probe_offset_in_the_unseen_operation_is_a_confirmed_fault(calibrated):
+def test_a_probe_bias_in_the_unseen_operation_is_a_confirmed_fault(calibrated):
     """A 0.5 pH offset from an onset drawn per run, on three runs (fixed seeds: the test is deterministic): no fault
     alarm before the onset on any; a fault alarm after it named a probe offset of about 0.5 pH on at least two (the
     chattering pump leaves few samples of the run to compare with: on the simulated rig 8 of 12 offsets of 0.4 pH
@@ -89,7 +89,7 @@ def test_a_probe_offset_in_the_unseen_operation_is_a_confirmed_fault(calibrated)
         t, rows = _unseen(truth, seed, lambda t, ph: np.where(np.arange(len(ph)) >= onset, ph + 0.5, ph))
         faults = [a for a in _verdicts(model, t, rows) if a["verdict"] == "fault"]
         assert not [a for a in faults if a["detection_index"] < onset]
-        if faults and faults[0]["isolation"]["fault_class"] == "probe_offset":
+        if faults and faults[0]["isolation"]["fault_class"] == "probe_bias":
             named += 0.35 < faults[0]["isolation"]["size"] < 0.65
     assert named >= 2
 

@@ -181,7 +181,7 @@ def test_alarms_are_named_the_same_whatever_the_chunking():
     whole, _, _ = run_record(model, t, rows, chunk=None)
     named = [e for e in whole if e.kind == "named"]
     assert named and named[0].alarm["isolation"]["family"] == "sensor"
-    assert named[0].alarm["isolation"]["fault_class"] == "probe_offset"
+    assert named[0].alarm["isolation"]["fault_class"] == "probe_bias"
     for chunk in (1, 7, 500):
         again, _, _ = run_record(model, t, rows, chunk=chunk)
         assert [(e.kind, e.index, e.message) for e in again] == [(e.kind, e.index, e.message) for e in whole]

@@ -75,7 +75,7 @@ def test_a_probe_jump_is_named_from_where_it_began(tmp_path_factory, capsys):
     alarms = _alarms(capsys, faulty, ref)
     assert alarms and alarms[0]["detection_time"] >= 90.0, alarms
     iso = alarms[0].get("isolation") or {}
-    assert iso.get("fault_class") == "probe_offset" and 0.8 < iso["size"] < 1.2, iso
+    assert iso.get("fault_class") == "probe_bias" and 0.8 < iso["size"] < 1.2, iso
 
 
 def test_any_chunking_gives_the_same_alarms_to_the_last_bit(fold):
@@ -147,7 +147,7 @@ def test_a_small_bias_the_controller_hides_is_a_confirmed_fault(fold, capsys):
     seconds and the filter follows, so over the verdict's window the innovations hardly change (without the jump
     at the window's start this was a deviation outside calibration); named a probe offset of about 0.4 pH."""
     iso = _first_fault(fold, capsys, "probe_bias", "0.4", "small_bias")["isolation"]
-    assert iso["fault_class"] == "probe_offset" and 0.3 < iso["size"] < 0.5, iso
+    assert iso["fault_class"] == "probe_bias" and 0.3 < iso["size"] < 0.5, iso
     assert "jump" in iso["confirmation"]["confirmed_by"], iso["confirmation"]
 
 

@@ -58,5 +58,5 @@ def test_a_probe_bias_the_controller_acts_on_is_mostly_a_confirmed_fault(calibra
         faults = [a for a in alarms if a["verdict"] == "fault"]
         early += bool([a for a in faults if a["detection_time"] < onset])
         found += bool(faults) and faults[-1]["detection_time"] >= onset and \
-            faults[-1]["isolation"]["fault_class"] in ("probe_offset", "probe_drift")
+            faults[-1]["isolation"]["fault_class"] in ("probe_bias", "probe_drift")
     assert early <= 2 and found >= 3, (early, found)
