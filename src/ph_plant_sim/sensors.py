@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phfdi_base.blocks import register_block
-from phfdi_base.faults import Fault, FaultParam, Range
+from phfdi_base.faults import Fault, FaultParam, Range, register_fault
 
 
 def _check(name: str, value: float, positive: bool = False) -> None:
@@ -95,7 +95,7 @@ class TransportDelay:
 
 
 @register_block("sensor_lag", fault=Fault(
-    "sensor_lag", site="ph_sensor", description="first-order pH probe lag (a diagnosis candidate)",
+    "probe_lag", site="ph_sensor", description="first-order pH probe lag (a diagnosis candidate)",
     # the diagnosis fits up to 600 s (and a fifth of the record)
     params=(FaultParam("tau_s", "s", (0.0, math.inf), search=Range(0.0, 600.0)),), isolate=False, preset=False))
 @dataclass
@@ -122,7 +122,9 @@ class FirstOrderLag:
         return self._y
 
 
-@register_block("sensor_noise")
+@register_block("sensor_noise", fault=Fault(
+    "probe_noise", site="ph_sensor", description="pH probe noise (white, seeded)",
+    params=(FaultParam("std", "pH", (0.0, 14.0)),), isolate=False, preset=False, candidate=False))
 @dataclass
 class GaussianNoise:
     """Additive white Gaussian noise of standard deviation ``std`` (units of the signal).
@@ -155,7 +157,7 @@ class GaussianNoise:
 
 
 @register_block("sensor_bias", fault=Fault(
-    "sensor_bias", site="ph_sensor", description="pH probe offset (a diagnosis candidate)",
+    "probe_bias", site="ph_sensor", description="pH probe bias (a diagnosis candidate)",
     params=(FaultParam("bias", "pH", (-14.0, 14.0), search=Range(-3.0, 3.0)),), isolate=False, preset=False))
 @dataclass
 class Bias:
@@ -175,7 +177,7 @@ class Bias:
 
 
 @register_block("sensor_drift", fault=Fault(
-    "sensor_drift", site="ph_sensor", description="pH probe drift (a diagnosis candidate)",
+    "probe_drift", site="ph_sensor", description="pH probe drift (a diagnosis candidate)",
     # the diagnosis fits up to 3 pH over the record, either sign: a range the record's length sets
     params=(FaultParam("rate_per_s", "pH/s", (-math.inf, math.inf)),), isolate=False, preset=False))
 @dataclass
@@ -202,7 +204,7 @@ class Drift:
 
 
 @register_block("sensor_gain", fault=Fault(
-    "sensor_gain", site="ph_sensor", description="pH probe slope error about pH 7 (a diagnosis candidate)",
+    "probe_gain", site="ph_sensor", description="pH probe slope error about pH 7 (a diagnosis candidate)",
     params=(FaultParam("gain", "1", (0.0, math.inf), search=Range(0.4, 2.5, log=True)),
             FaultParam("reference", "pH", (0.0, 14.0), paper=7.0)), isolate=False, preset=False))
 @dataclass
@@ -223,6 +225,12 @@ class Gain:
     def step_many(self, x: np.ndarray, t_s: np.ndarray) -> np.ndarray:
         g = 1.0 + self.severity * (self.gain - 1.0)
         return self.reference + g * (np.asarray(x, dtype=float) - self.reference)
+
+
+#: a frozen probe is the block that holds a valve's stem (``blocking``, registered with the valve's blocks), on the
+#: probe: the reading stays where the onset found it
+register_fault(Fault("probe_frozen", site="ph_sensor", description="pH reading frozen where the onset found it",
+                     isolate=False, preset=False, candidate=False), "blocking")
 
 
 @register_block("sensor_asymmetric_lag")

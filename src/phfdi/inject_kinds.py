@@ -1,4 +1,10 @@
-"""The faults :mod:`phfdi.inject` hides in measured records: names, families, units (no numpy: read by --help)."""
+"""The faults :mod:`phfdi.inject` hides in measured records: names, families, units (no numpy: read by --help).
+
+A probe fault's name is its name in the fault catalogue (:mod:`phfdi_base.faults`: ``probe_bias`` is the entry whose
+block ``sensor_bias`` simulates it, in that block's own units, a drift per second there and per minute here) and
+the rig estimator's class for it (``probe_bias``, ``probe_drift``, ``probe_noise``); ``isolated_as`` below lists
+every class a right name may give. The pump faults have no catalogue entry: no block models a rig pump's fault.
+"""
 
 from __future__ import annotations
 
@@ -63,9 +69,6 @@ class FaultKind:
     #: the classes the rig estimator's isolation (wavelet_fdi.estimator_isolation) names it by when it names it
     #: right, the exact one first; ``{pump}`` stands for the pump the fault is on (``pump:acid_flow_ml_s``)
     isolated_as: tuple[str, ...] = ()
-    #: the catalogued block (phfdi_base.faults) that models the same fault in simulation, in its own
-    #: parameters and units (a drift per second there, per minute here); None: no block models it
-    block: str | None = None
 
     def isolation_classes(self, pump: str | None = None) -> list[str]:
         """The classes a right name gives this fault (on ``pump``'s flow for a pump fault)."""
@@ -81,17 +84,17 @@ class FaultKind:
 PUMP_CLASS = ("pump:{pump}_flow_ml_s",)
 KINDS: dict[str, FaultKind] = {k.name: k for k in (
     FaultKind("probe_bias", "sensor", "pH", "a step of SIZE pH added to pH", SizeRange(-PH_MAX, PH_MAX),
-              ("probe_bias",), "sensor_bias"),
+              ("probe_bias",)),
     FaultKind("probe_drift", "sensor", "pH/min", "a ramp of SIZE pH per minute added to pH",
-              SizeRange(-PH_MAX, PH_MAX), ("probe_drift", "probe_bias"), "sensor_drift"),
+              SizeRange(-PH_MAX, PH_MAX), ("probe_drift", "probe_bias")),
     FaultKind("probe_frozen", "sensor", "none", "pH held at its value at the onset (SIZE ignored)", None,
-              ("probe_noise",), "blocking"),
+              ("probe_noise",)),
     FaultKind("probe_noise", "sensor", "pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added",
-              SizeRange(0.0, PH_MAX, low_in=False), ("probe_noise",), "sensor_noise"),
+              SizeRange(0.0, PH_MAX, low_in=False), ("probe_noise",)),
     FaultKind("probe_lag", "sensor", "s", "a first-order lag of time constant SIZE s added to the probe",
-              SizeRange(0.0, 86400.0, low_in=False), ("probe_noise",), "sensor_lag"),
+              SizeRange(0.0, 86400.0, low_in=False), ("probe_noise",)),
     FaultKind("probe_gain", "sensor", "fraction", "slope error about pH 7: pH' = 7 + (1 + SIZE)(pH - 7)",
-              SizeRange(-1.0, 10.0, low_in=False), ("probe_bias", "probe_drift"), "sensor_gain"),
+              SizeRange(-1.0, 10.0, low_in=False), ("probe_bias", "probe_drift")),
     FaultKind("pump_low", "actuator", "fraction", "the pump delivers SIZE less than recorded: "
                                                   "recorded = delivered / (1 - SIZE)",
               SizeRange(0.0, 1.0, low_in=False, high_in=False), PUMP_CLASS),

@@ -174,8 +174,8 @@ def test_a_fault_answers_to_its_preset_name_and_its_blocks():
                   has_command=True, command_pct=np.linspace(30.0, 60.0, 50), ph_range=(8.0, 11.0),
                   duration_s=1000.0, dt_s=1.0, total_inflow_ml_s=30.0, feed_strength_mol_l={"acid": 0.1, "base": 0.1},
                   outputs={"ph_measured"})
-    cands, _ = candidates(ctx, only=["friction", "probe_delay"])
-    assert sorted(c.cause for c in cands) == ["coulomb_viscous_friction", "sensor_delay"]
+    cands, _ = candidates(ctx, only=["friction", "probe_delay", "probe_bias"])  # the name phfdi inject uses too
+    assert sorted(c.cause for c in cands) == ["coulomb_viscous_friction", "sensor_bias", "sensor_delay"]
     delay = next(c for c in cands if c.cause == "sensor_delay").params[0]
     # the catalogue's diagnosis range, narrowed by the record (a fifth of 1000 s)
     assert (delay.low, delay.high) == (0.0, 200.0)
