@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phfdi_base.blocks import register_block
+from phfdi_base.faults import Fault, Injection, SizeRange, register_fault
 
 from .sensors import TransportDelay, _check, lag_step
 
@@ -55,6 +56,27 @@ class PumpCurve:
         """:meth:`step` for each sample of ``x`` (the same arithmetic, vectorised)."""
         g = 1.0 + self.severity * (self.gain - 1.0)
         return g * np.maximum(0.0, np.asarray(x, dtype=float) - self.severity * self.threshold_ml_s)
+
+
+#: A dosing pump that delivers other than its record says: the delivery curve with a gain of 1 - SIZE (pump_low),
+#: 1 + SIZE (pump_high) or 0 (pump_stuck). Only ``phfdi inject`` (which writes the fault into a record's RECORDED
+#: command and flow, since the measured pH is what the pump really delivered) and the rig estimator (which names it
+#: by the pump's feed: its apparent strength) use them. The ranges: a pump can deliver nothing (pump_low's 1) but no
+#: less; eleven times the recorded flow (pump_high's 10) and 1000 mL/s (a litre a second: no lab or pilot dosing
+#: pump) are where a record stops being a pump's.
+PUMP_CLASS = ("pump:{pump}_flow_ml_s",)
+for _name, _what, _inject in (
+        ("pump_low", "a dosing pump delivering less than recorded",
+         Injection("fraction", "the pump delivers SIZE less than recorded: recorded = delivered / (1 - SIZE)",
+                   SizeRange(0.0, 1.0, low_in=False, high_in=False), PUMP_CLASS)),
+        ("pump_high", "a dosing pump delivering more than recorded",
+         Injection("fraction", "the pump delivers SIZE more than recorded: recorded = delivered / (1 + SIZE)",
+                   SizeRange(0.0, 10.0, low_in=False), PUMP_CLASS)),
+        ("pump_stuck", "a dosing pump delivering nothing while its record says it runs",
+         Injection("mL/s", "the pump delivers nothing while the record says SIZE mL/s "
+                           "(only where the data's pump is off)", SizeRange(0.0, 1000.0, low_in=False), PUMP_CLASS))):
+    register_fault(Fault(_name, site="pump", description=_what, isolate=False, preset=False, candidate=False,
+                         inject=_inject), "pump_curve")
 
 
 @register_block("pump_lag")

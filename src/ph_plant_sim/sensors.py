@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phfdi_base.blocks import register_block
-from phfdi_base.faults import Fault, FaultParam, Range, register_fault
+from phfdi_base.faults import Fault, FaultParam, Injection, Range, SizeRange, register_fault
 
 
 def _check(name: str, value: float, positive: bool = False) -> None:
@@ -94,10 +94,20 @@ class TransportDelay:
         return y
 
 
+#: How ``phfdi inject`` hides each probe fault in a measured record (``inject=``): the size ranges are where a size
+#: still means the fault: beyond the probe's 0..14 pH span a bias, a drift per minute or a noise's standard deviation
+#: only clips to the span's ends; a lag longer than a day is a frozen probe in any record; a gain at or below -1
+#: turns the slope over. The rig estimator's classes: a slope error is locally an offset or a drift, a drift over a
+#: short window an offset; a frozen or sluggish reading loses its noise (its class is the noise's, s < 1).
+PH_SPAN = SizeRange(-14.0, 14.0)
+
+
 @register_block("sensor_lag", fault=Fault(
     "probe_lag", site="ph_sensor", description="first-order pH probe lag (a diagnosis candidate)",
     # the diagnosis fits up to 600 s (and a fifth of the record)
-    params=(FaultParam("tau_s", "s", (0.0, math.inf), search=Range(0.0, 600.0)),), isolate=False, preset=False))
+    params=(FaultParam("tau_s", "s", (0.0, math.inf), search=Range(0.0, 600.0)),), isolate=False, preset=False,
+    inject=Injection("s", "a first-order lag of time constant SIZE s added to the probe",
+                     SizeRange(0.0, 86400.0, low_in=False), ("probe_noise",))))
 @dataclass
 class FirstOrderLag:
     """First-order lag tau dy/dt = x - y, exact for an input held over each sample:
@@ -124,7 +134,9 @@ class FirstOrderLag:
 
 @register_block("sensor_noise", fault=Fault(
     "probe_noise", site="ph_sensor", description="pH probe noise (white, seeded)",
-    params=(FaultParam("std", "pH", (0.0, 14.0)),), isolate=False, preset=False, candidate=False))
+    params=(FaultParam("std", "pH", (0.0, 14.0)),), isolate=False, preset=False, candidate=False,
+    inject=Injection("pH (std)", "seeded Gaussian noise of standard deviation SIZE pH added",
+                     SizeRange(0.0, 14.0, low_in=False), ("probe_noise",))))
 @dataclass
 class GaussianNoise:
     """Additive white Gaussian noise of standard deviation ``std`` (units of the signal).
@@ -158,7 +170,8 @@ class GaussianNoise:
 
 @register_block("sensor_bias", fault=Fault(
     "probe_bias", site="ph_sensor", description="pH probe bias (a diagnosis candidate)",
-    params=(FaultParam("bias", "pH", (-14.0, 14.0), search=Range(-3.0, 3.0)),), isolate=False, preset=False))
+    params=(FaultParam("bias", "pH", (-14.0, 14.0), search=Range(-3.0, 3.0)),), isolate=False, preset=False,
+    inject=Injection("pH", "a step of SIZE pH added to pH", PH_SPAN, ("probe_bias",))))
 @dataclass
 class Bias:
     """Constant offset: y = x + bias."""
@@ -179,7 +192,8 @@ class Bias:
 @register_block("sensor_drift", fault=Fault(
     "probe_drift", site="ph_sensor", description="pH probe drift (a diagnosis candidate)",
     # the diagnosis fits up to 3 pH over the record, either sign: a range the record's length sets
-    params=(FaultParam("rate_per_s", "pH/s", (-math.inf, math.inf)),), isolate=False, preset=False))
+    params=(FaultParam("rate_per_s", "pH/s", (-math.inf, math.inf)),), isolate=False, preset=False,
+    inject=Injection("pH/min", "a ramp of SIZE pH per minute added to pH", PH_SPAN, ("probe_drift", "probe_bias"))))
 @dataclass
 class Drift:
     """Linear drift from the moment the block comes to rest: y = x + rate (t - t0)."""
@@ -206,7 +220,9 @@ class Drift:
 @register_block("sensor_gain", fault=Fault(
     "probe_gain", site="ph_sensor", description="pH probe slope error about pH 7 (a diagnosis candidate)",
     params=(FaultParam("gain", "1", (0.0, math.inf), search=Range(0.4, 2.5, log=True)),
-            FaultParam("reference", "pH", (0.0, 14.0), paper=7.0)), isolate=False, preset=False))
+            FaultParam("reference", "pH", (0.0, 14.0), paper=7.0)), isolate=False, preset=False,
+    inject=Injection("fraction", "slope error about pH 7: pH' = 7 + (1 + SIZE)(pH - 7)",
+                     SizeRange(-1.0, 10.0, low_in=False), ("probe_bias", "probe_drift"))))
 @dataclass
 class Gain:
     """Span error about a reference point: y = ref + gain (x - ref) (pH probe slope error about pH 7)."""
@@ -230,7 +246,9 @@ class Gain:
 #: a frozen probe is the block that holds a valve's stem (``blocking``, registered with the valve's blocks), on the
 #: probe: the reading stays where the onset found it
 register_fault(Fault("probe_frozen", site="ph_sensor", description="pH reading frozen where the onset found it",
-                     isolate=False, preset=False, candidate=False), "blocking")
+                     isolate=False, preset=False, candidate=False,
+                     inject=Injection("none", "pH held at its value at the onset (SIZE ignored)", None, ("probe_noise",))),
+               "blocking")
 
 
 @register_block("sensor_asymmetric_lag")

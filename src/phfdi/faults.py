@@ -7,6 +7,7 @@ plugin a scenario names registers its own when the scenario is loaded. The prese
 
 from __future__ import annotations
 
+import ph_plant_sim.feedlines  # noqa: F401  (registers the dosing pumps' faults)
 import ph_plant_sim.sensors  # noqa: F401  (registers the probe's faults)
 import valve_actuator.blocks  # noqa: F401  (registers the valve's faults)
 from phfdi_base.faults import Fault, faults

@@ -25,8 +25,9 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 from phfdi_base.outputs import write_together
+from phfdi_base.faults import Fault
 
-from .inject_kinds import KINDS, PH_CAL_POINT, PH_MAX, PH_MIN, PH_RESOLUTION, PUMPS, TRUTH_FORMAT, FaultKind
+from .inject_kinds import KINDS, PH_CAL_POINT, PH_MAX, PH_MIN, PH_RESOLUTION, PUMPS, TRUTH_FORMAT
 
 _NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
@@ -233,14 +234,15 @@ def _mapped(cmap, signal: str) -> str:
     return cmap.signals[signal].column
 
 
-def _check_size(spec: FaultKind, size: float | None) -> float:
-    """The size, if it is in the kind's range (:data:`~phfdi.inject_kinds.KINDS`); one line naming the range."""
-    if spec.sizes is None:
+def _check_size(spec: Fault, size: float | None) -> float:
+    """The size, if it is in the kind's range (its catalogue entry's injection form); one line naming the range."""
+    form = spec.inject
+    if form.sizes is None:
         return 0.0
     if size is None or not math.isfinite(size):
-        raise UserError(f"{spec.name} needs a finite --size, {spec.sizes.says(spec.unit)}")
-    if size not in spec.sizes:
-        raise UserError(f"--size {size:g}: {spec.name} takes a size {spec.sizes.says(spec.unit)}")
+        raise UserError(f"{spec.name} needs a finite --size, {form.sizes.says(form.unit)}")
+    if size not in form.sizes:
+        raise UserError(f"--size {size:g}: {spec.name} takes a size {form.sizes.says(form.unit)}")
     return float(size)
 
 
@@ -301,7 +303,7 @@ def inject_fault(path: str | Path, kind: str, onset_s: float, size: float | None
     else:
         changes, channels = _pump_changes(csv, cmap, kind, pump, k0, onset_s, size)
     if not changes:
-        raise UserError(f"{kind} of size {size:g} {spec.unit} from {onset_s:g} s would change no cell of {path} "
+        raise UserError(f"{kind} of size {size:g} {spec.inject.unit} from {onset_s:g} s would change no cell of {path} "
                         f"(at the file's resolution); nothing written")
     truth = _truth(csv, spec, channels, onset_s, k0, size, pump, seed, changes)
     last_s = float(record.time_s[-1])  # an onset a rounding past the last stamp is that stamp (_onset_row)
@@ -336,21 +338,21 @@ def _column_map(given):
     return ColumnMap.load(given)
 
 
-def _truth(csv: CsvText, spec: FaultKind, channels: list[str], onset_s: float, k0: int, size: float,
+def _truth(csv: CsvText, spec: Fault, channels: list[str], onset_s: float, k0: int, size: float,
            pump: str | None, seed: int, changes: dict) -> dict:
     rows = sorted({k for k, _ in changes})
     where = f"the {pump} pump's recorded {' and '.join(repr(c) for c in channels)}" if pump and \
         spec.family == "actuator" else " and ".join(repr(c) for c in channels)
-    amount = "" if spec.name == "probe_frozen" else f" of {size:g} {spec.unit}"
+    amount = "" if spec.name == "probe_frozen" else f" of {size:g} {spec.inject.unit}"
     truth = {
         "format": TRUTH_FORMAT, "kind": spec.name, "family": spec.family, "channels": channels,
         "pump": pump if spec.family == "actuator" else None,
         "onset_s": float(onset_s), "onset_index": None, "onset_line": csv.line_of[k0] + 1,
-        "size": size, "unit": spec.unit, "seed": seed,
+        "size": size, "unit": spec.inject.unit, "seed": seed,
         "rows_changed": len(rows), "first_changed_line": csv.line_of[rows[0]] + 1,
         "source": csv.path, "source_sha256": csv.sha256,
         "description": f"{spec.name}{amount} in {where} from {onset_s:g} s (record time): "
-                       f"{spec.what.replace('SIZE', f'{size:g}')}",
+                       f"{spec.inject.what.replace('SIZE', f'{size:g}')}",
         "notes": list(csv.notes),
     }
     if spec.name == "probe_lag":

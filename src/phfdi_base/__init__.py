@@ -16,13 +16,14 @@ from typing import TYPE_CHECKING
 
 from .lazy import lazy_exports
 
-__all__ = ["Block", "Chain", "Change", "Fault", "FaultParam", "LoopDraws", "Profile", "Range", "ScenarioSpec", "Signal",
-           "UserError", "label", "make_block", "read_mapping", "register_block", "unit_of", "validate_scenario"]
+__all__ = ["Block", "Chain", "Change", "Fault", "FaultParam", "Injection", "LoopDraws", "Profile", "Range", "ScenarioSpec",
+           "Signal", "SizeRange", "UserError", "label", "make_block", "read_mapping", "register_block", "unit_of",
+           "validate_scenario"]
 
 if TYPE_CHECKING:  # the public names, for type checkers; lazy_exports reads them too
     from .blocks import Block, Chain, make_block, register_block
     from .errors import UserError
-    from .faults import Fault, FaultParam, LoopDraws, Range
+    from .faults import Fault, FaultParam, Injection, LoopDraws, Range, SizeRange
     from .profiles import Change, Profile
     from .signals import Signal, label, unit_of
     from .spec import ScenarioSpec, validate_scenario

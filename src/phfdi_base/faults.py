@@ -29,11 +29,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["FAULTS", "SITES", "Fault", "FaultParam", "LoopDraws", "Range", "faults", "register_fault"]
+__all__ = ["FAULTS", "SITES", "SITE_FAMILY", "Fault", "FaultParam", "Injection", "LoopDraws", "Range", "SizeRange",
+           "faults", "register_fault"]
 
-#: where a fault acts: the valve stem position, the valve's flow, or the pH probe (as in a scenario's
-#: ``faults: - where:``; the plant and its feeds are extended by the diagnosis's process candidates)
-SITES = ("valve", "valve_flow", "ph_sensor")
+#: where a fault acts: the valve stem position, the valve's flow, the pH probe (as in a scenario's
+#: ``faults: - where:``; the plant and its feeds are extended by the diagnosis's process candidates), or a
+#: dosing pump of a feed (the rig's; faults only ``phfdi inject`` and the rig estimator name)
+SITES = ("valve", "valve_flow", "ph_sensor", "pump")
+#: a fault's family by where it acts: a valve's or a pump's is the actuator's, the probe's the sensor's
+SITE_FAMILY = {"valve": "actuator", "valve_flow": "actuator", "ph_sensor": "sensor", "pump": "actuator"}
 
 
 @dataclass(frozen=True)
@@ -145,6 +149,78 @@ class LoopDraws:
 
 
 @dataclass(frozen=True)
+class SizeRange:
+    """The sizes an injected fault takes: from ``low`` to ``high`` in its unit, each end in or out of the range.
+
+    Examples
+    --------
+    >>> from phfdi_base import SizeRange
+    >>> SizeRange(0.0, 1.0, low_in=False, high_in=False).says("fraction")
+    'above 0 and below 1 (a fraction)'
+    >>> 1e308 in SizeRange(-14.0, 14.0)
+    False
+    """
+
+    low: float
+    high: float
+    low_in: bool = True
+    high_in: bool = True
+
+    def __contains__(self, size: float) -> bool:
+        above = size >= self.low if self.low_in else size > self.low
+        below = size <= self.high if self.high_in else size < self.high
+        return above and below
+
+    def says(self, unit: str) -> str:
+        """The range in words, with its unit."""
+        unit = "(a fraction)" if unit == "fraction" else unit
+        if self.low_in and self.high_in:
+            return f"from {self.low:g} to {self.high:g} {unit}"
+        low = f"at least {self.low:g}" if self.low_in else f"above {self.low:g}"
+        high = f"at most {self.high:g}" if self.high_in else f"below {self.high:g}"
+        return f"{low} and {high} {unit}"
+
+
+@dataclass(frozen=True)
+class Injection:
+    """The fault as ``phfdi inject`` hides it in a measured record, and the rig estimator's names for it.
+
+    Parameters
+    ----------
+    unit : str
+        The size's unit in a record (a probe drift in pH per minute, as a rig's engineer states it; its block
+        takes pH per second).
+    what : str
+        What it does to the record, ``SIZE`` standing for the size.
+    sizes : SizeRange or None
+        The sizes where the size still means the fault (None: it takes no size).
+    isolated_as : tuple of str
+        The classes the rig estimator's isolation (``wavelet_fdi.estimator_isolation``) names it by when it names
+        it right, the exact one first; ``{pump}`` stands for the pump the fault is on (``pump:acid_flow_ml_s``).
+
+    Examples
+    --------
+    >>> from phfdi_base import Injection, SizeRange
+    >>> i = Injection("fraction", "delivers SIZE less", SizeRange(0.0, 1.0, low_in=False), ("pump:{pump}_flow_ml_s",))
+    >>> i.isolation_classes("acid"), i.size_text()
+    (['pump:acid_flow_ml_s'], 'above 0 and at most 1 (a fraction)')
+    """
+
+    unit: str
+    what: str
+    sizes: SizeRange | None
+    isolated_as: tuple[str, ...] = ()
+
+    def isolation_classes(self, pump: str | None = None) -> list[str]:
+        """The classes a right name gives this fault (on ``pump``'s flow for a pump fault)."""
+        return [c.format(pump=pump) for c in self.isolated_as]
+
+    def size_text(self) -> str:
+        """'from -14 to 14 pH' (--help): the range and its unit."""
+        return "none" if self.sizes is None else self.sizes.says(self.unit)
+
+
+@dataclass(frozen=True)
 class Fault:
     """A fault a block models: preset name, site, parameters (main first), severities.
 
@@ -174,6 +250,8 @@ class Fault:
         use.
     loop : LoopDraws, optional
         How the loop diagnosis's training loops draw it (None: they do not).
+    inject : Injection, optional
+        How ``phfdi inject`` hides it in a measured record and the rig estimator names it (None: it does not).
 
     ``block``, the registered block type (the diagnosis's cause), is filled in by
     :func:`phfdi_base.blocks.register_block`.
@@ -198,6 +276,7 @@ class Fault:
     preset: bool = True
     candidate: bool = True
     loop: LoopDraws | None = field(default=None, compare=False)
+    inject: Injection | None = field(default=None, compare=False)
     block: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -205,6 +284,11 @@ class Fault:
             raise ValueError(f"fault {self.name}: site {self.site!r} not one of {', '.join(SITES)}")
         if self.severities is not None and self.main is None:
             raise ValueError(f"fault {self.name}: severities need a parameter")
+
+    @property
+    def family(self) -> str:
+        """``actuator`` or ``sensor``, by where it acts (:data:`SITE_FAMILY`)."""
+        return SITE_FAMILY[self.site]
 
     @property
     def main(self) -> FaultParam | None:

@@ -37,9 +37,9 @@ SIZES: dict[str, tuple[float, ...]] = {
     "probe_lag": (30.0, 10.0), "probe_gain": (0.3, 0.1), "pump_low": (0.5, 0.2), "pump_high": (0.5, 0.2),
     "pump_stuck": (3.0, 1.0)}
 ONSET_FRACTIONS = (0.35, 0.55, 0.75)
-#: the classes a right name gives each injected probe kind (declared with the kind: phfdi.inject_kinds), the first
-#: the exact one
-PROBE_CLASS = {name: kind.isolated_as for name, kind in KINDS.items() if kind.family == "sensor"}
+#: the classes a right name gives each injected probe kind (its catalogue entry's injection form), the first the
+#: exact one
+PROBE_CLASS = {name: kind.inject.isolated_as for name, kind in KINDS.items() if kind.family == "sensor"}
 PLAIN_CUSUM_K = 0.5
 
 
@@ -70,7 +70,7 @@ class Outcome:
 
 def expected_class(kind: str, pump: str | None) -> list[str]:
     """The fault classes a right name gives an injected fault of ``kind`` (on ``pump``'s flow for the pumps)."""
-    return KINDS[kind].isolation_classes(pump)
+    return KINDS[kind].inject.isolation_classes(pump)
 
 
 def expected_size(kind: str, size: float) -> float | None:

@@ -37,7 +37,8 @@ a detector never needs it. Both files are written atomically; an existing file i
 def _examples() -> str:
     from phfdi.inject_kinds import KINDS
 
-    return EXAMPLES.replace("{kinds}", "\n".join(f"  {k.name:13s} [{k.size_text()}] {k.what}" for k in KINDS.values()))
+    return EXAMPLES.replace("{kinds}", "\n".join(f"  {k.name:13s} [{k.inject.size_text()}] {k.inject.what}"
+                                                for k in KINDS.values()))
 
 
 def register(sub: argparse._SubParsersAction) -> None:

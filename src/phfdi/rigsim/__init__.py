@@ -21,8 +21,8 @@ Examples
 (3.0, 12.0, 's')
 >>> f"{60 * FLOW_PER_PCT['acid']:.2f} {100 * FLOW_PER_PCT['base']:.2f}"  # mL/s at 60 % acid, 100 % base
 '4.31 6.45'
->>> HEADER.split(",")[:2], PROBE_FAULTS[:2]
-(['Time', ' ElapsedTime (s)'], ('probe_bias', 'probe_drift'))
+>>> HEADER.split(",")[:2], sorted(PROBE_FAULTS)[:2]
+(['Time', ' ElapsedTime (s)'], ['probe_bias', 'probe_drift'])
 """
 
 from .day import DAY_RANGES, FLOW_PER_PCT, RigDay, draw_day

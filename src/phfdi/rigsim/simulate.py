@@ -70,9 +70,9 @@ class ProbeFault:
             raise UserError("the probe fault's onset must be a finite time")
         if self.kind != "probe_frozen":
             if self.size is None or not math.isfinite(self.size):
-                raise UserError(f"{self.kind} needs a finite size (in {KINDS[self.kind].unit})")
+                raise UserError(f"{self.kind} needs a finite size (in {KINDS[self.kind].inject.unit})")
             if self.kind in ("probe_noise", "probe_lag") and not self.size > 0:
-                raise UserError(f"{self.kind}: the size must be above 0 ({KINDS[self.kind].unit})")
+                raise UserError(f"{self.kind}: the size must be above 0 ({KINDS[self.kind].inject.unit})")
             if self.kind == "probe_gain" and not self.size > -1:
                 raise UserError("probe_gain: the size must be above -1 (fraction)")
 
@@ -353,15 +353,15 @@ def _truth(fault: ProbeFault, t: np.ndarray, op: Operation) -> dict:
     spec = KINDS[fault.kind]
     k0 = int(np.searchsorted(t, fault.onset_s, side="left"))
     closed = op.kind in ("on_off", "pi")
-    amount = "" if fault.kind == "probe_frozen" else f" of {fault.size:g} {spec.unit}"
+    amount = "" if fault.kind == "probe_frozen" else f" of {fault.size:g} {spec.inject.unit}"
     seen = "the reading the controller acts on" if closed else "the recorded reading (open loop: no controller)"
     return {
         "format": TRUTH_FORMAT, "kind": fault.kind, "family": spec.family, "channels": ["pH"], "pump": None,
         "onset_s": float(fault.onset_s), "onset_index": k0, "onset_line": k0 + 2,
-        "size": 0.0 if fault.size is None else float(fault.size), "unit": spec.unit, "seed": int(fault.seed),
+        "size": 0.0 if fault.size is None else float(fault.size), "unit": spec.inject.unit, "seed": int(fault.seed),
         "closed_loop": closed,
         "description": f"{fault.kind}{amount} on {seen} from {fault.onset_s:g} s (record time): "
-                       f"{spec.what.replace('SIZE', f'{fault.size if fault.size is not None else 0:g}')}",
+                       f"{spec.inject.what.replace('SIZE', f'{fault.size if fault.size is not None else 0:g}')}",
         "source": f"phfdi rig-sim --operation {op.name}",
         "resolution": {"value": PH_RESOLUTION, "unit": "pH", "clipped_to": [PH_MIN, PH_MAX]},
     }
