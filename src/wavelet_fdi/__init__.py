@@ -17,10 +17,10 @@ __all__ = ["Calibration", "CausalSwt", "CusumBank", "DetectorSettings", "Event",
            "run_record"]
 
 if TYPE_CHECKING:  # the public names, for type checkers; lazy_exports reads them too
-    from .config import Calibration, DetectorSettings, load_default_calibration
+    from .config import Calibration, DetectorSettings, LearnedSettings, load_default_calibration
     from .detector import Event, StreamingDetector
     from .filterbank import CausalSwt
-    from .learned_detector import LearnedDetector, LearnedModel, LearnedSettings, learn, run_record
+    from .learned_detector import LearnedDetector, LearnedModel, learn, run_record
     from .statistics import CusumBank
 else:
     __getattr__, __dir__ = lazy_exports(__name__, __file__)

@@ -41,7 +41,7 @@ import numpy.typing as npt
 
 from phfdi_base.errors import UserError
 
-from .config import check_declared_ranges, setting
+from .config import LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
 from .filterbank import CausalSwt, wavelet_filters
 from .healthy_range import checked_ranges, healthy_ranges, outside_masks
 from .reference_learned import LearnedReference, load_json, save_json
@@ -63,118 +63,6 @@ NAMING_AFTER = 64  # samples after a detection that the naming window takes in
 ENERGY_WARMUP_BLOCKS = 4
 #: the repeats test's time constant for the run's repeat share when the energy test sets none (s)
 REPEAT_TIME_CONSTANT_S = 120.0
-#: learned reference forms (LearnedSettings.form)
-LEARNED_FORMS = ("arx", "oe")  # sample times kept to date an alarm's onset
-
-
-@dataclass
-class LearnedSettings:
-    """Design of the learned detector; every threshold in healthy standard deviations of its band.
-
-    The defaults were chosen on SKAB's valve1 files and scored held out on its other files
-    (benchmarks/skab_select.py; docs/detector.md): one configuration for every record.
-
-    Examples
-    --------
-    >>> from wavelet_fdi import LearnedSettings
-    >>> settings = LearnedSettings().check()  # the defaults are valid
-    >>> settings.wavelet, settings.level
-    ('sym4', 2)
-    """
-
-    wavelet: str = setting("sym4", "PyWavelets orthogonal wavelet of the stationary filter bank")
-    level: int = setting(2, "wavelet decomposition level", range=(1, 8))
-    lags: int = setting(2, "own lags of each channel in the learned reference")
-    ridge_own: float = setting(1.0, "ridge penalty on a channel's own lags (standardised units)")
-    ridge_cross: float = setting(10.0, "ridge penalty on the other channels' lags (standardised units)")
-    form: str = setting("arx", "form of the learned reference: arx (own lags measured, wavelet_fdi.reference_learned) "
-                               "or oe (output error: own lags simulated, pulled toward the measurement over "
-                               "correction_samples samples; wavelet_fdi.reference_oe), which keeps a sensor fault in "
-                               "its channel's residual")
-    correction_samples: float = setting(100.0, "oe: samples over which the simulated lags are pulled toward the "
-                                               "measurement (0: pure simulation, else at least 1)")
-    mean_k: float = setting(5.0, "mean CUSUMs on AJ: reference value k (healthy sigmas of AJ)", range=(0.0, math.inf))
-    mean_h: float = setting(5.0, "mean CUSUMs on AJ: threshold h (healthy sigmas of AJ), above 0")
-    energy_variance_ratio: float = setting(0.0, "energy CUSUMs on the detail bands designed for this variance "
-                                                "ratio, above 1 (0: off)")
-    energy_h: float = setting(20.0, "energy CUSUMs' threshold, above 0")
-    energy_baseline_time_constant_s: float = setting(
-        0.0, "the energy CUSUMs' scale: 0, the calibrated band sigma pooled over the healthy runs; above 0, a scale "
-             "of this run learned from its own detail bands (the mean of d^2 over the blocks so far, then moving "
-             "with this time constant, s), frozen while an energy statistic is above freeze_ratio of its threshold "
-             "and kept within energy_variance_ratio of the calibrated one: a plant whose healthy noise differs "
-             "from day to day is compared with itself, and a fault faster than the time constant is not absorbed",
-        range=(0.0, math.inf))
-    energy_down_variance_ratio: float = setting(0.0, "energy-decrease CUSUMs on the detail bands designed for this "
-                                                     "variance ratio, between 0 and 1 (a probe that freezes or turns "
-                                                     "sluggish loses its noise; 0: off)")
-    energy_down_h: float = setting(20.0, "energy-decrease CUSUMs' threshold, above 0")
-    repeat_probability: float = setting(0.0, "repeats CUSUM on each watched channel's raw reading "
-                                             "(wavelet_fdi.repeat_test), designed for a stale reading that repeats "
-                                             "its previous value in this share of the samples, against the run's own "
-                                             "repeat share (learned with energy_baseline_time_constant_s, 120 s when "
-                                             "that is 0); 0: off, else below 1")
-    repeat_h: float = setting(20.0, "repeats CUSUM's threshold (an in-control run length of at least e^h samples), "
-                                    "above 0")
-    observer_time_constant_s: float = setting(300.0, "observer on AJ: time constant, s (0: off)",
-                                              range=(0.0, math.inf))
-    freeze_ratio: float = setting(0.5, "the observer and the energy scale freeze above this fraction of a "
-                                       "threshold, in (0, 1]")
-    observer_alarm_time_constant_s: float = setting(
-        10000.0, "while an alarm is up the observer keeps learning with this (longer) time constant, s, so that a "
-                 "lasting new operating point stops alarming eventually (0: frozen until the alarm clears)",
-        range=(0.0, math.inf))
-    block_samples: int = setting(32, "observer updates and in-alarm CUSUM restarts happen every this many samples; "
-                                     "an alarm clears after this many samples without a crossing",
-                                 range=(1, math.inf))
-    clear_fraction: float = setting(0.2, "in alarm, a mean statistic holds the alarm only while its channel's AJ "
-                                         "deviation is at least this fraction of the episode's peak on that channel "
-                                         "(0: any crossing holds it), in [0, 1)")
-    sample_time_s: float = setting(1.0, "nominal sample time of the record, s, above 0")
-    outside_hold_s: float = setting(300.0, "with a reference that confirms its alarms (the estimator): a deviation "
-                                           "no fault hypothesis explains is announced once (outside calibration, "
-                                           "WARN); the next ones only after this long without one, s (each is "
-                                           "still kept and counted)", range=(0.0, math.inf))
-
-    def check(self) -> "LearnedSettings":
-        """Every value within its declared range, and the rules a range cannot say (an open end, an "off")."""
-        check_declared_ranges(self, "learned-detector setting")
-        try:
-            wavelet_filters(self.wavelet)
-        except ValueError as exc:
-            raise UserError(str(exc)) from None
-        if self.form not in LEARNED_FORMS:
-            raise UserError(f"form must be one of {', '.join(LEARNED_FORMS)}, got {self.form!r}")
-        if self.correction_samples < 0 or 0 < self.correction_samples < 1:
-            raise UserError("correction_samples must be 0 (pure simulation) or at least 1")
-        if not self.mean_h > 0:
-            raise UserError("mean_h must be > 0")
-        if self.energy_variance_ratio and not self.energy_variance_ratio > 1.0:
-            raise UserError("energy_variance_ratio must be 0 (off) or above 1")
-        if self.energy_down_variance_ratio and not 0.0 < self.energy_down_variance_ratio < 1.0:
-            raise UserError("energy_down_variance_ratio must be 0 (off) or between 0 and 1")
-        if not (self.energy_h > 0 and self.energy_down_h > 0 and self.repeat_h > 0):
-            raise UserError("energy_h, energy_down_h and repeat_h must be positive")
-        if not 0.0 <= self.repeat_probability < 1.0:
-            raise UserError("repeat_probability must be 0 (off) or between 0 and 1")
-        if not 0 < self.freeze_ratio <= 1:
-            raise UserError("freeze_ratio must be in (0, 1]")
-        if not self.sample_time_s > 0:
-            raise UserError("sample_time_s must be positive")
-        if not 0.0 <= self.clear_fraction < 1.0:
-            raise UserError("clear_fraction must be in [0, 1)")
-        return self
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "LearnedSettings":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise UserError(f"unknown learned-detector setting(s): {', '.join(unknown)}")
-        return cls(**d).check()
-
-    def bands(self) -> list[str]:
-        return [f"D{j + 1}" for j in range(self.level)] + [f"A{self.level}"]
 
 
 @dataclass

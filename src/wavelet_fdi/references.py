@@ -18,7 +18,7 @@ Kinds (chosen by the reference file, :data:`KINDS`):
   the others, learned from healthy rows; any plant, no model;
 * ``oe`` (:class:`~wavelet_fdi.reference_oe.OutputErrorReference`): the same linear model in output-error
   form, its own lags from its own past predictions pulled slowly toward the measurement, so a sensor
-  fault (a step that stays, a frozen channel) stays in the channel's residual (``--learned form=oe``);
+  fault (a step that stays, a frozen channel) stays in the channel's residual (``--form oe``);
 * ``estimator`` (:class:`~wavelet_fdi.reference_estimator.EstimatorReference`, ``correct: true``): a
   Kalman filter on a stirred vessel's reaction invariant driven by the measured pH;
 * the same physics run open loop (``correct: false``): the model simulated from the record's first pH on

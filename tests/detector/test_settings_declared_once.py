@@ -31,7 +31,7 @@ def test_the_docs_table_is_the_declaration():
 
     text = (ROOT / "docs" / "detector.md").read_text(encoding="utf-8")
     assert settings_table_markdown() in text, "regenerate the table: wavelet_fdi.config.settings_table_markdown()"
-    assert settings_table_markdown(LearnedSettings, option_form="--learned {name}=VALUE") in text, \
+    assert settings_table_markdown(LearnedSettings, option_form="{flag}") in text, \
         "regenerate the learned detector's table (docs/detector.md, Learned detector settings)"
 
 

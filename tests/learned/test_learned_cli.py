@@ -132,3 +132,31 @@ def test_a_damaged_measured_bag_is_one_line(files, capsys):
     capsys.readouterr()
     line = one_error_line(capsys, ["replay", str(bag), "--reference", str(ref)])
     assert str(bag) in line and "bag recover" in line, line
+
+
+def test_every_detector_setting_is_an_option_of_its_own(files, tmp_path, capsys):
+    """One CLI form for both detectors (issue 37): a learned setting is --NAME VALUE like the physics detector's;
+    --level sets the detector being calibrated (it used to set only the physics one, silently ignored with --learn);
+    an option of the other detector is refused in one line; the old --learned KEY=VALUE is still read, with a
+    note, and a setting given both ways is refused."""
+    ref = tmp_path / "ref.json"
+    assert main(["calibrate", "--learn", str(files["healthy"]), "--level", "3", "--mean-h", "8", "--form", "oe",
+                 "--out", str(ref)]) == 0
+    settings = json.loads(ref.read_text())["settings"]
+    assert (settings["level"], settings["mean_h"], settings["form"]) == (3, 8.0, "oe")
+    assert settings["lags"] == 2 and settings["wavelet"] == "sym4"  # the others: the learned detector's defaults
+    capsys.readouterr()
+
+    old = tmp_path / "old.json"
+    assert main(["calibrate", "--learn", str(files["healthy"]), "--learned", "mean_h=8", "--out", str(old)]) == 0
+    assert "--learned KEY=VALUE is the old form" in capsys.readouterr().err
+    assert json.loads(old.read_text())["settings"]["mean_h"] == 8.0
+
+    assert "--arl0" in one_error_line(capsys, ["calibrate", "--learn", str(files["healthy"]), "--arl0", "1e6",
+                                               "--out", str(tmp_path / "a.json")])
+    assert "--mean-h" in one_error_line(capsys, ["calibrate", "--mean-h", "8", "--out", str(tmp_path / "b.yaml")])
+    assert "mean_h" in one_error_line(capsys, ["calibrate", "--learn", str(files["healthy"]), "--mean-h", "8",
+                                               "--learned", "mean_h=7", "--out", str(tmp_path / "c.json")])
+    assert "--level" in one_error_line(capsys, ["replay", str(files["faulty"]), "--reference", str(ref),
+                                                "--level", "4"])
+    assert not any((tmp_path / n).exists() for n in ("a.json", "b.yaml", "c.json"))

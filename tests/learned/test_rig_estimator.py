@@ -102,8 +102,9 @@ def test_any_chunking_gives_the_same_alarms_to_the_last_bit(fold):
 
 
 def test_detector_settings_go_with_the_estimator_and_row_windows_do_not(tmp_path, capsys):
-    """--learned sets a detector setting of the estimator's model file (the repeats test off, for a record whose
-    values are held between changes); --rows and the other --learn-only options are refused, not ignored."""
+    """A detector setting's option sets it in the estimator's model file (--repeat-probability 0: the repeats test
+    off, for a record whose values are held between changes); --rows and the other --learn-only options are
+    refused, not ignored."""
     rig = SHARED_DATA / "ph_rig"
     if not rig.is_dir():
         pytest.skip(f"real data folder not found at {SHARED_DATA} (set PHFDI_SHARED_DATA)")
@@ -113,7 +114,7 @@ def test_detector_settings_go_with_the_estimator_and_row_windows_do_not(tmp_path
     assert main(["calibrate", "--estimator", *runs, "--map", "ph_rig", "--rows", "100", "--out", str(out)]) != 0
     assert "--rows, --from, --to and --exclude go with --learn" in capsys.readouterr().err
     assert not out.exists()
-    assert main(["calibrate", "--estimator", *runs, "--map", "ph_rig", "--learned", "repeat_probability=0",
+    assert main(["calibrate", "--estimator", *runs, "--map", "ph_rig", "--repeat-probability", "0",
                  "--out", str(out)]) == 0
     settings = json.loads(out.read_text())["settings"]
     assert settings["repeat_probability"] == 0.0

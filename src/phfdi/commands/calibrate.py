@@ -24,7 +24,8 @@ EXAMPLES = """examples:
   phfdi calibrate --scenario my_loop.yaml --runs h1.csv h2.csv --map plant_columns.yaml --out plant.yaml
   phfdi calibrate --learn healthy.csv --rows 400 --exclude anomaly,changepoint --out ref.json
   phfdi calibrate --learn export.csv --from 2020-03-09T11:14:34 --to 2020-03-09T11:21:13 --map tags.yaml --out ref.json
-  phfdi calibrate --learn healthy.csv --rows 400 --learned form=oe --learned correction_samples=100 --out ref.json
+  phfdi calibrate --learn healthy.csv --rows 400 --form oe --correction-samples 100 --out ref.json
+  phfdi calibrate --estimator runs/*.csv --map ph_rig --repeat-probability 0 --out rig.json  # no repeats test
   phfdi calibrate --estimator ../shared/data/ph_rig/2025.02.24-*.csv --model rig_flask --map ph_rig --out rig.json
 
 --learn fits a learned healthy reference (no plant model needed) on the first
@@ -52,6 +53,12 @@ phfdi replay --calibration. The shipped default for the paper scenario is
 wavelet_fdi/calibrations/paper_sym4_L3.yaml (made with the defaults).
 Recorded runs are read under the reading policy of docs/records.md (--map,
 --column, --encoding as in phfdi replay); every repair is printed as a note.
+
+Every detector setting is an option of its own, --NAME VALUE, derived from its
+one declaration (docs/detector.md, "Detector settings"): --level and --wavelet
+set the detector being calibrated (physics, learned or estimator), each with its
+own default; --arl0 and --channels are the physics detector's, the others the
+learned and estimator detector's. The old form --learned KEY=VALUE is still read.
 """
 
 
@@ -74,22 +81,101 @@ def parse_seeds(text: str) -> list[int]:
     return out
 
 
-def add_detector_args(p: argparse.ArgumentParser) -> None:
-    """The detector settings exposed as options, derived from their one declaration (wavelet_fdi.config)."""
+def _shown(value) -> str:
+    """A setting's default as the help shows it."""
+    return ",".join(value) if isinstance(value, tuple) else f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def add_detector_args(p: argparse.ArgumentParser, learned: bool = False) -> None:
+    """The detector settings as options, derived from their one declaration (wavelet_fdi.config): the physics
+    detector's exposed ones, and with ``learned`` every learned (and estimator) detector setting, in the same form,
+    ``--NAME VALUE``; a setting both declare (``--level``, ``--wavelet``) is one option for the detector being
+    calibrated. No option has an argparse default: a setting not given keeps its detector's own default, and
+    :func:`given_settings` can tell what was given."""
+    from wavelet_fdi.config import LearnedSettings, setting_specs
+
+    physics = {s.name: s for s in setting_specs(exposed_only=True)}
+    learned_specs = {s.name: s for s in setting_specs(of=LearnedSettings)} if learned else {}
+    for s in physics.values():
+        metavar = "A,B" if s.is_list else "SAMPLES" if s.name == "arl0_samples" else None
+        also = learned_specs.get(s.name)
+        default = f"default {_shown(s.default)}" + (f"; with --learn or --estimator {_shown(also.default)}"
+                                                    if also is not None and also.default != s.default else "")
+        p.add_argument(s.flag, dest=s.name, type=str if s.is_list else s.type, default=None, metavar=metavar,
+                       help=f"{s.help} ({default})")
+    if learned:
+        add_learned_args(p.add_argument_group(
+            "learned and estimator detector settings (with --learn or --estimator; --level and --wavelet above too; "
+            "the estimator's own design where it differs: docs/detector.md)"), skip=tuple(physics))
+
+
+def add_learned_args(p, skip: tuple[str, ...] = ()) -> None:
+    """Every learned (and estimator) detector setting not in ``skip`` as an option ``--NAME VALUE`` of ``p`` (a parser
+    or an argument group), from its one declaration, with no argparse default (see :func:`add_detector_args`)."""
+    from wavelet_fdi.config import LearnedSettings, setting_specs
+
+    for s in setting_specs(of=LearnedSettings):
+        if s.name not in skip:
+            p.add_argument(s.flag, dest=s.name, type=s.type, default=None, metavar=s.name.split("_")[-1].upper(),
+                           help=f"{s.help} (default {_shown(s.default)})")
+
+
+def given_settings(args: argparse.Namespace, of: type | None = None) -> dict:
+    """The settings of ``of`` (default: the physics detector's exposed ones) given as options."""
     from wavelet_fdi.config import setting_specs
 
-    for s in setting_specs(exposed_only=True):
-        default = ",".join(s.default) if s.is_list else s.default
-        metavar = "A,B" if s.is_list else "SAMPLES" if s.name == "arl0_samples" else None
-        p.add_argument(s.flag, dest=s.name, type=str if s.is_list else s.type, default=default, metavar=metavar,
-                       help=f"{s.help} (default {default:g})" if isinstance(default, float)
-                       else f"{s.help} (default {default})")
+    specs = setting_specs(exposed_only=True) if of is None else setting_specs(of=of)
+    return {s.name: getattr(args, s.name) for s in specs if getattr(args, s.name, None) is not None}
 
 
 def settings_from_args(args: argparse.Namespace):
-    from wavelet_fdi.config import setting_specs, settings_from_values
+    """The physics detector's settings: those given as options, the others their defaults."""
+    from wavelet_fdi.config import settings_from_values
 
-    return settings_from_values({s.name: getattr(args, s.name) for s in setting_specs(exposed_only=True)})
+    return settings_from_values(given_settings(args))
+
+
+def learned_settings_from_args(args: argparse.Namespace, base=None):
+    """The learned (or, from ``base``, the estimator's) detector settings: those given as options, then those of the
+    old ``--learned KEY=VALUE`` form (still read, with a note), the others ``base``'s or the defaults."""
+    from dataclasses import asdict
+
+    from phfdi_base.errors import UserError
+    from wavelet_fdi.config import LearnedSettings
+
+    given = given_settings(args, LearnedSettings)
+    pairs = getattr(args, "learned", None) or []
+    if pairs:
+        print("note: --learned KEY=VALUE is the old form of --KEY VALUE (e.g. --mean-h 8)", file=sys.stderr)
+    old = asdict(learned_settings(pairs))
+    from_pairs = {pair.partition("=")[0] for pair in pairs}
+    both = sorted(from_pairs & set(given))
+    if both:
+        raise UserError(f"{', '.join(both)} given both as an option and with --learned: give each once")
+    d = asdict(base or LearnedSettings())
+    d.update(given)
+    d.update({k: old[k] for k in from_pairs})
+    return LearnedSettings.from_dict(d)
+
+
+def learned_settings(pairs: list[str], base=None):
+    """LearnedSettings from the old ``--learned KEY=VALUE`` pairs (numbers, or text for the wavelet and form)."""
+    from dataclasses import asdict
+
+    from phfdi_base.errors import UserError
+    from wavelet_fdi.config import LearnedSettings
+
+    d = asdict(base or LearnedSettings())
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or key not in d:
+            raise UserError(f"--learned {pair!r}: use KEY=VALUE with KEY one of {', '.join(d)}")
+        kind = type(d[key])
+        try:
+            d[key] = value if kind is str else kind(float(value)) if kind is int else float(value)
+        except ValueError:
+            raise UserError(f"--learned {pair!r}: {key} must be a number") from None
+    return LearnedSettings.from_dict(d)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -107,7 +193,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--runs", nargs="+", default=None, metavar="FILE",
                    help="calibrate on these recorded healthy runs (.csv, .parquet, .mcap) instead of simulating; "
                         "--scenario is then the plant's model")
-    add_detector_args(p)
+    add_detector_args(p, learned=True)
     add_record_args(p)
     g = p.add_argument_group("learned reference (measured records, no plant model)")
     g.add_argument("--learn", default=None, metavar="RECORD",
@@ -121,10 +207,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--exclude", default="", metavar="COLS", help="with --learn: columns that are not channels, "
                    "comma-separated (e.g. labels)")
     g.add_argument("--learned", action="append", default=[], metavar="KEY=VALUE",
-                   help="with --learn or --estimator: a detector setting, e.g. --learned mean_h=8, or --learned "
-                        "repeat_probability=0 (--estimator: no repeats test, for a record whose values are held "
-                        "between changes, such as a compressed historian export), or --learned form=oe for the "
-                        "output-error reference that keeps a sensor fault in its residual (see docs/detector.md)")
+                   help="the old form of a learned or estimator detector setting's option: --learned mean_h=8 is "
+                        "--mean-h 8 (still read, with a note)")
     g = p.add_argument_group("estimator reference (a vessel with pumped feeds of strong acid and base)")
     g.add_argument("--estimator", nargs="+", default=None, metavar="RUN",
                    help="fit the estimator reference on these healthy runs (.csv, .parquet, .mcap)")
@@ -145,12 +229,13 @@ def run(args: argparse.Namespace) -> int:
     from phfdi_base.outputs import refuse_existing
 
     refuse_existing(args.out, args.overwrite)  # before any fitting
+    check_settings_given(args)
     if args.estimator:
         return run_estimator(args)
     if args.learn:
         return run_learn(args)
-    if args.rows is not None or args.exclude or args.learned or args.start or args.end:
-        raise UserError("--rows, --from, --to, --exclude and --learned go with --learn")
+    if args.rows is not None or args.exclude or args.start or args.end:
+        raise UserError("--rows, --from, --to and --exclude go with --learn")
     settings = settings_from_args(args)
     cmap = column_map_from_args(args)
     if not args.runs and (cmap is not None or args.encoding):
@@ -179,24 +264,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def learned_settings(pairs: list[str], base=None):
-    """LearnedSettings from --learned KEY=VALUE pairs (numbers, or text for the wavelet)."""
-    from dataclasses import asdict
-
+def check_settings_given(args: argparse.Namespace) -> None:
+    """Each detector setting given goes with the detector being calibrated (one line naming those that do not)."""
     from phfdi_base.errors import UserError
-    from wavelet_fdi.learned_detector import LearnedSettings
+    from wavelet_fdi.config import LearnedSettings, setting_specs
 
-    d = asdict(base or LearnedSettings())
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or key not in d:
-            raise UserError(f"--learned {pair!r}: use KEY=VALUE with KEY one of {', '.join(d)}")
-        kind = type(d[key])
-        try:
-            d[key] = value if kind is str else kind(float(value)) if kind is int else float(value)
-        except ValueError:
-            raise UserError(f"--learned {pair!r}: {key} must be a number") from None
-    return LearnedSettings.from_dict(d)
+    physics = {s.name: s.flag for s in setting_specs(exposed_only=True)}
+    learned = {s.name: s.flag for s in setting_specs(of=LearnedSettings)}
+    given = set(given_settings(args)) | set(given_settings(args, LearnedSettings))
+    if args.learn or args.estimator:
+        stray = [physics[n] for n in physics if n in given and n not in learned]
+        what = "set the physics detector (phfdi calibrate without --learn or --estimator)"
+    else:
+        stray = [learned[n] for n in learned if n in given and n not in physics] + (["--learned"] if args.learned
+                                                                                    else [])
+        what = "set the learned or estimator detector: give them with --learn or --estimator"
+    if stray:
+        raise UserError(f"{', '.join(stray)} {what}")
 
 
 def run_learn(args: argparse.Namespace) -> int:
@@ -207,7 +291,7 @@ def run_learn(args: argparse.Namespace) -> int:
         raise UserError("--learn and --runs are two different calibrations: give one")
     if not args.out.endswith(".json"):
         raise UserError(f"--out {args.out}: a learned reference is written as .json")
-    settings = learned_settings(args.learned)
+    settings = learned_settings_from_args(args)
     rec = read_measured(args.learn, column_map_from_args(args),
                         exclude=[c.strip() for c in args.exclude.split(",") if c.strip()], encoding=args.encoding)
     print_notes("calibrate", rec.notes)
@@ -232,7 +316,7 @@ def run_learn(args: argparse.Namespace) -> int:
 def run_estimator(args: argparse.Namespace) -> int:
     from phfdi.estimator import ESTIMATOR_SETTINGS, fit_estimator, identifiability_notes, read_runs, start_from_model
     from phfdi_base.errors import UserError
-    from wavelet_fdi.learned_detector import LearnedSettings
+    from wavelet_fdi.config import LearnedSettings
 
     if args.learn or args.runs:
         raise UserError("--estimator, --learn and --runs are different calibrations: give one")
@@ -245,7 +329,7 @@ def run_estimator(args: argparse.Namespace) -> int:
     for r in records:
         print_notes("calibrate", r.notes)
     with plant_runs_on(", ".join(args.estimator)):
-        model = fit_estimator(records, start, learned_settings(args.learned, LearnedSettings(**ESTIMATOR_SETTINGS)),
+        model = fit_estimator(records, start, learned_settings_from_args(args, LearnedSettings(**ESTIMATOR_SETTINGS)),
                               progress=lambda msg: print(f"phfdi calibrate: {msg} ...", file=sys.stderr, flush=True))
     store_column_map(args, model)
     ref = model.reference

@@ -9,7 +9,7 @@ import time
 
 from phfdi.alarm_text import format_alarms, input_problems
 
-from .calibrate import add_detector_args, settings_from_args
+from .calibrate import add_detector_args, given_settings, settings_from_args
 from .common import (
     EPILOG_FORMAT,
     add_record_args,
@@ -115,6 +115,10 @@ def run(args: argparse.Namespace) -> int:
         _model_as_scenario(args)
     if args.refit_rows is not None and not args.reference:
         raise UserError("--refit-rows goes with a learned --reference (REF.json)")
+    if args.reference and given_settings(args):
+        flags = ", ".join(f"--{n.replace('_', '-')}" for n in given_settings(args)).replace("--arl0-samples", "--arl0")
+        raise UserError(f"{flags}: a learned or estimator --reference carries its detector's settings (set them with "
+                        f"phfdi calibrate --learn or --estimator); these options set the physics detector")
     if args.reference and not args.live:
         return run_learned(args)
     if args.reference:
