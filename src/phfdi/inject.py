@@ -24,8 +24,8 @@ from typing import Callable
 import numpy as np
 
 from phfdi_base.errors import UserError
-from phfdi_base.outputs import write_together
 from phfdi_base.faults import Fault
+from phfdi_base.outputs import write_together
 
 from .inject_kinds import KINDS, PH_CAL_POINT, PH_MAX, PH_MIN, PH_RESOLUTION, PUMPS, TRUTH_FORMAT
 

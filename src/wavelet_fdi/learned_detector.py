@@ -31,7 +31,7 @@ statistics and is reported once per stretch (an ``input`` event); the record rea
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import Sequence
@@ -42,7 +42,7 @@ import numpy.typing as npt
 from phfdi_base.errors import UserError
 
 from .config import LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
-from .filterbank import CausalSwt, wavelet_filters
+from .filterbank import CausalSwt
 from .healthy_range import checked_ranges, healthy_ranges, outside_masks
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
