@@ -12,8 +12,9 @@ Per sample, for every channel c of a measured record (docs/detector.md, "Measure
    ``freeze_ratio`` of its threshold (a fault is not learned as the new healthy);
 4. every band is divided by its healthy RMS (measured on the healthy rows,
    :func:`calibrate`): u = AJ deviation, d_j = D_j coefficient;
-5. one-sided CUSUMs (:class:`~wavelet_fdi.statistics.CusumBank`): mean up (u - k) and
-   down (-u - k) on AJ, and, if enabled, energy (d_j^2 - k_e) on each detail band;
+5. one-sided CUSUMs (:class:`~wavelet_fdi.statistics.CusumBank`) of every registered kind
+   (:mod:`wavelet_fdi.learned_statistics`): mean up (u - k) and down (-u - k) on AJ, and, if
+   enabled, energy up (d_j^2 - k_e) and down on each detail band and repeated readings;
    an alarm is raised when one crosses its threshold h (in healthy sigmas);
 6. while the alarm is up the CUSUMs restart at every block boundary, so they measure
    whether the fault is still there (not how long it has been); the alarm clears once a
@@ -44,11 +45,12 @@ from phfdi_base.errors import UserError
 from .config import LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
 from .filterbank import CausalSwt
 from .healthy_range import checked_ranges, healthy_ranges, outside_masks
+from .learned_statistics import LEARNED_STATISTICS, Chunk, LearnedStatistic, Repeats
 from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
 from .references import LOOKS, NAMERS, Reference, reference_from_dict
 from .repeat_test import RepeatTest
-from .statistics import CusumBank, energy_decrease_reference, energy_reference
+from .statistics import CusumBank
 
 FORMAT = "phfdi-learned-detector/1"
 TIME_RING = 1 << 16
@@ -58,11 +60,6 @@ NAMING_RING = 1 << 13  # rows kept for naming an alarm's fault (about 48 min at 
 MAX_PART_ROWS = 1024
 NAMING_WINDOW = NAMING_RING - MAX_PART_ROWS
 NAMING_AFTER = 64  # samples after a detection that the naming window takes in
-#: blocks of a run the run-adapted energy scale learns from (a running mean, never frozen) before the energy
-#: CUSUMs look at it: 4 blocks of 32 samples estimate a variance to about 12 % (sqrt(2 / 128))
-ENERGY_WARMUP_BLOCKS = 4
-#: the repeats test's time constant for the run's repeat share when the energy test sets none (s)
-REPEAT_TIME_CONSTANT_S = 120.0
 
 
 @dataclass
@@ -267,7 +264,6 @@ class LearnedDetector:
         self.bias = np.zeros(m)
         self._acc = np.zeros(m)
         self._acc_n = 0
-        self._init_energy_scale(m, s)
         self.in_alarm = False
         self._last_crossing = -1
         self._holdoff = False  # an alarm cleared in this block: no new one before the next block boundary
@@ -283,45 +279,43 @@ class LearnedDetector:
         self._init_naming(model, alarms)
 
     def _init_statistics(self, s: LearnedSettings, m: int) -> None:
-        """The CUSUM statistics: mean up and down per channel, then energy (up, and down where set) per channel and
-        detail band, then the repeats; each row is "value - k" against its threshold h."""
-        self.energy = s.energy_variance_ratio > 1.0
-        names, k, h, chan, band = [], [], [], [], []
-        for c, ch in enumerate(self.channels):
-            for kind in ("mean_up", "mean_down"):
-                names.append(f"{ch}.A{s.level}.{kind}")
-                k.append(s.mean_k)
-                h.append(s.mean_h)
-                chan.append(c)
-                band.append(s.level)
-        if self.energy:
-            ke = energy_reference(s.energy_variance_ratio)
-            for c, ch in enumerate(self.channels):
-                for j in range(s.level):
-                    names.append(f"{ch}.D{j + 1}.energy")
-                    k.append(ke)
-                    h.append(s.energy_h)
-                    chan.append(c)
-                    band.append(j)
-        self.energy_down = 0.0 < s.energy_down_variance_ratio < 1.0
-        if self.energy_down:
-            # log-likelihood ratio of a variance decrease to rho: k - d^2 with k = ln(1/rho) / (1/rho - 1);
-            # kept as value -d^2 minus reference -k so that every row is "value - k"
-            kd = energy_decrease_reference(s.energy_down_variance_ratio)
-            for c, ch in enumerate(self.channels):
-                for j in range(s.level):
-                    names.append(f"{ch}.D{j + 1}.energy_down")
-                    k.append(-kd)
-                    h.append(s.energy_down_h)
-                    chan.append(c)
-                    band.append(j)
-        self.repeats, self._rep_row, self._rep_cols = self._init_repeats(s, names, k, h, chan, band)
+        """The CUSUM statistics: every registered kind that has rows under these settings
+        (:mod:`wavelet_fdi.learned_statistics`), each row "value - k" against its threshold h."""
+        self.statistics: list[LearnedStatistic] = []
+        self._slices: list[slice] = []
+        names: list[str] = []
+        k: list[float] = []
+        h: list[float] = []
+        chan: list[int] = []
+        band: list[int] = []
+        by_level: list[bool] = []
+        for cls in LEARNED_STATISTICS.values():
+            stat = cls(self)
+            rows = stat.rows()
+            if not rows:
+                continue
+            self.statistics.append(stat)
+            self._slices.append(slice(len(names), len(names) + len(rows)))
+            for r in rows:
+                names.append(f"{self.channels[r.channel]}.{self.bands[r.band]}.{r.kind}")
+                chan.append(r.channel)
+                band.append(r.band)
+            k += [stat.reference_value()] * len(rows)
+            h += [stat.threshold()] * len(rows)
+            by_level += [stat.holds_by_level] * len(rows)
+        self.band_energy = any(st.uses_band_energy for st in self.statistics)
         self.stat_names = names
         self.k = np.array(k)
         self.h = np.array(h)
-        self.stat_channel = np.array(chan)
-        self.stat_band = np.array(band)
+        self.stat_channel = np.array(chan, dtype=int)
+        self.stat_band = np.array(band, dtype=int)
+        self._by_level = np.flatnonzero(by_level)  # rows held by their channel's level (clear_fraction)
         self.cusum = CusumBank(len(names))
+
+    @property
+    def repeats(self) -> RepeatTest | None:
+        """The repeats test (None: off)."""
+        return next((st.test for st in self.statistics if isinstance(st, Repeats)), None)
 
     def _init_naming(self, model: LearnedModel, alarms: bool) -> None:
         """The namer, its rings of recent rows, the confirmation state and the healthy runs' ranges."""
@@ -366,7 +360,6 @@ class LearnedDetector:
         g = self.samples_processed + np.arange(len(rows))
         self._times[g % TIME_RING] = t
         r = self.stream.residuals(t, rows)
-        rep = self.repeats.indicators(rows[:, self._rep_cols]) if self.repeats is not None else None
         missing = ~np.isfinite(r)
         events += self._missing_events(missing, t)
         out = self.swt.process(np.where(missing, 0.0, r))
@@ -376,10 +369,12 @@ class LearnedDetector:
         a_raw = approx / self.gain  # AJ in residual units (DC gain removed)
         b = self.settings.block_samples
         n = len(rows)
-        chunk = _Chunk(a_raw, d_norm, missing, bool(missing.any()), rep)
-        if self.energy or self.energy_down:  # the detail bands' d^2 and missing flags, channel-major, once a chunk
+        chunk = Chunk(a_raw, d_norm, missing, bool(missing.any()))
+        if self.band_energy:  # the detail bands' d^2 and missing flags, channel-major, once a chunk
             chunk.e2 = d_norm.transpose(2, 0, 1).reshape(self.m * self.settings.level, n) ** 2
             chunk.miss = np.repeat(missing.T, self.settings.level, axis=0)
+        for stat in self.statistics:
+            stat.prepare(chunk, rows)
         if self.namer is not None:
             self._keep(t, rows)
         pos = 0
@@ -514,83 +509,8 @@ class LearnedDetector:
             raise RuntimeError("the detector was built without record_trace")
         return {k: (np.concatenate(v) if v else np.empty(0)) for k, v in self._trace.items()}
 
-    def _init_repeats(self, s: LearnedSettings, names, k, h, chan, band):
-        """The repeats CUSUMs (one per watched channel that is a column of the rows), appended to the statistics'
-        lists; returns the test (None: off), its first statistic row and the rows' columns it reads."""
-        watched = [c for c, ch in enumerate(self.channels) if ch in self.inputs]
-        if not s.repeat_probability > 0.0 or not watched:
-            return None, len(names), []
-        first = len(names)
-        for c in watched:
-            names.append(f"{self.channels[c]}.raw.repeats")
-            k.append(0.0)  # the increments are the log-likelihood ratios themselves
-            h.append(s.repeat_h)
-            chan.append(c)
-            band.append(s.level + 1)  # "raw"
-        tau = s.energy_baseline_time_constant_s or REPEAT_TIME_CONSTANT_S
-        gain = min(1.0, s.block_samples * s.sample_time_s / tau)
-        test = RepeatTest(len(watched), s.repeat_probability, ENERGY_WARMUP_BLOCKS, gain,
-                          min_valid=max(1, s.block_samples // 2))
-        return test, first, [self.inputs.index(self.channels[c]) for c in watched]
-
-    def _init_energy_scale(self, m: int, s: LearnedSettings) -> None:
-        """The energy CUSUMs' run-adapted scale per (channel, detail band), channel-major as the statistics, in
-        calibrated variances (1: as calibrated)."""
-        self.energy_adapted = self.energy and s.energy_baseline_time_constant_s > 0
-        self.energy_scale = np.ones(m * s.level)
-        # this block's d^2 (0 where not used) and which were used, by position in the block: summed once at its
-        # boundary, so any chunking sums the same numbers in the same order
-        self._e2_block = np.zeros((m * s.level, s.block_samples))
-        self._e2_used = np.zeros((m * s.level, s.block_samples))  # 1.0: used
-        self._energy_blocks = 0  # blocks the scale has learned from
-
-    def _against_run_scale(self, e2: np.ndarray, miss: np.ndarray | None, g0: int) -> np.ndarray:
-        """The detail bands' d^2 (channel-major rows) against the run's own scale, and robust: a sample counts at
-        most as the design variance ratio rho (one outlier moves the CUSUM by at most rho - k; a noisier probe
-        keeps adding). Adds the samples to the block's sums the scale learns from (``miss``: None, none missing)."""
-        s = self.settings
-        at = g0 % s.block_samples  # a call never crosses a block boundary
-        nb = e2.shape[1]
-        if miss is None and g0 >= self.fill_samples:  # every sample used (the usual case: fewer numpy calls)
-            self._e2_block[:, at:at + nb] = e2
-            self._e2_used[:, at:at + nb] = 1.0
-        else:
-            used = np.ones_like(e2, dtype=bool) if miss is None else ~miss
-            if g0 < self.fill_samples:
-                used = used & (g0 + np.arange(nb) >= self.fill_samples)
-            self._e2_block[:, at:at + nb] = np.where(used, e2, 0.0)
-            self._e2_used[:, at:at + nb] = used
-        if self._energy_blocks < ENERGY_WARMUP_BLOCKS:  # the run's scale is still being learned
-            return np.full_like(e2, self.k[2 * self.m])  # no evidence either way
-        return np.minimum(e2 / self.energy_scale[:, None], s.energy_variance_ratio)
-
-    def _adapt_energy_scale(self, ratio: np.ndarray) -> None:
-        """At a block boundary: move each band's energy scale toward the block's mean d^2 (the running mean
-        over the first blocks, then gain block time / time constant), unless an energy statistic is high
-        (a fault is not learned as the run's noise). Kept within the design variance ratio rho of the
-        calibrated scale (1/rho..rho): a probe noisy from the start is still compared with the healthy runs,
-        and a quantised plateau, whose detail bands read zero, does not make the next healthy sample a
-        variance ratio without bound."""
-        s = self.settings
-        if self._energy_blocks >= ENERGY_WARMUP_BLOCKS and (
-                self.in_alarm or ratio[2 * self.m:2 * self.m + len(self.energy_scale), -1].max() > s.freeze_ratio):
-            return  # frozen (the block's arrays are overwritten by the next block: every position is written)
-        n_used = self._e2_used.sum(axis=1)  # few small numpy calls: this runs every block (the rig's 1e5 samples/s)
-        half = max(1, s.block_samples // 2)
-        if n_used.max() < half:
-            return
-        self._energy_blocks += 1
-        gain = max(1.0 / self._energy_blocks,
-                   min(1.0, s.block_samples * s.sample_time_s / s.energy_baseline_time_constant_s))
-        scale = self.energy_scale
-        new = scale + gain * (self._e2_block.sum(axis=1) / np.maximum(n_used, 1.0) - scale)
-        if n_used.min() < half:  # a band mostly missing in this block keeps its scale
-            new = np.where(n_used >= half, new, scale)
-        rho = s.energy_variance_ratio
-        self.energy_scale = np.minimum(np.maximum(new, 1.0 / rho), rho)
-
     # ---- one block (observer constant inside) -------------------------------------------
-    def _block(self, t, i0, i1, c: "_Chunk", states) -> list[LearnedEvent]:
+    def _block(self, t, i0, i1, c: Chunk, states) -> list[LearnedEvent]:
         s = self.settings
         g0 = self.samples_processed + i0
         d_norm, missing = c.d_norm, c.missing
@@ -601,22 +521,8 @@ class LearnedDetector:
             u = np.where(missing[i0:i1], 0.0, u)
         nb = i1 - i0
         vals = np.empty((len(self.stat_names), nb))
-        nm = 2 * self.m
-        vals[0:nm:2] = u.T
-        vals[1:nm:2] = -u.T
-        ne = self.m * s.level
-        if c.e2 is not None and c.miss is not None:  # the energy statistics are on
-            e2 = c.e2[:, i0:i1]  # (m*J, nb)
-            miss = c.miss[:, i0:i1]  # a missing sample is healthy
-            row = nm
-            if self.energy:
-                e2_up = self._against_run_scale(e2, miss if c.gappy else None, g0) if self.energy_adapted else e2
-                vals[row:row + ne] = np.where(miss, 0.0, e2_up) if c.gappy else e2_up
-                row += ne
-            if self.energy_down:
-                vals[row:row + ne] = np.where(miss, -1.0, -e2) if c.gappy else -e2
-        if self.repeats is not None and c.rep is not None:
-            self.repeats.increments(c.rep[:, i0:i1], out=vals[self._rep_row:])
+        for stat, rows in zip(self.statistics, self._slices):
+            stat.values(vals[rows], c, i0, i1, g0, u)
         z = vals - self.k[:, None]
         warm = g0 < self.fill_samples
         if warm:  # filters not yet filled: no evidence either way
@@ -653,10 +559,8 @@ class LearnedDetector:
                 self.bias = self.bias + gain * self._acc / self._acc_n
             self._acc[:] = 0.0
             self._acc_n = 0
-            if self.energy_adapted:
-                self._adapt_energy_scale(ratio)
-            if self.repeats is not None:
-                self.repeats.adapt(self.in_alarm or max(ratio[self._rep_row:, -1].tolist()) > s.freeze_ratio)
+            for stat, rows in zip(self.statistics, self._slices):
+                stat.end_block(ratio[rows, -1], self.in_alarm)
             if self.in_alarm or self._holdoff:
                 self.cusum.restart(g0 + nb - 1)
                 self._holdoff = False
@@ -678,9 +582,8 @@ class LearnedDetector:
         a = absu[j:]  # (n, m)
         peak = np.maximum(np.maximum.accumulate(a, axis=0), self._peak)  # running peak per channel
         strong = (a >= rho * peak).T  # (m, n)
-        nm = 2 * self.m
         ok = above.copy()
-        ok[:nm] &= np.repeat(strong, 2, axis=0)
+        ok[self._by_level] &= strong[self.stat_channel[self._by_level]]
         return np.any(ok, axis=0)
 
     def _alarm_logic(self, t, i0, i1, g0, ratio, cross, states, absu) -> list[LearnedEvent]:
@@ -818,19 +721,6 @@ class LearnedDetector:
             self._missing_open[c] = bool(col[-1])
         out.sort(key=lambda e: e.index)
         return out
-
-
-@dataclass
-class _Chunk:
-    """What one ``process`` call computed for all its blocks."""
-
-    a_raw: np.ndarray  # (n, m) AJ in residual units
-    d_norm: np.ndarray  # (J, n, m) detail coefficients over their healthy sigma
-    missing: np.ndarray  # (n, m)
-    gappy: bool  # any sample missing
-    rep: np.ndarray | None  # (m_watched, n) repeat indicators
-    e2: np.ndarray | None = None  # (m*J, n) d^2, channel-major
-    miss: np.ndarray | None = None  # (m*J, n) missing, channel-major
 
 
 def _running_sum(total: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray:

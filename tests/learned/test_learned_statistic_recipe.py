@@ -1,0 +1,104 @@
+"""docs/architecture.md, "A statistic of the learned detector": a new kind is one class in one file.
+
+The toy kind here is registered in this file alone; the learned detector then runs it on every channel, names it
+``CHANNEL.raw.KIND`` in its statistics, its traces and its alarms, and its alarm has the onset of its own CUSUM. A
+contract test holds every registered kind to the protocol, and the order of the shipped kinds' statistics (their
+names, alarms and traces read by position) is pinned.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wavelet_fdi.learned_detector import LearnedDetector, LearnedSettings, learn
+from wavelet_fdi.learned_statistics import (
+    LEARNED_STATISTICS,
+    LearnedStatistic,
+    StatisticRow,
+    register_learned_statistic,
+)
+
+LIMIT = 20.0  # the toy's alarm limit on a channel's raw reading
+
+
+class AboveLimit(LearnedStatistic):
+    """Toy: readings above LIMIT (1 per sample above it; k 0.5, so a CUSUM grows by 0.5 a sample above it)."""
+
+    kind = "above_limit"
+
+    def rows(self) -> list[StatisticRow]:
+        raw = self.settings.level + 1
+        return [StatisticRow(c, raw, self.kind) for c in range(self.detector.m)]
+
+    def reference_value(self) -> float:
+        return 0.5
+
+    def threshold(self) -> float:
+        return 10.0
+
+    def prepare(self, chunk, rows) -> None:
+        self._above = (rows > LIMIT).T.astype(float)  # the raw rows: what a reading is, not its residual
+
+    def values(self, out, chunk, i0, i1, g0, u) -> None:
+        out[:] = self._above[:, i0:i1]
+
+
+@pytest.fixture
+def toy_kind():
+    register_learned_statistic(AboveLimit)
+    yield AboveLimit
+    LEARNED_STATISTICS.pop(AboveLimit.kind)  # the registry is global: other tests run the shipped kinds only
+
+
+def healthy(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.column_stack([5.0 + rng.normal(size=n), 7.0 + rng.normal(size=n)])
+
+
+def test_a_registered_kind_is_run_named_and_raises_its_own_alarm(toy_kind):
+    model = learn(healthy(4000, 1), ["flow", "pressure"], LearnedSettings(mean_h=1e6, energy_variance_ratio=0.0))
+    x = healthy(3000, 2)
+    x[2000:, 1] += 20.0  # the pressure reads above the limit from row 2000 (the mean CUSUMs are off: h 1e6)
+    det = LearnedDetector(model, record_trace=True)
+    assert det.stat_names[-2:] == ["flow.raw.above_limit", "pressure.raw.above_limit"]
+    det.process(np.arange(3000.0), x)
+    stat = det.trace()["stat"]
+    toy = det.stat_names.index("pressure.raw.above_limit")
+    assert not (stat[:2000, toy] > 1.0).any()
+    assert det.alarms and det.alarms[0]["statistic"] == "pressure.raw.above_limit", det.alarms[:1]
+    # 10 / 0.5 = 20 samples above the limit cross h; the onset is the CUSUM's last zero
+    assert det.alarms[0]["detection_index"] == 2020 and det.alarms[0]["onset_index"] == 2000
+    assert list(det.alarms[0]["contributions"]) == ["pressure"]
+
+
+def test_without_the_toy_the_detector_runs_the_shipped_kinds_only():
+    model = learn(healthy(4000, 1), ["flow", "pressure"])
+    assert not [n for n in LearnedDetector(model).stat_names if n.endswith(".above_limit")]
+
+
+def test_the_shipped_kinds_statistics_keep_their_order():
+    """Mean up and down per channel, then energy up per channel and band, energy down likewise, then repeats: the
+    order alarms, traces and calibration files were made with."""
+    s = LearnedSettings(level=2, energy_variance_ratio=4.0, energy_down_variance_ratio=0.25, repeat_probability=0.5)
+    det = LearnedDetector(learn(healthy(4000, 1), ["a", "b"], s))
+    assert det.stat_names == [
+        "a.A2.mean_up", "a.A2.mean_down", "b.A2.mean_up", "b.A2.mean_down",
+        "a.D1.energy", "a.D2.energy", "b.D1.energy", "b.D2.energy",
+        "a.D1.energy_down", "a.D2.energy_down", "b.D1.energy_down", "b.D2.energy_down",
+        "a.raw.repeats", "b.raw.repeats"]
+    assert det.h.tolist() == [s.mean_h] * 4 + [s.energy_h] * 4 + [s.energy_down_h] * 4 + [s.repeat_h] * 2
+
+
+@pytest.mark.parametrize("kind", list(LEARNED_STATISTICS))
+def test_every_kind_keeps_the_protocol(kind):
+    """Rows inside the detector's channels and bands, k finite, h positive, values of the asked shape and finite on
+    healthy rows."""
+    s = LearnedSettings(level=2, energy_variance_ratio=4.0, energy_down_variance_ratio=0.25, repeat_probability=0.5)
+    det = LearnedDetector(learn(healthy(4000, 1), ["a", "b"], s))
+    stat = next(st for st in det.statistics if st.kind == kind)
+    rows = stat.rows()
+    assert rows and all(0 <= r.channel < det.m and 0 <= r.band < len(det.bands) for r in rows)
+    assert np.isfinite(stat.reference_value()) and stat.threshold() > 0
+    det.process(np.arange(300.0), healthy(300, 3))
+    assert stat in det.statistics and np.isfinite(det.cusum.value).all()
