@@ -6,8 +6,10 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import dataclass
 
 from phfdi.alarm_text import format_alarms, input_problems
+from phfdi_base.topics import MEASURED_SAMPLE
 
 from .calibrate import add_detector_args, given_settings, settings_from_args
 from .common import (
@@ -101,10 +103,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.replay import load_any, replay_run, scenario_of
-    from phfdi.scenario import load_scenario
+    """One path for every replay: the reference kind (the physics model, or a learned or estimator reference file)
+    replays the record offline or plays the bag into its detector node (:func:`_run_live`); the alarms are printed
+    as text or as one JSON document."""
     from phfdi_base.errors import UserError
-    from wavelet_fdi.config import Calibration
 
     if args.chunk < 1:
         raise UserError("--chunk must be at least 1")
@@ -119,35 +121,178 @@ def run(args: argparse.Namespace) -> int:
         flags = ", ".join(f"--{n.replace('_', '-')}" for n in given_settings(args)).replace("--arl0-samples", "--arl0")
         raise UserError(f"{flags}: a learned or estimator --reference carries its detector's settings (set them with "
                         f"phfdi calibrate --learn or --estimator); these options set the physics detector")
-    if args.reference and not args.live:
-        return run_learned(args)
-    if args.reference:
-        if args.map or args.column or args.encoding or args.refit_rows is not None:
-            raise UserError("--map, --column, --encoding and --refit-rows apply to an offline replay, not to --live")
-        return run_live_learned(args)
-    if args.live:
-        if args.map or args.column or args.encoding:
-            raise UserError("--map, --column and --encoding apply to an offline replay, not to --live")
-        return run_live(args)
-    run_ = load_any(args.file, column_map_from_args(args), args.encoding)
-    notes = run_.metadata.get("notes", [])
-    print_notes("replay", notes)
-    spec = getattr(args, "model_spec", None) or (load_scenario(args.scenario, fault="healthy") if args.scenario
-                                                 else scenario_of(run_))
-    settings = settings_from_args(args)
-    cal = Calibration.load(args.calibration) if args.calibration else None
-    t0 = time.perf_counter()
-    with plant_runs_on(args.file):
-        result = replay_run(run_, spec, cal, settings, chunk=args.chunk, isolate=not args.no_isolation)
-    elapsed = time.perf_counter() - t0
-    print(f"replayed {result.samples} samples in {elapsed:.2f} s ({result.samples / max(elapsed, 1e-9):.0f} "
-          f"samples/s, isolation included)", file=sys.stderr)
-    if args.json:
-        print(json.dumps(replay_json(args.file, result.samples, notes, result.diagnostics,
-                                     [a.summary() for a in result.alarms]), indent=2))
-        return 0
-    print(format_alarms(result.alarms, result.diagnostics))
-    return 0
+    kind: _Kind = _Learned() if args.reference else _Physics()
+    if args.live and (args.map or args.column or args.encoding or args.refit_rows is not None):
+        raise UserError(f"{kind.offline_options} apply to an offline replay, not to --live")
+    replayed = _run_live(args, kind) if args.live else kind.offline(args)
+    if replayed.document is not None:
+        print(json.dumps(replayed.document, indent=2) if args.json else replayed.text)
+    return replayed.status
+
+
+@dataclass
+class _Replayed:
+    """What a replay gives: the --json document and the text report (None: the replay failed, said on stderr), and
+    the exit status."""
+
+    document: dict | None
+    text: str = ""
+    status: int = 0
+
+
+class _Kind:
+    """A reference kind's part of the one replay path: the record through its detector offline, or the node that
+    plays its bag live."""
+
+    #: the options that apply only offline, as the refusal of --live names them
+    offline_options = ""
+    #: the topic a bag must have for --live, and what to do when it has not
+    bag_topic = ""
+    bag_hint = ""
+
+    def offline(self, args: argparse.Namespace) -> _Replayed:
+        raise NotImplementedError
+
+    def check_live(self, args: argparse.Namespace) -> None:
+        """What is checked before any process starts (one line each), after the bag."""
+
+    def live_nodes(self, args: argparse.Namespace, common: dict) -> list:
+        """The detector node to start (``common``: the parameters every node of the graph gets)."""
+        raise NotImplementedError
+
+    def event_line(self, event: dict) -> str | None:
+        """A node's event as a line on stderr while the bag plays (None: not said)."""
+        raise NotImplementedError
+
+    def live_result(self, args: argparse.Namespace, report: dict, result, elapsed: float, say) -> _Replayed:
+        """The detector node's final report as the replay's result."""
+        raise NotImplementedError
+
+
+class _Physics(_Kind):
+    """The physics reference (the run's own scenario, --scenario or a model .yaml) and the streaming detector."""
+
+    offline_options = "--map, --column and --encoding"
+    bag_topic, bag_hint = "/plant/measurement", "not a bag of the phfdi graph"
+
+    def offline(self, args: argparse.Namespace) -> _Replayed:
+        from phfdi.replay import load_any, replay_run, scenario_of
+        from phfdi.scenario import load_scenario
+        from wavelet_fdi.config import Calibration
+
+        run_ = load_any(args.file, column_map_from_args(args), args.encoding)
+        notes = run_.metadata.get("notes", [])
+        print_notes("replay", notes)
+        spec = getattr(args, "model_spec", None) or (load_scenario(args.scenario, fault="healthy") if args.scenario
+                                                     else scenario_of(run_))
+        settings = settings_from_args(args)
+        cal = Calibration.load(args.calibration) if args.calibration else None
+        t0 = time.perf_counter()
+        with plant_runs_on(args.file):
+            result = replay_run(run_, spec, cal, settings, chunk=args.chunk, isolate=not args.no_isolation)
+        elapsed = time.perf_counter() - t0
+        print(f"replayed {result.samples} samples in {elapsed:.2f} s ({result.samples / max(elapsed, 1e-9):.0f} "
+              f"samples/s, isolation included)", file=sys.stderr)
+        document = replay_json(args.file, result.samples, notes, result.diagnostics,
+                               [a.summary() for a in result.alarms])
+        return _Replayed(document, format_alarms(result.alarms, result.diagnostics))
+
+    def check_live(self, args: argparse.Namespace) -> None:
+        from phfdi.replay import load_any
+
+        # the offline reader first: what offline replay refuses, --live refuses with the same line (it played
+        # such a bag as "0 samples", exit 0); what it repairs is said the same way
+        print_notes("replay", load_any(args.file, None, None).metadata.get("notes", []))
+        self.settings = settings_from_args(args)  # one line for bad detector settings before any process starts
+
+    def live_nodes(self, args: argparse.Namespace, common: dict) -> list:
+        from pathlib import Path
+
+        from phfdi.ros.launcher import detector_spec
+        from wavelet_fdi.config import settings_as_params
+
+        detector = {**common, **settings_as_params(self.settings), "isolate": not args.no_isolation}
+        if args.calibration:
+            detector["calibration"] = str(Path(args.calibration).resolve())
+        return [detector_spec(detector)]
+
+    def event_line(self, event: dict) -> str | None:
+        from .launch import alarm_event_line
+
+        return alarm_event_line(event)
+
+    def live_result(self, args: argparse.Namespace, report: dict, result, elapsed: float, say) -> _Replayed:
+        say(f"played {report['samples']} samples through the detector node in {elapsed:.1f} s "
+            f"({result.run_wall_s:.1f} s after the graph connected; ROS domain {result.domain_id})")
+        alarms = report["alarms"]
+        document = replay_json(args.file, report["samples"], [], report["diagnostics"],
+                               [{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms])
+        return _Replayed(document, format_alarms(alarms, report["diagnostics"]), result.status)
+
+
+class _Learned(_Kind):
+    """A learned or estimator reference file (phfdi calibrate --learn or --estimator) and the multichannel
+    detector: any record's channels."""
+
+    offline_options = "--map, --column, --encoding and --refit-rows"
+    bag_topic, bag_hint = MEASURED_SAMPLE.name, "write the record with phfdi bag from-csv"
+
+    def offline(self, args: argparse.Namespace) -> _Replayed:
+        from phfdi.learned import alarm_summaries, event_dict, replay_measured
+        from wavelet_fdi.learned_detector import LearnedModel
+
+        model = LearnedModel.load(args.reference)
+        cmap, columns_said = reference_column_map(args, model, args.reference)
+        rec, columns_said = _read_with_stored_map(args, model, cmap, columns_said)
+        print(f"phfdi replay: {columns_said}", file=sys.stderr)
+        print_notes("replay", rec.notes)
+        t0 = time.perf_counter()
+        events, states, model = replay_measured(rec, model, args.refit_rows)
+        elapsed = time.perf_counter() - t0
+        print(f"replayed {len(rec.x)} rows x {len(model.channels)} channels in {elapsed:.2f} s", file=sys.stderr)
+        outside = outside_healthy_range(model, rec)
+        alarms = alarm_summaries(events, rec)
+        inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
+        document = {"file": args.file, "reference": args.reference, "samples": len(rec.x),
+                    "channels": list(model.channels), "columns": columns_said, "notes": rec.notes,
+                    "input_problems": inputs, "outside_healthy_range": outside, "alarm_rows": int(states.sum()),
+                    "alarms": alarms}
+        lines = [format_alarms(alarms)]
+        for e in inputs:
+            stamp = f"{e['stamp']}, " if e["stamp"] else ""
+            lines.append(f"input: {e['message']} ({stamp}{rec.where} {e['line']})")
+        return _Replayed(document, "\n".join(lines))
+
+    def check_live(self, args: argparse.Namespace) -> None:
+        from wavelet_fdi.learned_detector import LearnedModel
+
+        self.model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
+
+    def live_nodes(self, args: argparse.Namespace, common: dict) -> list:
+        from pathlib import Path
+
+        from phfdi.ros.launcher import OBSERVER, NodeSpec
+        from phfdi_base.topics import DETECTOR
+
+        return [NodeSpec(DETECTOR, "wavelet_fdi.learned_node",
+                         {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
+
+    def event_line(self, event: dict) -> str | None:
+        if event.get("event") == "fault_alarm":
+            return f"/fault_alarm {event['state']} at {event['time_s']:g} s: {event['message']}"
+        return None
+
+    def live_result(self, args: argparse.Namespace, report: dict, result, elapsed: float, say) -> _Replayed:
+        from wavelet_fdi.healthy_range import describe
+
+        say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
+            f"(ROS domain {result.domain_id})")
+        alarms = _located_live(args.file, report["alarms"], report["samples"])
+        outside = report.get("outside_healthy_range") or []  # what the node's core counted (the offline replay's)
+        print_notes("replay", [describe(o) for o in outside])
+        document = {"file": args.file, "reference": args.reference, "samples": report["samples"],
+                    "channels": list(self.model.channels), "outside_healthy_range": outside, "alarms": alarms}
+        return _Replayed(document, format_alarms(alarms), result.status)
 
 
 def _is_model_file(path: str) -> bool:
@@ -199,35 +344,6 @@ def _read_with_stored_map(args: argparse.Namespace, model, cmap, columns_said: s
                      f"{args.reference} does not fit this file: {exc})")
 
 
-def run_learned(args: argparse.Namespace) -> int:
-    """The record through the learned reference and the multichannel detector."""
-    from phfdi.learned import alarm_summaries, event_dict, replay_measured
-    from wavelet_fdi.learned_detector import LearnedModel
-
-    model = LearnedModel.load(args.reference)
-    cmap, columns_said = reference_column_map(args, model, args.reference)
-    rec, columns_said = _read_with_stored_map(args, model, cmap, columns_said)
-    print(f"phfdi replay: {columns_said}", file=sys.stderr)
-    print_notes("replay", rec.notes)
-    t0 = time.perf_counter()
-    events, states, model = replay_measured(rec, model, args.refit_rows)
-    elapsed = time.perf_counter() - t0
-    print(f"replayed {len(rec.x)} rows x {len(model.channels)} channels in {elapsed:.2f} s", file=sys.stderr)
-    outside = outside_healthy_range(model, rec)
-    alarms = alarm_summaries(events, rec)
-    inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
-    if args.json:
-        print(json.dumps({"file": args.file, "reference": args.reference, "samples": len(rec.x),
-                          "channels": list(model.channels), "columns": columns_said, "notes": rec.notes, "input_problems": inputs,
-                          "outside_healthy_range": outside, "alarm_rows": int(states.sum()), "alarms": alarms}, indent=2))
-        return 0
-    print(format_alarms(alarms))
-    for e in inputs:
-        stamp = f"{e['stamp']}, " if e["stamp"] else ""
-        print(f"input: {e['message']} ({stamp}{rec.where} {e['line']})")
-    return 0
-
-
 def outside_healthy_range(model, rec) -> list[dict]:
     """phfdi.learned.outside_healthy_range, each stretch said in one note."""
     from phfdi.learned import outside_healthy_range as outside_of
@@ -236,47 +352,6 @@ def outside_healthy_range(model, rec) -> list[dict]:
     outside = outside_of(model, rec)
     print_notes("replay", [describe(o) for o in outside])
     return outside
-
-
-def run_live_learned(args: argparse.Namespace) -> int:
-    """A bag of a measured record (phfdi bag from-csv) through the learned detector NODE over ROS."""
-    from pathlib import Path
-
-    from phfdi.ros.launcher import OBSERVER, NodeSpec
-    from phfdi.ros.player import PLAYER
-    from phfdi_base.topics import DETECTOR, MEASURED_SAMPLE
-    from wavelet_fdi.healthy_range import describe
-    from wavelet_fdi.learned_detector import LearnedModel
-
-    model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
-    _check_live_bag(args, MEASURED_SAMPLE.name, "write the record with phfdi bag from-csv")
-    say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
-
-    def on_event(node: str, event: dict) -> None:
-        if event.get("event") == "fault_alarm":
-            say(f"/fault_alarm {event['state']} at {event['time_s']:g} s: {event['message']}")
-
-    spec = _replay_scenario(args.file, args.scenario)
-    common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
-    nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
-                                                    "pace": float(args.pace)}),
-             NodeSpec(DETECTOR, "wavelet_fdi.learned_node",
-                      {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
-    result, report, elapsed = _play_live(args, nodes, spec, say, on_event)
-    if report is None:
-        return result.status or 1
-    say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
-        f"(ROS domain {result.domain_id})")
-    alarms = _located_live(args.file, report["alarms"], report["samples"])
-    outside = report.get("outside_healthy_range") or []  # what the node's core counted (the offline replay's)
-    print_notes("replay", [describe(o) for o in outside])
-    if args.json:
-        print(json.dumps({"file": args.file, "reference": args.reference, "samples": report["samples"],
-                          "channels": list(model.channels), "outside_healthy_range": outside, "alarms": alarms},
-                         indent=2))
-    else:
-        print(format_alarms(alarms))
-    return result.status
 
 
 def _located_live(bag: str, alarms: list[dict], samples: int) -> list[dict]:
@@ -323,51 +398,32 @@ def _replay_scenario(bag: str, fallback: str | None):
     return validate_scenario(meta["spec"], source=f"{bag} metadata")
 
 
-def run_live(args: argparse.Namespace) -> int:
-    """The bag through a detector node over ROS: player + detector, started and stopped here."""
+def _run_live(args: argparse.Namespace, kind: _Kind) -> _Replayed:
+    """The bag through the kind's detector NODE over ROS: a player and the detector, started and stopped here."""
     from pathlib import Path
 
-    from phfdi.ros.launcher import NodeSpec, detector_spec
+    from phfdi.ros.launcher import NodeSpec
     from phfdi.ros.player import PLAYER
     from phfdi_base.topics import DETECTOR
-    from wavelet_fdi.config import settings_as_params
 
-    from .launch import alarm_event_line
-
-    _check_live_bag(args, "/plant/measurement", "not a bag of the phfdi graph")
-    from phfdi.replay import load_any
-
-    # the offline reader first: what offline replay refuses, --live refuses with the same line (it played
-    # such a bag as "0 samples", exit 0); what it repairs is said the same way
-    print_notes("replay", load_any(args.file, None, None).metadata.get("notes", []))
-    settings = settings_from_args(args)  # one line for bad detector settings before any process starts
+    _check_live_bag(args, kind.bag_topic, kind.bag_hint)
+    kind.check_live(args)
+    spec = _replay_scenario(args.file, args.scenario)
+    common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
+    detector = kind.live_nodes(args, common)
     say = lambda text: print(f"phfdi replay: {text}", file=sys.stderr)  # noqa: E731
 
     def on_event(node: str, event: dict) -> None:
-        line = alarm_event_line(event)
+        line = kind.event_line(event)
         if line:
             say(line)
 
-    spec = _replay_scenario(args.file, args.scenario)
-    common = {"scenario": spec.name, "fault": "", "graph_nodes": [PLAYER, DETECTOR]}
-    detector = {**common, **settings_as_params(settings), "isolate": not args.no_isolation}
-    if args.calibration:
-        detector["calibration"] = str(Path(args.calibration).resolve())
     nodes = [NodeSpec(PLAYER, "phfdi.ros.player", {**common, "path": str(Path(args.file).resolve()),
-                                                    "pace": float(args.pace)}),
-             detector_spec(detector)]
+                                                    "pace": float(args.pace)}), *detector]
     result, report, elapsed = _play_live(args, nodes, spec, say, on_event)
     if report is None:
-        return result.status or 1
-    say(f"played {report['samples']} samples through the detector node in {elapsed:.1f} s "
-        f"({result.run_wall_s:.1f} s after the graph connected; ROS domain {result.domain_id})")
-    alarms = report["alarms"]
-    if args.json:
-        print(json.dumps(replay_json(args.file, report["samples"], [], report["diagnostics"],
-                                     [{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms]), indent=2))
-    else:
-        print(format_alarms(alarms, report["diagnostics"]))
-    return result.status
+        return _Replayed(None, status=result.status or 1)
+    return kind.live_result(args, report, result, elapsed, say)
 
 
 def _check_live_bag(args: argparse.Namespace, topic: str, hint: str) -> None:
