@@ -163,7 +163,7 @@ class LearnedSettings:
     Examples
     --------
     >>> from wavelet_fdi import LearnedSettings
-    >>> settings = LearnedSettings().check()  # the defaults are valid
+    >>> settings = LearnedSettings()  # checked when made: the defaults are valid
     >>> settings.wavelet, settings.level
     ('sym4', 2)
     """
@@ -221,6 +221,9 @@ class LearnedSettings:
                                            "no fault hypothesis explains is announced once (outside calibration, "
                                            "WARN); the next ones only after this long without one, s (each is "
                                            "still kept and counted)", range=(0.0, math.inf))
+
+    def __post_init__(self) -> None:
+        self.check()  # refused when made, as DetectorSettings are: a bad value never reaches a detector
 
     def check(self) -> "LearnedSettings":
         """Every value within its declared range, and the rules a range cannot say (an open end, an "off")."""
