@@ -260,7 +260,7 @@ class LearnedSettings:
         unknown = sorted(set(d) - known)
         if unknown:
             raise UserError(f"unknown learned-detector setting(s): {', '.join(unknown)}")
-        return cls(**d).check()
+        return cls(**d)  # checked when made
 
     def bands(self) -> list[str]:
         return [f"D{j + 1}" for j in range(self.level)] + [f"A{self.level}"]

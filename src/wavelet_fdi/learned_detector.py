@@ -303,7 +303,6 @@ class LearnedDetector:
             k += [stat.reference_value()] * len(rows)
             h += [stat.threshold()] * len(rows)
             by_level += [stat.holds_by_level] * len(rows)
-        self.band_energy = any(st.uses_band_energy for st in self.statistics)
         self.stat_names = names
         self.k = np.array(k)
         self.h = np.array(h)
@@ -370,9 +369,6 @@ class LearnedDetector:
         b = self.settings.block_samples
         n = len(rows)
         chunk = Chunk(a_raw, d_norm, missing, bool(missing.any()))
-        if self.band_energy:  # the detail bands' d^2 and missing flags, channel-major, once a chunk
-            chunk.e2 = d_norm.transpose(2, 0, 1).reshape(self.m * self.settings.level, n) ** 2
-            chunk.miss = np.repeat(missing.T, self.settings.level, axis=0)
         for stat in self.statistics:
             stat.prepare(chunk, rows)
         if self.namer is not None:

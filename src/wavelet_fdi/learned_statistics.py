@@ -20,6 +20,7 @@ Examples
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
@@ -52,8 +53,17 @@ class Chunk:
     d_norm: np.ndarray  # (J, n, m) detail coefficients over their healthy sigma
     missing: np.ndarray  # (n, m)
     gappy: bool  # any sample missing
-    e2: np.ndarray | None = None  # (m*J, n) d^2, channel-major (for a kind that uses_band_energy)
-    miss: np.ndarray | None = None  # (m*J, n) missing, channel-major
+
+    @cached_property
+    def e2(self) -> np.ndarray:
+        """(m*J, n) the detail bands' d^2, channel-major as the energy rows: once a chunk, for every kind."""
+        n_bands, n, m = self.d_norm.shape
+        return self.d_norm.transpose(2, 0, 1).reshape(m * n_bands, n) ** 2
+
+    @cached_property
+    def miss(self) -> np.ndarray:
+        """(m*J, n) missing flags in the rows of :attr:`e2`."""
+        return np.repeat(self.missing.T, self.d_norm.shape[0], axis=0)
 
 
 @dataclass(frozen=True)
@@ -77,8 +87,6 @@ class LearnedStatistic:
     #: its rows hold an alarm only while their channel's AJ deviation stays within ``clear_fraction`` of the
     #: episode's peak (a mean shift that came most of the way back does not hold it by a small offset)
     holds_by_level: ClassVar[bool] = False
-    #: its values are the detail bands' d^2 (the chunk computes them once for every kind that says so)
-    uses_band_energy: ClassVar[bool] = False
 
     def __init__(self, detector: LearnedDetectorView) -> None:
         self.detector = detector
@@ -149,7 +157,6 @@ class EnergyIncrease(LearnedStatistic):
     scale where ``energy_baseline_time_constant_s`` > 0 (robust: a sample counts at most rho)."""
 
     kind = "energy"
-    uses_band_energy = True
 
     def __init__(self, detector: LearnedDetectorView) -> None:
         super().__init__(detector)
@@ -176,7 +183,6 @@ class EnergyIncrease(LearnedStatistic):
         return self.settings.energy_h
 
     def values(self, out, chunk, i0, i1, g0, u) -> None:
-        assert chunk.e2 is not None and chunk.miss is not None, "computed for a kind that uses_band_energy"
         e2, miss = chunk.e2[:, i0:i1], chunk.miss[:, i0:i1]  # a missing sample is healthy
         e2_up = self._against_run_scale(e2, miss if chunk.gappy else None, g0) if self.adapted else e2
         out[:] = np.where(miss, 0.0, e2_up) if chunk.gappy else e2_up
@@ -233,7 +239,6 @@ class EnergyDecrease(LearnedStatistic):
     k - d^2 with k = ln(1/rho) / (1/rho - 1), kept as value -d^2 minus reference -k (every row is "value - k")."""
 
     kind = "energy_down"
-    uses_band_energy = True
 
     def rows(self) -> list[StatisticRow]:
         s = self.settings
@@ -248,7 +253,6 @@ class EnergyDecrease(LearnedStatistic):
         return self.settings.energy_down_h
 
     def values(self, out, chunk, i0, i1, g0, u) -> None:
-        assert chunk.e2 is not None and chunk.miss is not None, "computed for a kind that uses_band_energy"
         e2 = chunk.e2[:, i0:i1]
         out[:] = np.where(chunk.miss[:, i0:i1], -1.0, -e2) if chunk.gappy else -e2
 
