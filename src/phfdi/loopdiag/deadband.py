@@ -55,7 +55,7 @@ def _design(y: np.ndarray, base: np.ndarray) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def _rss(y: np.ndarray, u: np.ndarray, integrating: bool) -> float:
+def arx_rss(y: np.ndarray, u: np.ndarray, integrating: bool) -> float:
     """Residual sum of squares of the ARX model of PV's changes y with input u (module docstring)."""
     base = u - float(np.mean(u)) if integrating else np.diff(np.concatenate([u[:1], u]))
     x = _design(y, base)
@@ -79,13 +79,13 @@ def deadband_evidence(op: np.ndarray, pv: np.ndarray, process_type: str) -> Indi
     y = np.diff(pv)
     u = op[1:]
     integrating = process_type == INTEGRATING
-    r_op = _rss(y, u, integrating)
+    r_op = arx_rss(y, u, integrating)
     if r_op <= 0.0:
         return not_applicable(name, "PV's changes are explained exactly (no noise)", DEADBAND_REF)
     widths = span * np.geomspace(*WIDTH_RANGE, WIDTHS)
     blocks = [Backlash(width_pct=float(w)) for w in widths] + [Stiction(s_pct=float(w), j_pct=float(w)) for w in widths]
     stems = positions(blocks, u)
-    rss = np.array([_rss(y, s, integrating) for s in stems])
+    rss = np.array([arx_rss(y, s, integrating) for s in stems])
     k = int(np.argmin(rss))
     gain = 1.0 - float(rss[k]) / r_op
     kind = "backlash" if k < WIDTHS else "stiction (J = S)"
