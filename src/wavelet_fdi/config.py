@@ -27,6 +27,8 @@ from .statistics import STATISTICS, parse_statistic
 
 CALIBRATION_DIR = Path(str(resources.files("wavelet_fdi"))) / "calibrations"
 CHANNELS = ("ph", "level")
+#: samples per window in which a threshold calibration restarts the CUSUMs and takes their maxima
+ARL_WINDOW_SAMPLES = 1000
 
 
 def setting(default: Any, help: str, *, range: tuple[float, float] | None = None, option: str | None = None,
@@ -217,6 +219,12 @@ class LearnedSettings:
                                          "deviation is at least this fraction of the episode's peak on that channel "
                                          "(0: any crossing holds it), in [0, 1)")
     sample_time_s: float = setting(1.0, "nominal sample time of the record, s, above 0")
+    arl0_samples: float = setting(0.0, "0: every statistic's threshold as declared (mean_h, energy_h, ...); above 0: "
+                                       "each statistic's threshold measured on the healthy runs the bands are "
+                                       "calibrated on, for this average run length to a false alarm of the whole "
+                                       "detector, samples (window maxima of CUSUMs restarted every 1000 samples, "
+                                       "exponential tail, the target split evenly over the statistics: the physics "
+                                       "detector's calibration, wavelet_fdi.calibration)", range=(0.0, math.inf))
     outside_hold_s: float = setting(300.0, "with a reference that confirms its alarms (the estimator): a deviation "
                                            "no fault hypothesis explains is announced once (outside calibration, "
                                            "WARN); the next ones only after this long without one, s (each is "
@@ -252,6 +260,9 @@ class LearnedSettings:
             raise UserError("sample_time_s must be positive")
         if not 0.0 <= self.clear_fraction < 1.0:
             raise UserError("clear_fraction must be in [0, 1)")
+        if self.arl0_samples and not (ARL_WINDOW_SAMPLES <= self.arl0_samples < math.inf):
+            raise UserError(f"arl0_samples must be 0 (thresholds as declared) or at least {ARL_WINDOW_SAMPLES} (the "
+                            "window its calibration measures CUSUM maxima in), finite")
         return self
 
     @classmethod

@@ -42,7 +42,8 @@ import numpy.typing as npt
 
 from phfdi_base.errors import UserError
 
-from .config import LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
+from .calibration import tail_threshold, window_maxima
+from .config import ARL_WINDOW_SAMPLES, LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
 from .filterbank import CausalSwt
 from .healthy_range import checked_ranges, healthy_ranges, outside_masks
 from .learned_statistics import LEARNED_STATISTICS, Chunk, LearnedStatistic, Repeats
@@ -83,6 +84,9 @@ class LearnedModel:
     #: healthy RMS per residual channel (rows) and band (columns D1..DJ, AJ), residual-sigma units
     band_sigma: np.ndarray
     source: dict = field(default_factory=dict)
+    #: thresholds measured for ``settings.arl0_samples`` (:func:`calibrate_bands`), by statistic name; a statistic
+    #: not here keeps its declared threshold
+    thresholds: dict = field(default_factory=dict)
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -98,7 +102,7 @@ class LearnedModel:
         return {"format": FORMAT, "settings": asdict(self.settings), "reference": self.reference.to_dict(),
                 "band_sigma": {c: dict(zip(self.settings.bands(), map(float, row)))
                                for c, row in zip(self.residual_channels, self.band_sigma)},
-                "source": self.source}
+                "source": self.source, **({"thresholds": dict(self.thresholds)} if self.thresholds else {})}
 
     def save(self, path: str | Path, overwrite: bool = True) -> None:
         save_json(path, self.to_dict(), overwrite)
@@ -122,7 +126,19 @@ class LearnedModel:
         source = dict(d.get("source") or {})
         if "healthy_ranges" in source:  # kept since 2026-11-29; a file from before has none
             source["healthy_ranges"] = checked_ranges(source["healthy_ranges"], f"{where}: source.healthy_ranges")
-        return cls(ref, settings, sigma, source)
+        return cls(ref, settings, sigma, source, _checked_thresholds(d.get("thresholds") or {}, where))
+
+
+def _checked_thresholds(d: dict, where: str) -> dict[str, float]:
+    """A model file's measured thresholds: statistic name -> a positive number."""
+    try:
+        out = {str(k): float(v) for k, v in dict(d).items()}
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"{where}: thresholds must map statistic names to numbers ({exc})") from None
+    bad = sorted(k for k, v in out.items() if not (math.isfinite(v) and v > 0))
+    if bad:
+        raise UserError(f"{where}: threshold of {bad[0]} must be a positive number")
+    return out
 
 
 def fit_reference(x_healthy: np.ndarray, channels: Sequence[str], settings: LearnedSettings) -> Reference:
@@ -205,7 +221,50 @@ def calibrate_bands(reference: Reference, runs: Sequence[tuple[np.ndarray, np.nd
     coef = np.where(np.isfinite(coef), coef, np.nan)
     sigma = np.sqrt(np.nanmean(coef ** 2, axis=0))
     sigma = np.where(np.isfinite(sigma) & (sigma > 1e-9), sigma, 1.0)
-    return LearnedModel(reference, s, sigma, dict(source or {}))
+    model = LearnedModel(reference, s, sigma, dict(source or {}))
+    if s.arl0_samples > 0:
+        model.thresholds = measured_thresholds(model, runs, refs)
+    return model
+
+
+def measured_thresholds(model: LearnedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]],
+                        run_references: Sequence[Reference]) -> dict[str, float]:
+    """Each statistic's threshold for the model's false-alarm target (``settings.arl0_samples``), measured on the
+    healthy runs as the physics detector's calibration measures its own (:mod:`wavelet_fdi.calibration`): every
+    run through the calibrated detector (no alarms), each statistic's increments after the warm-up cut into
+    windows of :data:`~wavelet_fdi.config.ARL_WINDOW_SAMPLES` with a CUSUM restarted in each, an exponential fit
+    to the upper tail of the windows' maxima, and h where P(max > h) = window / (ARL0 x the number of
+    statistics): an alarm of any statistic within a window has probability about window / ARL0 (Bonferroni,
+    conservative where the statistics are correlated). A statistic whose CUSUM stays at zero in most healthy
+    windows has no tail to fit and keeps its declared threshold (it is then not part of the stated rate). Needs 8
+    windows' worth of healthy rows after the warm-ups."""
+    s = model.settings
+    per_stat: list[list[np.ndarray]] = []
+    for (t, rows), ref in zip(runs, run_references):
+        det = LearnedDetector(LearnedModel(ref, s, model.band_sigma, model.source), alarms=False, record_trace=True)
+        det.process(t, rows)
+        z = det.trace()["increments"][det.fill_samples:]
+        if not per_stat:
+            per_stat = [[] for _ in det.stat_names]
+            names = det.stat_names
+        for j in range(len(names)):
+            per_stat[j].append(window_maxima(z[:, j], ARL_WINDOW_SAMPLES))
+    windows = sum(len(m) for m in per_stat[0]) if per_stat else 0
+    if windows < 8:
+        raise UserError(f"arl0_samples {s.arl0_samples:g}: measuring the thresholds needs at least 8 windows of "
+                        f"{ARL_WINDOW_SAMPLES} healthy rows after the runs' warm-ups, these runs give {windows} "
+                        "(more or longer healthy runs, or arl0_samples 0 for the declared thresholds)")
+    p_target = ARL_WINDOW_SAMPLES / (s.arl0_samples * len(per_stat))
+    out = {}
+    for name, parts in zip(names, per_stat):
+        maxima = np.concatenate(parts)
+        if np.count_nonzero(maxima > 0.0) < len(maxima) / 2:
+            # the statistic stays at zero in most healthy windows (its k is far above the healthy values): no tail
+            # to fit, and a threshold from the few nonzero maxima would make it fire on one sample; it keeps its
+            # declared threshold
+            continue
+        out[name] = tail_threshold(maxima, p_target).threshold
+    return out
 
 
 @dataclass
@@ -260,6 +319,7 @@ class LearnedDetector:
         self.fill_samples = self.swt.fill_samples + model.reference.lags
         self.bands = s.bands() + ["raw"]  # "raw": a statistic on the channel's reading itself
         self._init_statistics(s, m)
+        self._measured_thresholds(model)
         self.alarms_enabled = alarms
         self.bias = np.zeros(m)
         self._acc = np.zeros(m)
@@ -275,7 +335,8 @@ class LearnedDetector:
         self._missing_open = np.zeros(m, dtype=bool)
         self.samples_processed = 0
         self._times = np.full(TIME_RING, np.nan)  # times of the last TIME_RING samples (onset times)
-        self._trace: dict[str, list] | None = {"coef": [], "stat": [], "state": []} if record_trace else None
+        self._trace: dict[str, list] | None = ({"coef": [], "stat": [], "state": [], "increments": []}
+                                               if record_trace else None)
         self._init_naming(model, alarms)
 
     def _init_statistics(self, s: LearnedSettings, m: int) -> None:
@@ -310,6 +371,15 @@ class LearnedDetector:
         self.stat_band = np.array(band, dtype=int)
         self._by_level = np.flatnonzero(by_level)  # rows held by their channel's level (clear_fraction)
         self.cusum = CusumBank(len(names))
+
+    def _measured_thresholds(self, model: LearnedModel) -> None:
+        """The thresholds the model measured for its false-alarm target replace the declared ones."""
+        unknown = sorted(set(model.thresholds) - set(self.stat_names))
+        if unknown:
+            raise UserError(f"the model has a threshold for {unknown[0]}, a statistic these settings do not run")
+        for i, name in enumerate(self.stat_names):
+            if name in model.thresholds:
+                self.h[i] = float(model.thresholds[name])
 
     @property
     def repeats(self) -> RepeatTest | None:
@@ -533,6 +603,7 @@ class LearnedDetector:
                                    (dev * self.gain)[:, :, None]), axis=2)
             self._trace["coef"].append(np.where(missing[i0:i1][:, :, None], np.nan, coef))
             self._trace["stat"].append(ratio.T.copy())
+            self._trace["increments"].append(z.T.copy())  # value - k per statistic (the warm-up's at -k)
         if self.alarms_enabled:
             events += self._alarm_logic(t, i0, i1, g0, ratio, cross, states, np.abs(u))
         if self._trace is not None:

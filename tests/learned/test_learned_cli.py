@@ -152,8 +152,11 @@ def test_every_detector_setting_is_an_option_of_its_own(files, tmp_path, capsys)
     assert "--learned KEY=VALUE is the old form" in capsys.readouterr().err
     assert json.loads(old.read_text())["settings"]["mean_h"] == 8.0
 
-    assert "--arl0" in one_error_line(capsys, ["calibrate", "--learn", str(files["healthy"]), "--arl0", "1e6",
-                                               "--out", str(tmp_path / "a.json")])
+    assert "--channels" in one_error_line(capsys, ["calibrate", "--learn", str(files["healthy"]), "--channels",
+                                                   "ph,level", "--out", str(tmp_path / "a.json")])
+    # --arl0 is both detectors' (the false-alarm target): here it asks for thresholds the record is too short for
+    assert "arl0_samples 1e+06: measuring the thresholds needs at least 8 windows" in one_error_line(
+        capsys, ["calibrate", "--learn", str(files["healthy"]), "--arl0", "1e6", "--out", str(tmp_path / "a.json")])
     assert "--mean-h" in one_error_line(capsys, ["calibrate", "--mean-h", "8", "--out", str(tmp_path / "b.yaml")])
     assert "mean_h" in one_error_line(capsys, ["calibrate", "--learn", str(files["healthy"]), "--mean-h", "8",
                                                "--learned", "mean_h=7", "--out", str(tmp_path / "c.json")])
