@@ -22,10 +22,15 @@ Kinds (chosen by the reference file, :data:`KINDS`):
 * ``estimator`` (:class:`~wavelet_fdi.reference_estimator.EstimatorReference`, ``correct: true``): a
   Kalman filter on a stirred vessel's reaction invariant driven by the measured pH;
 * the same physics run open loop (``correct: false``): the model simulated from the record's first pH on
-  the measured pump flows, never corrected, the way ``phfdi diagnose`` compares a model with a run.
+  the measured pump flows, never corrected, the way ``phfdi diagnose`` compares a model with a run;
+* ``physics`` (:class:`~wavelet_fdi.reference_physics.PhysicsReference`): a scenario's healthy plant and valves
+  (the paper's loop) run on the measured valve commands, the model the physics detector runs; it does not name
+  faults yet.
 
-The valve loop of the paper keeps its own physics reference and detector
-(:class:`~wavelet_fdi.detector.StreamingDetector`): it isolates valve faults by re-running that model.
+The valve loop of the paper keeps its own physics detector
+(:class:`~wavelet_fdi.detector.StreamingDetector`) until the ``physics`` kind names faults as it does (it
+isolates valve faults by re-running the model with each fault's block); benchmarks/physics_reference.py
+measures the two side by side.
 Adding a kind: a class with the members above, one entry in :data:`KINDS` (and, if it can name the fault
 behind an alarm, one in :data:`NAMERS`).
 """
@@ -42,6 +47,7 @@ from .estimator_isolation import isolate, look_schedule
 from .reference_estimator import EstimatorReference
 from .reference_learned import LearnedReference
 from .reference_oe import OutputErrorReference
+from .reference_physics import PhysicsReference
 
 
 class ReferenceStream(Protocol):
@@ -64,7 +70,8 @@ class Reference(Protocol):
 
 
 #: reference kinds by the name their files carry
-KINDS: dict[str, Any] = {"arx": LearnedReference, "oe": OutputErrorReference, "estimator": EstimatorReference}
+KINDS: dict[str, Any] = {"arx": LearnedReference, "oe": OutputErrorReference, "estimator": EstimatorReference,
+                         "physics": PhysicsReference}
 
 
 #: kinds whose alarms can be named (family, class, size): namer(reference, t_s, rows, onset_index,

@@ -1,0 +1,181 @@
+"""The paper loop's physics as a reference kind of the multichannel detector, against the physics detector.
+
+    .venv/bin/python benchmarks/physics_reference.py                  # paper severities, seeds 1-3 (Dask, minutes)
+    .venv/bin/python benchmarks/physics_reference.py --all-severities
+
+Issue 37 asks for one detector core: the physics model as one more reference kind of the multichannel detector
+(``wavelet_fdi.reference_physics``, kind ``physics``), and the physics detector (``StreamingDetector``) retired
+once the two are measured side by side. This is that measurement, detection only (the physics kind does not name
+faults yet):
+
+* calibration: the physics kind's band scales (``learned_detector.calibrate_bands``) on healthy runs of the paper
+  scenario with the seeds ``phfdi evaluate`` calibrates on (1001-1016); the physics detector uses its shipped
+  calibration (``load_default_calibration("paper")``), made on other healthy runs the same way;
+* held-out healthy runs (seeds 1-8 of ``phfdi evaluate``): fault alarms per hour of monitored time;
+* every fault of ``phfdi evaluate``'s matrix (``study.evaluation.severities``), onset 7000 s, seeds 1-3: found or
+  missed, and the delay from the onset to the first alarm after it.
+
+The multichannel detector's settings are its declared defaults with five values taken from the physics
+detector's design (``DetectorSettings``): the same wavelet and level, its mean CUSUMs designed for a shift of one
+residual sigma (``mean_shift_sigma``; k in AJ's sigmas, below), its energy CUSUMs designed for a fourfold
+variance (``variance_ratio``), and its false-alarm target (``arl0_samples``, 1e5 samples for the whole detector),
+for which each statistic's threshold is measured on the calibration runs the way the physics detector's are
+(``learned_detector.measured_thresholds``). Nothing was chosen on a fault run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+ONSET_S = 7000.0
+CALIBRATION_SEEDS = tuple(range(1001, 1017))
+HEALTHY_SEEDS = tuple(range(1, 9))
+FAULT_SEEDS = (1, 2, 3)
+
+
+@dataclass(frozen=True)
+class Task:
+    fault: str  # "healthy" or a fault of study.evaluation.severities()
+    params: dict
+    seed: int
+
+
+def physics_settings():
+    """The multichannel detector's defaults, with the physics detector's wavelet, level and energy design."""
+    from wavelet_fdi.config import DetectorSettings, LearnedSettings
+
+    d = DetectorSettings()
+    # the physics detector's mean CUSUMs are designed for a shift of mean_shift_sigma in the residual (k = half of
+    # it); the multichannel detector's watch AJ in AJ's own sigmas, where that shift of white noise reads 2^(J/2)
+    # times larger (AJ is a local mean over about 2^J samples)
+    k = 0.5 * d.mean_shift_sigma * 2.0 ** (d.level / 2.0)
+    return LearnedSettings(wavelet=d.wavelet, level=d.level, mean_k=k, energy_variance_ratio=d.variance_ratio,
+                           arl0_samples=d.arl0_samples, sample_time_s=1.0)
+
+
+def _spec(task: Task):
+    from phfdi.study.evaluation import _spec as evaluation_spec
+
+    return evaluation_spec("paper", task.fault, task.params, task.seed, None if task.fault == "healthy" else ONSET_S)
+
+
+def healthy_rows(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A healthy run's time and the physics kind's channels."""
+    from phfdi.loop import simulate
+    from wavelet_fdi.reference_physics import PhysicsReference
+
+    spec = _spec(Task("healthy", {}, seed))
+    run = simulate(spec)
+    ref = PhysicsReference.from_spec(spec)
+    return np.asarray(run.time_s, float), np.column_stack([np.asarray(run[c], float) for c in ref.channels])
+
+
+def score(task: Task, model) -> dict:
+    """Both detectors on one run: alarms before the onset, and the delay of the first one after it."""
+    from phfdi.loop import simulate
+    from phfdi.replay import run_chunks
+    from wavelet_fdi import DetectorSettings, StreamingDetector, load_default_calibration
+    from wavelet_fdi.learned_detector import run_record
+
+    spec = _spec(task)
+    run = simulate(spec)
+    t = np.asarray(run.time_s, float)
+    onset = ONSET_S if task.fault != "healthy" else None
+    settings = DetectorSettings()
+    det = StreamingDetector(spec, load_default_calibration("paper", settings), settings, isolate=False)
+    run_chunks(det, run)
+    physics_times = [a.detection_time_s for a in det.alarms]
+    rows = np.column_stack([np.asarray(run[c], float) for c in model.channels])
+    events, _, _ = run_record(model, t, rows)
+    kind_times = [e.time_s for e in events if e.kind == "alarm"]
+    out = {"fault": task.fault, "params": task.params, "seed": task.seed,
+           "monitored_h": float((t[-1] - t[0]) / 3600.0)}
+    for name, times in (("physics_detector", physics_times), ("physics_kind", kind_times)):
+        before = [x for x in times if onset is None or x < onset]
+        after = [x for x in times if onset is not None and x >= onset]
+        out[name] = {"alarms_before": len(before), "delay_s": (after[0] - onset) if after else None}
+    return out
+
+
+def tasks(all_severities: bool) -> list[Task]:
+    from phfdi.study.evaluation import PAPER_SEVERITY, severities
+
+    out = [Task("healthy", {}, s) for s in HEALTHY_SEEDS]
+    for fault, (_, levels) in severities().items():
+        chosen = levels if all_severities else [levels[PAPER_SEVERITY]]
+        out += [Task(fault, p, s) for p in chosen for s in FAULT_SEEDS]
+    return out
+
+
+def report(rows: list[dict]) -> None:
+    healthy = [r for r in rows if r["fault"] == "healthy"]
+    hours = sum(r["monitored_h"] for r in healthy)
+    print(f"\nheld-out healthy runs: {len(healthy)} ({hours:.1f} h)")
+    print("| detector | fault alarms on healthy runs | per hour | faults found | median delay (s) |")
+    print("|---|---|---|---|---|")
+    faulty = [r for r in rows if r["fault"] != "healthy"]
+    for name in ("physics_detector", "physics_kind"):
+        fa = sum(r[name]["alarms_before"] for r in healthy)
+        found = [r[name]["delay_s"] for r in faulty if r[name]["delay_s"] is not None]
+        med = f"{np.median(found):.0f}" if found else "-"
+        print(f"| {name} | {fa} | {fa / hours:.2f} | {len(found)}/{len(faulty)} | {med} |")
+    print("\n| fault | parameters | physics detector: found, delays (s) | physics kind: found, delays (s) | "
+          "alarms before the onset (detector / kind) |")
+    print("|---|---|---|---|---|")
+    groups: dict[tuple, list[dict]] = {}
+    for r in faulty:
+        groups.setdefault((r["fault"], tuple(sorted(r["params"].items()))), []).append(r)
+    for (fault, params), rs in groups.items():
+        cells = []
+        for name in ("physics_detector", "physics_kind"):
+            d = [r[name]["delay_s"] for r in rs]
+            found = [x for x in d if x is not None]
+            cells.append(f"{len(found)}/{len(d)}: " + ", ".join("-" if x is None else f"{x:.0f}" for x in d))
+        before = "/".join(str(sum(r[n]["alarms_before"] for r in rs)) for n in ("physics_detector", "physics_kind"))
+        print(f"| {fault} | {', '.join(f'{k} {v:g}' for k, v in params)} | {cells[0]} | {cells[1]} | {before} |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--all-severities", action="store_true", help="the three severities of every fault, not only "
+                                                                 "the paper's")
+    p.add_argument("--scheduler", default=None, help="an existing Dask scheduler's address (default: a local one)")
+    args = p.parse_args(argv)
+    from phfdi.loop import simulate  # noqa: F401  (fails early, before the cluster starts, if the install is broken)
+    from phfdi.loopdiag.dask_run import dask_client, map_ordered
+    from phfdi.scenario import load_scenario
+    from wavelet_fdi.learned_detector import calibrate_bands
+    from wavelet_fdi.reference_physics import PhysicsReference
+
+    t0 = time.perf_counter()
+
+    def show(done: int, total: int) -> None:
+        print(f"{done}/{total} runs, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
+
+    with dask_client(args.scheduler, None) as client:
+        runs = map_ordered(client, healthy_rows, list(CALIBRATION_SEEDS), show)
+        reference = PhysicsReference.from_spec(load_scenario("paper", fault="healthy"))
+        model = calibrate_bands(reference, runs, physics_settings(), {"seeds": list(CALIBRATION_SEEDS)})
+        print("band scales (healthy RMS, sensor-noise units):", {c: np.round(row, 3).tolist() for c, row in
+                                                                 zip(model.residual_channels, model.band_sigma)})
+        print("thresholds measured for ARL0 =", f"{model.settings.arl0_samples:g} samples:",
+              {k: round(v, 1) for k, v in model.thresholds.items()})
+        todo = tasks(args.all_severities)
+        rows = map_ordered(client, _score_with, [(t, model) for t in todo], show)
+    report(rows)
+    print(f"\n{time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    return 0
+
+
+def _score_with(item: tuple) -> dict:
+    task, model = item
+    return score(task, model)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,61 @@
+"""The paper loop's physics as a reference kind of the multichannel detector (wavelet_fdi.reference_physics)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phfdi.loop import simulate
+from phfdi.scenario import load_scenario
+from phfdi_base.errors import UserError
+from wavelet_fdi.learned_detector import LearnedSettings, calibrate_bands, run_record
+from wavelet_fdi.reference_physics import PhysicsReference
+from wavelet_fdi.references import reference_from_dict
+
+SHORT = ["duration_s=3000", "setpoints.ph.initial=8", "setpoints.ph.changes=[]"]
+ONSET_S = 2000.0
+
+
+def record(seed: int, fault: str = "healthy") -> tuple[PhysicsReference, np.ndarray, np.ndarray]:
+    spec = load_scenario("paper", fault=fault, overrides=SHORT + [f"seed={seed}"],
+                         onset_s=None if fault == "healthy" else ONSET_S)
+    run = simulate(spec)
+    ref = PhysicsReference.from_spec(spec)
+    return ref, np.asarray(run.time_s, float), np.column_stack([np.asarray(run[c], float) for c in ref.channels])
+
+
+def test_healthy_residuals_are_the_sensor_noise_and_any_chunking_gives_them():
+    ref, t, x = record(11)
+    r = ref.residuals(t, x)
+    after = r[ref.lags:]
+    assert r.shape == (len(t), 2)
+    assert np.all(np.abs(np.std(after, axis=0) - 1.0) < 0.1) and np.all(np.abs(np.mean(after, axis=0)) < 0.1)
+    stream = ref.new_state()
+    parts = [stream.residuals(t[a:a + 333], x[a:a + 333]) for a in range(0, len(t), 333)]
+    assert np.array_equal(np.concatenate(parts), r, equal_nan=True)
+    # the reference file's entry gives the same reference
+    again = reference_from_dict(ref.to_dict())
+    assert isinstance(again, PhysicsReference) and np.array_equal(again.residuals(t, x), r, equal_nan=True)
+
+
+def test_the_multichannel_detector_on_the_physics_finds_a_sticky_valve_and_only_after_it():
+    ref, _, _ = record(12)
+    runs = [record(s)[1:] for s in (13, 14)]
+    model = calibrate_bands(ref, runs, LearnedSettings(level=3, sample_time_s=1.0))
+    _, t, x = record(15, "stiction")
+    events, _, _ = run_record(model, t, x)
+    alarms = [e.time_s for e in events if e.kind == "alarm"]
+    assert alarms and alarms[0] >= ONSET_S, alarms
+    _, t, x = record(16)
+    assert not [e for e in run_record(model, t, x)[0] if e.kind == "alarm"]
+
+
+def test_a_reference_entry_that_is_not_a_scenario_is_one_clear_refusal():
+    ref, _, _ = record(17)
+    bad = {**ref.to_dict(), "scenario": {**ref.scenario, "sample_time_s": -1.0}}
+    with pytest.raises(UserError, match="physics reference: scenario: sample_time_s: Input should be greater than 0"):
+        reference_from_dict(bad)
+    with pytest.raises(UserError, match="not a physics reference"):
+        reference_from_dict({"kind": "physics"})
+    with pytest.raises(UserError, match="warmup_s must be >= 0"):
+        PhysicsReference(ref.scenario, warmup_s=-1.0)
