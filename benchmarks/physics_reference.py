@@ -54,8 +54,8 @@ def physics_settings():
     # it); the multichannel detector's watch AJ in AJ's own sigmas, where that shift of white noise reads 2^(J/2)
     # times larger (AJ is a local mean over about 2^J samples)
     k = 0.5 * d.mean_shift_sigma * 2.0 ** (d.level / 2.0)
-    return LearnedSettings(wavelet=d.wavelet, level=d.level, mean_k=k, energy_variance_ratio=d.variance_ratio,
-                           arl0_samples=d.arl0_samples, sample_time_s=1.0)
+    return LearnedSettings(wavelet=d.wavelet, level=d.level, mean_k=k, residual_mean_k=0.5 * d.mean_shift_sigma,
+                           energy_variance_ratio=d.variance_ratio, arl0_samples=d.arl0_samples, sample_time_s=1.0)
 
 
 def _spec(task: Task):
@@ -159,7 +159,8 @@ def main(argv: list[str] | None = None) -> int:
 
     with dask_client(args.scheduler, None) as client:
         runs = map_ordered(client, healthy_rows, list(CALIBRATION_SEEDS), show)
-        reference = PhysicsReference.from_spec(load_scenario("paper", fault="healthy"))
+        # the pH alone, as the physics detector watches it by default (DetectorSettings.channels)
+        reference = PhysicsReference.from_spec(load_scenario("paper", fault="healthy"), watch_level=False)
         model = calibrate_bands(reference, runs, physics_settings(), {"seeds": list(CALIBRATION_SEEDS)})
         print("band scales (healthy RMS, sensor-noise units):", {c: np.round(row, 3).tolist() for c, row in
                                                                  zip(model.residual_channels, model.band_sigma)})

@@ -183,6 +183,10 @@ class LearnedSettings:
                                                "measurement (0: pure simulation, else at least 1)")
     mean_k: float = setting(5.0, "mean CUSUMs on AJ: reference value k (healthy sigmas of AJ)", range=(0.0, math.inf))
     mean_h: float = setting(5.0, "mean CUSUMs on AJ: threshold h (healthy sigmas of AJ), above 0")
+    residual_mean_k: float = setting(0.0, "mean CUSUMs on each residual itself (the physics detector's R): reference "
+                                          "value k, residual sigmas, half the shift they are designed for (0: off)",
+                                     range=(0.0, math.inf))
+    residual_mean_h: float = setting(20.0, "those CUSUMs' threshold, above 0 (measured instead with arl0_samples)")
     energy_variance_ratio: float = setting(0.0, "energy CUSUMs on the detail bands designed for this variance "
                                                 "ratio, above 1 (0: off)")
     energy_h: float = setting(20.0, "energy CUSUMs' threshold, above 0")
@@ -250,8 +254,8 @@ class LearnedSettings:
             raise UserError("energy_variance_ratio must be 0 (off) or above 1")
         if self.energy_down_variance_ratio and not 0.0 < self.energy_down_variance_ratio < 1.0:
             raise UserError("energy_down_variance_ratio must be 0 (off) or between 0 and 1")
-        if not (self.energy_h > 0 and self.energy_down_h > 0 and self.repeat_h > 0):
-            raise UserError("energy_h, energy_down_h and repeat_h must be positive")
+        if not (self.energy_h > 0 and self.energy_down_h > 0 and self.repeat_h > 0 and self.residual_mean_h > 0):
+            raise UserError("energy_h, energy_down_h, repeat_h and residual_mean_h must be positive")
         if not 0.0 <= self.repeat_probability < 1.0:
             raise UserError("repeat_probability must be 0 (off) or between 0 and 1")
         if not 0 < self.freeze_ratio <= 1:

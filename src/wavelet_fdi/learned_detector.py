@@ -317,7 +317,8 @@ class LearnedDetector:
         self.swt = CausalSwt(s.wavelet, s.level, channels=m)
         self.gain = 2.0 ** (s.level / 2.0)  # DC gain of AJ
         self.fill_samples = self.swt.fill_samples + model.reference.lags
-        self.bands = s.bands() + ["raw"]  # "raw": a statistic on the channel's reading itself
+        # "raw": a statistic on the channel's reading itself; "R": on the reference's residual itself
+        self.bands = s.bands() + ["raw", "R"]
         self._init_statistics(s, m)
         self._measured_thresholds(model)
         self.alarms_enabled = alarms
@@ -438,7 +439,7 @@ class LearnedDetector:
         a_raw = approx / self.gain  # AJ in residual units (DC gain removed)
         b = self.settings.block_samples
         n = len(rows)
-        chunk = Chunk(a_raw, d_norm, missing, bool(missing.any()))
+        chunk = Chunk(a_raw, d_norm, missing, bool(missing.any()), np.where(missing, 0.0, r))
         for stat in self.statistics:
             stat.prepare(chunk, rows)
         if self.namer is not None:

@@ -1,11 +1,12 @@
 """The learned detector's statistics: one registered class per kind, as the physics detector's are.
 
 Every statistic of :class:`~wavelet_fdi.learned_detector.LearnedDetector` is a one-sided CUSUM of "value - k"
-against a threshold h. A kind says which rows it watches (a channel and a band: D1..DJ, AJ, or ``raw``, the
-channel's reading itself), its k and h (from :class:`~wavelet_fdi.config.LearnedSettings`), and each block's
-values; a kind that adapts to the run (the energy's run scale, the repeats' share) does so at the block's end,
-frozen while an alarm is up or one of its own rows is above ``freeze_ratio`` of its threshold (a fault is not
-learned as the run's normal). The detector runs every registered kind that has rows, in registration order
+against a threshold h. A kind says which rows it watches (a channel and a band: D1..DJ, AJ, ``raw``, the channel's
+reading itself, or ``R``, the reference's residual itself), its k and h (from
+:class:`~wavelet_fdi.config.LearnedSettings`), and each block's values; a kind that adapts to the run (the
+energy's run scale, the repeats' share) does so at the block's end, frozen while an alarm is up or one of its own
+rows is above ``freeze_ratio`` of its threshold (a fault is not learned as the run's normal). The detector runs
+every registered kind that has rows, in registration order
 (the order of its statistics' names, alarms and traces).
 
 A new statistic is one subclass of :class:`LearnedStatistic` decorated ``@register_learned_statistic`` (here or
@@ -14,7 +15,7 @@ in your own module); ``tests/learned/test_learned_statistic_recipe.py`` adds one
 Examples
 --------
 >>> list(LEARNED_STATISTICS)
-['mean', 'energy', 'energy_down', 'repeats']
+['mean', 'energy', 'energy_down', 'repeats', 'residual_mean']
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ class LearnedDetectorView(Protocol):
     channels: tuple[str, ...]  # the watched (residual) channels
     inputs: tuple[str, ...]  # the rows' columns
     fill_samples: int  # samples before the filters are filled
+    bias: np.ndarray  # (m,) the observer's estimate of each channel's healthy level, residual units
 
 
 @dataclass
@@ -53,6 +55,7 @@ class Chunk:
     d_norm: np.ndarray  # (J, n, m) detail coefficients over their healthy sigma
     missing: np.ndarray  # (n, m)
     gappy: bool  # any sample missing
+    residual: np.ndarray | None = None  # (n, m) the reference's residuals (healthy sigmas; 0 where missing)
 
     @cached_property
     def e2(self) -> np.ndarray:
@@ -299,3 +302,35 @@ class Repeats(LearnedStatistic):
     def end_block(self, last_ratio: np.ndarray, in_alarm: bool) -> None:
         assert self.test is not None, "called only when on"
         self.test.adapt(in_alarm or max(last_ratio.tolist()) > self.settings.freeze_ratio)
+
+
+@register_learned_statistic
+class ResidualMean(LearnedStatistic):
+    """A mean shift of the residual itself, not of a band, up and down on every channel, less the observer's level:
+    the physics detector's R statistic. AJ's mean is a local mean over about 2^J samples that lags a step by about
+    as much; the residual's own mean sees it at once, at the price of its full noise. k = ``residual_mean_k`` in the
+    residual's healthy sigmas (half the shift it is designed for; 0: off), h = ``residual_mean_h``."""
+
+    kind = "residual_mean"
+    holds_by_level = True
+
+    def rows(self) -> list[StatisticRow]:
+        if not self.settings.residual_mean_k:
+            return []
+        band = self.settings.level + 2  # "R", after D1..DJ, AJ and raw
+        return [StatisticRow(c, band, direction) for c in range(self.detector.m)
+                for direction in ("mean_up", "mean_down")]
+
+    def reference_value(self) -> float:
+        return self.settings.residual_mean_k
+
+    def threshold(self) -> float:
+        return self.settings.residual_mean_h
+
+    def values(self, out, chunk, i0, i1, g0, u) -> None:
+        assert chunk.residual is not None, "the detector passes its residuals"
+        r = chunk.residual[i0:i1] - self.detector.bias
+        if chunk.gappy:
+            r = np.where(chunk.missing[i0:i1], 0.0, r)
+        out[0::2] = r.T
+        out[1::2] = -r.T

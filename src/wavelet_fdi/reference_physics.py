@@ -68,6 +68,9 @@ class PhysicsReference:
     scenario: dict  # a validated scenario (phfdi_base.spec.ScenarioSpec), as its file holds it
     warmup_s: float = 600.0
     block_samples: int = 256
+    #: watch the level's residual too (where a controller holds the level); False: the pH alone, as the physics
+    #: detector does by default (its ``channels``)
+    watch_level: bool = True
     spec: Any = field(default=None, compare=False, repr=False)
 
     kind = KIND
@@ -83,10 +86,11 @@ class PhysicsReference:
             object.__setattr__(self, "spec", validate_scenario(self.scenario, "physics reference: scenario"))
 
     @classmethod
-    def from_spec(cls, spec: ScenarioSpec, warmup_s: float = 600.0, block_samples: int = 256) -> "PhysicsReference":
+    def from_spec(cls, spec: ScenarioSpec, warmup_s: float = 600.0, block_samples: int = 256,
+                  watch_level: bool = True) -> "PhysicsReference":
         """The reference of a validated scenario (its faults are dropped: the reference is the healthy loop)."""
         healthy = spec.model_copy(update={"faults": []})
-        return cls(healthy.model_dump(mode="json"), float(warmup_s), int(block_samples), healthy)
+        return cls(healthy.model_dump(mode="json"), float(warmup_s), int(block_samples), bool(watch_level), healthy)
 
     # ---- the protocol every reference kind shares ------------------------------------------
     @property
@@ -100,7 +104,7 @@ class PhysicsReference:
 
     @property
     def residual_channels(self) -> tuple[str, ...]:
-        return (PH, LEVEL) if self.has_level else (PH,)
+        return (PH, LEVEL) if self.has_level and self.watch_level else (PH,)
 
     @property
     def lags(self) -> int:
@@ -111,7 +115,8 @@ class PhysicsReference:
     def noise(self) -> np.ndarray:
         """Each residual channel's unit: the scenario's sensor noise standard deviation."""
         s = self.spec.sensors
-        return np.array([_noise(s.ph.noise_std)] + ([_noise(s.level.noise_std)] if self.has_level else []))
+        return np.array([_noise(s.ph.noise_std)] + ([_noise(s.level.noise_std)] if len(self.residual_channels) > 1
+                                                    else []))
 
     def new_state(self) -> "PhysicsStream":
         return PhysicsStream(self)
@@ -122,12 +127,13 @@ class PhysicsReference:
 
     def to_dict(self) -> dict:
         return {"kind": KIND, "scenario": self.scenario, "warmup_s": self.warmup_s,
-                "block_samples": self.block_samples}
+                "block_samples": self.block_samples, "watch_level": self.watch_level}
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "PhysicsReference":
         try:
-            return cls(dict(d["scenario"]), float(d.get("warmup_s", 600.0)), int(d.get("block_samples", 256)))
+            return cls(dict(d["scenario"]), float(d.get("warmup_s", 600.0)), int(d.get("block_samples", 256)),
+                       bool(d.get("watch_level", True)))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not a physics reference ({exc})") from None
 
@@ -187,7 +193,7 @@ class PhysicsStream:
             self._acc[col + 1] += int(np.sum(ok))
         last = pred.ph[np.isfinite(pred.ph)]
         self._last_pred = float(last[-1]) if len(last) else math.nan
-        res = np.column_stack([r_ph, r_lv]) if self.ref.has_level else r_ph[:, None]
+        res = np.column_stack([r_ph, r_lv]) if len(self._unit) > 1 else r_ph[:, None]
         return res / self._unit
 
     def _end_block(self) -> None:

@@ -90,11 +90,28 @@ def test_the_shipped_kinds_statistics_keep_their_order():
     assert det.h.tolist() == [s.mean_h] * 4 + [s.energy_h] * 4 + [s.energy_down_h] * 4 + [s.repeat_h] * 2
 
 
+def test_the_residual_mean_sees_a_step_before_the_approximation_band_does():
+    """The residual's own mean (R, residual_mean_k) against AJ's mean: on a step of 3 healthy sigmas in one channel
+    it crosses first, since AJ, a local mean over about 2^J samples, lags the step."""
+    s = LearnedSettings(level=3, mean_k=1.5 * 2 ** 1.5, mean_h=20.0, residual_mean_k=1.5, residual_mean_h=20.0)
+    model = learn(healthy(6000, 1), ["a", "b"], s)
+    x = healthy(3000, 4)
+    x[2000:, 1] += 3.0 * np.std(healthy(6000, 1)[:, 1])
+    det = LearnedDetector(model, record_trace=True)
+    det.process(np.arange(3000.0), x)
+    ratio = det.trace()["stat"]
+    first = {name: int(np.argmax(ratio[2000:, det.stat_names.index(name)] > 1.0))
+             for name in ("b.R.mean_up", "b.A3.mean_up")}
+    assert 0 < first["b.R.mean_up"] < first["b.A3.mean_up"], first
+    assert det.alarms and det.alarms[0]["statistic"] == "b.R.mean_up"
+
+
 @pytest.mark.parametrize("kind", list(LEARNED_STATISTICS))
 def test_every_kind_keeps_the_protocol(kind):
     """Rows inside the detector's channels and bands, k finite, h positive, values of the asked shape and finite on
     healthy rows."""
-    s = LearnedSettings(level=2, energy_variance_ratio=4.0, energy_down_variance_ratio=0.25, repeat_probability=0.5)
+    s = LearnedSettings(level=2, energy_variance_ratio=4.0, energy_down_variance_ratio=0.25, repeat_probability=0.5,
+                        residual_mean_k=0.5)
     det = LearnedDetector(learn(healthy(4000, 1), ["a", "b"], s))
     stat = next(st for st in det.statistics if st.kind == kind)
     rows = stat.rows()
