@@ -400,7 +400,11 @@ class LearnedDetector:
         # a deviation not confirmed that stays up is looked at again with more rows after its detection (the
         # reference's looks; its confirmation has a margin for each): the ones waiting for their next look
         looks = LOOKS.get(getattr(model.reference, "kind", ""))
-        self._looks: tuple[int, ...] = tuple(looks(model.reference)) if looks and self.namer else (NAMING_AFTER,)
+        # samples after a detection the first naming waits for: the reference's own (a stick-slip shows over a few
+        # controller cycles) or NAMING_AFTER
+        self._naming_after = int(getattr(model.reference, "naming_after_samples", NAMING_AFTER))
+        self._looks: tuple[int, ...] = (tuple(looks(model.reference)) if looks and self.namer
+                                        else (self._naming_after,))
         self._relook: list[dict] = []
         # a confirming reference (its namer says whether a fault explains an alarm): alarms start as deviations
         self.confirming = self.namer is not None and bool(getattr(model.reference, "confirm", None))
@@ -486,7 +490,7 @@ class LearnedDetector:
         for a in list(self._relook):
             events += self._look_again(a, upto)
         for a in list(self._to_name):
-            end = a["detection_index"] + NAMING_AFTER
+            end = a["detection_index"] + self._naming_after
             if end > upto and not final:
                 continue
             end = min(end, upto)
@@ -504,11 +508,23 @@ class LearnedDetector:
                 events += self._verdict(a, iso, float(self._ring_t[at % NAMING_RING]), at)
                 self._wait_for_next_look(a, iso, 0, end)
                 continue
-            when = float(self._ring_t[(end - 1) % NAMING_RING])
-            events.append(LearnedEvent("named", when, end - 1, "ERROR" if self.in_alarm else "OK",
-                                       f"alarm {a['alarm_id']} named: {iso['family']} fault, {iso['description']} "
-                                       f"({iso['size']:g} {iso['unit']})", dict(a)))
+            events.append(self._named_event(a, iso, end))
+            self._name_again_later(a, iso, 0, end)
         return events
+
+    def _named_event(self, a: dict, iso: dict, end: int) -> LearnedEvent:
+        when = float(self._ring_t[(end - 1) % NAMING_RING])
+        return LearnedEvent("named", when, end - 1, "ERROR" if self.in_alarm else "OK",
+                            f"alarm {a['alarm_id']} named: {iso['family']} fault, {iso['description']} "
+                            f"({iso['size']:g} {iso['unit']})", dict(a))
+
+    def _name_again_later(self, a: dict, iso: dict, look: int, end: int) -> None:
+        """A naming that is unsure (the namer says ``name_again``: more samples may separate its candidates, as a
+        stuck valve slips or a limit cycle develops) is made again at the reference's next look, while the alarm
+        is up; the last naming stands."""
+        if iso.get("name_again") and look + 1 < len(self._looks) and a.get("cleared_index") is None:
+            a["look"] = look + 1
+            self._relook.append(a)
 
     def _wait_for_next_look(self, a: dict, iso: dict, look: int, end: int) -> None:
         """After look ``look`` (its window ended at global index ``end``): a deviation no fault explained that is
@@ -536,6 +552,11 @@ class LearnedDetector:
         assert self.namer is not None, "looks are made only by a reference that names faults"
         iso = self.namer(self._ring_t[k], self._ring_x[k], a["onset_index"] - first, a["detection_index"] - first,
                          a["statistic"], after=after)
+        if not self.confirming:  # a naming made again with more samples
+            a.setdefault("namings", []).append(a.get("isolation"))
+            a["isolation"] = iso
+            self._name_again_later(a, iso, look, end)
+            return [self._named_event(a, iso, end)]
         conf = iso.get("confirmation") or {}
         a.setdefault("looks", []).append({"after_samples": after, "confirmed": bool(iso.get("confirmed")),
                                           "statistics": conf.get("statistics")})

@@ -20,9 +20,10 @@ What the stream does, per sample, in the order of the record:
   chunking of a record gives bit-identical residuals.
 
 A missing command (NaN) holds the valve's last position, as the core valve does; a missing measurement gives a NaN
-residual (the detector counts it as healthy and reports it). What this kind does not do yet, and the physics
-detector does: naming a valve fault (its isolation re-runs this model with each fault's block), the set-point
-hold-off, and re-aligning after a command was missing for long.
+residual (the detector counts it as healthy and reports it). An alarm's fault is named by the physics detector's
+isolation (:mod:`wavelet_fdi.physics_naming`, the kind's ``NAMERS`` entry), :data:`NAMING_AFTER_S` after the
+detection. What this kind does not do, and the physics detector does: the set-point hold-off, re-aligning
+after a command was missing for long, and naming again when the first naming was unsure.
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ KIND = "physics"
 COMMAND, OUTLET, PH, LEVEL = "valve_command_pct", "level_controller_output_pct", "ph_measured", "level_measured_cm"
 #: share of a block's mean residual the warm-up moves the model's state by (the physics detector's warm-up gain)
 WARMUP_GAIN = 0.5
+#: time after a detection at which the fault is named (the physics detector's isolation delay, DetectorSettings)
+NAMING_AFTER_S = 300.0
 
 
 def _noise(value: float | None) -> float:
@@ -107,6 +110,12 @@ class PhysicsReference:
         return (PH, LEVEL) if self.has_level and self.watch_level else (PH,)
 
     @property
+    def naming_after_samples(self) -> int:
+        """Samples after a detection the detector waits before naming the fault (the physics detector's isolation
+        delay, :data:`NAMING_AFTER_S`: a stick-slip shows over a few controller cycles)."""
+        return int(round(NAMING_AFTER_S / self.spec.sample_time_s))
+
+    @property
     def lags(self) -> int:
         """Samples before the first residual the detector's statistics use: the model's warm-up."""
         return int(math.ceil(self.warmup_s / self.spec.sample_time_s))
@@ -141,9 +150,13 @@ class PhysicsReference:
 class PhysicsStream:
     """The model's state between chunks of one record (:meth:`residuals` keeps it)."""
 
-    def __init__(self, ref: PhysicsReference) -> None:
+    def __init__(self, ref: PhysicsReference, keep: bool = False) -> None:
+        """``keep``: also keep every sample's prediction and a model snapshot at every block boundary
+        (:attr:`kept`; what naming a fault re-runs the model for)."""
         self.ref = ref
         self.model = HealthyReference(ref.spec)
+        self.kept: dict[str, Any] | None = ({"ph_pred": [], "level_pred": [], "flows": [], "opening": [],
+                                              "snapshots": {}, "guesses": {}} if keep else None)
         self.index = 0  # global index of the next row
         self._guess = 7.0
         self._acc = np.zeros(4)  # this block's sums: pH residual, count, level residual, count
@@ -162,6 +175,9 @@ class PhysicsStream:
         while i < n:
             if self.index == 0:
                 self._start(float(t_s[i]), rows[i])
+            if self.kept is not None and self.index % self.ref.block_samples == 0:
+                self.kept["snapshots"][self.index] = self.model.snapshot()
+                self.kept["guesses"][self.index] = self._guess
             block = self.ref.block_samples
             end = min(n, i + block - self.index % block)
             out[i:end] = self._segment(t_s[i:end], rows[i:end])
@@ -185,6 +201,10 @@ class PhysicsStream:
     def _segment(self, t: np.ndarray, rows: np.ndarray) -> np.ndarray:
         cmd, outlet, ph, level = self._columns(rows)
         pred = self.model.advance(t, cmd, outlet, self._guess)
+        if self.kept is not None:
+            for key, v in (("ph_pred", pred.ph), ("level_pred", pred.level_cm), ("flows", pred.flows),
+                           ("opening", pred.openings)):
+                self.kept[key].append(np.asarray(v, dtype=float))
         r_ph = ph - pred.ph
         r_lv = level - pred.level_cm
         for col, r in ((0, r_ph), (2, r_lv)):

@@ -24,13 +24,13 @@ Kinds (chosen by the reference file, :data:`KINDS`):
 * the same physics run open loop (``correct: false``): the model simulated from the record's first pH on
   the measured pump flows, never corrected, the way ``phfdi diagnose`` compares a model with a run;
 * ``physics`` (:class:`~wavelet_fdi.reference_physics.PhysicsReference`): a scenario's healthy plant and valves
-  (the paper's loop) run on the measured valve commands, the model the physics detector runs; it does not name
-  faults yet.
+  (the paper's loop) run on the measured valve commands, the model the physics detector runs; its alarms are
+  named by the physics detector's isolation (:mod:`wavelet_fdi.physics_naming`).
 
-The valve loop of the paper keeps its own physics detector
-(:class:`~wavelet_fdi.detector.StreamingDetector`) until the ``physics`` kind names faults as it does (it
-isolates valve faults by re-running the model with each fault's block); benchmarks/physics_reference.py
-measures the two side by side.
+The valve loop of the paper keeps its own physics detector (:class:`~wavelet_fdi.detector.StreamingDetector`)
+until the ``physics`` kind is shown to do what it does; benchmarks/physics_reference.py measures the two side by
+side. A kind whose namer needs more (or fewer) samples after a detection than the detector's
+``NAMING_AFTER`` says so with ``naming_after_samples``.
 Adding a kind: a class with the members above, one entry in :data:`KINDS` (and, if it can name the fault
 behind an alarm, one in :data:`NAMERS`).
 """
@@ -44,6 +44,8 @@ import numpy as np
 from phfdi_base.errors import UserError
 
 from .estimator_isolation import isolate, look_schedule
+from .physics_naming import name_fault as name_physics_fault
+from .physics_naming import naming_looks
 from .reference_estimator import EstimatorReference
 from .reference_learned import LearnedReference
 from .reference_oe import OutputErrorReference
@@ -76,10 +78,12 @@ KINDS: dict[str, Any] = {"arx": LearnedReference, "oe": OutputErrorReference, "e
 
 #: kinds whose alarms can be named (family, class, size): namer(reference, t_s, rows, onset_index,
 #: detection_index, statistic) -> dict, called by the detector on the rows it kept (LearnedDetector)
-NAMERS: dict[str, Any] = {"estimator": isolate}
-#: kinds whose namer looks again at a deviation it did not confirm while it stays up: looks(reference) -> the
-#: samples after the detection each look's window keeps, the first look's first (one look: never again)
-LOOKS: dict[str, Any] = {"estimator": lambda ref: look_schedule(ref.confirm)}
+NAMERS: dict[str, Any] = {"estimator": isolate, "physics": name_physics_fault}
+#: kinds whose namer looks again at a deviation it did not confirm (or, for a namer that does not confirm, names
+#: again an alarm it was unsure of) while it stays up: looks(reference) -> the samples after the detection each
+#: look's window keeps, the first look's first (one look: never again)
+LOOKS: dict[str, Any] = {"estimator": lambda ref: look_schedule(ref.confirm),
+                         "physics": lambda ref: naming_looks(ref.naming_after_samples)}
 
 
 def reference_from_dict(d: dict, where: str = "reference") -> Reference:

@@ -95,3 +95,33 @@ def test_without_its_registration_the_kind_is_refused_in_one_line(toy_model, tmp
     assert main(["replay", str(_csv(tmp_path / "h.csv", _rows(600, 4))), "--reference", str(toy_model)]) == 2
     err = capsys.readouterr().err
     assert "unknown reference kind 'toy_standardised'" in err and "Traceback" not in err
+
+
+def test_a_namer_unsure_of_its_first_naming_names_again_at_the_kinds_next_look(monkeypatch):
+    """A kind that names faults (one entry in NAMERS) and gives looks (one in LOOKS): a naming that says
+    ``name_again`` is made again at the next look while the alarm is up; the last one stands, the earlier are kept."""
+    calls = []
+
+    def namer(ref, t_s, rows, onset_index, detection_index, statistic, after=None):
+        calls.append(len(rows) - detection_index)  # samples after the detection the window holds
+        sure = len(calls) > 1
+        return {"family": "sensor", "fault_class": "toy_step" if sure else "toy_unsure", "description": "a step",
+                "size": 0.5, "unit": "bar", "confirmed": True, "name_again": not sure}
+
+    monkeypatch.setitem(references.KINDS, _Standardised.kind, _Standardised)
+    monkeypatch.setitem(references.NAMERS, _Standardised.kind, namer)
+    monkeypatch.setitem(references.LOOKS, _Standardised.kind, lambda ref: (64, 128, 192))
+    healthy = _rows(3000, 1)
+    ref = _Standardised(CHANNELS, healthy.mean(axis=0), healthy.std(axis=0))
+    model = calibrate_bands(ref, [(np.arange(len(healthy), dtype=float), healthy)], LearnedSettings())
+    faulty = _rows(2400, 2)
+    faulty[1500:, 1] += 0.5  # stays to the end: the alarm stays up
+    from wavelet_fdi.learned_detector import run_record
+
+    events, _, det = run_record(model, np.arange(2400.0), faulty)
+    named = [e for e in events if e.kind == "named"]
+    assert len(named) == 2 and len(calls) == 2, (named, calls)
+    assert calls == [64, 128]  # the second look, not a third: the second naming was sure
+    (alarm,) = det.alarms
+    assert alarm["isolation"]["fault_class"] == "toy_step" and alarm["namings"][0]["fault_class"] == "toy_unsure"
+    assert named[1].index - named[0].index == 64

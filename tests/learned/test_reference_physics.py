@@ -50,6 +50,28 @@ def test_the_multichannel_detector_on_the_physics_finds_a_sticky_valve_and_only_
     assert not [e for e in run_record(model, t, x)[0] if e.kind == "alarm"]
 
 
+@pytest.mark.parametrize("fault,params", [("backlash", {"width_pct": 1.0}), ("deadzone", {"width_pct": 100.0})])
+def test_an_alarm_is_named_by_the_physics_detectors_isolation(fault, params):
+    """The kind's namer re-runs its model from the ring's first row and fits every valve and probe hypothesis from
+    the last snapshot before the onset: the fault is named, with its size, 300 s after the detection."""
+    ref, _, _ = record(21)
+    ref = PhysicsReference.from_spec(ref.spec, watch_level=False)
+    model = calibrate_bands(ref, [record(s)[1:] for s in (22, 23)],
+                            LearnedSettings(level=3, residual_mean_k=0.5, sample_time_s=1.0))
+    spec = load_scenario("paper", fault=fault, overrides=SHORT + ["seed=24"] +
+                         [f"faults.0.params.{k}={v}" for k, v in params.items()], onset_s=ONSET_S)
+    run = simulate(spec)
+    x = np.column_stack([np.asarray(run[c], float) for c in ref.channels])
+    events, _, det = run_record(model, np.asarray(run.time_s, float), x)
+    named = [e for e in events if e.kind == "named"]
+    assert named and det.alarms[0]["detection_time"] >= ONSET_S
+    iso = det.alarms[0]["isolation"]
+    assert iso["fault_class"] == fault and iso["family"] == "actuator", iso
+    assert named[0].time_s == pytest.approx(det.alarms[0]["detection_time"] + 300.0, abs=1.0)
+    main = next(iter(params))
+    assert iso["size"] == pytest.approx(params[main], rel=0.3) and iso["unit"] == "% of span"
+
+
 def test_a_reference_entry_that_is_not_a_scenario_is_one_clear_refusal():
     ref, _, _ = record(17)
     bad = {**ref.to_dict(), "scenario": {**ref.scenario, "sample_time_s": -1.0}}
