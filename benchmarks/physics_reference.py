@@ -48,16 +48,10 @@ class Task:
 
 
 def physics_settings():
-    """The multichannel detector's defaults, with the physics detector's wavelet, level and energy design."""
-    from wavelet_fdi.config import DetectorSettings, LearnedSettings
+    """The multichannel detector's settings with the physics detector's design (``reference_physics.design_settings``)."""
+    from wavelet_fdi.reference_physics import design_settings
 
-    d = DetectorSettings()
-    # the physics detector's mean CUSUMs are designed for a shift of mean_shift_sigma in the residual (k = half of
-    # it); the multichannel detector's watch AJ in AJ's own sigmas, where that shift of white noise reads 2^(J/2)
-    # times larger (AJ is a local mean over about 2^J samples)
-    k = 0.5 * d.mean_shift_sigma * 2.0 ** (d.level / 2.0)
-    return LearnedSettings(wavelet=d.wavelet, level=d.level, mean_k=k, residual_mean_k=0.5 * d.mean_shift_sigma,
-                           energy_variance_ratio=d.variance_ratio, arl0_samples=d.arl0_samples, sample_time_s=1.0)
+    return design_settings(sample_time_s=1.0)
 
 
 def _spec(task: Task):

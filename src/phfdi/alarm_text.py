@@ -133,8 +133,13 @@ def _named_lines(iso: dict, verdict: str | None, u: str) -> list[str]:
                else f"best explained as healthy operation re-adapted: {iso['description']} ({size})")
         return [f"  outside calibration, not a fault: the innovations' change against the run's own past: {change} "
                 f"(the margins); {why}"]
-    out = [f"  named: {iso['family']} fault, {iso['description']} ({size}{began}; "
-           f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy)"]
+    # each namer says how sure it is its own way: the estimator's log-likelihood gain over healthy, the physics
+    # kind's isolation its class's likelihood share
+    how = (f"log-likelihood gain {iso['log_likelihood_gain']:.0f} over healthy" if "log_likelihood_gain" in iso
+           else f"confidence {iso['confidence']:.2f}" if "confidence" in iso else "")
+    if iso["family"] == "none" and verdict is None:  # a namer that does not confirm found no fault to name
+        return [f"  not named: {iso['description']}"]
+    out = [f"  named: {iso['family']} fault, {iso['description']} ({size}{began}" + (f"; {how})" if how else ")")]
     if change:
         out.append(f"  confirmed: the innovations' change against the run's own past: {change} (the margins), and "
                    f"the probe fault fits better than any feed's re-adapted strength")

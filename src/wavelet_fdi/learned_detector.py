@@ -544,6 +544,9 @@ class LearnedDetector:
         look = int(a["look"])
         after = self._looks[look]
         end = a["detection_index"] + after
+        if not self.confirming and a.get("cleared_index") is not None:
+            self._relook.remove(a)  # a naming is made again only while its alarm is up: the last one stands
+            return []
         if end > upto:
             return []
         self._relook.remove(a)

@@ -105,7 +105,7 @@ def _named(result: IsolationResult | None) -> dict:
     p = result.parameter or {}
     size = float(p.get("value", math.nan))  # the fitted main parameter: {"name", "value", "unit", "fault_class"}
     return {"family": fault.family if fault is not None else "unknown", "fault_class": result.fault_class,
-            "description": fault.description if fault is not None else result.fault_class,
+            "description": result.fault_class.replace("_", " "),  # the fitted size follows in size and unit
             "size": round(size, 4) if math.isfinite(size) else 0.0, "unit": str(p.get("unit", "")),
             "confidence": round(float(result.confidence), 4), "parameter": result.parameter,
             "alternatives": result.alternatives, "evidence": result.evidence}

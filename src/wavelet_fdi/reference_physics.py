@@ -41,12 +41,33 @@ from .reference import HealthyReference
 if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
     from phfdi_base.spec import ScenarioSpec
 
+    from .config import DetectorSettings, LearnedSettings
+
 KIND = "physics"
 COMMAND, OUTLET, PH, LEVEL = "valve_command_pct", "level_controller_output_pct", "ph_measured", "level_measured_cm"
 #: share of a block's mean residual the warm-up moves the model's state by (the physics detector's warm-up gain)
 WARMUP_GAIN = 0.5
 #: time after a detection at which the fault is named (the physics detector's isolation delay, DetectorSettings)
 NAMING_AFTER_S = 300.0
+
+
+def design_settings(physics: DetectorSettings | None = None, sample_time_s: float = 1.0, **given: Any
+                    ) -> LearnedSettings:
+    """The multichannel detector's settings that carry the physics detector's design (its
+    :class:`~wavelet_fdi.config.DetectorSettings`): the same wavelet and level; the residual's own mean (R) and AJ's
+    mean designed for a shift of ``mean_shift_sigma`` (k half of it: in the residual's sigmas for R, in AJ's for AJ,
+    where a shift of white noise reads 2^(J/2) times larger); energy CUSUMs for its ``variance_ratio``; its block
+    (``block_samples``: an alarm clears only after a whole block without a crossing, so a valve that sticks and
+    slips keeps one alarm up rather than raising one per slip); and its false-alarm target ``arl0_samples``, for
+    which :func:`~wavelet_fdi.learned_detector.calibrate_bands` measures every threshold. ``given``: any setting
+    of :class:`~wavelet_fdi.config.LearnedSettings` set otherwise."""
+    from .config import DetectorSettings, LearnedSettings
+
+    d = physics or DetectorSettings()
+    design = dict(wavelet=d.wavelet, level=d.level, mean_k=0.5 * d.mean_shift_sigma * 2.0 ** (d.level / 2.0),
+                  residual_mean_k=0.5 * d.mean_shift_sigma, energy_variance_ratio=d.variance_ratio,
+                  arl0_samples=d.arl0_samples, block_samples=d.block_samples, sample_time_s=float(sample_time_s))
+    return LearnedSettings(**{**design, **given})
 
 
 def _noise(value: float | None) -> float:

@@ -81,3 +81,26 @@ def test_a_reference_entry_that_is_not_a_scenario_is_one_clear_refusal():
         reference_from_dict({"kind": "physics"})
     with pytest.raises(UserError, match="warmup_s must be >= 0"):
         PhysicsReference(ref.scenario, warmup_s=-1.0)
+
+
+def test_calibrate_physics_writes_a_model_replay_watches_and_names_with(tmp_path, capsys):
+    """phfdi calibrate --physics: the scenario's physics calibrated on simulated healthy runs, written as a detector
+    model file; phfdi replay --reference then detects a sticky valve in a simulated run and names it."""
+    from phfdi.cli import main
+
+    short = [x for o in SHORT for x in ("--set", o)]
+    model = tmp_path / "physics.json"
+    assert main(["calibrate", "--physics", "--seeds", "1001-1004", *short, "--out", str(model)]) == 0
+    assert "ph_measured.R.mean_up" in capsys.readouterr().out
+    run = tmp_path / "sticky.csv"
+    assert main(["simulate", "--fault", "stiction", *short, "--onset", str(ONSET_S), "--out", str(run)]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(run), "--reference", str(model), "--json"]) == 0
+    import json
+
+    alarms = json.loads(capsys.readouterr().out)["alarms"]
+    assert alarms and alarms[0]["detection_time"] >= ONSET_S
+    assert alarms[0]["isolation"]["fault_class"] == "stiction", alarms[0]["isolation"]
+    # too few healthy rows for the thresholds' tails: one line, nothing written
+    assert main(["calibrate", "--physics", "--seeds", "1001-1002", *short, "--out", str(tmp_path / "b.json")]) == 2
+    assert "needs at least 8 windows" in capsys.readouterr().err and not (tmp_path / "b.json").exists()

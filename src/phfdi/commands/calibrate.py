@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+import numpy as np
+
 from .common import (
     EPILOG_FORMAT,
     Progress,
@@ -27,6 +29,7 @@ EXAMPLES = """examples:
   phfdi calibrate --learn healthy.csv --rows 400 --form oe --correction-samples 100 --out ref.json
   phfdi calibrate --estimator runs/*.csv --map ph_rig --repeat-probability 0 --out rig.json  # no repeats test
   phfdi calibrate --estimator ../shared/data/ph_rig/2025.02.24-*.csv --model rig_flask --map ph_rig --out rig.json
+  phfdi calibrate --physics --scenario paper --out paper_physics.json   # then phfdi replay RUN --reference paper_physics.json
 
 --learn fits a learned healthy reference (no plant model needed) on the first
 --rows rows of a measured record (all of them by default), or on the rows from
@@ -54,10 +57,17 @@ wavelet_fdi/calibrations/paper_sym4_L3.yaml (made with the defaults).
 Recorded runs are read under the reading policy of docs/records.md (--map,
 --column, --encoding as in phfdi replay); every repair is printed as a note.
 
+--physics calibrates the scenario's healthy plant and valves as a reference of the
+multichannel detector (docs/detector.md, "The paper's physics as a reference kind"):
+the physics detector's design (--wavelet, --level, --arl0, --channels) carried over,
+the band noise and every threshold measured on the healthy runs for --arl0; any
+learned-detector option given sets that setting over the design.
+
 Every detector setting is an option of its own, --NAME VALUE, derived from its
-one declaration (docs/detector.md, "Detector settings"): --level and --wavelet
-set the detector being calibrated (physics, learned or estimator), each with its
-own default; --arl0 and --channels are the physics detector's, the others the
+one declaration (docs/detector.md, "Detector settings"): --level, --wavelet and
+--arl0 set the detector being calibrated (physics, learned or estimator), each
+with its own default (the learned and estimator detectors' --arl0 is 0: their
+declared thresholds); --channels is the physics detector's, the others the
 learned and estimator detector's. The old form --learned KEY=VALUE is still read.
 """
 
@@ -216,6 +226,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "first guesses (preset or .yaml; default rig_flask)")
     g.add_argument("--open-loop", action="store_true",
                    help="with --estimator: simulate the model from each run's first pH, never correct it")
+    g = p.add_argument_group("physics reference kind (the scenario's model in the multichannel detector)")
+    g.add_argument("--physics", action="store_true",
+                   help="calibrate the scenario's healthy plant and valves as a reference of the multichannel "
+                        "detector (kind physics) on the --seeds' healthy runs, or on --runs: band noise and every "
+                        "threshold for --arl0, its alarms named by the physics detector's isolation; writes .json "
+                        "for phfdi replay --reference")
     p.add_argument("--out", required=True, help="file to write (.yaml or .json; --learn, --estimator: .json)")
     add_overwrite_arg(p)
     p.set_defaults(func=run)
@@ -234,6 +250,8 @@ def run(args: argparse.Namespace) -> int:
         return run_estimator(args)
     if args.learn:
         return run_learn(args)
+    if args.physics:
+        return run_physics(args)
     if args.rows is not None or args.exclude or args.start or args.end:
         raise UserError("--rows, --from, --to and --exclude go with --learn")
     settings = settings_from_args(args)
@@ -272,6 +290,8 @@ def check_settings_given(args: argparse.Namespace) -> None:
     physics = {s.name: s.flag for s in setting_specs(exposed_only=True)}
     learned = {s.name: s.flag for s in setting_specs(of=LearnedSettings)}
     given = set(given_settings(args)) | set(given_settings(args, LearnedSettings))
+    if getattr(args, "physics", False) and not (args.learn or args.estimator):
+        return  # the physics detector's design, then any learned-detector setting given over it
     if args.learn or args.estimator:
         stray = [physics[n] for n in physics if n in given and n not in learned]
         what = "set the physics detector (phfdi calibrate without --learn or --estimator)"
@@ -281,6 +301,60 @@ def check_settings_given(args: argparse.Namespace) -> None:
         what = "set the learned or estimator detector: give them with --learn or --estimator"
     if stray:
         raise UserError(f"{', '.join(stray)} {what}")
+
+
+def run_physics(args: argparse.Namespace) -> int:
+    """The scenario's physics as a reference kind of the multichannel detector, calibrated on healthy runs."""
+    from phfdi.calibration import scenario_for_seed
+    from phfdi.loop import simulate
+    from phfdi.replay import load_any
+    from phfdi.scenario import load_scenario
+    from phfdi_base.errors import UserError
+    from wavelet_fdi.config import LearnedSettings
+    from wavelet_fdi.learned_detector import calibrate_bands
+    from wavelet_fdi.reference_physics import PhysicsReference, design_settings
+
+    if not args.out.endswith(".json"):
+        raise UserError(f"--out {args.out}: a physics reference is written as .json")
+    if args.rows is not None or args.exclude or args.start or args.end:
+        raise UserError("--rows, --from, --to and --exclude go with --learn (--physics calibrates on whole runs)")
+    physics = settings_from_args(args)
+    spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
+    ref = PhysicsReference.from_spec(spec, watch_level="level" in physics.channels)
+    settings = design_settings(physics, spec.sample_time_s, **given_settings(args, LearnedSettings))
+    cmap = column_map_from_args(args)
+    runs = []
+    if args.runs:
+        sources = list(args.runs)
+        for path in args.runs:
+            run = load_any(path, cmap, args.encoding)
+            print_notes("calibrate", run.metadata.get("notes", []))
+            runs.append(run)
+    else:
+        seeds = parse_seeds(args.seeds)
+        make = scenario_for_seed(args.scenario, args.overrides)
+        progress = Progress(f"simulate {len(seeds)} healthy runs", enabled=True)
+        for i, seed in enumerate(seeds):
+            runs.append(simulate(make(seed)))
+            progress((i + 1) / len(seeds))
+        sources = [f"seed {seed}" for seed in seeds]
+    missing = sorted({c for run in runs for c in ref.channels if c not in run})
+    if missing:
+        raise UserError(f"the healthy runs lack {', '.join(missing)} (the physics reference reads "
+                        f"{', '.join(ref.channels)}; --map names other columns)")
+    rows = [(run.time_s, np.column_stack([np.asarray(run[c], float) for c in ref.channels])) for run in runs]
+    model = calibrate_bands(ref, rows, settings, {"runs": sources, "scenario": spec.name})
+    model.save(args.out, overwrite=args.overwrite)
+    print(f"physics reference of scenario {spec.name} on {len(runs)} healthy runs: watches "
+          f"{', '.join(model.residual_channels)}; {settings.wavelet} level {settings.level}, ARL0 "
+          f"{settings.arl0_samples:g} samples")
+    for name, h in zip(model.residual_channels, model.band_sigma):
+        print(f"  {name:22s} healthy RMS per band ({', '.join(settings.bands())}): "
+              + " ".join(f"{v:.3f}" for v in h))
+    for name, h in model.thresholds.items():
+        print(f"  {name:28s} threshold {h:8.2f}")
+    print(f"wrote {args.out}")
+    return 0
 
 
 def run_learn(args: argparse.Namespace) -> int:
