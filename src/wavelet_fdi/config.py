@@ -228,7 +228,8 @@ class LearnedSettings:
                                        "calibrated on, for this average run length to a false alarm of the whole "
                                        "detector, samples (window maxima of CUSUMs restarted every 1000 samples, "
                                        "exponential tail, the target split evenly over the statistics: the physics "
-                                       "detector's calibration, wavelet_fdi.calibration)", range=(0.0, math.inf))
+                                       "detector's calibration, wavelet_fdi.calibration)", range=(0.0, math.inf),
+                                  option="arl0")
     outside_hold_s: float = setting(300.0, "with a reference that confirms its alarms (the estimator): a deviation "
                                            "no fault hypothesis explains is announced once (outside calibration, "
                                            "WARN); the next ones only after this long without one, s (each is "
