@@ -139,9 +139,12 @@ class MeanShift(LearnedStatistic):
     holds_by_level = True
 
     def rows(self) -> list[StatisticRow]:
-        level = self.settings.level
-        return [StatisticRow(c, level, direction) for c in range(self.detector.m)
+        return [StatisticRow(c, self.band(), direction) for c in range(self.detector.m)
                 for direction in ("mean_up", "mean_down")]
+
+    def band(self) -> int:
+        """The band watched: AJ."""
+        return self.settings.level
 
     def reference_value(self) -> float:
         return self.settings.mean_k
@@ -149,9 +152,14 @@ class MeanShift(LearnedStatistic):
     def threshold(self) -> float:
         return self.settings.mean_h
 
+    def deviation(self, chunk: Chunk, i0: int, i1: int, u: np.ndarray) -> np.ndarray:
+        """(i1 - i0, m): each channel's deviation from its healthy level, in healthy sigmas."""
+        return u
+
     def values(self, out, chunk, i0, i1, g0, u) -> None:
-        out[0::2] = u.T
-        out[1::2] = -u.T
+        d = self.deviation(chunk, i0, i1, u)
+        out[0::2] = d.T
+        out[1::2] = -d.T
 
 
 @register_learned_statistic
@@ -305,21 +313,20 @@ class Repeats(LearnedStatistic):
 
 
 @register_learned_statistic
-class ResidualMean(LearnedStatistic):
+class ResidualMean(MeanShift):
     """A mean shift of the residual itself, not of a band, up and down on every channel, less the observer's level:
     the physics detector's R statistic. AJ's mean is a local mean over about 2^J samples that lags a step by about
     as much; the residual's own mean sees it at once, at the price of its full noise. k = ``residual_mean_k`` in the
     residual's healthy sigmas (half the shift it is designed for; 0: off), h = ``residual_mean_h``."""
 
     kind = "residual_mean"
-    holds_by_level = True
 
     def rows(self) -> list[StatisticRow]:
-        if not self.settings.residual_mean_k:
-            return []
-        band = self.settings.level + 2  # "R", after D1..DJ, AJ and raw
-        return [StatisticRow(c, band, direction) for c in range(self.detector.m)
-                for direction in ("mean_up", "mean_down")]
+        return super().rows() if self.settings.residual_mean_k else []
+
+    def band(self) -> int:
+        """The band watched: R, after D1..DJ, AJ and raw."""
+        return self.settings.level + 2
 
     def reference_value(self) -> float:
         return self.settings.residual_mean_k
@@ -327,10 +334,7 @@ class ResidualMean(LearnedStatistic):
     def threshold(self) -> float:
         return self.settings.residual_mean_h
 
-    def values(self, out, chunk, i0, i1, g0, u) -> None:
+    def deviation(self, chunk: Chunk, i0: int, i1: int, u: np.ndarray) -> np.ndarray:
         assert chunk.residual is not None, "the detector passes its residuals"
         r = chunk.residual[i0:i1] - self.detector.bias
-        if chunk.gappy:
-            r = np.where(chunk.missing[i0:i1], 0.0, r)
-        out[0::2] = r.T
-        out[1::2] = -r.T
+        return np.where(chunk.missing[i0:i1], 0.0, r) if chunk.gappy else r

@@ -34,8 +34,7 @@ def _isolator(ref: PhysicsReference) -> tuple[FaultIsolator, DetectorSettings]:
     if cached is not None:
         return cached
     settings = DetectorSettings()
-    noise = {"ph": float(ref.noise[0]),
-             "level": float(ref.spec.sensors.level.noise_std or 1.0) if ref.has_level else 1.0}
+    noise = ref.sensor_noise
     bands = settings.bands() + ["raw"]
     cal = Calibration(str(ref.spec.name), settings.wavelet, settings.level, ref.spec.sample_time_s,
                       settings.arl0_samples, {ch: {b: v for b in bands} for ch, v in noise.items()}, {})
@@ -45,13 +44,13 @@ def _isolator(ref: PhysicsReference) -> tuple[FaultIsolator, DetectorSettings]:
 
 
 def _history(ref: PhysicsReference, t_s: np.ndarray, rows: np.ndarray, settings: DetectorSettings
-             ) -> tuple[History, dict, dict]:
-    """The kind's model re-run over the rows: what the isolator reads, and the snapshots and guesses it starts from."""
+             ) -> tuple[History, dict]:
+    """The kind's model re-run over the rows: what the isolator reads, and the snapshots it starts from."""
     stream = PhysicsStream(ref, keep=True)
     stream.residuals(t_s, rows)
     kept = stream.kept
     assert kept is not None, "made with keep=True"
-    cmd, _, ph, level = stream._columns(rows)
+    cmd, _, ph, level = stream.columns(rows)
     ph_pred = np.concatenate(kept["ph_pred"])
     residual = np.where(np.isfinite(ph - ph_pred), ph - ph_pred, 0.0)
     out = CausalSwt(settings.wavelet, settings.level).process(residual)
@@ -63,7 +62,7 @@ def _history(ref: PhysicsReference, t_s: np.ndarray, rows: np.ndarray, settings:
     hist.write(0, {"t": np.asarray(t_s, float), "ph": ph, "level": level, "command": cmd, "ph_pred": ph_pred,
                    "level_pred": np.concatenate(kept["level_pred"]), "flows": flows,
                    "opening": np.concatenate(kept["opening"]), "setpoint": np.full(n, math.nan), "coef": coef})
-    return hist, kept["snapshots"], kept["guesses"]
+    return hist, kept["snapshots"]
 
 
 #: namings made while the first stays unsure: the physics detector's isolation retries (DetectorSettings)
@@ -81,7 +80,7 @@ def name_fault(ref: PhysicsReference, t_s: np.ndarray, rows: np.ndarray, onset_i
                statistic: str = "", after: int | None = None) -> dict:
     """The fault behind an alarm (module docstring); ``rows`` in ``ref.channels`` order, indices into them."""
     isolator, settings = _isolator(ref)
-    hist, snapshots, _ = _history(ref, np.asarray(t_s, float), np.asarray(rows, float), settings)
+    hist, snapshots = _history(ref, np.asarray(t_s, float), np.asarray(rows, float), settings)
     start = [k for k in snapshots if k <= onset_index]
     result = (isolator.isolate(hist, snapshots[max(start)], max(start), onset_index, len(rows) - 1)
               if start else None)

@@ -142,11 +142,16 @@ class PhysicsReference:
         return int(math.ceil(self.warmup_s / self.spec.sample_time_s))
 
     @property
+    def sensor_noise(self) -> dict[str, float]:
+        """The scenario's sensor noise standard deviations (1 where it says none), by channel ("ph", "level")."""
+        s = self.spec.sensors
+        return {"ph": _noise(s.ph.noise_std), "level": _noise(s.level.noise_std)}
+
+    @property
     def noise(self) -> np.ndarray:
         """Each residual channel's unit: the scenario's sensor noise standard deviation."""
-        s = self.spec.sensors
-        return np.array([_noise(s.ph.noise_std)] + ([_noise(s.level.noise_std)] if len(self.residual_channels) > 1
-                                                    else []))
+        sigma = self.sensor_noise
+        return np.array([sigma["ph"]] + ([sigma["level"]] if len(self.residual_channels) > 1 else []))
 
     def new_state(self) -> "PhysicsStream":
         return PhysicsStream(self)
@@ -177,7 +182,7 @@ class PhysicsStream:
         self.ref = ref
         self.model = HealthyReference(ref.spec)
         self.kept: dict[str, Any] | None = ({"ph_pred": [], "level_pred": [], "flows": [], "opening": [],
-                                              "snapshots": {}, "guesses": {}} if keep else None)
+                                              "snapshots": {}} if keep else None)
         self.index = 0  # global index of the next row
         self._guess = 7.0
         self._acc = np.zeros(4)  # this block's sums: pH residual, count, level residual, count
@@ -198,7 +203,6 @@ class PhysicsStream:
                 self._start(float(t_s[i]), rows[i])
             if self.kept is not None and self.index % self.ref.block_samples == 0:
                 self.kept["snapshots"][self.index] = self.model.snapshot()
-                self.kept["guesses"][self.index] = self._guess
             block = self.ref.block_samples
             end = min(n, i + block - self.index % block)
             out[i:end] = self._segment(t_s[i:end], rows[i:end])
@@ -208,19 +212,21 @@ class PhysicsStream:
             i = end
         return out
 
-    def _columns(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def columns(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Rows in the reference's channel order as (valve command, level-controller output, pH, level); NaN for
+        the level's two where the scenario holds no level."""
         if self.ref.has_level:
             return rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
         nan = np.full(len(rows), math.nan)
         return rows[:, 0], nan, rows[:, 1], nan
 
     def _start(self, t0: float, row: np.ndarray) -> None:
-        cmd, outlet, ph, level = (float(v[0]) for v in self._columns(row[None, :]))
+        cmd, outlet, ph, level = (float(v[0]) for v in self.columns(row[None, :]))
         self.model.initialize(t0, cmd, outlet, level, None, ph)
         self._guess = self.model.ph
 
     def _segment(self, t: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        cmd, outlet, ph, level = self._columns(rows)
+        cmd, outlet, ph, level = self.columns(rows)
         pred = self.model.advance(t, cmd, outlet, self._guess)
         if self.kept is not None:
             for key, v in (("ph_pred", pred.ph), ("level_pred", pred.level_cm), ("flows", pred.flows),
