@@ -554,6 +554,32 @@ def test_table_read_checker_catches_a_reader_of_its_own(tmp_path):
     assert table_reads(tmp_path) == {"phfdi.tool": ["line 3"]}
 
 
+
+#: the one in-memory measured record (issue 37): a second class of that kind is a record type more to learn
+RECORD_CLASS = ("phfdi.records.record", "Record")
+
+
+def record_classes(src: Path) -> dict[str, list[str]]:
+    """module -> classes named ``...Record`` other than :data:`RECORD_CLASS`: a second in-memory record type,
+    where :class:`phfdi.records.Record` should carry the view (``inputs``/``outputs``, ``x``, ``on_grid``...)."""
+    out: dict[str, list[str]] = {}
+    for module, path in project_modules(src).items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef) and node.name.endswith("Record") and (module, node.name) != RECORD_CLASS:
+                out.setdefault(module, []).append(f"{node.name} (line {node.lineno})")
+    return out
+
+
+def test_one_in_memory_record_type():
+    assert record_classes(SRC) == {}, "use phfdi.records.Record (add the view the new code needs to it)"
+
+
+def test_record_class_checker_catches_a_second_record(tmp_path):
+    _tree(tmp_path, {"phfdi/__init__.py": "", "phfdi/records/__init__.py": "",
+                     "phfdi/records/record.py": "class Record:\n    pass\n",
+                     "phfdi/tool.py": "import dataclasses\n@dataclasses.dataclass\nclass MeasuredRecord:\n    x: int\n"})
+    assert record_classes(tmp_path) == {"phfdi.tool": ["MeasuredRecord (line 3)"]}
+
 #: the delimiters a hand-written table parser splits its lines on
 DELIMITERS = frozenset({";", ",", "\t", "|"})
 

@@ -126,3 +126,23 @@ def test_map_needs_time_output_input(tmp_path):
         diagnosis_map(ColumnMap.from_mapping({"time_s": "t", "ph_measured": "pH"}, "column map"))
     with pytest.raises(UserError, match="cannot map onto 'temperature'"):
         diagnosis_map(ColumnMap.from_mapping({"time_s": "t", "temperature": "T"}, "column map"))
+
+
+def test_the_diagnosis_reads_the_one_record_type_on_its_grid(good):
+    """The diagnosis's record is phfdi.records.Record (issue 37: one in-memory record): its inputs and outputs are
+    views of the same signals, its step is the grid's exactly, and a slice is a record of its own."""
+    from phfdi.records import Record
+
+    tmp, t, op, ph, lev = good
+    jitter = t + np.where(np.arange(len(t)) % 3 == 1, 0.02, 0.0)  # non-uniform: put on a grid
+    rec = load_record(_write(tmp / "a.csv", jitter, op, ph, lev), diagnosis_map(ColumnMap.load(_map(tmp))))
+    assert isinstance(rec, Record)
+    assert list(rec.inputs) == ["valve_command_pct"] and list(rec.outputs) == ["ph_measured", "level_measured_cm"]
+    assert rec.inputs["valve_command_pct"] is rec.signals["valve_command_pct"]
+    assert rec.grid_s is not None and rec.dt_s == rec.grid_s  # the grid's step, not a median of rounded steps
+    assert rec.units["level_measured_cm"] == "cm" and rec.name == "a.csv"
+    part = rec.slice(100, 200, name="middle")
+    assert (len(part), part.name, part.dt_s) == (100, "middle", rec.dt_s)
+    part.signals["ph_measured"][:] = 0.0  # a copy: the record it came from keeps its samples
+    assert np.all(rec.outputs["ph_measured"][100:200] > 8.0)
+    assert not rec.constant_inputs()

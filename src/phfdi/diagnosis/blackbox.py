@@ -29,7 +29,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from .data import Record
+from phfdi.records import Record
 
 
 @dataclass

@@ -23,16 +23,15 @@ error, never silently left out.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from phfdi import records
+from phfdi.records import Record  # the one measured record: the diagnosis reads it on a uniform grid
+from phfdi.records.columns import OUTPUTS, is_input
 from phfdi_base.errors import UserError
-
-OUTPUTS = ("ph_measured", "level_measured_cm")
-COMMAND_INPUTS = ("valve_command_pct", "level_controller_output_pct")
+from phfdi_base.signals import unit_of
 
 UNITS = records.columns.UNITS
 
@@ -49,41 +48,6 @@ def kind_of(signal: str) -> str:
         return kind
     raise UserError(f"column map: cannot map onto {signal!r}: use time_s, valve_command_pct, "
                     f"level_controller_output_pct, <feed>_flow_ml_s, ph_measured or level_measured_cm")
-
-
-def is_input(signal: str) -> bool:
-    return signal in COMMAND_INPUTS or signal.endswith("_flow_ml_s")
-
-
-@dataclass
-class Record:
-    """One measured record on a uniform time base."""
-
-    name: str
-    time_s: np.ndarray
-    inputs: dict[str, np.ndarray]
-    outputs: dict[str, np.ndarray]
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def dt_s(self) -> float:
-        return float(self.time_s[1] - self.time_s[0])
-
-    def __len__(self) -> int:
-        return len(self.time_s)
-
-    def slice(self, start: int, stop: int, name: str | None = None) -> "Record":
-        sl = slice(start, stop)
-        return Record(name or self.name, self.time_s[sl].copy(), {k: v[sl].copy() for k, v in self.inputs.items()},
-                      {k: v[sl].copy() for k, v in self.outputs.items()}, list(self.notes))
-
-    def constant_inputs(self) -> bool:
-        """True when no input moves (nothing excites the plant)."""
-        for v in self.inputs.values():
-            scale = max(1.0, float(np.max(np.abs(v))))
-            if float(np.max(v) - np.min(v)) > 1e-6 * scale:
-                return False
-        return True
 
 
 def diagnosis_map(cmap: records.ColumnMap) -> records.ColumnMap:
@@ -250,7 +214,9 @@ def make_record(signals: dict[str, np.ndarray], label: str, dt_s: float | None =
                         f"level_controller_output_pct)")
     if not outputs:
         raise UserError(f"{label}: no output signal (ph_measured, level_measured_cm)")
-    return Record(label, t, inputs, outputs, notes)
+    signals = {**inputs, **outputs}
+    return Record(label, t, signals, units={k: unit_of(k) for k in signals}, columns={k: k for k in signals},
+                  lines=np.arange(len(t)), where="sample", notes=notes, grid_s=float(step))
 
 
 def load_record(path: str | Path, cmap: records.ColumnMap | None = None, dt_s: float | None = None,

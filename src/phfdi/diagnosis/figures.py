@@ -11,10 +11,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pywt  # noqa: E402
 
+from phfdi.records import Record  # noqa: E402
 from phfdi_base.outputs import save_figure
 from phfdi_base.signals import label, unit_of  # noqa: E402
 
-from .data import Record  # noqa: E402
 from .model import Prediction  # noqa: E402
 
 CWT_WAVELET = "cmor1.5-1.0"

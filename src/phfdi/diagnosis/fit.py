@@ -30,10 +30,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import direct, least_squares, minimize
 
+from phfdi.records import Record
 from phfdi_base.errors import UserError
 
 from .catalogue import Candidate, Context, catalogue
-from .data import Record
 from .model import Evaluator, Prediction, Start
 from .residual import ljung_box
 

@@ -40,13 +40,12 @@ from ph_plant_sim.exchange import AirExchange, exchange_recurrence
 from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from ph_plant_sim.plant import CstrPlant, affine_recurrence, record_sample_maps
 from ph_plant_sim.series import TanksInSeries, series_trajectory
+from phfdi.records import Record
 from phfdi.scenario import raw_scenario
 from phfdi_base.blocks import Chain, Injected
 from phfdi_base.errors import UserError
 from phfdi_base.spec import ScenarioSpec, apply_override, injected_faults, parse_override, profile, validate_scenario
 from valve_actuator.build import build_valve
-
-from .data import Record
 
 
 def nominal_raw(model: str, overrides: list[str] = ()) -> dict:

@@ -39,8 +39,9 @@ from typing import Callable
 
 import numpy as np
 
+from phfdi.records import Record
+
 from .calibrate import Calibration, calibrate
-from .data import Record
 from .fit import FitResult
 from .pipeline import Diagnosis, Options, _compatible, _counts, diagnose
 

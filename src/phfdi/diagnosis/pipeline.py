@@ -42,10 +42,10 @@ from typing import Callable
 import numpy as np
 
 from ph_plant_sim.build import build_plant, load_plant_model
+from phfdi.records import Record
 from phfdi_base.spec import PlantModelSpec
 
 from .catalogue import Context
-from .data import Record
 from .fit import FitResult, Fitter, Problem, fit_task, init_worker, one_blas_thread
 from .model import Evaluator, Prediction
 from .report import check_report, family_of

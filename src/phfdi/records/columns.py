@@ -61,6 +61,17 @@ def kind_of(signal: str) -> str | None:
     return None
 
 
+#: the measured outputs a plant model is compared with (the model diagnosis's outputs)
+OUTPUTS = ("ph_measured", "level_measured_cm")
+#: the controller outputs that drive a plant (the model diagnosis's inputs, with every feed's flow)
+COMMAND_INPUTS = ("valve_command_pct", "level_controller_output_pct")
+
+
+def is_input(signal: str) -> bool:
+    """True for a signal that drives the plant: a controller output or a feed's flow."""
+    return signal in COMMAND_INPUTS or signal.endswith("_flow_ml_s")
+
+
 def normal_cell(value: object) -> str:
     """A cell as compared with mode and quality lists: stripped, lower case, numbers without '.0'."""
     text = str(value).strip().lower()

@@ -10,6 +10,7 @@ import numpy as np
 from phfdi.run import Run
 
 from .cells import iso_stamp
+from .columns import OUTPUTS, is_input
 from .errors import ReadError
 from .notes import places
 from .policy import interval_s, spans
@@ -23,9 +24,12 @@ class Record:
     with NaN where a sample is missing; ``lines`` the source line (text), row (Parquet) or sample (bag)
     of each sample, ``where`` which of the three; ``columns`` signal -> the file's column name;
     ``automatic`` True where the controller was in automatic (None: no MODE column);
-    ``boundaries`` indices where a new segment starts (historian policy: clock resets and jumps).
+    ``boundaries`` indices where a new segment starts (historian policy: clock resets and jumps);
+    ``grid_s`` the step of the uniform grid the samples were put on by a reader that states one (the model
+    diagnosis's, :func:`phfdi.diagnosis.make_record`), else None: :attr:`dt_s` is then the median interval.
 
-    Made by :func:`~phfdi.records.read_record`; :meth:`to_run` gives the project's run.
+    Made by :func:`~phfdi.records.read_record`; :meth:`to_run` gives the project's run. The model diagnosis
+    reads the same record on its uniform grid, split into :attr:`inputs` and :attr:`outputs`.
 
     Examples
     --------
@@ -56,13 +60,37 @@ class Record:
     #: the wall-clock time at ``time_s`` 0 when the time column holds date-time or epoch stamps (None: the
     #: record's own seconds only); :func:`~phfdi.records.cells.iso_stamp` turns a time into its stamp
     wall_clock: datetime | None = None
+    grid_s: float | None = None
 
     def __len__(self) -> int:
         return len(self.time_s)
 
     @property
+    def name(self) -> str:
+        """What reports call the record: the file (or label) it was made from."""
+        return self.path
+
+    @property
     def names(self) -> list[str]:
         return list(self.signals)
+
+    @property
+    def inputs(self) -> dict[str, np.ndarray]:
+        """The signals that drive the plant (controller outputs, feed flows), in the record's order."""
+        return {k: v for k, v in self.signals.items() if is_input(k)}
+
+    @property
+    def outputs(self) -> dict[str, np.ndarray]:
+        """The measured outputs (pH, level), in the record's order."""
+        return {k: v for k, v in self.signals.items() if k in OUTPUTS}
+
+    def constant_inputs(self) -> bool:
+        """True when no input moves (nothing excites the plant)."""
+        for v in self.inputs.values():
+            scale = max(1.0, float(np.max(np.abs(v))))
+            if float(np.max(v) - np.min(v)) > 1e-6 * scale:
+                return False
+        return True
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -93,8 +121,8 @@ class Record:
 
     @property
     def dt_s(self) -> float:
-        """Median sample interval (s)."""
-        return interval_s(self.time_s)
+        """The sample interval (s): the grid's step on a stated grid (``grid_s``), else the median interval."""
+        return self.grid_s if self.grid_s is not None else interval_s(self.time_s)
 
     # ---- reporting ------------------------------------------------------------------------
     def note_lines(self) -> list[str]:
@@ -128,6 +156,14 @@ class Record:
         auto = None if self.automatic is None else self.automatic[index]
         return replace(self, time_s=self.time_s[index], lines=self.lines[index], automatic=auto,
                        signals={k: v[index] for k, v in self.signals.items()}, notes=list(self.notes), **changes)
+
+    def slice(self, start: int, stop: int, name: str | None = None) -> "Record":
+        """Samples ``start:stop`` as a record of their own (copies), renamed ``name`` when given."""
+        start, stop, _ = slice(start, stop).indices(len(self))
+        part = self.subset(slice(start, stop), boundaries=[b - start for b in self.boundaries if start < b < stop],
+                           **({"path": name} if name else {}))
+        return replace(part, time_s=part.time_s.copy(), lines=part.lines.copy(),
+                       signals={k: v.copy() for k, v in part.signals.items()})
 
     def segments(self, automatic_only: bool = True, min_samples: int = 1) -> list["Record"]:
         """Stretches on one clock (and, with a MODE column, in automatic), each a record of its own."""
