@@ -114,6 +114,11 @@ PUMP_RANGE = (0.0, FACTOR_BOUNDS[1])
 STIFFNESS = 0.1
 #: the detector's statistics that watch the reading's noise (wavelet_fdi.learned_detector)
 NOISE_STATISTICS = ("energy", "energy_down", "repeats")
+#: the statistics whose onset is the change itself: the spike test's is the one innovation beyond its level (where
+#: a probe stepped), so the window starts there instead of at a change time looked for before it (a healthy
+#: sample above 2 sigma 24 samples before a 1 pH step started the window there, and the jump then lay outside its
+#: head); the noise statistics' keep theirs too (a noise change moves no mean)
+ONSET_STATISTICS = ("spike", *NOISE_STATISTICS)
 #: the run's stretch before the window that the two-sample noise test compares with (samples), and the least
 #: that makes a comparison (below it: the healthy runs' band of noise scales)
 NOISE_BEFORE_SAMPLES = 1024
@@ -200,7 +205,7 @@ class _Window:
 
 
 def _window(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_index: int, detection_index: int,
-            noise_alarm: bool, after: int = AFTER_DETECTION_SAMPLES) -> _Window:
+            keep_onset: bool, after: int = AFTER_DETECTION_SAMPLES) -> _Window:
     n = len(rows)
     onset = max(1, min(int(onset_index), n - 1))
     det = min(n - 1, max(int(detection_index), onset))
@@ -215,7 +220,7 @@ def _window(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     run.residuals(t_s[pre:lo], rows[pre:lo])
     # the window starts where the raw residual changed, not at the band statistic's onset (a noise change moves
     # no mean, and a residual with no change point in the lookback has none to place: the onset stays)
-    k = None if noise_alarm else change_index(run.fork().residuals(t_s[lo:det + 1], rows[lo:det + 1])[:, 0])
+    k = None if keep_onset else change_index(run.fork().residuals(t_s[lo:det + 1], rows[lo:det + 1])[:, 0])
     a = onset if k is None else lo + k
     run.residuals(t_s[lo:a], rows[lo:a])
     return _Window(a, min(n, det + after), run, before, pre, lo)
@@ -427,8 +432,9 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     is named by the healthy explanation that fits best: a feed's apparent strength (``pump:<channel>``, "outside
     calibration") or none (``unexplained``).
     """
-    noise_alarm = bool(statistic) and parse_statistic(statistic)[2] in NOISE_STATISTICS
-    w = _window(ref, t_s, rows, onset_index, detection_index, noise_alarm, after)
+    kind = parse_statistic(statistic)[2] if statistic else ""
+    noise_alarm = kind in NOISE_STATISTICS
+    w = _window(ref, t_s, rows, onset_index, detection_index, kind in ONSET_STATISTICS, after)
     conf = dict(ref.confirm or {})
     ev = _hypotheses(ref, t_s, rows, w, noise_only=noise_alarm)
     evidence = {name: {"log_likelihood_gain": round(g, 3), "size": round(x, 4), "unit": _unit(name)}
@@ -464,6 +470,16 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     still = sensor == "probe_noise" and ev[sensor][1] < 1.0 and not _feeds_ran(ref, rows, w)
     confirmation["still_flask"] = still
     confirmation.update(sensor_gain_margin=round(0.5 * float(chi2.isf(alpha, 1)), 3))
+    # a jump beyond its margin where the reading stepped once by at least half the offset fitted is evidence only
+    # an offset gives, whichever hypothesis fits the window best: a feed's strength scales how fast the pH moves and
+    # never steps the reading, a noisier probe steps it at every sample, not once. Over the window an offset can be
+    # another hypothesis: on a strong acid's plateau pH = -log10 [H+] with [H+] linear in the acid added, so a probe
+    # reading b pH high reads as every acid feed scaled by 10^-b (a 1 pH offset hidden at pH 3.7 of April's
+    # titration: the acid at 0.11 of its strength gained 1192 over healthy, the offset, sized 0.92, 25), and the
+    # one innovation of the step (20 to 40 sigma there) is what a probe 20 times noisier fits best
+    if stepped and ratios.get("jump", 0.0) > 1.0:
+        confirmation.update(confirmed_by=["jump"], stepped=True)
+        return {**result, **_naming("probe_bias", ev), "confirmed": True, "confirmation": confirmation}
     if confirmed_by and not beaten and not still and not weak:
         return {**result, **_naming(sensor, ev), "confirmed": True, "confirmation": confirmation}
     named = explanation or "unexplained"

@@ -143,11 +143,12 @@ def _accumulate(gg, gy, on, fac, strengths, qp, dt: float, v: float, corr: float
                 gg[i, j] += gi * (fac[j] * strengths[j] * qp[j] * dt / v)
 
 
-def _run(t, flows, ok, xm, r_meas, ph, out,  # noqa: C901 - one tight loop, as the filter's equations read
+def _run(t, flows, ok, xm, r_meas, ph, out, unlimited,  # noqa: C901 - one tight loop, as the filter's equations
          strengths, xs, betas, bounds_ph, zf, gg, gy, on, qp, rel,
          tr_block, tr_rel, tr_on, tr_fac, tr_zone, consts, flags, scalars):
     """The recursion over the chunk's rows (module doc of reference_estimator for the equations). ``flows`` is
-    written (a missing flow holds the last one); the state arrays (factors, block sums, last flows) are updated
+    written (a missing flow holds the last one); ``out`` gets the residual limited to +-clip, ``unlimited`` the
+    same standardised innovation before the limit; the state arrays (factors, block sums, last flows) are updated
     in place; ``scalars`` = (started, x, P, last_t, zone, samples, nll, blocks) in, the same out (returned with
     the trace's length)."""
     v, rel2, walk2, eps2, sp2, tim, clip, tau, lo, hi, cap = consts
@@ -165,6 +166,7 @@ def _run(t, flows, ok, xm, r_meas, ph, out,  # noqa: C901 - one tight loop, as t
                 for i in range(m):
                     qp[i] = flows[k, i]
                 out[k] = 0.0  # the start: no evidence either way
+                unlimited[k] = 0.0
                 zone = _bisect_right(bounds_ph, ph[k])  # the zone: how many boundaries lie at or below the pH
             samples += 1
             continue
@@ -188,6 +190,7 @@ def _run(t, flows, ok, xm, r_meas, ph, out,  # noqa: C901 - one tight loop, as t
             pv = (1.0 - gain) * pm
             z = nu / math.sqrt(sv) if in_x else (ph[k] - php) / math.sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
             out[k] = -clip if z < -clip else clip if z > clip else z
+            unlimited[k] = z
             nll += 0.5 * (math.log(sv) + nu * nu / sv)
             if adapting and corr != 0.0:
                 _accumulate(gg[zone], gy[zone], on[zone], zf[zone], strengths, qp, dt, v, corr)

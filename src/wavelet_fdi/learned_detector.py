@@ -32,7 +32,7 @@ statistics and is reported once per stretch (an ``input`` event); the record rea
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Sequence
@@ -51,6 +51,7 @@ from .reference_learned import LearnedReference, load_json, save_json
 from .reference_oe import OutputErrorReference
 from .references import LOOKS, NAMERS, Reference, reference_from_dict
 from .repeat_test import RepeatTest
+from .spike_checks import Spike, SpikeChecks
 from .statistics import CusumBank
 
 FORMAT = "phfdi-learned-detector/1"
@@ -221,6 +222,8 @@ def calibrate_bands(reference: Reference, runs: Sequence[tuple[np.ndarray, np.nd
     coef = np.where(np.isfinite(coef), coef, np.nan)
     sigma = np.sqrt(np.nanmean(coef ** 2, axis=0))
     sigma = np.where(np.isfinite(sigma) & (sigma > 1e-9), sigma, 1.0)
+    if s.spike_per_sample > 0:
+        s = replace(s, spike_sigma=measured_spike_level(runs, refs, s.spike_per_sample))
     model = LearnedModel(reference, s, sigma, dict(source or {}))
     if s.arl0_samples > 0:
         model.thresholds = measured_thresholds(model, runs, refs)
@@ -265,6 +268,28 @@ def measured_thresholds(model: LearnedModel, runs: Sequence[tuple[np.ndarray, np
             continue
         out[name] = tail_threshold(maxima, p_target).threshold
     return out
+
+
+def measured_spike_level(runs: Sequence[tuple[np.ndarray, np.ndarray]], run_references: Sequence[Reference],
+                         per_sample: float) -> float:
+    """The spike test's level (:class:`~wavelet_fdi.learned_statistics.Spike`): the residual magnitude a healthy
+    sample exceeds with probability ``per_sample``, measured on every run's residuals from its reference (before
+    the reference's limit where it has one): the empirical 90th percentile u and beyond it an exponential tail
+    with the mean excess as its scale, never below half a sigma (the generalised Pareto tail of shape 0, as the
+    estimator's confirmation margins are placed: :func:`wavelet_fdi.estimator_isolation.tail_threshold`)."""
+    from .estimator_isolation import tail_threshold as excess_tail
+
+    values: list[np.ndarray] = []
+    for (t, rows), ref in zip(runs, run_references):
+        stream = ref.new_state()
+        r = stream.residuals(t, rows)
+        r = getattr(stream, "last_unlimited", r)
+        values.append(np.abs(r[np.isfinite(r)]))
+    v = np.concatenate(values) if values else np.empty(0)
+    try:
+        return float(excess_tail(v.tolist(), per_sample)["threshold"])
+    except ValueError as exc:
+        raise UserError(f"spike_per_sample {per_sample:g}: {exc}") from None
 
 
 @dataclass
@@ -408,6 +433,9 @@ class LearnedDetector:
         self._relook: list[dict] = []
         # a confirming reference (its namer says whether a fault explains an alarm): alarms start as deviations
         self.confirming = self.namer is not None and bool(getattr(model.reference, "confirm", None))
+        # a confirming reference's spikes (one innovation beyond spike_sigma, before the reference's limit) are each
+        # judged once as a step of the reading (wavelet_fdi.spike_checks)
+        self.spikes = SpikeChecks(model.settings.spike_sigma if self.confirming else 0.0, self._naming_after)
         self._last_outside_t = -math.inf  # the last deviation outside calibration (the announcements' hold)
         # per channel the last sample beyond the healthy runs' range (an alarm whose window holds one says so)
         self._ranges = model.source.get("healthy_ranges") or {}
@@ -434,6 +462,8 @@ class LearnedDetector:
         g = self.samples_processed + np.arange(len(rows))
         self._times[g % TIME_RING] = t
         r = self.stream.residuals(t, rows)
+        if self.spikes.level:
+            self.spikes.scan(getattr(self.stream, "last_unlimited", r), t, self.samples_processed, self.fill_samples)
         missing = ~np.isfinite(r)
         events += self._missing_events(missing, t)
         out = self.swt.process(np.where(missing, 0.0, r))
@@ -487,6 +517,8 @@ class LearnedDetector:
         for a in self.alarms[len(self._named_ids()):]:
             self._to_name.append(a)
         events = []
+        for spike in self.spikes.due(upto, self._naming_after, final):
+            events += self._check_spike(spike, upto)
         for a in list(self._relook):
             events += self._look_again(a, upto)
         for a in list(self._to_name):
@@ -511,6 +543,43 @@ class LearnedDetector:
             events.append(self._named_event(a, iso, end))
             self._name_again_later(a, iso, 0, end)
         return events
+
+    def _check_spike(self, spike: Spike, upto: int) -> list[LearnedEvent]:
+        """A spike's window ended: a fault alarm when the namer confirms that the reading stepped there (the jump;
+        wavelet_fdi.spike_checks), else nothing but the count. A deviation raised about the spike, or up when its
+        window ended, is judged on its own: no second alarm for one fault."""
+        assert self.namer is not None, "spikes are checked only for a reference that names faults"
+        end = min(spike.index + self._naming_after, upto)
+        if any(spike.index - self.spikes.gap <= a["detection_index"] < end for a in self.alarms):
+            return []  # a deviation raised about the spike is judged on its own, with the same rule for a step
+        first = max(0, end - NAMING_WINDOW)
+        k = np.arange(first, end) % NAMING_RING
+        name = f"{self.channels[spike.channel]}.R.spike"
+        iso = self.namer(self._ring_t[k], self._ring_x[k], spike.index - first, spike.index - first, name)
+        self.spikes.checked += 1
+        stepped = iso.get("confirmed") and "jump" in (iso.get("confirmation") or {}).get("confirmed_by", ())
+        if not stepped or self.in_alarm:
+            return []
+        self.spikes.steps += 1
+        at = end - 1
+        t_now = float(self._ring_t[at % NAMING_RING])
+        ch = self.channels[spike.channel]
+        a = {"alarm_id": len(self.alarms) + 1, "detection_time": spike.time_s, "detection_index": spike.index,
+             "onset_index": spike.index, "onset_time": spike.time_s, "statistic": name,
+             "statistic_value": abs(spike.sigma), "threshold": self.spikes.level, "channels": [ch],
+             "contributions": {ch: {"share": 1.0, "bands": {"R": 1.0}}}, "cleared_time": None, "isolation": iso,
+             "outside_healthy_range": [], "verdict": "fault", "confirmed_time": t_now, "confirmed_index": at}
+        self.alarms.append(a)
+        self._named.append(a["alarm_id"])
+        # the alarm is up from here, held as any other while a statistic crosses, cleared after a quiet block
+        self.in_alarm, self._alarm, self._last_crossing = True, a, at
+        self._episode[:] = 0.0
+        self._peak = np.zeros(self.m)
+        size = f"{iso['size']:g} {iso['unit']}".strip()
+        return [LearnedEvent("alarm", t_now, at, "ERROR",
+                             f"alarm {a['alarm_id']}: {iso['family']} fault, {iso['description']} ({size}); the reading "
+                             f"stepped at {spike.time_s:g} s (one innovation of {abs(spike.sigma):.1f} sigma, beyond "
+                             f"the spike level {self.spikes.level:g})", dict(a))]
 
     def _named_event(self, a: dict, iso: dict, end: int) -> LearnedEvent:
         when = float(self._ring_t[(end - 1) % NAMING_RING])

@@ -330,6 +330,9 @@ class EstimatorStream:
         self._on_s = np.zeros((zones, m))
         self.nll = 0.0  # running negative log-likelihood of the innovations (for fitting)
         self.blocks = 0  # block boundaries passed (the adaptation's clock: block_samples samples each)
+        #: the standardised innovations of the last :meth:`residuals` call before the limit ``clip_sigma`` (n, 1):
+        #: what a test of single large innovations reads (the residual itself counts an outlier as clip_sigma)
+        self.last_unlimited: np.ndarray = np.empty((0, 1))
         #: set to a list to record every adaptation: (block boundary, relative errors, pump-on s, factors before,
         #: zone)
         self.adapt_trace: list[tuple[int, list[float], list[float], list[float], int]] | None = None
@@ -379,11 +382,13 @@ class EstimatorStream:
         r_meas = (nz.probe_noise_ph * ref.beta_of_ph(at)) ** 2 + nz.curve_std_mM ** 2
         n = len(t)
         out = np.full(n, math.nan)
+        unlimited = np.full(n, math.nan)
         if n:
-            self._run(t, np.array(rows[:, :m]), ok, xm, r_meas, ph, out)
+            self._run(t, np.array(rows[:, :m]), ok, xm, r_meas, ph, out, unlimited)
+        self.last_unlimited = unlimited[:, None]
         return out[:, None]
 
-    def _run(self, t, flows, ok, xm, r_meas, ph, out) -> None:
+    def _run(self, t, flows, ok, xm, r_meas, ph, out, unlimited) -> None:
         """The compiled recursion over one chunk (:func:`wavelet_fdi.estimator_kernel.compiled`); the state comes
         in and goes back out through its arguments."""
         ref, nz = self.ref, self.ref.noise
@@ -401,7 +406,7 @@ class EstimatorStream:
         trace = (np.zeros(most, dtype=np.int64), np.zeros((most, m)), np.zeros((most, m)), np.zeros((most, m)),
                  np.zeros(most, dtype=np.int64))
         strengths = np.array([f.strength_mM for f in ref.feeds])
-        state, ntrace = compiled()(t, flows, ok, xm, r_meas, ph, out, strengths, ref._x_table,  # type: ignore[attr-defined]
+        state, ntrace = compiled()(t, flows, ok, xm, r_meas, ph, out, unlimited, strengths, ref._x_table,  # type: ignore[attr-defined]
                                    ref._beta_table, np.array(ref.adapt_zones_ph, dtype=float),  # type: ignore[attr-defined]
                                    self._zf, self._gg, self._gy, self._on_s, self._qp, np.zeros(m), *trace,
                                    consts, flags, scalars)
