@@ -554,7 +554,6 @@ def test_table_read_checker_catches_a_reader_of_its_own(tmp_path):
     assert table_reads(tmp_path) == {"phfdi.tool": ["line 3"]}
 
 
-
 #: the one in-memory measured record (issue 37): a second class of that kind is a record type more to learn
 RECORD_CLASS = ("phfdi.records.record", "Record")
 
@@ -579,6 +578,7 @@ def test_record_class_checker_catches_a_second_record(tmp_path):
                      "phfdi/records/record.py": "class Record:\n    pass\n",
                      "phfdi/tool.py": "import dataclasses\n@dataclasses.dataclass\nclass MeasuredRecord:\n    x: int\n"})
     assert record_classes(tmp_path) == {"phfdi.tool": ["MeasuredRecord (line 3)"]}
+
 
 #: the delimiters a hand-written table parser splits its lines on
 DELIMITERS = frozenset({";", ",", "\t", "|"})

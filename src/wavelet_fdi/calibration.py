@@ -85,6 +85,26 @@ def tail_threshold(maxima: np.ndarray, p_target: float, tail_fraction: float = T
     return TailFit(float(max(h, 0.0)), a, theta, top, len(m), top_max)
 
 
+#: the excess tail's start: exponential beyond this quantile (a generalised Pareto tail of shape 0)
+EXCESS_TAIL_QUANTILE = 0.9
+
+
+def excess_tail_threshold(values: Sequence[float], alpha: float, quantile: float = EXCESS_TAIL_QUANTILE) -> dict:
+    """The value a healthy statistic exceeds with probability ``alpha``: the empirical ``quantile`` u, and beyond
+    it an exponential tail with the mean excess over u as its scale (the generalised Pareto tail of shape 0,
+    fitted by maximum likelihood): u + scale ln((1 - quantile) / alpha). For single values (the estimator's
+    confirmation statistics, the spike level), where :func:`tail_threshold` fits window maxima."""
+    v = np.sort(np.asarray([x for x in values if math.isfinite(x)], dtype=float))
+    if len(v) < 20:
+        raise ValueError(f"{len(v)} null values: too few to place a margin (20 at least)")
+    u = float(np.quantile(v, quantile))
+    excess = v[v > u] - u
+    scale = float(excess.mean()) if len(excess) else 0.0
+    scale = max(scale, 0.5)  # never below the chi-square(1)/2 tail's own scale, a well-specified model's
+    return {"threshold": round(u + scale * math.log((1.0 - quantile) / alpha), 3), "u": round(u, 3),
+            "scale": round(scale, 3), "n": int(len(v))}
+
+
 def tail_probability(maxima: np.ndarray, threshold: float) -> float:
     """P(window maximum > threshold) from the tail fit (for held-out checks of a calibration)."""
     a, theta, _ = fit_tail(maxima)

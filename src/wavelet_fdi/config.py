@@ -187,12 +187,13 @@ class LearnedSettings:
                                           "value k, residual sigmas, half the shift they are designed for (0: off)",
                                      range=(0.0, math.inf))
     residual_mean_h: float = setting(20.0, "those CUSUMs' threshold, above 0 (measured instead with arl0_samples)")
-    spike_sigma: float = setting(0.0, "the spike test: a deviation at one residual beyond this many healthy sigmas, "
-                                      "read before the reference's limit where it has one (the estimator's "
-                                      "clip_sigma; wavelet_fdi.learned_statistics.Spike); 0: off. phfdi calibrate "
-                                      "--estimator measures it for spike_per_sample",
+    spike_sigma: float = setting(0.0, "spike checks (a reference that confirms its alarms, the estimator): one "
+                                      "residual beyond this many healthy sigmas, read before the reference's limit "
+                                      "(clip_sigma), is judged once as a step of the reading "
+                                      "(wavelet_fdi.spike_checks); 0: off. phfdi calibrate --estimator measures it "
+                                      "for spike_per_sample",
                                  range=(0.0, math.inf))
-    spike_per_sample: float = setting(0.0, "the spike test's design: the probability that a healthy sample crosses "
+    spike_per_sample: float = setting(0.0, "the spike checks' design: the probability that a healthy sample crosses "
                                            "it; above 0, calibrating measures spike_sigma for it on the healthy "
                                            "runs' residuals (each run's from the reference it was scored by; "
                                            "exponential tail beyond their 90th percentile); 0: spike_sigma as given",

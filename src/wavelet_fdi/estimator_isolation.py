@@ -87,6 +87,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.stats import chi2
 
+from .calibration import excess_tail_threshold
 from .reference_estimator import FACTOR_BOUNDS, EstimatorReference, EstimatorStream
 from .statistics import parse_statistic
 
@@ -146,8 +147,6 @@ STEP_SHARE = 0.5
 JUMP_SAMPLES = 8
 #: the sensor fault hypotheses (what a confirmed alarm is named by)
 SENSOR_CLASSES = ("probe_bias", "probe_drift", "probe_noise")
-#: the null's tail: exponential beyond this quantile (a generalised Pareto tail of shape 0)
-TAIL_QUANTILE = 0.9
 #: the design: the probability that the confirmation takes a healthy deviation for a fault
 DEFAULT_ALPHA = 1e-3
 #: where the null is sampled: a pretended detection at every block boundary of each held-out run after its
@@ -451,8 +450,8 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     # and only where the reading itself stepped once, by at least half the offset named (a model that parted from
     # the plant slowly is fitted by an offset too, with no step in the reading; a steep passage steps many times)
     stepped = "probe_bias" in ev and _reading_stepped(ref, rows, w, ev["probe_bias"][1])
-    confirmed_by = [k for k, r in ratios.items()
-                    if r > 1.0 and sensor in CONFIRMS.get(k, ()) and (k != "jump" or stepped)]
+    # the jump confirms by its own rule below (before this one), never through the window's best fit
+    confirmed_by = [k for k, r in ratios.items() if r > 1.0 and sensor in CONFIRMS.get(k, ()) and k != "jump"]
     confirmation = {"statistics": {k: round(v, 3) for k, v in stats.items()},
                     "thresholds": {k: margins[k] for k in stats if k in margins},
                     "confirmed_by": confirmed_by, "alpha_per_test": conf.get("alpha_per_test")}
@@ -561,27 +560,13 @@ def null_statistics(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray,
     return out
 
 
-def tail_threshold(values: Sequence[float], alpha: float, quantile: float = TAIL_QUANTILE) -> dict:
-    """The value a healthy statistic exceeds with probability ``alpha``: the empirical ``quantile`` u, and beyond
-    it an exponential tail with the mean excess over u as its scale (the generalised Pareto tail of shape 0,
-    fitted by maximum likelihood): u + scale ln((1 - quantile) / alpha)."""
-    v = np.sort(np.asarray([x for x in values if math.isfinite(x)], dtype=float))
-    if len(v) < 20:
-        raise ValueError(f"{len(v)} null values: too few to place a margin (20 at least)")
-    u = float(np.quantile(v, quantile))
-    excess = v[v > u] - u
-    scale = float(excess.mean()) if len(excess) else 0.0
-    scale = max(scale, 0.5)  # never below the chi-square(1)/2 tail's own scale, a well-specified model's
-    return {"threshold": round(u + scale * math.log((1.0 - quantile) / alpha), 3), "u": round(u, 3),
-            "scale": round(scale, 3), "n": int(len(v))}
-
-
 def confirmation_thresholds(nulls: Sequence[dict[str, float]], alpha: float = DEFAULT_ALPHA) -> dict:
-    """Each statistic's margin (:func:`tail_threshold`) from the pooled null values, at ``alpha`` split equally
+    """Each statistic's margin (:func:`~wavelet_fdi.calibration.excess_tail_threshold`) from the pooled null
+    values, at ``alpha`` split equally
     among the statistics that have a null (Bonferroni: a healthy deviation passes any of them with probability at
     most ``alpha``)."""
     have = [k for k in CONFIRM_STATISTICS if sum(1 for d in nulls if k in d) >= 20]
     per_test = alpha / max(len(have), 1)
-    tails = {k: tail_threshold([d[k] for d in nulls if k in d], per_test) for k in have}
+    tails = {k: excess_tail_threshold([d[k] for d in nulls if k in d], per_test) for k in have}
     return {"thresholds": {k: t["threshold"] for k, t in tails.items()}, "null_tail": tails,
             "alpha_per_test": per_test, "alpha": alpha}

@@ -42,7 +42,7 @@ import numpy.typing as npt
 
 from phfdi_base.errors import UserError
 
-from .calibration import tail_threshold, window_maxima
+from .calibration import excess_tail_threshold, tail_threshold, window_maxima
 from .config import ARL_WINDOW_SAMPLES, LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
 from .filterbank import CausalSwt
 from .healthy_range import checked_ranges, healthy_ranges, outside_masks
@@ -272,13 +272,11 @@ def measured_thresholds(model: LearnedModel, runs: Sequence[tuple[np.ndarray, np
 
 def measured_spike_level(runs: Sequence[tuple[np.ndarray, np.ndarray]], run_references: Sequence[Reference],
                          per_sample: float) -> float:
-    """The spike test's level (:class:`~wavelet_fdi.learned_statistics.Spike`): the residual magnitude a healthy
-    sample exceeds with probability ``per_sample``, measured on every run's residuals from its reference (before
-    the reference's limit where it has one): the empirical 90th percentile u and beyond it an exponential tail
-    with the mean excess as its scale, never below half a sigma (the generalised Pareto tail of shape 0, as the
-    estimator's confirmation margins are placed: :func:`wavelet_fdi.estimator_isolation.tail_threshold`)."""
-    from .estimator_isolation import tail_threshold as excess_tail
-
+    """The spike checks' level (:mod:`wavelet_fdi.spike_checks`): the residual magnitude a healthy sample exceeds
+    with probability ``per_sample``, measured on every run's residuals from its reference (before the reference's
+    limit where it has one): the empirical 90th percentile u and beyond it an exponential tail with the mean
+    excess as its scale, never below half a sigma, as the estimator's confirmation margins are placed
+    (:func:`~wavelet_fdi.calibration.excess_tail_threshold`)."""
     values: list[np.ndarray] = []
     for (t, rows), ref in zip(runs, run_references):
         stream = ref.new_state()
@@ -287,7 +285,7 @@ def measured_spike_level(runs: Sequence[tuple[np.ndarray, np.ndarray]], run_refe
         values.append(np.abs(r[np.isfinite(r)]))
     v = np.concatenate(values) if values else np.empty(0)
     try:
-        return float(excess_tail(v.tolist(), per_sample)["threshold"])
+        return float(excess_tail_threshold(v.tolist(), per_sample)["threshold"])
     except ValueError as exc:
         raise UserError(f"spike_per_sample {per_sample:g}: {exc}") from None
 

@@ -173,12 +173,13 @@ def test_the_jump_statistic_is_one_sided_and_the_scale_change_is_not():
 def test_the_design_rate_is_split_between_the_statistics():
     """Two statistics with the same null get the same margin, each at alpha / 2: the margin of one statistic
     alone at alpha / 2 (Bonferroni: a healthy deviation passes either with probability at most alpha)."""
-    from wavelet_fdi.estimator_isolation import confirmation_thresholds, tail_threshold
+    from wavelet_fdi.calibration import excess_tail_threshold
+    from wavelet_fdi.estimator_isolation import confirmation_thresholds
 
     rng = np.random.default_rng(11)
     values = rng.exponential(3.0, 500)
     conf = confirmation_thresholds([{"change": v, "jump": v} for v in values], alpha=1e-3)
-    alone = tail_threshold(values, 5e-4)["threshold"]
+    alone = excess_tail_threshold(values, 5e-4)["threshold"]
     assert conf["alpha_per_test"] == pytest.approx(5e-4)
     assert conf["thresholds"] == {"change": alone, "jump": alone}
 
