@@ -44,7 +44,11 @@ ESTIMATOR_SETTINGS = {"observer_time_constant_s": 60.0, "observer_alarm_time_con
                       # within a sample and shows as one innovation the band statistics see limited to clip_sigma: the
                       # spike test at the level held-out innovations pass once in a million samples (about 4 days of
                       # the rig's 0.35 s sampling), measured on the calibration's leave-one-run-out residuals
-                      "spike_per_sample": 1e-6}
+                      "spike_per_sample": 1e-6,
+                      # a probe that drifts against the only feed that runs (up while acid alone runs): a reading
+                      # that a one-reagent vessel cannot give, whatever its model (wavelet_fdi.feed_checks), at the
+                      # spike test's rate per sample
+                      "against_feed_per_sample": 1e-6}
 
 
 def feed_strength_mM(recipe: dict[str, float]) -> float:

@@ -88,6 +88,7 @@ from scipy.optimize import minimize_scalar
 from scipy.stats import chi2
 
 from .calibration import excess_tail_threshold
+from .feed_checks import SETTLE_S, WINDOW_SAMPLES, feed_codes, reading_rate_ph_per_min
 from .reference_estimator import FACTOR_BOUNDS, EstimatorReference, EstimatorStream
 from .statistics import parse_statistic
 
@@ -119,7 +120,11 @@ NOISE_STATISTICS = ("energy", "energy_down", "repeats")
 #: a probe stepped), so the window starts there instead of at a change time looked for before it (a healthy
 #: sample above 2 sigma 24 samples before a 1 pH step started the window there, and the jump then lay outside its
 #: head); the noise statistics' keep theirs too (a noise change moves no mean)
-ONSET_STATISTICS = ("spike", *NOISE_STATISTICS)
+ONSET_STATISTICS = ("spike", "against_feed", *NOISE_STATISTICS)
+#: a feed check's crossing (wavelet_fdi.feed_checks): a reading that moved against the only feed that ran, a test of
+#: its own at its own stated rate; what it is evidence for (an error of the reading that moves it one way)
+AGAINST_FEED = "against_feed"
+AGAINST_FEED_CLASSES = ("probe_bias", "probe_drift")
 #: the run's stretch before the window that the two-sample noise test compares with (samples), and the least
 #: that makes a comparison (below it: the healthy runs' band of noise scales)
 NOISE_BEFORE_SAMPLES = 1024
@@ -127,9 +132,6 @@ NOISE_BEFORE_MIN_SAMPLES = 32
 #: the least samples of one pump state before the window that the change test compares that state's window
 #: samples with
 STATE_MIN_SAMPLES = 16
-#: the span of a pump's recent mean flow that the change test's pump state holds (s): three times the rig's mixing
-#: zone's time constant as fitted (5-11 s, docs/diagnosis.md)
-SETTLE_S = 30.0
 #: the confirmation's statistics (module doc); the design probability is split equally among them (Bonferroni):
 #: at the first look the change and the jump, at each later look the change over the longer window
 #: (``change@N``, N samples after the detection: :data:`LOOK_AFTER_SAMPLES`)
@@ -479,6 +481,8 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     if stepped and ratios.get("jump", 0.0) > 1.0:
         confirmation.update(confirmed_by=["jump"], stepped=True)
         return {**result, **_naming("probe_bias", ev), "confirmed": True, "confirmation": confirmation}
+    if kind == AGAINST_FEED:
+        return _judge_against_feed(ref, t_s, rows, w, ev, result, confirmation)
     if confirmed_by and not beaten and not still and not weak:
         return {**result, **_naming(sensor, ev), "confirmed": True, "confirmation": confirmation}
     named = explanation or "unexplained"
@@ -490,6 +494,30 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     confirmation["compared_samples"] = compared
     return {**result, **_naming(named, ev), "confirmed": False, "confirmation": confirmation,
             "look_again": compared >= STATE_MIN_SAMPLES}
+
+
+def _judge_against_feed(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, w: _Window, ev: dict,
+                        result: dict, confirmation: dict) -> dict:
+    """A feed check's window: the reading moved against the only feed that ran, by a test of its own at its own
+    stated rate (wavelet_fdi.feed_checks), which no healthy re-adaptation can pass: a feed's strength scaled by any
+    c >= 0 moves the pH with the feed or not at all. So the check confirms, and the window only names the fault:
+    the probe offset or drift that moves the reading against the feed and fits best. Where neither fitted one moves
+    it that way (a drift that began long before the window has its error in the filter's state there, and the fits
+    answer another question), a drift at the rate the reading moved against the feed in the test's window, a lower
+    bound (the pH itself moved with the feed)."""
+    m = len(ref.feeds)
+    window = np.asarray(rows[w.a:w.b], dtype=float)
+    codes = feed_codes(window[:, :m], np.array([f.strength_mM for f in ref.feeds]))
+    direction = int(np.sign(codes.sum()))  # the feed that ran in most of the window (the test's own)
+    moving = [k for k in AGAINST_FEED_CLASSES if direction and np.sign(ev[k][1]) == -direction]
+    confirmation.update(confirmed_by=[AGAINST_FEED], against_feed_direction=direction)
+    if moving:
+        return {**result, **_naming(_best(ev, moving), ev), "confirmed": True, "confirmation": confirmation}
+    head = slice(w.a, min(w.a + WINDOW_SAMPLES, w.b))
+    rate = reading_rate_ph_per_min(np.asarray(t_s[head], dtype=float), np.asarray(rows[head], dtype=float)[:, m])
+    named = {**ev, "probe_drift": (ev["probe_drift"][0], rate)}
+    return {**result, **_naming("probe_drift", named), "confirmed": True, "confirmation": confirmation,
+            "size_is_lower_bound": True}
 
 
 def _reading_stepped(ref: EstimatorReference, rows: np.ndarray, w: _Window, offset_ph: float) -> bool:

@@ -44,6 +44,8 @@ from phfdi_base.errors import UserError
 
 from .calibration import excess_tail_threshold, tail_threshold, window_maxima
 from .config import ARL_WINDOW_SAMPLES, LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
+from .feed_checks import FeedCheck, FeedChecks
+from .feed_checks import level as feed_level
 from .filterbank import CausalSwt
 from .healthy_range import checked_ranges, healthy_ranges, outside_masks
 from .learned_statistics import LEARNED_STATISTICS, Chunk, LearnedStatistic, Repeats
@@ -434,6 +436,13 @@ class LearnedDetector:
         # a confirming reference's spikes (one innovation beyond spike_sigma, before the reference's limit) are each
         # judged once as a step of the reading (wavelet_fdi.spike_checks)
         self.spikes = SpikeChecks(model.settings.spike_sigma if self.confirming else 0.0, self._naming_after)
+        # a confirming reference that knows its feeds' directions: a reading moving against the only feed that runs
+        # is judged once as a probe offset or drift (wavelet_fdi.feed_checks)
+        directions = getattr(model.reference, "feed_directions", None)
+        per_sample = model.settings.against_feed_per_sample
+        self.feed_checks = FeedChecks(feed_level(per_sample) if self.confirming and directions and per_sample > 0
+                                      else 0.0, tuple(directions or ()), self._naming_after)
+        self._feed_fault_stretch: tuple[int, float] | None = None  # the feed stretch a confirmed crossing was in
         self._last_outside_t = -math.inf  # the last deviation outside calibration (the announcements' hold)
         # per channel the last sample beyond the healthy runs' range (an alarm whose window holds one says so)
         self._ranges = model.source.get("healthy_ranges") or {}
@@ -462,6 +471,8 @@ class LearnedDetector:
         r = self.stream.residuals(t, rows)
         if self.spikes.level:
             self.spikes.scan(getattr(self.stream, "last_unlimited", r), t, self.samples_processed, self.fill_samples)
+        if self.feed_checks.level:
+            self.feed_checks.scan(t, rows, self.samples_processed, self.fill_samples)
         missing = ~np.isfinite(r)
         events += self._missing_events(missing, t)
         out = self.swt.process(np.where(missing, 0.0, r))
@@ -517,6 +528,8 @@ class LearnedDetector:
         events = []
         for spike in self.spikes.due(upto, self._naming_after, final):
             events += self._check_spike(spike, upto)
+        for check in self.feed_checks.due(upto, self._naming_after, final):
+            events += self._check_feed(check, upto)
         for a in list(self._relook):
             events += self._look_again(a, upto)
         for a in list(self._to_name):
@@ -578,6 +591,65 @@ class LearnedDetector:
                              f"alarm {a['alarm_id']}: {iso['family']} fault, {iso['description']} ({size}); the reading "
                              f"stepped at {spike.time_s:g} s (one innovation of {abs(spike.sigma):.1f} sigma, beyond "
                              f"the spike level {self.spikes.level:g})", dict(a))]
+
+    def _check_feed(self, check: FeedCheck, upto: int) -> list[LearnedEvent]:
+        """A reading that moved against the only feed (wavelet_fdi.feed_checks), its window ended: judged by the
+        namer on the test's window and the samples after it. Confirmed (a probe offset or drift against the feed
+        beats every healthy re-adaptation), it turns the deviation that is up into a fault alarm, or is a fault
+        alarm of its own; else it is counted and dropped. Nothing is judged while a fault alarm is up, nor after a
+        confirmed crossing in the same stretch of the same feed running alone (a probe that keeps drifting crosses
+        again and again: one fault, one alarm)."""
+        assert self.namer is not None, "feed checks are made only for a reference that names faults"
+        if self._feed_fault_stretch == (check.direction, check.since_s):
+            return []
+        up = self._alarm if self.in_alarm else None
+        if up is not None and up.get("verdict") == "fault":
+            return []
+        end = min(check.index + self._naming_after, upto)
+        first = max(0, end - NAMING_WINDOW)
+        k = np.arange(first, end) % NAMING_RING
+        ph = self.channels[0]
+        name = f"{ph}.raw.against_feed"
+        iso = self.namer(self._ring_t[k], self._ring_x[k], max(check.first_index - first, 0), check.index - first,
+                         name)
+        self.feed_checks.checked += 1
+        if not iso.get("confirmed") or "against_feed" not in (iso.get("confirmation") or {}).get("confirmed_by", ()):
+            return []
+        self.feed_checks.faults += 1
+        self._feed_fault_stretch = (check.direction, check.since_s)
+        at = end - 1
+        t_now = float(self._ring_t[at % NAMING_RING])
+        feed = "acid" if check.direction < 0 else "base"
+        since = float(self._times[check.first_index % TIME_RING])
+        why = (f"the reading moved against the only feed that ran ({feed}) from {since:g} s (t = {check.value:.1f} at "
+               f"{check.time_s:g} s, level {self.feed_checks.level:.2f})")
+        iso = {**iso, "against_feed": {"first_time": since,
+                                       "time": check.time_s, "t": round(check.value, 3),
+                                       "level": round(self.feed_checks.level, 3), "feed_direction": check.direction}}
+        if up is not None:  # the deviation up is this fault: confirmed, as a look that confirms it would
+            for waiting in (self._to_name, self._relook):
+                if up in waiting:
+                    waiting.remove(up)
+            if up["alarm_id"] not in self._named:
+                self._named.append(up["alarm_id"])
+            up["isolation"] = iso
+            return self._verdict(up, iso, t_now, at)
+        alarm_id = len(self.alarms) + 1
+        a = {"alarm_id": alarm_id, "detection_time": check.time_s, "detection_index": check.index,
+             "onset_index": check.first_index, "onset_time": since,
+             "statistic": name, "statistic_value": check.value, "threshold": self.feed_checks.level,
+             "channels": [ph], "contributions": {ph: {"share": 1.0, "bands": {"raw": 1.0}}}, "cleared_time": None,
+             "isolation": iso, "outside_healthy_range": [], "verdict": "fault", "confirmed_time": t_now,
+             "confirmed_index": at}
+        self.alarms.append(a)
+        self._named.append(alarm_id)
+        self.in_alarm, self._alarm, self._last_crossing = True, a, at
+        self._episode[:] = 0.0
+        self._peak = np.zeros(self.m)
+        size = f"{iso['size']:g} {iso['unit']}".strip()
+        return [LearnedEvent("alarm", t_now, at, "ERROR",
+                             f"alarm {alarm_id}: {iso['family']} fault, {iso['description']} ({size}); {why}",
+                             dict(a))]
 
     def _named_event(self, a: dict, iso: dict, end: int) -> LearnedEvent:
         when = float(self._ring_t[(end - 1) % NAMING_RING])

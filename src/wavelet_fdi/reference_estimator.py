@@ -206,6 +206,11 @@ class EstimatorReference:
     def residual_channels(self) -> tuple[str, ...]:
         return (self.ph_channel,)
 
+    @property
+    def feed_directions(self) -> tuple[int, ...]:
+        """Per feed, the way it moves the pH: -1 an acid, +1 a base (its strength's sign; wavelet_fdi.feed_checks)."""
+        return tuple(1 if f.strength_mM > 0 else -1 for f in self.feeds)
+
     def new_state(self) -> "EstimatorStream":
         return EstimatorStream(self)
 

@@ -87,3 +87,31 @@ def test_a_probe_that_steps_on_the_acid_plateau_is_a_confirmed_offset(calibrated
         named += [any(a["isolation"]["fault_class"] == "probe_bias" and 0.7 < a["isolation"]["size"] < 1.3
                       for a in faults)]
     assert sum(named) >= 4, named
+
+
+def test_a_probe_drifting_up_while_acid_alone_runs_is_a_confirmed_drift(calibrated):
+    """A probe drifting up at 0.5 pH/min from an onset drawn by the test's own generator where acid alone runs (a
+    minute after the run's start at least, two minutes before its end), on six simulated acid additions and
+    titrations the calibration never had. On a strong acid's plateau the tracking filter follows such a drift as
+    a weaker acid and the band statistics see little: before the feed checks none of the six was named a drift
+    (one a probe that lost its noise, four raised nothing). A reading rising while only acid runs is what no
+    healthy vessel gives (wavelet_fdi.feed_checks): each is to be a fault alarm after the onset named a probe
+    drift up, none before it. Deterministic (fixed seeds); five of six are asked, so that a platform's last-bit
+    differences in the filter cannot fail it."""
+    named = []
+    for op, seed in (("add_acid_new_setting", 91), ("titration_base_to_acid_new_rate", 92), ("titration_ramp_acid", 93),
+                     ("titration_base_to_acid_new_rate", 94), ("titration_ramp_acid", 95),
+                     ("add_acid_new_setting", 96)):
+        healthy = simulate_run(op, seed).measured(CHANNELS)
+        t = healthy.time_s
+        acid, base = healthy.x[:, CHANNELS.index("acid_flow_ml_s")], healthy.x[:, CHANNELS.index("base_flow_ml_s")]
+        alone = np.flatnonzero((acid > 0) & (base == 0) & (t > t[0] + 60.0) & (t < t[-1] - 120.0))
+        assert len(alone), f"{op} seed {seed}: acid never runs alone: the test would test nothing"
+        onset = round(float(t[alone[int(np.random.default_rng(seed).integers(len(alone)))]]), 1)
+        alarms = _alarms(calibrated, simulate_run(op, seed, probe_fault=ProbeFault("probe_drift", onset, 0.5,
+                                                                                   seed=seed)))
+        faults = [a for a in alarms if a["verdict"] == "fault"]
+        assert not [a for a in faults if a["detection_time"] < onset], (op, seed, faults)
+        named += [bool(faults) and faults[0]["isolation"]["fault_class"] == "probe_drift"
+                  and faults[0]["isolation"]["size"] > 0]
+    assert sum(named) >= 5, named
