@@ -140,6 +140,15 @@ def _named_lines(iso: dict, verdict: str | None, u: str) -> list[str]:
     if iso["family"] == "none" and verdict is None:  # a namer that does not confirm found no fault to name
         return [f"  not named: {iso['description']}"]
     out = [f"  named: {iso['family']} fault, {iso['description']} ({size}{began}" + (f"; {how})" if how else ")")]
+    against = iso.get("against_feed")
+    if against:  # confirmed by the feed check (wavelet_fdi.feed_checks), not by the innovations' change
+        feed = "acid" if against["feed_direction"] < 0 else "base"
+        out.append(f"  confirmed: the reading moved against the only feed that ran ({feed}) from "
+                   f"{against['first_time']:g} {u}: t = {against['t']:g} > {against['level']:g} (the level a "
+                   f"reading about a pH the {feed} moves its own way passes with the stated probability per sample)"
+                   + ("; the size is the reading's own rate in that window, a lower bound"
+                      if iso.get("size_is_lower_bound") else ""))
+        return out
     if change:
         out.append(f"  confirmed: the innovations' change against the run's own past: {change} (the margins), and "
                    f"the probe fault fits better than any feed's re-adapted strength")

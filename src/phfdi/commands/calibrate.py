@@ -424,14 +424,14 @@ def run_estimator(args: argparse.Namespace) -> int:
     print(f"  healthy RMS per band ({', '.join(model.settings.bands())}): "
           + " ".join(f"{v:.2f}" for v in model.band_sigma[0])
           + f" (from {model.source.get('bands_from', 'the runs themselves')})")
-    print_confirmation(ref)
+    print_confirmation(ref, model.settings)
     print_healthy_ranges(model)
     print(f"wrote {args.out}")
     return 0
 
 
-def print_confirmation(ref) -> None:
-    """The fault confirmation's margin and its design (an estimator reference)."""
+def print_confirmation(ref, settings=None) -> None:
+    """The fault confirmation's margin and its design (an estimator reference), and the feed checks' level."""
     conf = getattr(ref, "confirm", None) or {}
     if not conf.get("thresholds"):
         return
@@ -449,6 +449,14 @@ def print_confirmation(ref) -> None:
           f"healthy operation exceeds each margin with probability {conf['alpha_per_test']:g} "
           f"(at least {n} null values each, from {'each run held out' if conf.get('held_out') else 'the one run itself'}); "
           f"else it is a deviation outside calibration (WARN)")
+    per_sample = getattr(settings, "against_feed_per_sample", 0.0)
+    if per_sample:
+        from wavelet_fdi.feed_checks import level
+
+        print(f"  feed checks: a reading that moves against the only feed that runs (up while acid alone runs, down "
+              f"while base alone runs) by t > {level(per_sample):.2f} is a fault alarm, a probe offset or drift: no "
+              f"healthy vessel gives it; a healthy sample passes that level with probability {per_sample:g} "
+              f"(wavelet_fdi.feed_checks states the assumptions)")
     if not conf.get("held_out"):
         print("  note: one calibration run: the scales and the margin come from that run itself, not from a day it did "
               "not see; calibrate on two runs or more to measure them across days")
