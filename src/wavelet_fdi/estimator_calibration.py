@@ -71,5 +71,10 @@ def calibrate_estimator(runs: Runs, start: EstimatorReference, settings: Learned
                            f"on {'leave-one-run-out' if held_out else 'in-sample'} residuals of {len(runs)} run(s), "
                            f"its tail beyond the 90th percentile exponential"))
     ref = replace(ref, confirm=confirm)
-    return calibrate_bands(ref, runs, settings, {**(source or {}), "bands_from": "leave-one-run-out residuals"
-                                                 if held_out else "the run's own residuals"}, folds)
+    model = calibrate_bands(ref, runs, settings, {**(source or {}), "bands_from": "leave-one-run-out residuals"
+                                                  if held_out else "the run's own residuals"}, folds)
+    # a reading beyond the spike level is held until the next says what it was: a lone glitch is dropped (the state
+    # does not jump to it and crawl back, a mean deviation the offset hypothesis fits), a step is followed as before
+    # (wavelet_fdi.estimator_kernel)
+    model.reference = replace(ref, gate_sigma=float(model.settings.spike_sigma))
+    return model

@@ -131,6 +131,34 @@ def _curve_at(xs, betas, xp: float) -> tuple[float, float]:
     return (j - 1 + frac) * 0.001, betas[j]
 
 
+def _standardised(xp: float, x: float, pv: float, a: float, bp: float, dt: float, k: int, xm, r_meas, ph,
+                  php: float, rel2: float, walk2: float, eps2: float, sp2: float, tim: float, in_x: bool) -> float:
+    """The standardised innovation of reading k against the prediction (xp, from x and P over dt), as the update
+    computes it (the gate's look at the reading after a held one)."""
+    step = xp - x
+    pm = a * a * pv + rel2 * step * step + walk2 * bp * bp * dt
+    rate_error = tim * step / dt if dt > 0 else 0.0
+    tv = rate_error * rate_error
+    if in_x:
+        return (xm[k] - xp) / math.sqrt(pm + r_meas[k] + tv)
+    return (ph[k] - php) / math.sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
+
+
+def _resolve_held(x: float, pv: float, held_nu: float, held_sv: float, held_sign: float, gate: float, fac,
+                  strengths, qp, v: float, dt: float, xs, betas, k: int, xm, r_meas, ph, rel2: float, walk2: float,
+                  eps2: float, sp2: float, tim: float, in_x: bool) -> tuple[float, float]:
+    """The state after a held reading, once reading k says what it was: beyond the gate on the same side, the held
+    reading's update made on the state held for it (the pH did move); else the state as it is (a lone outlier,
+    dropped)."""
+    a, xp = _predict(x, fac, strengths, qp, v, dt)
+    php, bp = _curve_at(xs, betas, xp)
+    z = _standardised(xp, x, pv, a, bp, dt, k, xm, r_meas, ph, php, rel2, walk2, eps2, sp2, tim, in_x)
+    if (z > gate and held_sign > 0) or (z < -gate and held_sign < 0):
+        g_held = pv / held_sv
+        return x + g_held * held_nu, (1.0 - g_held) * pv
+    return x, pv
+
+
 def _accumulate(gg, gy, on, fac, strengths, qp, dt: float, v: float, corr: float) -> None:
     """A zone's block sums for the least-squares strength correction: regressors g_i = f_i s_i q_i dt / V."""
     m = len(strengths)
@@ -149,11 +177,17 @@ def _run(t, flows, ok, xm, r_meas, ph, out, unlimited,  # noqa: C901 - one tight
     """The recursion over the chunk's rows (module doc of reference_estimator for the equations). ``flows`` is
     written (a missing flow holds the last one); ``out`` gets the residual limited to +-clip, ``unlimited`` the
     same standardised innovation before the limit; the state arrays (factors, block sums, last flows) are updated
-    in place; ``scalars`` = (started, x, P, last_t, zone, samples, nll, blocks) in, the same out (returned with
-    the trace's length)."""
-    v, rel2, walk2, eps2, sp2, tim, clip, tau, lo, hi, cap = consts
+    in place; ``scalars`` = (started, x, P, last_t, zone, samples, nll, blocks, held_nu, held_sv, held_sign) in,
+    the same out (returned with the trace's length).
+
+    The gate: a reading whose standardised innovation exceeds ``gate`` is held (the state is predicted across it,
+    its innovation and likelihood are those of its prediction) until the next reading says what it was. Beyond the
+    gate on the same side too: the pH did move so far (a step, a knee the model's timing missed), and the held
+    reading's update is made after all (the state and its variance as they would have been, the strength
+    adaptation's block sums without it), before the next reading's; else it was a lone outlier and is dropped."""
+    v, rel2, walk2, eps2, sp2, tim, clip, gate, tau, lo, hi, cap = consts
     block, correct, adapting, in_x = flags
-    started, x, pv, last_t, zone, samples, nll, blocks = scalars
+    started, x, pv, last_t, zone, samples, nll, blocks, held_nu, held_sv, held_sign = scalars
     m = len(strengths)
     ntrace = 0
     for k in range(len(t)):
@@ -173,6 +207,11 @@ def _run(t, flows, ok, xm, r_meas, ph, out, unlimited,  # noqa: C901 - one tight
         dt = t[k] - last_t
         if not dt > 0:
             dt = 0.0
+        if held_sign != 0.0:  # the reading before was held at the gate: this one says what it was
+            if ok[k] and correct:
+                x, pv = _resolve_held(x, pv, held_nu, held_sv, held_sign, gate, zf[zone], strengths, qp, v, dt, xs,
+                                      betas, k, xm, r_meas, ph, rel2, walk2, eps2, sp2, tim, in_x)
+            held_sign = 0.0
         a, xp = _predict(x, zf[zone], strengths, qp, v, dt)
         php, bp = _curve_at(xs, betas, xp)  # pH(x-) and beta there: the curve's table
         step = xp - x
@@ -184,11 +223,14 @@ def _run(t, flows, ok, xm, r_meas, ph, out, unlimited,  # noqa: C901 - one tight
             tv = rate_error * rate_error  # (a product, not ** 2: libm's pow may differ from it in the last bit)
             sv = pm + r_meas[k] + tv
             nu = xm[k] - xp
-            gain = pm / sv if correct else 0.0
+            z = nu / math.sqrt(sv) if in_x else (ph[k] - php) / math.sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
+            hold = z > gate or z < -gate
+            if hold:
+                held_nu, held_sv, held_sign = nu, sv, (1.0 if z > 0 else -1.0)
+            gain = pm / sv if correct and not hold else 0.0
             corr = gain * nu
             x = xp + corr
             pv = (1.0 - gain) * pm
-            z = nu / math.sqrt(sv) if in_x else (ph[k] - php) / math.sqrt((pm + eps2 + tv) / (bp * bp) + sp2)
             out[k] = -clip if z < -clip else clip if z > clip else z
             unlimited[k] = z
             nll += 0.5 * (math.log(sv) + nu * nu / sv)
@@ -205,7 +247,7 @@ def _run(t, flows, ok, xm, r_meas, ph, out, unlimited,  # noqa: C901 - one tight
             blocks += 1
             ntrace = _adapt(zf, gg, gy, on, tau, lo, hi, cap, blocks, tr_block, tr_rel, tr_on, tr_fac, tr_zone,
                             ntrace, rel)
-    return (started, x, pv, last_t, zone, samples, nll, blocks), ntrace
+    return (started, x, pv, last_t, zone, samples, nll, blocks, held_nu, held_sv, held_sign), ntrace
 
 
 def compiled() -> Callable[..., Any]:
@@ -220,7 +262,7 @@ def compiled() -> Callable[..., Any]:
 
         jit = njit(cache=True)
         for name in ("_py_max", "_py_min", "_bisect_left", "_bisect_right", "_ridge_solve", "_adapt", "_predict",
-                     "_curve_at", "_accumulate"):
+                     "_curve_at", "_standardised", "_resolve_held", "_accumulate"):
             globals()[name] = jit(globals()[name])
         _COMPILED = jit(_run)
     return _COMPILED

@@ -42,7 +42,14 @@ at the predicted pH: at the knee of a titration, where beta changes tenfold with
 standard deviation is too small on the steep side, and a reading landing there read as 6 to 8 sigma.
 The residual is limited to +-``clip_sigma`` (4): a one-sample outlier then moves the CUSUMs no more than
 a 4-sigma sample, while a fault that persists still adds 4 sigma a sample (the psi-function of robust
-filtering: Masreliez & Martin 1977; the Kalman update itself is not limited).
+filtering: Masreliez & Martin 1977). The Kalman update itself is gated (``gate_sigma``, set at calibration to
+the detector's spike level, which a healthy innovation passes once in a million samples): a reading beyond it is
+held, the state predicted across it, until the next reading says what it was. Beyond the gate on the same side
+too, the pH did move that far (a step, a knee the model's timing missed): the held reading's update is made after
+all, then the next one's, and the filter is where it would have been. Otherwise the held reading was a lone
+outlier and is dropped: the state stays where it was. Ungated, where the curve is steeper than at the true pH a
+glitch's measurement reads as more precise, the state jumped to a 1 pH glitch and crawled back over ten samples,
+and the return read as a probe offset: a third of such glitches on the rig were fault alarms.
 
 Adaptation ("slowly adapted run parameters"). Day-to-day the reagents' strengths differ by tens of per
 cent (docs/diagnosis.md), which a fixed model would call a fault on every run. Each feed's factor f_i
@@ -168,6 +175,10 @@ class EstimatorReference:
     #: the margins by which a fault hypothesis must beat healthy operation re-adapted before an alarm is a fault
     #: (wavelet_fdi.estimator_isolation, "Confirmation"); empty: every alarm is named a fault (files from before)
     confirm: dict = field(default_factory=dict, compare=False)
+    #: a reading whose standardised innovation exceeds this is held until the next one says whether it was a lone
+    #: outlier (dropped) or the pH moving (updated after all) (0: never): the detector's spike level, set at
+    #: calibration
+    gate_sigma: float = 0.0
 
     kind = KIND
     lags = 1  # the first sample only starts the state
@@ -189,6 +200,8 @@ class EstimatorReference:
             raise UserError(f"estimator: innovation must be one of {', '.join(INNOVATIONS)}, got {self.innovation!r}")
         if not (self.clip_sigma == 0.0 or self.clip_sigma > 0.0):  # also refuses NaN
             raise UserError(f"estimator: clip_sigma must be 0 (no limit) or positive, got {self.clip_sigma}")
+        if not (self.gate_sigma == 0.0 or self.gate_sigma > 0.0):
+            raise UserError(f"estimator: gate_sigma must be 0 (no gate) or positive, got {self.gate_sigma}")
         self.noise.check()
         # a hypothesis or a fit evaluation changes a noise term or a strength, not the curve: share its table
         x, beta, x_list = _curve_tables(float(self.buffer_mM), float(self.carbonate_mM))
@@ -224,7 +237,8 @@ class EstimatorReference:
                 "noise": asdict(self.noise), "adapt_time_constant_s": self.adapt_time_constant_s,
                 "block_samples": self.block_samples, "adapt_zones_ph": list(self.adapt_zones_ph),
                 "innovation": self.innovation, "clip_sigma": self.clip_sigma, "correct": self.correct,
-                "fit": self.fit_info, **({"confirm": self.confirm} if self.confirm else {})}
+                "fit": self.fit_info, **({"confirm": self.confirm} if self.confirm else {}),
+                **({"gate_sigma": self.gate_sigma} if self.gate_sigma else {})}
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "EstimatorReference":
@@ -238,7 +252,8 @@ class EstimatorReference:
                        tuple(float(b) for b in d.get("adapt_zones_ph", ())),
                        str(d.get("innovation", "ph")), float(d.get("clip_sigma", 0.0)),
                        bool(d.get("correct", True)), dict(d.get("fit") or {}),
-                       checked_confirm(d.get("confirm") or {}, f"{where}: confirm"))
+                       checked_confirm(d.get("confirm") or {}, f"{where}: confirm"),
+                       float(d.get("gate_sigma", 0.0)))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not an estimator reference ({exc})") from None
 
@@ -335,6 +350,9 @@ class EstimatorStream:
         self._on_s = np.zeros((zones, m))
         self.nll = 0.0  # running negative log-likelihood of the innovations (for fitting)
         self.blocks = 0  # block boundaries passed (the adaptation's clock: block_samples samples each)
+        #: the reading held at the gate, waiting for the next to say what it was: (innovation, its variance, side;
+        #: side 0: none held)
+        self.held: tuple[float, float, float] = (0.0, 1.0, 0.0)
         #: the standardised innovations of the last :meth:`residuals` call before the limit ``clip_sigma`` (n, 1):
         #: what a test of single large innovations reads (the residual itself counts an outlier as clip_sigma)
         self.last_unlimited: np.ndarray = np.empty((0, 1))
@@ -360,7 +378,7 @@ class EstimatorStream:
         """A copy of this state (the same or another reference, e.g. a fault hypothesis), log-likelihood reset."""
         other = EstimatorStream(ref or self.ref)
         other.x, other.p, other.last_t, other.samples = self.x, self.p, self.last_t, self.samples
-        other.blocks, other.zone = self.blocks, self.zone
+        other.blocks, other.zone, other.held = self.blocks, self.zone, self.held
         other._zf, other._qp = self._zf.copy(), self._qp.copy()
         other._gg, other._gy, other._on_s = self._gg.copy(), self._gy.copy(), self._on_s.copy()
         return other
@@ -400,12 +418,13 @@ class EstimatorStream:
         lo, hi = FACTOR_BOUNDS
         consts = (float(ref.volume_ml), nz.rate_rel_std ** 2, nz.walk_ph_per_sqrt_s ** 2, nz.curve_std_mM ** 2,
                   nz.probe_noise_ph ** 2, float(nz.timing_s), float(ref.clip_sigma or math.inf),
+                  float(ref.gate_sigma or math.inf),
                   float(ref.adapt_time_constant_s), lo, hi, MAX_BLOCK_STEP)
         flags = (int(ref.block_samples), bool(ref.correct), ref.adapt_time_constant_s > 0, ref.innovation == "x")
         started = self.x is not None
         scalars = (started, float(self.x) if self.x is not None else 0.0, float(self.p),
                    float(self.last_t) if self.last_t is not None else 0.0, int(self.zone), int(self.samples),
-                   float(self.nll), int(self.blocks))
+                   float(self.nll), int(self.blocks), *self.held)
         m, zones = len(ref.feeds), self._zf.shape[0]
         most = (len(t) // ref.block_samples + 2) * zones  # adaptations this chunk can record
         trace = (np.zeros(most, dtype=np.int64), np.zeros((most, m)), np.zeros((most, m)), np.zeros((most, m)),
@@ -415,7 +434,8 @@ class EstimatorStream:
                                    ref._beta_table, np.array(ref.adapt_zones_ph, dtype=float),  # type: ignore[attr-defined]
                                    self._zf, self._gg, self._gy, self._on_s, self._qp, np.zeros(m), *trace,
                                    consts, flags, scalars)
-        started, x, self.p, last_t, self.zone, self.samples, self.nll, self.blocks = state
+        started, x, self.p, last_t, self.zone, self.samples, self.nll, self.blocks, *held = state
+        self.held = (float(held[0]), float(held[1]), float(held[2]))
         self.x, self.last_t = (float(x), float(last_t)) if started else (None, None)
         if self.adapt_trace is not None:
             blocks, rel, on, fac, zone = trace

@@ -245,7 +245,7 @@ def test_the_residual_is_limited_and_files_before_the_zones_keep_their_residual(
         flask(innovation="volts")
 
 
-@pytest.mark.parametrize("variant", ["zones, x innovation", "one zone, ph innovation", "open loop"])
+@pytest.mark.parametrize("variant", ["zones, x innovation", "one zone, ph innovation", "open loop", "gated"])
 def test_the_compiled_recursion_is_the_written_one(variant):
     """The filter runs compiled (wavelet_fdi.estimator_kernel, Numba); the same function interpreted by Python must
     give the same residuals, likelihood, factors, adaptation trace and state to the last bit (no fast-math, no
@@ -257,7 +257,13 @@ def test_the_compiled_recursion_is_the_written_one(variant):
         ref = ref.with_values(adapt_zones_ph=(), innovation="ph", clip_sigma=0.0)
     elif variant == "open loop":
         ref = ref.with_values(correct=False)
+    elif variant == "gated":
+        ref = ref.with_values(gate_sigma=4.0)
     t, rows = _zoned_run(ref, 3000)
+    if variant == "gated":  # lone glitches (one at a chunk's end), a step, and two glitches in a row
+        rows[[300, 1776, 2400], 2] += 1.5
+        rows[2000:, 2] -= 0.8
+        rows[[2600, 2601], 2] += 2.0
     rows[[5, 700, 701], 1] = np.nan  # a flow missing: held
     rows[[0, 1, 1500], 2] = np.nan  # readings missing: the state starts at the first and predicts through the other
 
@@ -277,5 +283,54 @@ def test_the_compiled_recursion_is_the_written_one(variant):
     assert np.isfinite(r_c[2:]).sum() > 2900  # it ran
     assert (len(s_c.adapt_trace) > 10) == ref.correct  # and adapted (open loop: nothing corrected, nothing learned)
     np.testing.assert_array_equal(r_c, r_i)
+    if variant == "gated":
+        assert s_c.held == s_i.held
     assert (s_c.nll, s_c.x, s_c.p, s_c.zone_factors, s_c.adapt_trace) == (s_i.nll, s_i.x, s_i.p, s_i.zone_factors,
                                                                            s_i.adapt_trace)
+
+
+def _gate_run(n: int = 1200) -> tuple[EstimatorReference, np.ndarray, np.ndarray]:
+    # nothing adapting: the state is x and P alone; the gate above the run's largest innovation (11.7 sigma: the
+    # base's strength the model gets wrong above pH 9, not adapted)
+    ref = flask(adapt_time_constant_s=0.0, gate_sigma=12.5)
+    t, rows = _zoned_run(ref, n)
+    return ref, t, rows
+
+
+def test_the_gate_drops_a_lone_glitch_as_a_missing_reading():
+    """One reading 2 pH off and back at the next: held at the gate, and dropped when the next reading is back
+    within it. The filter's state afterwards is exactly that of the same run with the reading missing (ungated,
+    the state jumped toward the glitch); its own innovation is still reported (what the spike check reads)."""
+    ref, t, rows = _gate_run()
+    glitch, missing = rows.copy(), rows.copy()
+    glitch[600, 2] -= 2.0
+    missing[600, 2] = np.nan
+    g, m_ = ref.new_state(), ref.new_state()
+    r = g.residuals(t, glitch)
+    m_.residuals(t, missing)
+    assert abs(g.last_unlimited[600, 0]) > 12.5, "the glitch is within the gate: nothing tested"
+    assert (g.x, g.p) == (m_.x, m_.p)
+    ungated = ref.with_values(gate_sigma=0.0).new_state()
+    ungated.residuals(t, glitch)
+    assert abs(ungated.x - m_.x) > 0 and r[600, 0] == pytest.approx(-4.0)
+
+
+def test_the_gate_follows_a_step_as_the_ungated_filter_does():
+    """The reading steps 2 pH and stays (the filter here follows over tens of samples, every innovation beyond the
+    gate): each reading is held, confirmed by the next and its update made after all, so every innovation is the
+    ungated filter's to the last bit, whatever the chunking (a held reading at a chunk's end waits for the next
+    chunk), and the state is the ungated one's but for the one reading still held."""
+    ref, t, rows = _gate_run()
+    rows[600:, 2] += 2.0
+    ungated = ref.with_values(gate_sigma=0.0).new_state()
+    r_u = ungated.residuals(t, rows)
+    u_unlimited = ungated.last_unlimited
+    for cut in (601, 900):
+        gated = ref.new_state()
+        r_g = np.vstack([gated.residuals(t[:cut], rows[:cut]), gated.residuals(t[cut:], rows[cut:])])
+        np.testing.assert_array_equal(r_g, r_u)
+        np.testing.assert_array_equal(gated.last_unlimited, u_unlimited[cut:])
+        assert abs(u_unlimited[-1, 0]) > 12.5 and gated.held[2] != 0.0, "the last reading is not held: nothing tested"
+        nu, sv, _ = gated.held
+        gain = gated.p / sv  # the held reading's update, as the next reading would make it
+        assert (gated.x + gain * nu, (1.0 - gain) * gated.p) == pytest.approx((ungated.x, ungated.p), rel=1e-12)
