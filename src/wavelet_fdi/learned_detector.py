@@ -557,23 +557,28 @@ class LearnedDetector:
 
     def _check_spike(self, spike: Spike, upto: int) -> list[LearnedEvent]:
         """A spike's window ended: a fault alarm when the namer confirms that the reading stepped there (the jump;
-        wavelet_fdi.spike_checks), else nothing but the count. A deviation raised about the spike, or up when its
-        window ended, is judged on its own: no second alarm for one fault."""
+        wavelet_fdi.spike_checks), else nothing but the count. A deviation raised about the spike (detected at it
+        or after) is judged on its own, with the same rule for a step: no second alarm for one fault. A deviation
+        up since before the spike and not confirmed is judged on its own window, which need not start at the step:
+        a step the spike check confirms makes it this fault alarm (as a look that confirms it would)."""
         assert self.namer is not None, "spikes are checked only for a reference that names faults"
         end = min(spike.index + self._naming_after, upto)
-        if any(spike.index - self.spikes.gap <= a["detection_index"] < end for a in self.alarms):
-            return []  # a deviation raised about the spike is judged on its own, with the same rule for a step
+        if any(spike.index <= a["detection_index"] < end for a in self.alarms):
+            return []
         first = max(0, end - NAMING_WINDOW)
         k = np.arange(first, end) % NAMING_RING
         name = f"{self.channels[spike.channel]}.R.spike"
         iso = self.namer(self._ring_t[k], self._ring_x[k], spike.index - first, spike.index - first, name)
         self.spikes.checked += 1
         stepped = iso.get("confirmed") and "jump" in (iso.get("confirmation") or {}).get("confirmed_by", ())
-        if not stepped or self.in_alarm:
+        up = self._alarm if self.in_alarm else None
+        if not stepped or (up is not None and up.get("verdict") == "fault"):
             return []
         self.spikes.steps += 1
         at = end - 1
         t_now = float(self._ring_t[at % NAMING_RING])
+        if up is not None:
+            return self._confirmed_by_check(up, iso, t_now, at)
         ch = self.channels[spike.channel]
         a = {"alarm_id": len(self.alarms) + 1, "detection_time": spike.time_s, "detection_index": spike.index,
              "onset_index": spike.index, "onset_time": spike.time_s, "statistic": name,
@@ -626,14 +631,8 @@ class LearnedDetector:
         iso = {**iso, "against_feed": {"first_time": since,
                                        "time": check.time_s, "t": round(check.value, 3),
                                        "level": round(self.feed_checks.level, 3), "feed_direction": check.direction}}
-        if up is not None:  # the deviation up is this fault: confirmed, as a look that confirms it would
-            for waiting in (self._to_name, self._relook):
-                if up in waiting:
-                    waiting.remove(up)
-            if up["alarm_id"] not in self._named:
-                self._named.append(up["alarm_id"])
-            up["isolation"] = iso
-            return self._verdict(up, iso, t_now, at)
+        if up is not None:
+            return self._confirmed_by_check(up, iso, t_now, at)
         alarm_id = len(self.alarms) + 1
         a = {"alarm_id": alarm_id, "detection_time": check.time_s, "detection_index": check.index,
              "onset_index": check.first_index, "onset_time": since,
@@ -650,6 +649,18 @@ class LearnedDetector:
         return [LearnedEvent("alarm", t_now, at, "ERROR",
                              f"alarm {alarm_id}: {iso['family']} fault, {iso['description']} ({size}); {why}",
                              dict(a))]
+
+    def _confirmed_by_check(self, up: dict, iso: dict, t_now: float, at: int) -> list[LearnedEvent]:
+        """A check (a spike that was a step, a reading against the feed) confirmed a fault while a deviation not
+        confirmed is up: the deviation is this fault, a fault alarm as a look that confirms it would make it (its
+        WARN stays in the log; it is named no more)."""
+        for waiting in (self._to_name, self._relook):
+            if up in waiting:
+                waiting.remove(up)
+        if up["alarm_id"] not in self._named:
+            self._named.append(up["alarm_id"])
+        up["isolation"] = iso
+        return self._verdict(up, iso, t_now, at)
 
     def _named_event(self, a: dict, iso: dict, end: int) -> LearnedEvent:
         when = float(self._ring_t[(end - 1) % NAMING_RING])

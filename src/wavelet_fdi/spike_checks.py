@@ -3,11 +3,13 @@
 The estimator reference (:mod:`wavelet_fdi.reference_estimator`) is a Kalman filter whose state uncertainty is
 large where the pumps move the pH fast for what the curve says, on a strong acid's plateau above all. A probe
 that steps there by 1 pH gives one innovation of 20 to 40 sigma and then none above 2: the filter has followed
-the step into its state. The band statistics read the residual limited to ``clip_sigma`` (4), so the step moves
-them no more than a 4 sigma outlier does, and nothing is raised (a 1 pH offset at pH 3.7 of the April
-titration: no deviation at all, leave-one-out). Over a window after the step the offset cannot be told from
-the acid pumped at 10^-b of its strength (pH = -log10 [H+] with [H+] linear in the acid added), so only the
-step itself tells them apart (:func:`wavelet_fdi.estimator_isolation.isolate`, the jump).
+the step into its state (its gate holds the first reading beyond the level until the second, still there,
+confirms it: the state then follows as before). The band statistics read the residual limited to
+``clip_sigma`` (4), so the step moves them no more than a 4 sigma outlier does, and nothing is raised (a 1 pH
+offset at pH 3.7 of the April titration: no deviation at all, leave-one-out). Over a window after the step the
+offset cannot be told from the acid pumped at 10^-b of its strength (pH = -log10 [H+] with [H+] linear in the
+acid added), so only the step itself tells them apart (:func:`wavelet_fdi.estimator_isolation.isolate`, the
+jump).
 
 A spike is a sample whose innovation, before the limit, exceeds ``spike_sigma``: the level held-out innovations
 of the calibration runs exceed with the stated probability per sample (``spike_per_sample``,
