@@ -13,7 +13,13 @@ against the sample number, signed against the running feed, over its Newey-West 
 the window's own line, Bartlett weights to lag ``NW_LAGS``: the pumps' stroke ripple correlates a few samples).
 Testable samples: exactly one feed has run (recorded flow above 0) in every row of the window and for
 ``settle_s`` before it (the mixing zone and the probe's lag: a reading still rising from the base that stopped
-is no evidence), and the window's readings are all finite.
+is no evidence), the window's readings are all finite, and an earlier window of the same stretch had the reading
+moving with the feed or level (statistic <= 0): the previous feed's transient, which decays through the mixing
+and probe lags while the new feed's effect grows, is over once the net slope has turned (it turns once). Why the
+turn and not only the settle time: on simulated days with mixing and probe twice to four times slower than the
+rig's fitted ones (zone 25-40 s, probe 6-10 s), healthy on/off runs read up to t = 47 after 30 s of settling; with
+the turn, 5.2 at most (the level is 7.7). What it costs: a drift already under way when the feed started running
+alone is not tested in that stretch.
 
 **The design rate.** Assumptions, stated: (1) while one feed runs the true pH is monotone in that feed's
 direction (well mixed, no other reagent, no unrecorded feed); (2) the reading's error about it is stationary
@@ -159,6 +165,9 @@ class FeedChecks:
         self._hist_y = np.empty(0)
         self._code = 0  # the last row's feed code, and since when (time) it held
         self._since_s = np.nan
+        # the stretch of the last tested window, and whether the reading had turned with its feed by its end
+        self._turned_since = np.nan
+        self._turned = False
 
     def scan(self, t: np.ndarray, rows: np.ndarray, first_index: int, from_index: int) -> None:
         """Note the crossings among these rows (global index of the first: ``first_index``), none before global
@@ -192,12 +201,27 @@ class FeedChecks:
         finite = np.isfinite(means).all(axis=1)
         rows_tested = k[testable][finite]
         z = _batch_means_t(means[finite], codes[rows_tested])
-        for i, value in zip(rows_tested[z > self.level], z[z > self.level]):
+        crossed = (z > self.level) & self._turned_before(z, since[rows_tested])
+        for i, value in zip(rows_tested[crossed], z[crossed]):
             g = first_index + int(i)
             if g < from_index or g - self._last < self.gap:
                 continue
             self.pending.append(FeedCheck(g, float(t[i]), g - (w - 1), int(codes[i]), float(value), float(since[i])))
             self._last = g
+
+    def _turned_before(self, z: np.ndarray, since: np.ndarray) -> np.ndarray:
+        """Per tested window (in order), whether an earlier tested window of the same stretch (its feed running
+        alone since the same time) had the reading moving with the feed or level (statistic <= 0), this chunk's or
+        an earlier one's: the previous feed's transient is over (it decays through mixing and probe lags while the
+        new feed's effect grows: the net slope turns once)."""
+        with_feed = z <= 0.0
+        new_stretch = np.r_[True, since[1:] != since[:-1]]
+        group = np.cumsum(new_stretch) - 1
+        before: np.ndarray = np.cumsum(with_feed) - with_feed  # windows with the feed before each, in the chunk
+        turned = before - before[new_stretch][group] > 0
+        turned |= (since == self._turned_since) & self._turned  # the stretch the last chunk ended in
+        self._turned_since, self._turned = float(since[-1]), bool(turned[-1] or with_feed[-1])
+        return turned
 
     def _run_starts(self, t: np.ndarray, codes: np.ndarray) -> np.ndarray:
         """Per row, the time its feed code has held since (the record's first row for a code it started with:

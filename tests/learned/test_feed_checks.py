@@ -75,16 +75,25 @@ def test_a_reading_rising_under_acid_alone_is_found_and_the_same_under_base_is_n
     assert _crossings(*_acid_run(None), len(t)) == []
 
 
-def test_nothing_is_tested_until_the_feed_has_run_alone_for_the_settle_time():
-    """The base ran until 100 s: the reading may still rise from it (mixing, the probe's lag) for SETTLE_S, so a
-    rise right after it stopped is not tested; the same rise once acid has run alone that long is."""
-    t, rows = _acid_run(100.0)
+def test_a_stretch_is_tested_once_settled_and_turned_with_its_feed():
+    """The base ran until 100 s; after it the reading goes on rising toward where the base was taking it (the
+    mixing zone and the probe lag it, here with a 40 s time constant, longer than the settle time) and then falls
+    with the acid; from 300 s it drifts up. Nothing crosses before 300 s (the transient against the acid is no
+    evidence: tested only once a window of the stretch showed the reading moving with the acid; on the settle time
+    alone it read t = 28.7 at 156 s), a crossing follows
+    the drift. A reading that rises from the stretch's start and never turns with the feed is never tested."""
+    t, rows = _acid_run(300.0, n=1400)
     rows[t < 100.0, 1] = 3.0  # both pumps until 100 s
+    rows[:, 2] += np.where(t >= 100.0, 1.5 * (1.0 - np.exp(-(t - 100.0) / 40.0)), 0.0)  # the base's transient
     codes = feed_codes(rows[:, :2], np.array([-1, 1]))
     assert (codes[t < 100.0] == 0).all() and (codes[t >= 100.0] == -1).all()
     found = _crossings(t, rows, len(t))
-    window_s = (WINDOW_SAMPLES - 1) * 0.35
-    assert found and all(t[i] - window_s >= 100.0 + 30.0 - 1e-9 for i, _ in found), found
+    assert found and all(t[i] > 300.0 for i, _ in found), found
+    without = FeedChecks(-1e9, (-1, 1), gap=1)  # every window tested and turned, with its value
+    without.scan(t, rows, first_index=0, from_index=0)
+    assert min(c.time_s for c in without.pending) - (WINDOW_SAMPLES - 1) * 0.35 >= 100.0 + 30.0 - 1e-9
+    rising = _acid_run(0.0)  # rising from the record's first row: never seen moving with the acid
+    assert _crossings(*rising, len(rising[0])) == []
 
 
 def test_any_chunking_finds_the_same_crossings():
