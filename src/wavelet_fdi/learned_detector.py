@@ -54,7 +54,7 @@ from .reference_oe import OutputErrorReference
 from .references import LOOKS, NAMERS, Reference, reference_from_dict
 from .repeat_test import RepeatTest
 from .spike_checks import Spike, SpikeChecks
-from .statistics import CusumBank
+from .statistics import CusumBank, parse_statistic
 
 FORMAT = "phfdi-learned-detector/1"
 TIME_RING = 1 << 16
@@ -579,23 +579,10 @@ class LearnedDetector:
         t_now = float(self._ring_t[at % NAMING_RING])
         if up is not None:
             return self._confirmed_by_check(up, iso, t_now, at)
-        ch = self.channels[spike.channel]
-        a = {"alarm_id": len(self.alarms) + 1, "detection_time": spike.time_s, "detection_index": spike.index,
-             "onset_index": spike.index, "onset_time": spike.time_s, "statistic": name,
-             "statistic_value": abs(spike.sigma), "threshold": self.spikes.level, "channels": [ch],
-             "contributions": {ch: {"share": 1.0, "bands": {"R": 1.0}}}, "cleared_time": None, "isolation": iso,
-             "outside_healthy_range": [], "verdict": "fault", "confirmed_time": t_now, "confirmed_index": at}
-        self.alarms.append(a)
-        self._named.append(a["alarm_id"])
-        # the alarm is up from here, held as any other while a statistic crosses, cleared after a quiet block
-        self.in_alarm, self._alarm, self._last_crossing = True, a, at
-        self._episode[:] = 0.0
-        self._peak = np.zeros(self.m)
-        size = f"{iso['size']:g} {iso['unit']}".strip()
-        return [LearnedEvent("alarm", t_now, at, "ERROR",
-                             f"alarm {a['alarm_id']}: {iso['family']} fault, {iso['description']} ({size}); the reading "
-                             f"stepped at {spike.time_s:g} s (one innovation of {abs(spike.sigma):.1f} sigma, beyond "
-                             f"the spike level {self.spikes.level:g})", dict(a))]
+        why = (f"the reading stepped at {spike.time_s:g} s (one innovation of {abs(spike.sigma):.1f} sigma, beyond "
+               f"the spike level {self.spikes.level:g})")
+        return self._checked_alarm(name, "R", (spike.index, spike.time_s), (spike.index, spike.time_s),
+                                   (abs(spike.sigma), self.spikes.level), iso, t_now, at, why)
 
     def _check_feed(self, check: FeedCheck, upto: int) -> list[LearnedEvent]:
         """A reading that moved against the only feed (wavelet_fdi.feed_checks), its window ended: judged by the
@@ -633,13 +620,21 @@ class LearnedDetector:
                                        "level": round(self.feed_checks.level, 3), "feed_direction": check.direction}}
         if up is not None:
             return self._confirmed_by_check(up, iso, t_now, at)
+        return self._checked_alarm(name, "raw", (check.index, check.time_s), (check.first_index, since),
+                                   (check.value, self.feed_checks.level), iso, t_now, at, why)
+
+    def _checked_alarm(self, name: str, band: str, detected: tuple[int, float], onset: tuple[int, float],
+                       value: tuple[float, float], iso: dict, t_now: float, at: int, why: str) -> list[LearnedEvent]:
+        """A fault alarm of a check's own (a spike that was a step, a reading against the feed; no deviation up):
+        ``detected`` and ``onset`` as (global index, time), ``value`` as (the check's value, its level); up from
+        here, held as any other alarm while a statistic crosses, cleared after a quiet block."""
+        ch = parse_statistic(name)[0]
         alarm_id = len(self.alarms) + 1
-        a = {"alarm_id": alarm_id, "detection_time": check.time_s, "detection_index": check.index,
-             "onset_index": check.first_index, "onset_time": since,
-             "statistic": name, "statistic_value": check.value, "threshold": self.feed_checks.level,
-             "channels": [ph], "contributions": {ph: {"share": 1.0, "bands": {"raw": 1.0}}}, "cleared_time": None,
-             "isolation": iso, "outside_healthy_range": [], "verdict": "fault", "confirmed_time": t_now,
-             "confirmed_index": at}
+        a = {"alarm_id": alarm_id, "detection_time": detected[1], "detection_index": detected[0],
+             "onset_index": onset[0], "onset_time": onset[1], "statistic": name, "statistic_value": value[0],
+             "threshold": value[1], "channels": [ch], "contributions": {ch: {"share": 1.0, "bands": {band: 1.0}}},
+             "cleared_time": None, "isolation": iso, "outside_healthy_range": [], "verdict": "fault",
+             "confirmed_time": t_now, "confirmed_index": at}
         self.alarms.append(a)
         self._named.append(alarm_id)
         self.in_alarm, self._alarm, self._last_crossing = True, a, at

@@ -29,6 +29,20 @@ def _alarms(model: LearnedModel, run) -> list[dict]:
     return det.alarms
 
 
+def _faults_after_drawn_onset(model: LearnedModel, op: str, seed: int, where, kind: str, size: float) -> list[dict]:
+    """The fault alarms of run ``op``/``seed`` with a probe fault from an onset the test's own generator draws among
+    the healthy run's samples ``where(t, x)`` selects; none may come before the onset."""
+    healthy = simulate_run(op, seed).measured(CHANNELS)
+    t = healthy.time_s
+    candidates = np.flatnonzero(where(t, healthy.x))
+    assert len(candidates), f"{op} seed {seed}: no sample where the fault is to be hidden: the test would test nothing"
+    onset = round(float(t[candidates[int(np.random.default_rng(seed).integers(len(candidates)))]]), 1)
+    alarms = _alarms(model, simulate_run(op, seed, probe_fault=ProbeFault(kind, onset, size, seed=seed)))
+    faults = [a for a in alarms if a["verdict"] == "fault"]
+    assert not [a for a in faults if a["detection_time"] < onset], (op, seed, faults)
+    return faults
+
+
 def test_on_off_control_never_seen_is_outside_calibration_not_a_fault(calibrated):
     """On/off control of both pumps and of the acid pump (each on a day of its own): the reference deviates (the
     test checks that it tested something) and no deviation is a fault alarm."""
@@ -75,15 +89,10 @@ def test_a_probe_that_steps_on_the_acid_plateau_is_a_confirmed_offset(calibrated
     named = []
     for op, seed in (("add_acid_new_setting", 81), ("titration_base_to_acid_new_rate", 82),
                      ("titration_ramp_acid", 83), ("titration_base_to_acid_new_rate", 85), ("titration_ramp_acid", 86)):
-        healthy = simulate_run(op, seed).measured(CHANNELS)
-        t, ph = healthy.time_s, healthy.x[:, CHANNELS.index("ph_measured")]
-        plateau = np.flatnonzero((ph < 4.0) & (t < t[-1] - 120.0))
-        assert len(plateau), f"{op} seed {seed} never reaches the acid plateau: the test would test nothing"
-        onset = round(float(t[plateau[int(np.random.default_rng(seed).integers(len(plateau)))]]), 1)
-        alarms = _alarms(calibrated, simulate_run(op, seed, probe_fault=ProbeFault("probe_bias", onset, 1.0,
-                                                                                   seed=seed)))
-        faults = [a for a in alarms if a["verdict"] == "fault"]
-        assert not [a for a in faults if a["detection_time"] < onset], (op, seed, faults)
+        def on_the_plateau(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+            return (x[:, CHANNELS.index("ph_measured")] < 4.0) & (t < t[-1] - 120.0)
+
+        faults = _faults_after_drawn_onset(calibrated, op, seed, on_the_plateau, "probe_bias", 1.0)
         named += [any(a["isolation"]["fault_class"] == "probe_bias" and 0.7 < a["isolation"]["size"] < 1.3
                       for a in faults)]
     assert sum(named) >= 4, named
@@ -102,16 +111,11 @@ def test_a_probe_drifting_up_while_acid_alone_runs_is_a_confirmed_drift(calibrat
     for op, seed in (("add_acid_new_setting", 91), ("titration_base_to_acid_new_rate", 92), ("titration_ramp_acid", 93),
                      ("titration_base_to_acid_new_rate", 94), ("titration_ramp_acid", 95),
                      ("add_acid_new_setting", 96)):
-        healthy = simulate_run(op, seed).measured(CHANNELS)
-        t = healthy.time_s
-        acid, base = healthy.x[:, CHANNELS.index("acid_flow_ml_s")], healthy.x[:, CHANNELS.index("base_flow_ml_s")]
-        alone = np.flatnonzero((acid > 0) & (base == 0) & (t > t[0] + 60.0) & (t < t[-1] - 120.0))
-        assert len(alone), f"{op} seed {seed}: acid never runs alone: the test would test nothing"
-        onset = round(float(t[alone[int(np.random.default_rng(seed).integers(len(alone)))]]), 1)
-        alarms = _alarms(calibrated, simulate_run(op, seed, probe_fault=ProbeFault("probe_drift", onset, 0.5,
-                                                                                   seed=seed)))
-        faults = [a for a in alarms if a["verdict"] == "fault"]
-        assert not [a for a in faults if a["detection_time"] < onset], (op, seed, faults)
+        def acid_alone(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+            acid, base = x[:, CHANNELS.index("acid_flow_ml_s")], x[:, CHANNELS.index("base_flow_ml_s")]
+            return (acid > 0) & (base == 0) & (t > t[0] + 60.0) & (t < t[-1] - 120.0)
+
+        faults = _faults_after_drawn_onset(calibrated, op, seed, acid_alone, "probe_drift", 0.5)
         named += [bool(faults) and faults[0]["isolation"]["fault_class"] == "probe_drift"
                   and faults[0]["isolation"]["size"] > 0]
     assert sum(named) >= 5, named
