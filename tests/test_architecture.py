@@ -242,7 +242,7 @@ def test_checker_asks_for_a_floor_for_a_new_package(tmp_path):
 #: own inner floor and the ones below, never one above (docs/architecture.md, "The application's inner floors").
 PHFDI_FLOORS = {
     # 0 a run and its files, the fault vocabulary of the application
-    "run": 0, "bagread": 0, "rosbag2_meta": 0, "records": 0, "bagio": 0, "faults": 0, "inject_kinds": 0,
+    "bagread": 0, "rosbag2_meta": 0, "records": 0, "bagio": 0, "faults": 0, "inject_kinds": 0,
     "summary": 0, "figures": 0, "alarm_text": 0,
     # 1 the loop: scenarios, the in-process simulation, replay through the detector, calibration, the ROS graph
     "scenario": 1, "loop": 1, "replay": 1, "calibration": 1, "ros": 1,
@@ -291,11 +291,11 @@ def test_no_import_goes_up_an_inner_floor(edges):
 
 
 def test_inner_floor_checker_catches_an_import_up_and_a_part_without_a_floor(tmp_path):
-    files = {"phfdi/__init__.py": "", "phfdi/run.py": "def f():\n    from phfdi.commands import replay\n",
-             "phfdi/commands/__init__.py": "", "phfdi/commands/replay.py": "from phfdi.run import f\n",
-             "phfdi/newpart.py": "import phfdi.run\n"}
+    files = {"phfdi/__init__.py": "", "phfdi/records.py": "def f():\n    from phfdi.commands import replay\n",
+             "phfdi/commands/__init__.py": "", "phfdi/commands/replay.py": "from phfdi.records import f\n",
+             "phfdi/newpart.py": "import phfdi.records\n"}
     found = inner_floor_violations(import_edges(_tree(tmp_path, files)))
-    assert any(v.startswith("phfdi.run (line 2) imports phfdi.commands.replay: phfdi.run (inner floor 0)")
+    assert any(v.startswith("phfdi.records (line 2) imports phfdi.commands.replay: phfdi.records (inner floor 0)")
                for v in found), found
     assert "phfdi.newpart: no inner floor declared in tests/test_architecture.py PHFDI_FLOORS" in found
     assert not any(v.startswith("phfdi.commands.replay") for v in found), found  # down is allowed
@@ -487,8 +487,8 @@ def test_cause_list_checker_catches_a_second_list(tmp_path):
 #: the suffixes of record files (runs, bags, historian exports); see phfdi.records.formats
 RECORD_SUFFIXES = frozenset({".csv", ".parquet", ".pq", ".mcap", ".txt", ".tsv"})
 #: the modules that may decide on a record file's suffix: the registry and readers, the bag reader below them
-#: and the run's writer
-FILE_FORMAT_MODULES = ("phfdi.records", "phfdi.bagread", "phfdi.run")
+#: (the writers are Record.save and its own)
+FILE_FORMAT_MODULES = ("phfdi.records", "phfdi.bagread")
 
 
 def suffix_decisions(src: Path, allowed: tuple[str, ...] = FILE_FORMAT_MODULES) -> dict[str, list[str]]:
@@ -554,17 +554,20 @@ def test_table_read_checker_catches_a_reader_of_its_own(tmp_path):
     assert table_reads(tmp_path) == {"phfdi.tool": ["line 3"]}
 
 
-#: the one in-memory measured record (issue 37): a second class of that kind is a record type more to learn
+#: the one in-memory record (issue 37: a simulated run and a read file alike): a second class of that kind is a
+#: record type more to learn
 RECORD_CLASS = ("phfdi.records.record", "Record")
 
 
 def record_classes(src: Path) -> dict[str, list[str]]:
-    """module -> classes named ``...Record`` other than :data:`RECORD_CLASS`: a second in-memory record type,
+    """module -> classes named ``...Record`` (or ``Run``, the run type it replaced) other than :data:`RECORD_CLASS`:
+    a second in-memory record type,
     where :class:`phfdi.records.Record` should carry the view (``inputs``/``outputs``, ``x``, ``on_grid``...)."""
     out: dict[str, list[str]] = {}
     for module, path in project_modules(src).items():
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.ClassDef) and node.name.endswith("Record") and (module, node.name) != RECORD_CLASS:
+            if (isinstance(node, ast.ClassDef) and (node.name.endswith("Record") or node.name == "Run")
+                    and (module, node.name) != RECORD_CLASS):
                 out.setdefault(module, []).append(f"{node.name} (line {node.lineno})")
     return out
 
@@ -576,8 +579,9 @@ def test_one_in_memory_record_type():
 def test_record_class_checker_catches_a_second_record(tmp_path):
     _tree(tmp_path, {"phfdi/__init__.py": "", "phfdi/records/__init__.py": "",
                      "phfdi/records/record.py": "class Record:\n    pass\n",
-                     "phfdi/tool.py": "import dataclasses\n@dataclasses.dataclass\nclass MeasuredRecord:\n    x: int\n"})
-    assert record_classes(tmp_path) == {"phfdi.tool": ["MeasuredRecord (line 3)"]}
+                     "phfdi/tool.py": "import dataclasses\n@dataclasses.dataclass\nclass MeasuredRecord:\n    x: int\n",
+                     "phfdi/sim.py": "class Run:\n    pass\n"})
+    assert record_classes(tmp_path) == {"phfdi.tool": ["MeasuredRecord (line 3)"], "phfdi.sim": ["Run (line 1)"]}
 
 
 #: the delimiters a hand-written table parser splits its lines on

@@ -11,9 +11,9 @@ Reader), mcap-ros2-support and Foxglove read it.
 
 - :class:`BagWriter`: what the recorder node and :func:`write_run` write with;
   small chunks (16 KB) so that a killed writer leaves recoverable chunks.
-- :func:`load_run`: bag (or .csv / .parquet run file) -> :class:`phfdi.run.Run`
+- :func:`load_run`: bag (or .csv / .parquet run file) -> :class:`phfdi.records.Record`
   with the run's signal names and units on the simulated time base.
-- :func:`write_run`: a Run -> bag with the graph's topics (for replay).
+- :func:`write_run`: a run (a Record) -> bag with the graph's topics (for replay).
 - :func:`bag_info` and :func:`recover`: ``phfdi bag info`` / ``phfdi bag recover``.
 - :func:`check_not_recording`: is another process writing this bag (the writer's lock)?
 
@@ -47,7 +47,7 @@ from typing import Iterator
 
 import numpy as np
 
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base import topics as T
 from phfdi_base.errors import UserError
 from phfdi_base.outputs import staged
@@ -401,7 +401,7 @@ def stamp_of_cdr(cdr: bytes) -> int:
     return join_ns(sec, nsec)
 
 
-def load_run(path: str | Path) -> Run:
+def load_run(path: str | Path) -> Record:
     """A run from a bag of the graph (.mcap) or a run file (.csv, .parquet): :func:`phfdi.records.read_run`,
     the one reader of runs (kept under this name for the bag tools' users).
 
@@ -435,7 +435,7 @@ def _time(store, ns: int):
     return store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
-def write_run(run: Run, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
+def write_run(run: Record, path: str | Path, chunk_size: int = DEFAULT_CHUNK_BYTES) -> Path:
     """Write a run as a bag with the graph's per-sample topics (NaN where the run lacks a signal).
 
     Stamps are time_s (relative to the first sample when it is not 0), so any

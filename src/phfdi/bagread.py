@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base import topics as T
 from phfdi_base.errors import UserError
 from phfdi_base.signals import SIGNALS
@@ -91,7 +91,7 @@ def read_metadata(path: Path) -> dict[str, dict[str, str]]:
     return out
 
 
-def load_bag(path: str | Path) -> Run:
+def load_bag(path: str | Path) -> Record:
     """A run from a bag of the graph (.mcap file or rosbag2 folder).
 
     Bag topics map onto the run's signals (``/plant/measurement.ph`` ->
@@ -152,7 +152,7 @@ def load_bag(path: str | Path) -> Run:
                 signals[n][i] = v
         sev = [row[k] for k in ("_valve_fault_severity", "_sensor_fault_severity") if k in row]
         signals["fault_severity"][i] = max(sev) if sev else math.nan
-    return Run(signals, metadata)
+    return Record.of(signals, metadata)
 
 
 def _one_line(exc: BaseException, limit: int = 160) -> str:

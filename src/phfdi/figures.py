@@ -14,7 +14,7 @@ from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 from phfdi_base.outputs import save_figure
 
-from .run import Run  # noqa: E402
+from .records.record import Record  # noqa: E402
 
 _SUFFIX_UNITS = (("_per_s", "1/s"), ("_ml_s", "mL/s"), ("_pct", "%"), ("_s", "s"))
 
@@ -48,14 +48,14 @@ def _fault_text(fault: dict) -> str:
     return f"{name} ({params})" if params else name
 
 
-def _title(run: Run) -> str:
+def _title(run: Record) -> str:
     faults = run.metadata.get("faults") or []
     if not faults:
         return f"{run.metadata.get('scenario', 'run')}: healthy valve"
     return f"{run.metadata.get('scenario', 'run')}: {_fault_text(faults[0])} from {faults[0]['onset_s']:g} s"
 
 
-def _mark_onset(ax, run: Run) -> None:
+def _mark_onset(ax, run: Record) -> None:
     """A dotted red line at each fault's onset within the axes' time span (none for a fault from t = 0)."""
     lo, hi = ax.get_xlim()
     for k, f in enumerate(run.metadata.get("faults") or []):
@@ -68,7 +68,7 @@ def _mark_onset(ax, run: Run) -> None:
 ZOOM_S = 600.0
 
 
-def zoom_window(run: Run) -> tuple[float, float]:
+def zoom_window(run: Record) -> tuple[float, float]:
     """The stretch the valve zoom shows: from 100 s before a fault's onset, or the run's end when the fault
     acts from the start (or there is none), so that a healthy run is zoomed where a faulty one would be."""
     t = run.time_s
@@ -80,12 +80,12 @@ def zoom_window(run: Run) -> tuple[float, float]:
     return float(t[-1]) - width, float(t[-1])
 
 
-def _valve_command(run: Run) -> np.ndarray:
+def _valve_command(run: Record) -> np.ndarray:
     """What the pH controller asks of the acid valve (older runs have only the controller output)."""
     return run["valve_command_pct"] if "valve_command_pct" in run else run["ph_controller_output_pct"]
 
 
-def _plot_valve(ax, run: Run, sel: np.ndarray, gap: bool) -> None:
+def _plot_valve(ax, run: Record, sel: np.ndarray, gap: bool) -> None:
     """Command and stem position, drawn so the stem never hides the command: command thick and light, stem
     thin and dark on top; with ``gap`` the difference is shaded (a backlash or stiction dead band)."""
     t, command, stem = run.time_s[sel], _valve_command(run)[sel], run["valve_position_pct"][sel]
@@ -96,7 +96,7 @@ def _plot_valve(ax, run: Run, sel: np.ndarray, gap: bool) -> None:
     ax.set_ylabel("valve command,\nstem position (% of span)")
 
 
-def plot_run(run: Run, path: str | Path) -> Path:
+def plot_run(run: Record, path: str | Path) -> Path:
     """pH against setpoint, the valve's command and stem position (with a zoom on the fault), level."""
     t = run.time_s
     fig = plt.figure(figsize=(13, 10), layout="constrained")
@@ -134,7 +134,7 @@ def plot_run(run: Run, path: str | Path) -> Path:
     return path
 
 
-def _run_label(run: Run, name: str) -> str:
+def _run_label(run: Record, name: str) -> str:
     """A run's fault and size for a panel or row title, e.g. 'backlash (width 0.7 % of span)' (else its name)."""
     faults = run.metadata.get("faults") or []
     return _fault_text(faults[0]) if faults else name.replace("_", " ")
@@ -145,7 +145,7 @@ def _run_label(run: Run, name: str) -> str:
 SETTLED_S = 2000.0
 
 
-def _settled_range(run: Run) -> str:
+def _settled_range(run: Record) -> str:
     """pH minus setpoint over the run's last stretch (SETTLED_S), as 'min to max' (the limit cycle or offset)."""
     settled_s = min(SETTLED_S, 0.2 * float(run.time_s[-1] - run.time_s[0]))
     keep = run.time_s >= run.time_s[-1] - settled_s
@@ -153,7 +153,7 @@ def _settled_range(run: Run) -> str:
     return f"pH - setpoint {np.min(dev):+.2f} to {np.max(dev):+.2f} over the last {settled_s:g} s"
 
 
-def plot_overview(runs: Sequence[Run], labels: Sequence[str], path: str | Path) -> Path:
+def plot_overview(runs: Sequence[Record], labels: Sequence[str], path: str | Path) -> Path:
     """The pH of every run in its own panel, all on the same axes, each over the healthy run (the paper's
     Figure 27 as small multiples: seven overlaid traces hide one another)."""
     n_cols = 2
@@ -191,14 +191,14 @@ MAP_BINS = 100
 MAP_FLOOR_PH = 0.01  # the colour scale's bottom: the probe's noise is about this size
 
 
-def _peak_deviation(run: Run, edges: np.ndarray) -> np.ndarray:
+def _peak_deviation(run: Record, edges: np.ndarray) -> np.ndarray:
     """Largest |pH in tank - setpoint| in each time bin [edges[i], edges[i+1])."""
     dev = np.abs(run["ph_true"] - run["ph_setpoint"])
     idx = np.clip(np.searchsorted(run.time_s, edges[:-1]), 0, len(dev) - 1)
     return np.maximum.reduceat(dev, idx)
 
 
-def plot_overview_map(runs: Sequence[Run], labels: Sequence[str], path: str | Path) -> Path:
+def plot_overview_map(runs: Sequence[Record], labels: Sequence[str], path: str | Path) -> Path:
     """How far each run's pH strays from its setpoint, one row per run against time, on a log colour scale
     (the paper's Figure 28, a 3-D waterfall, as a map that reads at a glance: where each run leaves its
     setpoint and by how much)."""

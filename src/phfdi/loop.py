@@ -16,7 +16,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from operator import itemgetter
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
 
 from ph_plant_sim.build import build_plant, build_process, load_plant_model, plant_start
 from ph_plant_sim.plant import CstrPlant
@@ -30,7 +33,32 @@ from valve_actuator.build import build_valves, check_reachable, start_commands, 
 from valve_actuator.valve import Valve
 
 from . import __version__
-from .run import Run, RunRecorder
+from .records.record import Record
+
+
+class RunRecorder:
+    """Rows collected one sample at a time, turned into columns at the end."""
+
+    def __init__(self, names: Iterable[str], n_samples: int = 0) -> None:
+        self.names = list(names)
+        self.rows: list[Mapping[str, float]] = []
+
+    def append(self, row: Mapping[str, float]) -> None:
+        self.rows.append(row)
+
+    @property
+    def n(self) -> int:
+        return len(self.rows)
+
+    def run(self, metadata: dict) -> Record:
+        rows = self.rows
+        if not rows:
+            return Record.of({n: np.zeros(0) for n in self.names}, metadata)
+        try:  # every row has every signal (the usual case): one C-level pass
+            table = np.array(list(map(itemgetter(*self.names), rows)), dtype=float).reshape(len(rows), -1)
+        except KeyError:  # some rows lack a signal: NaN there
+            table = np.array([[r.get(n, math.nan) for n in self.names] for r in rows], dtype=float)
+        return Record.of({n: table[:, i].copy() for i, n in enumerate(self.names)}, metadata)
 
 
 # ---- construction -----------------------------------------------------------------
@@ -135,7 +163,7 @@ def run_metadata(spec: ScenarioSpec, mode: str) -> dict:
     }
 
 
-def simulate(spec: ScenarioSpec, progress: Callable[[float], None] | None = None) -> Run:
+def simulate(spec: ScenarioSpec, progress: Callable[[float], None] | None = None) -> Record:
     """Run a scenario's closed loop in this process."""
     parts = build_parts(spec)
     n = parts.n_samples
@@ -174,7 +202,7 @@ def _rest_at_first_inputs(parts: LoopParts, valve_cmd: float | None, outlet_cmd:
     parts.process.rest(q0, opening0)
 
 
-def simulate_open_loop(spec: ScenarioSpec, inputs: Run, start: str = "first_inputs") -> Run:
+def simulate_open_loop(spec: ScenarioSpec, inputs: Record, start: str = "first_inputs") -> Record:
     """Plant, valves and sensors driven by recorded inputs instead of the controllers.
 
     ``inputs`` needs ``time_s`` (uniform) and, for the manipulated feed, either

@@ -9,7 +9,7 @@ import numpy as np
 
 from phfdi.faults import base_scenario
 from phfdi.records import ReadError, read_run
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
 from phfdi_base.spec import ScenarioSpec, validate_scenario
@@ -20,7 +20,7 @@ from wavelet_fdi.inputs import INPUT_SIGNALS
 DEFAULT_CHUNK = 4096
 
 
-def detector_inputs(run: Run, feed_names: list[str], valve_feed: str) -> dict[str, np.ndarray]:
+def detector_inputs(run: Record, feed_names: list[str], valve_feed: str) -> dict[str, np.ndarray]:
     """The signals the detector may see: measurements, commands, setpoint and the flows of feeds
     that no valve under test drives. Never the valve's own flow or position, nor ground truth
     (true pH, fault severity)."""
@@ -41,7 +41,7 @@ def detector_inputs(run: Run, feed_names: list[str], valve_feed: str) -> dict[st
     return cols
 
 
-def run_chunks(detector: StreamingDetector, run: Run, chunk: int = DEFAULT_CHUNK, flush: bool = True) -> list[Event]:
+def run_chunks(detector: StreamingDetector, run: Record, chunk: int = DEFAULT_CHUNK, flush: bool = True) -> list[Event]:
     ref = detector.reference
     cols = detector_inputs(run, ref.feed_names, ref.valve_feed)
     n = len(run)
@@ -53,7 +53,7 @@ def run_chunks(detector: StreamingDetector, run: Run, chunk: int = DEFAULT_CHUNK
     return events
 
 
-def scenario_of(run: Run, fallback: str = "paper") -> ScenarioSpec:
+def scenario_of(run: Record, fallback: str = "paper") -> ScenarioSpec:
     """The run's own scenario (simulated runs carry it), faults removed by the detector; else a preset."""
     spec = run.metadata.get("spec") if isinstance(run.metadata, dict) else None
     if isinstance(spec, dict):
@@ -61,7 +61,7 @@ def scenario_of(run: Run, fallback: str = "paper") -> ScenarioSpec:
     return load_scenario(fallback, fault="healthy")
 
 
-def load_any(path: str | Path, column_map=None, encoding: str | None = None) -> Run:
+def load_any(path: str | Path, column_map=None, encoding: str | None = None) -> Record:
     """A run read by :func:`phfdi.records.read_run` (.csv, .parquet or an .mcap bag; repairs in
     ``metadata["notes"]``) that the detector can replay: it needs ph_measured and the pH controller output
     (valve_command_pct or ph_controller_output_pct), by name or through ``column_map``."""
@@ -86,7 +86,7 @@ class ReplayResult:
     samples: int = 0
 
 
-def replay_run(run: Run, spec: ScenarioSpec | None = None, calibration: Calibration | None = None,
+def replay_run(run: Record, spec: ScenarioSpec | None = None, calibration: Calibration | None = None,
                settings: DetectorSettings | None = None, chunk: int = DEFAULT_CHUNK,
                isolate: bool = True) -> ReplayResult:
     spec = spec or scenario_of(run)

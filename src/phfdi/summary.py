@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .run import Run
+from .records.record import Record
 
 SETTLE_BAND_PH = 0.1
 
 
-def _segments(run: Run) -> list[tuple[float, float, float]]:
+def _segments(run: Record) -> list[tuple[float, float, float]]:
     """(start_s, end_s, setpoint) for each stretch of constant pH setpoint."""
     t, sp = run.time_s, run["ph_setpoint"]
     if np.all(np.isnan(sp)):
@@ -18,7 +18,7 @@ def _segments(run: Run) -> list[tuple[float, float, float]]:
     return [(float(t[a]), float(t[b - 1]), float(sp[b - 1])) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
-def segment_stats(run: Run, start_s: float, end_s: float, setpoint: float) -> dict:
+def segment_stats(run: Record, start_s: float, end_s: float, setpoint: float) -> dict:
     t = run.time_s
     m = (t >= start_s) & (t <= end_s)
     err = run["ph_true"][m] - setpoint
@@ -50,7 +50,7 @@ def valve_reversals(position: np.ndarray, threshold_pct: float = 0.05) -> int:
     return int(np.sum(np.diff(np.sign(d)) != 0)) if len(d) > 1 else 0
 
 
-def summarize(run: Run) -> dict:
+def summarize(run: Record) -> dict:
     faults = run.metadata.get("faults", [])
     out = {
         "scenario": run.metadata.get("scenario"),

@@ -1,7 +1,7 @@
 """The signals of a run: names, units and descriptions, one catalogue for every package.
 
 A run is a uniform time base ``time_s`` plus named signals of the same length
-(:class:`phfdi.run.Run`); names carry their unit as a suffix (``_pct``,
+(:class:`phfdi.records.Record`); names carry their unit as a suffix (``_pct``,
 ``_ml_s``, ``_cm``, ``_s``) and pH signals start with ``ph``.
 """
 

@@ -11,7 +11,7 @@ from phfdi.diagnosis.catalogue import _set_air_exchange, _set_contents
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, Start, mix_for_ph, nominal_raw
 from phfdi.loop import build_parts, simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.errors import UserError
 from phfdi_base.spec import validate_scenario
 
@@ -29,7 +29,7 @@ def _rig(edit=None):
 
 
 def _run(raw):
-    return simulate_open_loop(validate_scenario(raw), Run({"time_s": T, "acid_flow_ml_s": ACID,
+    return simulate_open_loop(validate_scenario(raw), Record.of({"time_s": T, "acid_flow_ml_s": ACID,
                                                           "base_flow_ml_s": BASE}))
 
 

@@ -16,7 +16,7 @@ import pytest
 from phfdi.cli import main
 from phfdi.faults import catalogue, fault_library
 from phfdi.loop import simulate
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi.scenario import load_scenario, raw_scenario
 from phfdi_base.blocks import BLOCKS, make_block, register_block
 from phfdi_base.faults import FAULTS, Fault, FaultParam, Range
@@ -105,7 +105,7 @@ def test_a_users_fault_is_a_diagnosis_candidate_found_in_measured_data(stem_offs
     keep = run.time_s >= WARMUP_S
     data = {c: np.asarray(run[c])[keep] for c in COLUMNS}
     data["time_s"] = data["time_s"] - data["time_s"][0]
-    path = Run(data, {}).to_csv(tmp_path / "record.csv")
+    path = Record.of(data, {}).to_csv(tmp_path / "record.csv")
     with pytest.raises(SystemExit):
         main(["diagnose", "--help"])
     assert "test_stem_offset (actuator)" in capsys.readouterr().out
@@ -220,4 +220,4 @@ def test_the_base_scenario_is_decided_from_the_catalogues_names():
     assert base_scenario("paper-extendedness") == "paper-extendedness"
     assert recorded_part(spec).base_scenario == "my-plant"
     with pytest.raises(Exception, match="no shipped calibration for scenario 'my-plant'"):
-        replay_run(Run({"time_s": np.zeros(1)}, {}), spec)  # asks for the base scenario's calibration
+        replay_run(Record.of({"time_s": np.zeros(1)}, {}), spec)  # asks for the base scenario's calibration

@@ -11,7 +11,7 @@ import ph_plant_sim.feedlines  # noqa: F401
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, nominal_raw
 from phfdi.loop import simulate, simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.blocks import make_block
 from phfdi_base.spec import validate_scenario
 
@@ -76,7 +76,7 @@ def test_a_feed_line_is_a_scenario_edit_the_loop_runs_and_the_diagnosis_simulate
     spec = validate_scenario(raw)
     lined = simulate(spec)
     assert np.max(np.abs(lined["ph_true"] - plain["ph_true"])) > 0.05  # the line changes the loop
-    inputs = Run({k: lined[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
+    inputs = Record.of({k: lined[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
     reference = simulate_open_loop(spec, inputs)
     record = make_record({k: lined[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct",
                                                 "ph_measured", "level_measured_cm")}, "run")

@@ -6,22 +6,22 @@ import numpy as np
 import pytest
 
 from phfdi.loop import simulate, simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi.scenario import load_scenario
 
 
-def window(run: Run, name: str, t0: float, t1: float) -> np.ndarray:
+def window(run: Record, name: str, t0: float, t1: float) -> np.ndarray:
     t = run.time_s
     return run[name][(t >= t0) & (t < t1)]
 
 
 @pytest.fixture(scope="module")
-def healthy() -> Run:
+def healthy() -> Record:
     return simulate(load_scenario("paper", fault="healthy"))
 
 
 @pytest.fixture(scope="module")
-def delayed() -> Run:
+def delayed() -> Record:
     return simulate(load_scenario("paper", fault="healthy", overrides=["sensors.ph.delay_s=10"]))
 
 
@@ -58,7 +58,7 @@ def test_runs_are_deterministic_for_a_seed():
 
 
 @pytest.fixture(scope="module")
-def faulty() -> dict[str, Run]:
+def faulty() -> dict[str, Record]:
     return {f: simulate(load_scenario("paper", fault=f))
             for f in ("backlash", "friction", "deadzone", "saturation", "stiction")}
 
@@ -90,7 +90,7 @@ def test_open_loop_replays_the_closed_loop_from_its_recorded_commands():
     spec = load_scenario("paper", fault="backlash", overrides=["duration_s=1500", "faults.0.onset_s=300",
                                                                "setpoints.ph.changes.0.at_s=600"])
     closed = simulate(spec)
-    inputs = Run({k: closed[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct",
+    inputs = Record.of({k: closed[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct",
                                          "buffer_flow_ml_s", "base_flow_ml_s")})
     opened = simulate_open_loop(spec, inputs, start="scenario")
     for name in ("ph_true", "level_true_cm", "valve_position_pct", "acid_flow_ml_s"):

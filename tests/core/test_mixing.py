@@ -9,7 +9,7 @@ from ph_plant_sim.mixing import MixingZone, zone_trajectory
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, nominal_raw
 from phfdi.loop import simulate, simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.spec import validate_scenario
 
 FEEDS = ["acid", "base"]
@@ -62,7 +62,7 @@ def test_a_zoned_vessel_runs_in_the_loop_and_the_diagnosis_simulates_it_identica
     run = simulate(spec)
     plain = simulate(validate_scenario(nominal_raw("paper", SHORT)))
     assert np.max(np.abs(run["ph_true"] - plain["ph_true"])) > 0.05
-    inputs = Run({k: run[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
+    inputs = Record.of({k: run[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
     reference = simulate_open_loop(spec, inputs)
     record = make_record({k: run[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct",
                                               "ph_measured", "level_measured_cm")}, "run")

@@ -14,7 +14,7 @@ from phfdi.diagnosis.catalogue import _set_air_exchange, _set_series
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, nominal_raw
 from phfdi.loop import simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.errors import UserError
 from phfdi_base.spec import validate_scenario
 
@@ -51,13 +51,13 @@ def _rig_case(edit):
     base = np.where((t > 60) & (t < 110) | (t > 300) & (t < 340), 6.45, 0.0)
     raw["duration_s"] = 500.0
     spec = validate_scenario(raw)
-    run = simulate_open_loop(spec, Run({"time_s": t, "acid_flow_ml_s": acid, "base_flow_ml_s": base}))
+    run = simulate_open_loop(spec, Record.of({"time_s": t, "acid_flow_ml_s": acid, "base_flow_ml_s": base}))
     record = make_record({"time_s": t, "acid_flow_ml_s": acid, "base_flow_ml_s": base,
                           "ph_measured": run["ph_true"]}, "run")
     pred = Evaluator(record, raw).predict(raw)
     plain = nominal_raw("rig_flask", ["plant.tank.volume_ml=1000", "sensors.ph.noise_std=0"])
     plain["duration_s"] = 500.0
-    base_run = simulate_open_loop(validate_scenario(plain), Run({"time_s": t, "acid_flow_ml_s": acid,
+    base_run = simulate_open_loop(validate_scenario(plain), Record.of({"time_s": t, "acid_flow_ml_s": acid,
                                                                  "base_flow_ml_s": base}))
     return spec, run, pred, base_run
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from ph_plant_sim.build import load_plant_model
 from phfdi.loop import simulate, simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi.scenario import raw_scenario
 from phfdi_base.blocks import register_block
 from phfdi_base.spec import validate_scenario
@@ -260,7 +260,7 @@ def make_case(rng: np.random.Generator, cause: str, excitation: str, out_dir: Pa
         raw["setpoints"]["ph"] = {"initial": 10.0}
         n = int(raw["duration_s"]) + 1
         t = np.arange(n, dtype=float)
-        inputs = Run({"time_s": t, "valve_command_pct": _command_sequence(rng, n),
+        inputs = Record.of({"time_s": t, "valve_command_pct": _command_sequence(rng, n),
                       "level_controller_output_pct": np.full(n, 50.0)})
         run = simulate_open_loop(validate_scenario(raw), inputs)
     else:
@@ -270,7 +270,7 @@ def make_case(rng: np.random.Generator, cause: str, excitation: str, out_dir: Pa
     data["time_s"] = data["time_s"] - data["time_s"][0]
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    path = Run(data, {}).to_csv(out_dir / "record.csv")
+    path = Record.of(data, {}).to_csv(out_dir / "record.csv")
     if cause in BOUNDS:
         rel, absolute = BOUNDS[cause][3]
         tol = max(rel * abs(value), absolute)

@@ -20,7 +20,7 @@ from phfdi.diagnosis.extend import load_model_file
 from phfdi.diagnosis.report import CAUSES, check_report
 from phfdi.loop import simulate_open_loop
 from phfdi.records import read_run
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi.scenario import load_scenario
 from phfdi_base.spec import validate_scenario
 
@@ -102,7 +102,7 @@ def test_effect_outside_the_catalogue_is_not_explained(hidden_rng, diagnose_json
         assert rep["gain_percent"] == pytest.approx(100 * (1 - rep["nrmse_extended"] / rep["nrmse_nominal"]),
                                                     rel=1e-9)
     data = read_run(case.path)
-    inputs = Run({k: data[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
+    inputs = Record.of({k: data[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
     spec = load_scenario("paper", overrides=["sensors.ph.noise_std=0", "sensors.level.noise_std=0"])
     sim = simulate_open_loop(spec, inputs)
     held_out = (np.arange(len(data)) * 8 // len(data)) % 2 == 1

@@ -19,7 +19,7 @@ from hidden_cases import fresh_draws  # (conftest puts this folder on sys.path; 
 from phfdi.diagnosis.model import nominal_raw
 from phfdi.diagnosis.residual import noise_floor
 from phfdi.loop import simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.spec import validate_scenario
 
 DT_S = 1.0
@@ -30,7 +30,7 @@ CANDIDATES = ["mixing_zone", "feed_delay", "pump_curve", "carbonate", "sensor_de
               "reagent_concentration", "buffer", "holdup"]
 
 
-def inputs(rng) -> Run:
+def inputs(rng) -> Record:
     """Acid steps between 2 and 6 mL/s; base pulses of 15..50 s at 2..6.45 mL/s, 30..110 s apart."""
     t = np.arange(0.0, DURATION_S + DT_S / 2, DT_S)
     acid = np.empty_like(t)
@@ -45,10 +45,10 @@ def inputs(rng) -> Run:
         n = int(rng.uniform(15, 50) / DT_S)
         base[k:k + n] = rng.choice([2.0, 3.5, 5.0, 6.45])
         k += n + int(rng.uniform(30, 110) / DT_S)
-    return Run({"time_s": t, "acid_flow_ml_s": acid, "base_flow_ml_s": base})
+    return Record.of({"time_s": t, "acid_flow_ml_s": acid, "base_flow_ml_s": base})
 
 
-def balanced_inputs(rng) -> Run:
+def balanced_inputs(rng) -> Record:
     """Acid steps as in :func:`inputs`; base pulses 20..60 s apart at 2..6.45 mL/s, each long enough to deliver
     0.6..1.8 times the acid (in equivalents of the nominal strengths) that flowed since the last, the first also
     1.0..1.4 times the acid the flask starts with: an on/off pH loop's duty cycle, swinging the flask's pH through
@@ -69,7 +69,7 @@ def balanced_inputs(rng) -> Run:
         n = max(1, int(round(due / DT_S)))
         base[k:k + n] = q
         k += n + gap
-    return Run({"time_s": t, "acid_flow_ml_s": acid, "base_flow_ml_s": base})
+    return Record.of({"time_s": t, "acid_flow_ml_s": acid, "base_flow_ml_s": base})
 
 
 def draw(rng, cause: str) -> tuple[dict, str, float, float]:
@@ -167,7 +167,7 @@ def make_case(rng, cause: str, folder, truth: dict | None = None, balanced: bool
     return path, main, value, tol
 
 
-def _nominal_misfit(inp: Run, ph: np.ndarray) -> float:
+def _nominal_misfit(inp: Record, ph: np.ndarray) -> float:
     """The nominal model's held-out error over the noise floor, as `phfdi diagnose` reports it
     (``nominal.combined_rmse_over_noise``: blocks 2, 4, 6, 8 of 8, the floor estimated from the data)."""
     raw = nominal_raw("rig_flask", NOMINAL)

@@ -10,7 +10,7 @@ import pytest
 from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import Evaluator, Start, nominal_raw
 from phfdi.loop import simulate, simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.spec import validate_scenario
 
 NO_NOISE = ["sensors.ph.noise_std=0", "sensors.level.noise_std=0", "duration_s=1500",
@@ -35,7 +35,7 @@ def closed_loop_run():
 ])
 def test_evaluator_equals_simulate_open_loop(closed_loop_run, extension):
     run = closed_loop_run
-    inputs = Run({k: run[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
+    inputs = Record.of({k: run[k] for k in ("time_s", "valve_command_pct", "level_controller_output_pct")})
     raw = nominal_raw("paper", NO_NOISE)
     if extension:
         for key, value in extension.items():

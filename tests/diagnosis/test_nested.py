@@ -23,7 +23,7 @@ from phfdi.diagnosis.data import make_record
 from phfdi.diagnosis.model import nominal_raw
 from phfdi.diagnosis.pipeline import Options, context_for, diagnose
 from phfdi.loop import simulate_open_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.spec import validate_scenario
 
 CANDIDATES = ["reagent_concentration", "feed_delay"]
@@ -108,7 +108,7 @@ def planted(rng, name: str):
     inp = {"time_s": t, "acid_flow_ml_s": np.r_[a["acid_flow_ml_s"], b["acid_flow_ml_s"][1:]],
            "base_flow_ml_s": 3.0 * np.r_[a["base_flow_ml_s"], b["base_flow_ml_s"][1:]]}
     raw["duration_s"] = float(t[-1])
-    run = simulate_open_loop(validate_scenario(raw), Run(dict(inp)))
+    run = simulate_open_loop(validate_scenario(raw), Record.of(dict(inp)))
     cols = dict(inp, ph_measured=run["ph_true"] + rng.normal(0.0, rig.NOISE_PH, len(t)))
     return make_record(cols, name)
 

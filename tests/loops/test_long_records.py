@@ -17,14 +17,14 @@ from phfdi.loopdiag.classifier import NO_STICTION, STICTION, UNDETERMINED
 from phfdi.loopdiag.diagnose import Settings
 from phfdi.loopdiag.single import diagnose_run
 from phfdi.loopdiag.synthetic import SyntheticLoop, simulate_loop
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 
 def test_window_bounds_cover_a_record_evenly_and_are_bounded():
-    run = Run({"time_s": np.arange(10 * 751.0)})
+    run = Record.of({"time_s": np.arange(10 * 751.0)})
     b = windows.window_bounds(run)
     assert len(b) == 10 and b[0] == (0, 751) and b[-1] == (10 * 751 - 751, 10 * 751)
-    long = Run({"time_s": np.arange(1000 * 751.0)})
+    long = Record.of({"time_s": np.arange(1000 * 751.0)})
     b = windows.window_bounds(long)
     assert len(b) == windows.MAX_WINDOWS and b[0][0] == 0 and b[-1][1] == 1000 * 751
     assert all(stop - start == windows.WINDOW for start, stop in b)
@@ -50,7 +50,7 @@ def test_record_call_from_the_windows():
     assert windows.record_call(_windows(0, 0, 0, unscored=3))["call"] == "pv_frozen"
 
 
-def _sticky(n: int, seed: int = 1) -> Run:
+def _sticky(n: int, seed: int = 1) -> Record:
     return simulate_loop(SyntheticLoop(valve=("stiction", {"s_pct": 3.0, "j_pct": 1.0}), ti_s=30, dt_s=4.0,
                                        duration_s=4.0 * n, setpoint_steps=[(100, 52), (1500, 49)], seed=seed,
                                        loop_tag="FIC7"))

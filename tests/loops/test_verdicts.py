@@ -30,7 +30,7 @@ from phfdi.loopdiag.readers import read_loop
 from phfdi.loopdiag.single import diagnose_run
 from phfdi.loopdiag.synthetic import SyntheticLoop, simulate_loop
 from phfdi.loopdiag.verdict import contradiction, loop_verdict, valve_model_evidence
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 STICTION_FILE = "stiction/stic_2111FIC46005_0614_0003.txt"
 OTHER_LOOP_FILE = "no_stiction/stic_2111FIC10201_1018_0002.txt"
@@ -44,7 +44,7 @@ def real_loops(shared_data):
     return read_loop(str(folder / STICTION_FILE)), read_loop(str(folder / OTHER_LOOP_FILE))
 
 
-def _with(run: Run, **signals) -> Run:
+def _with(run: Record, **signals) -> Record:
     """A copy of ``run`` with some signals replaced (``sp=None`` drops the setpoint)."""
     out = {"time_s": run.time_s.copy(), "op_pct": run["op_pct"].copy(), "pv": run["pv"].copy()}
     if "sp" in run:
@@ -54,7 +54,7 @@ def _with(run: Run, **signals) -> Run:
             out.pop(k, None)
         else:
             out[k] = v
-    return Run(out, dict(run.metadata))
+    return Record.of(out, dict(run.metadata))
 
 
 # ---- the records that are not scored ------------------------------------------------------------

@@ -9,7 +9,7 @@ _RUN: dict = {}
 
 @pytest.fixture(scope="session")
 def short_run():
-    """The paper loop, 900 s, pH 8 from 200 s, healthy (phfdi.run.Run)."""
+    """The paper loop, 900 s, pH 8 from 200 s, healthy (a phfdi.records.Record)."""
     if "run" not in _RUN:
         from phfdi.loop import simulate
         from phfdi.scenario import load_scenario

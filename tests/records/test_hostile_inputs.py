@@ -114,11 +114,10 @@ def test_a_bag_with_repeated_stamps_keeps_the_first_and_says_so(tmp_path):
 
     from phfdi import bagio
     from phfdi.records import read_run
-    from phfdi.run import Run
-
+    from phfdi.records.record import Record
     t = np.arange(20.0)
-    first = Run({"time_s": t, "ph_measured": np.full(20, 7.0)}, {"sample_time_s": 1.0})
-    second = Run({"time_s": t[:5], "ph_measured": np.full(5, 9.0)}, {"sample_time_s": 1.0})
+    first = Record.of({"time_s": t, "ph_measured": np.full(20, 7.0)}, {"sample_time_s": 1.0})
+    second = Record.of({"time_s": t[:5], "ph_measured": np.full(5, 9.0)}, {"sample_time_s": 1.0})
     a, b = bagio.write_run(first, tmp_path / "a.mcap"), bagio.write_run(second, tmp_path / "b.mcap")
     both = tmp_path / "both.mcap"
     _merge_bags([a, b], both)

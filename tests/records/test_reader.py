@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from phfdi.records import ColumnMap, ReadError, read_record
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.errors import UserError
 
 
@@ -29,7 +29,7 @@ def test_clean_csv_reads_without_notes(tmp_path):
     assert r.note_lines() == []
     assert r.units["ph_measured"] == "pH" and r.units["valve_command_pct"] == "%"
     run = r.to_run()
-    assert isinstance(run, Run) and np.allclose(run["time_s"], np.arange(10.0))
+    assert isinstance(run, Record) and np.allclose(run["time_s"], np.arange(10.0))
 
 
 @pytest.mark.parametrize("delimiter", [",", ";", "\t"])
@@ -213,7 +213,7 @@ def test_not_a_time(tmp_path):
 
 
 def test_parquet_round_trip_and_damage(tmp_path):
-    run = Run({"time_s": np.arange(5.0), "ph_measured": np.array([7, np.nan, 7, np.inf, 7.0])}, {"seed": 3})
+    run = Record.of({"time_s": np.arange(5.0), "ph_measured": np.array([7, np.nan, 7, np.inf, 7.0])}, {"seed": 3})
     path = run.to_parquet(tmp_path / "r.parquet")
     r = read_record(path)
     assert r.metadata["seed"] == 3 and r.where == "row"

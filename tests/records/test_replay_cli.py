@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from phfdi.records import read_run
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 
-def csv_lines(run: Run, path, edit=None) -> str:
+def csv_lines(run: Record, path, edit=None) -> str:
     """The run as CSV text; ``edit(lines)`` changes the data lines (lines[0] is the header) before writing."""
     run.to_csv(path)
     lines = path.read_text().splitlines()
@@ -130,7 +130,8 @@ def test_column_map_options(short_run, tmp_path, run_cli):
 def test_bag_to_run_names_its_repairs(short_run, tmp_path, run_cli):
     from phfdi.bagio import write_run
 
-    run = Run({k: v.copy() for k, v in short_run.signals.items()}, dict(short_run.metadata))
+    run = Record.of({"time_s": short_run.time_s.copy(), **{k: v.copy() for k, v in short_run.signals.items()}},
+                   dict(short_run.metadata))
     run.signals["ph_measured"][10] = np.nan
     bag = write_run(run, tmp_path / "r.mcap")
     status, out, err = run_cli("bag", "to-run", bag, tmp_path / "out.csv")

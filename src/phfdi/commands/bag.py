@@ -83,8 +83,7 @@ def run_recover(args: argparse.Namespace) -> int:
 
 def run_to_run(args: argparse.Namespace) -> int:
     from phfdi.records import read_run
-    from phfdi.records.formats import is_format
-    from phfdi.run import writable_format
+    from phfdi.records.formats import is_format, writable_format
     from phfdi_base.errors import UserError
     from phfdi_base.outputs import refuse_existing
 
@@ -97,7 +96,7 @@ def run_to_run(args: argparse.Namespace) -> int:
     run = read_run(args.input)
     print_notes("bag", run.metadata["notes"])
     path = run.save(args.output, overwrite=args.overwrite)
-    print(f"wrote {len(run)} samples of {len(run.names)} signals to {path}")
+    print(f"wrote {len(run)} samples of {len(run.names) + 1} signals to {path}")  # time_s counted, a column
     return 0
 
 

@@ -2,7 +2,7 @@
 
 A record is what the diagnosis may see of a plant: a uniform time base,
 the *inputs* it was driven with and the *outputs* it measured, in the
-project's signal names (:mod:`phfdi.run`):
+project's signal names (:mod:`phfdi_base.signals`):
 
 * inputs: ``valve_command_pct`` (the pH controller's output), ``<feed>_flow_ml_s``
   (measured feed flows), ``level_controller_output_pct`` (outlet valve command);

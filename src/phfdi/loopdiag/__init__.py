@@ -2,7 +2,7 @@
 
 ``phfdi loop-diagnose FILE...`` (see docs/loop_diagnosis.md). Modules:
 
-* :mod:`.readers` - historian exports (plant_loops TSV, CSV with a column mapping) -> Run;
+* :mod:`.readers` - historian exports (plant_loops TSV, CSV with a column mapping) -> Record;
 * :mod:`.oscillation` - does the loop oscillate (Thornhill et al. 2003 regularity);
 * :mod:`.controller` - the loop's PI law from the data (its action fixes the process gain sign);
 * :mod:`.identify` - linear OP -> PV models (FOPTD, integrating, ARX) scored on held-out data;

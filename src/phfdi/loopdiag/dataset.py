@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 from .classifier import HARD_NEGATIVES, Data, LogisticModel, train_simulated
 from .domain import slips
@@ -18,7 +18,7 @@ from .synthetic import simulate_loop
 from .training import DrawnLoop
 
 
-def screen_row(run: Run, process_type: str) -> dict:
+def screen_row(run: Record, process_type: str) -> dict:
     """The screen's features of one run (and which were measured)."""
     sp = run["sp"] if "sp" in run else None
     scr = screen_evidence(run["op_pct"], run["pv"], sp, run.dt_s, process_type)

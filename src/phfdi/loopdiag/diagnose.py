@@ -28,7 +28,7 @@ import numpy as np
 from scipy.signal import lfilter
 from scipy.stats import skew
 
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 from .baselines import run_baselines
 from .controller import ControllerEstimate, estimate_pi
@@ -116,7 +116,7 @@ class Evidence:
         return 100.0 * (nom - c.model.nrmse_validation) / nom
 
 
-def gather_evidence(run: Run, settings: Settings | None = None) -> Evidence:
+def gather_evidence(run: Record, settings: Settings | None = None) -> Evidence:
     settings = settings or Settings()
     op, pv = run["op_pct"], run["pv"]
     sp = run["sp"] if "sp" in run else None
@@ -350,7 +350,7 @@ def effective_samples(pv: np.ndarray, y_model: np.ndarray, split: Split) -> floa
 
 
 # ---- the report ------------------------------------------------------------------------------
-def report(run: Run, ev: Evidence, settings: Settings | None = None) -> dict:
+def report(run: Record, ev: Evidence, settings: Settings | None = None) -> dict:
     """The JSON-ready diagnosis of one loop (keys shared with ``phfdi diagnose``)."""
     settings = settings or Settings()
     d = decide(ev, settings.gain_threshold_percent)
@@ -395,6 +395,6 @@ def report(run: Run, ev: Evidence, settings: Settings | None = None) -> dict:
     return out
 
 
-def diagnose_run(run: Run, settings: Settings | None = None) -> dict:
+def diagnose_run(run: Record, settings: Settings | None = None) -> dict:
     settings = settings or Settings()
     return report(run, gather_evidence(run, settings), settings)

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 from .synthetic import WAVEFORMS, SyntheticLoop, simulate_loop
 from .training import DrawnLoop, _logu
@@ -289,7 +289,7 @@ def sticking_shows(stem: np.ndarray, op: np.ndarray) -> bool:
     return len(st) >= MIN_SLIPS or (len(st) >= 1 and max(st) >= LONG_STAND)
 
 
-def usable(run: Run) -> bool:
+def usable(run: Record) -> bool:
     """An operable loop: OP pinned at a limit for under 5 % of the record, PV finite."""
     op = run["op_pct"]
     return float(np.mean((op <= 0.01) | (op >= 99.99))) < 0.05 and bool(np.all(np.isfinite(run["pv"])))
@@ -312,7 +312,7 @@ def class_sequence(n: int) -> list[str]:
 
 
 def draw_domain_loops(n: int, seed: int, prefix: str = "DOM",
-                      limit: int | None = None) -> tuple[list[tuple[DrawnLoop, Run]], dict]:
+                      limit: int | None = None) -> tuple[list[tuple[DrawnLoop, Record]], dict]:
     """``n`` usable loops in the class shares (:func:`class_sequence`), each simulated; sticky valves that did not
     show (:func:`sticking_shows`) are redrawn. Also returns counts of what was redrawn and why. ``limit``: only the
     first that many of the ``n`` (the same loops, drawn from the same stream)."""

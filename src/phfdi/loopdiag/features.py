@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 from .diagnose import Evidence, Settings, gather_evidence
 from .indicator_set import compute_indicators
@@ -132,7 +132,7 @@ class LoopEvidence:
     measured: dict[str, bool]
 
 
-def loop_evidence(run: Run, settings: Settings | None = None) -> LoopEvidence:
+def loop_evidence(run: Record, settings: Settings | None = None) -> LoopEvidence:
     """The screen's indicators and features and the valve-model evidence of one loop (``settings.causes`` gets
     :data:`FRICTION_CAUSES` added: Kano's S and J are evidence of the verdict)."""
     settings = settings or Settings()

@@ -20,7 +20,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from phfdi.run import Run  # noqa: E402
+from phfdi.records.record import Record  # noqa: E402
 from phfdi_base.outputs import save_figure
 
 from .bicoherence import ellipse_points  # noqa: E402
@@ -36,7 +36,7 @@ def _conic(rep: dict) -> np.ndarray | None:
         return None
 
 
-def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
+def plot_loop(run: Record, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
     """Write ``<out_dir>/<file stem>[_<loop tag>].png`` and return its path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -63,7 +63,7 @@ def plot_loop(run: Run, ev: Evidence, rep: dict, out_dir: str | Path) -> Path:
     return path
 
 
-def _plot_trends(ax_pv, ax_op, run: Run, ev: Evidence, kano, unit: str, op_unit: str) -> None:
+def _plot_trends(ax_pv, ax_op, run: Record, ev: Evidence, kano, unit: str, op_unit: str) -> None:
     """PV and SP with the linear and valve models (top), OP with the models' stem positions (middle)."""
     t_min = run.time_s / 60.0
     ax_pv.plot(t_min, run["pv"], color="k", lw=0.7, label="PV measured")
@@ -96,7 +96,7 @@ def _plot_trends(ax_pv, ax_op, run: Run, ev: Evidence, kano, unit: str, op_unit:
     ax_op.legend(fontsize=7, loc="best")
 
 
-def _mark_slips(ax, run: Run, rep: dict) -> None:
+def _mark_slips(ax, run: Record, rep: dict) -> None:
     """Triangles on PV where the stick-slip index found a slip ending a stuck section (its first 20)."""
     detail = ((rep.get("indicators") or {}).get("stick_slip") or {}).get("detail") or {}
     times = detail.get("slip_times_s") or []
@@ -109,7 +109,7 @@ def _mark_slips(ax, run: Run, rep: dict) -> None:
     ax.legend(fontsize=7, loc="best")
 
 
-def _plot_pv_against_op(ax, run: Run, rep: dict, kano, unit: str, op_unit: str) -> None:
+def _plot_pv_against_op(ax, run: Record, rep: dict, kano, unit: str, op_unit: str) -> None:
     """PV against OP with Choudhury's fitted ellipse and the Kano model's PV."""
     op = run["op_pct"]
     ax.plot(op, run["pv"], color="0.35", lw=0.5, label="measured")
@@ -127,7 +127,7 @@ def _plot_pv_against_op(ax, run: Run, rep: dict, kano, unit: str, op_unit: str) 
     ax.legend(fontsize=7, loc="best")
 
 
-def _plot_dpv_against_op(ax, run: Run, kano, unit: str, op_unit: str) -> None:
+def _plot_dpv_against_op(ax, run: Record, kano, unit: str, op_unit: str) -> None:
     """PV's change per sample against OP, measured and from the Kano model."""
     op = run["op_pct"]
     ax.plot(op[1:], np.diff(run["pv"]), ".", color="0.35", ms=2, label="measured")
@@ -153,7 +153,7 @@ def _plot_stem(ax, op: np.ndarray, kano, op_unit: str) -> None:
     ax.set_ylabel(f"stem position ({op_unit})")
 
 
-def _units(run: Run) -> tuple[str, str]:
+def _units(run: Record) -> tuple[str, str]:
     """PV's unit as the record gives it, else 'as recorded'; OP in % of span when it stays within 0-100."""
     op = run["op_pct"]
     unit = (run.metadata.get("units") or {}).get("pv", "") or "as recorded"
@@ -167,7 +167,7 @@ def _title(rep: dict) -> str:
     return f"{rep.get('loop_tag')}: {verdict.get('summary', 'no verdict')}"
 
 
-def plot_record(run: Run, rep: dict, out_dir: str | Path) -> Path:
+def plot_record(run: Record, rep: dict, out_dir: str | Path) -> Path:
     """A record with no stiction score (PV frozen, not a closed loop): PV, SP and OP against time under
     its verdict. Written and returned as :func:`plot_loop`'s."""
     out_dir = Path(out_dir)

@@ -1,4 +1,4 @@
-"""Historian exports of one control loop -> :class:`phfdi.run.Run`, read by :func:`phfdi.records.read_record`
+"""Historian exports of one control loop -> :class:`phfdi.records.Record`, read by :func:`phfdi.records.read_record`
 under the historian policy (see docs/records.md).
 
 Two formats:
@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from phfdi import records
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.errors import UserError
 from phfdi_base.yamlfile import read_mapping
 
@@ -150,7 +150,7 @@ def guess_columns(header: list[str]) -> records.ColumnMap | None:
 
 
 # ---- reading -------------------------------------------------------------------------------
-def read_loop(path: str | Path, columns: records.ColumnMap | None = None) -> Run:
+def read_loop(path: str | Path, columns: records.ColumnMap | None = None) -> Record:
     """The longest usable stretch of one loop file (plant_loops export or CSV), checked for diagnosis.
 
     Raises
@@ -170,7 +170,7 @@ def read_loop(path: str | Path, columns: records.ColumnMap | None = None) -> Run
     ...            header="time,OP,PV", comments="", fmt="%.4f")
     >>> loop = read_loop(path)
     >>> loop.names, loop.metadata["loop_tag"], len(loop)
-    (['time_s', 'op_pct', 'pv'], 'FIC101', 750)
+    (['op_pct', 'pv'], 'FIC101', 750)
     """
     sampled = sampled_table(Path(path))
     runs, why, pieces, cuts = _stretches(Path(path), columns, sampled)
@@ -190,7 +190,7 @@ def read_loop(path: str | Path, columns: records.ColumnMap | None = None) -> Run
     return run
 
 
-def read_loop_segments(path: str | Path, columns: records.ColumnMap | None = None) -> list[Run]:
+def read_loop_segments(path: str | Path, columns: records.ColumnMap | None = None) -> list[Record]:
     """Every usable stretch of one loop file (at least ``MIN_SAMPLES``), not yet checked."""
     runs, why, _, _ = _stretches(Path(path), columns, sampled_table(Path(path)))
     if not runs:
@@ -198,7 +198,7 @@ def read_loop_segments(path: str | Path, columns: records.ColumnMap | None = Non
     return runs
 
 
-def _stretches(path: Path, columns: records.ColumnMap | None, table=None) -> tuple[list[Run], str, int, list[str]]:
+def _stretches(path: Path, columns: records.ColumnMap | None, table=None) -> tuple[list[Record], str, int, list[str]]:
     """Runs of the stretches with at least MIN_SAMPLES samples, why there is none when so, how many
     stretches there are in all and the gaps that cut them (``table``: the rows already read, for a sampled
     long file)."""
@@ -261,13 +261,13 @@ def _split_at_gaps(grid: records.Record) -> tuple[list[records.Record], list[str
     return pieces, cuts
 
 
-def _loop_run(piece: records.Record, rec: records.Record) -> Run:
+def _loop_run(piece: records.Record, rec: records.Record) -> Record:
     """A loop run of one stretch: time from the file's first sample, units and notes in the metadata."""
     meta = rec.metadata
     tag = meta.get("loop_tag") or Path(rec.path).stem
     tag = re.sub(r"\s+Data$", "", tag)
     descriptions = meta.get("descriptions") or {}
-    run = Run({"time_s": piece.time_s.copy(), **{k: v.copy() for k, v in piece.signals.items()}},
+    run = Record.of({"time_s": piece.time_s.copy(), **{k: v.copy() for k, v in piece.signals.items()}},
               {"loop_tag": tag, "file": rec.path, "sample_time_s": piece.dt_s,
                "units": {"op_pct": "%", "pv": "as exported", "sp": "as exported"},
                "descriptions": {k: descriptions.get(c, c) for k, c in piece.columns.items()},
@@ -336,12 +336,12 @@ def _pick_lines(path: Path, header_lines: int, starts: np.ndarray) -> tuple[byte
     return b"".join(out), numbers
 
 
-def _windows_run(runs: list[Run], sampled: dict) -> Run:
+def _windows_run(runs: list[Record], sampled: dict) -> Record:
     """The stretches read from a sampled file as one run, each a window (``metadata["windows"]``: start, stop
     and source lines), with a note saying what was read."""
     runs = sorted(runs, key=lambda r: r.metadata["lines"][0])
     names = [n for n in runs[0].names if all(n in r for r in runs)]
-    signals = {n: np.concatenate([r[n] for r in runs]) for n in names}
+    signals = {n: np.concatenate([r[n] for r in runs]) for n in ["time_s", *names]}
     windows, at = [], 0
     for r in runs:
         windows.append((at, at + len(r), *r.metadata["lines"]))
@@ -358,7 +358,7 @@ def _windows_run(runs: list[Run], sampled: dict) -> Run:
     meta["windows"] = windows
     meta["file_rows"] = sampled["rows"]
     meta["lines"] = [windows[0][2], windows[-1][3]]
-    return Run(signals, meta)
+    return Record.of(signals, meta)
 
 
 def process_type_for(loop_tag: str) -> str:
@@ -366,7 +366,7 @@ def process_type_for(loop_tag: str) -> str:
     return "integrating" if re.search(r"(^|[^A-Z])LI?C", loop_tag.upper()) else "self_regulating"
 
 
-def check_loop_run(run: Run) -> None:
+def check_loop_run(run: Record) -> None:
     """Reject, with one message, a loop that cannot be diagnosed; fill short gaps in place."""
     where = run.metadata.get("file", "loop")
     n = len(run)

@@ -6,7 +6,7 @@ import sys
 from dataclasses import replace
 
 from phfdi import records
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.errors import UserError
 
 from .classifier import NO_STICTION, STICTION, UNDETERMINED
@@ -82,7 +82,7 @@ def diagnose_run(run, settings: Settings | None = None, figure_dir: str | None =
 
     Parameters
     ----------
-    run : Run
+    run : Record
         ``time_s``, ``op_pct``, ``pv`` and optionally ``sp`` (e.g. from :func:`read_loop`).
     settings : Settings, optional
     figure_dir : str, optional
@@ -204,7 +204,7 @@ def diagnose_file_segments(path: str, columns: records.ColumnMap | None = None, 
 
 
 # ---- long records (phfdi.loopdiag.windows) ---------------------------------------------------------
-def diagnose_long(run: Run, settings: Settings, figure_dir: str | None = None) -> dict:
+def diagnose_long(run: Record, settings: Settings, figure_dir: str | None = None) -> dict:
     """The report of a record longer than :data:`.windows.WHOLE_MAX` samples (:mod:`.windows`)."""
     where = run.metadata.get("file") or run.metadata.get("loop_tag") or "record"
     progress = _stderr_progress(where) if len(window_bounds(run)) > PROGRESS_EVERY else None

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 import valve_actuator.blocks  # noqa: F401  (registers the valve blocks)
-from phfdi.run import Run
+from phfdi.records.record import Record
 from phfdi_base.blocks import make_block
 from pi_controllers.pi import PIController
 
@@ -44,7 +44,7 @@ class SyntheticLoop:
     >>> from phfdi.loopdiag import SyntheticLoop, simulate_loop
     >>> loop = SyntheticLoop(valve=("backlash", {"width_pct": 2.0}), duration_s=1200.0)
     >>> simulate_loop(loop).names
-    ['time_s', 'op_pct', 'pv', 'sp', 'stem_pct']
+    ['op_pct', 'pv', 'sp', 'stem_pct']
     """
 
     process: str = "foptd"  # or "integrating"
@@ -101,7 +101,7 @@ def waveform(name: str, phase: np.ndarray | float) -> np.ndarray | float:
     raise ValueError(f"unknown waveform {name!r}; one of {WAVEFORMS}")
 
 
-def simulate_loop(spec: SyntheticLoop) -> Run:
+def simulate_loop(spec: SyntheticLoop) -> Record:
     """The closed loop's historian record: time_s, op_pct, pv, sp, and the truth stem_pct.
 
     Examples
@@ -172,7 +172,7 @@ def simulate_loop(spec: SyntheticLoop) -> Run:
             "units": {"op_pct": "%", "pv": "PV units", "sp": "PV units"},
             "process_type": "integrating" if spec.process == "integrating" else "self_regulating",
             "synthetic": {"valve": spec.valve, "kp": spec.kp, "ti_s": spec.ti_s}, "notes": []}
-    return Run(out, meta)
+    return Record.of(out, meta)
 
 
 class _Extras:

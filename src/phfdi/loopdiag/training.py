@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 from .synthetic import SyntheticLoop, simulate_loop
 from .vocabulary import OTHER_NONLINEARITIES
@@ -122,7 +122,7 @@ def draw_spec(rng: np.random.Generator, stiction: bool, tag: str) -> DrawnLoop:
     return DrawnLoop(spec, stiction, conditions, "integrating" if integrating else "self_regulating")
 
 
-def usable(run: Run) -> bool:
+def usable(run: Record) -> bool:
     """A loop an operator would run: OP not pinned at a limit for more than a fifth of the record,
     PV not diverging."""
     op = run["op_pct"]
@@ -130,12 +130,12 @@ def usable(run: Run) -> bool:
     return at_limit < 0.2 and bool(np.all(np.isfinite(run["pv"])))
 
 
-def _at_limits(run: Run) -> float:
+def _at_limits(run: Record) -> float:
     op = run["op_pct"]
     return float(np.mean((op <= 0.01) | (op >= 99.99)))
 
 
-def draw_loops(n: int, seed: int, prefix: str = "SYN") -> list[tuple[DrawnLoop, Run]]:
+def draw_loops(n: int, seed: int, prefix: str = "SYN") -> list[tuple[DrawnLoop, Record]]:
     """n loops, half with stiction (alternating), each simulated; unusable draws are redrawn."""
     rng = np.random.default_rng(seed)
     out = []
@@ -291,7 +291,7 @@ def draw_class_spec(rng: np.random.Generator, loop_class: str, tag: str) -> Draw
                      loop_class)
 
 
-def draw_class_loops(classes: list[str], seed: int, prefix: str) -> list[tuple[DrawnLoop, Run]]:
+def draw_class_loops(classes: list[str], seed: int, prefix: str) -> list[tuple[DrawnLoop, Record]]:
     """One usable loop per entry of ``classes`` (in that order), each simulated; unusable draws
     are redrawn from the same random stream."""
     rng = np.random.default_rng(seed)

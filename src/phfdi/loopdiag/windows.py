@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import binom
 
-from phfdi.run import Run
+from phfdi.records.record import Record
 
 from .classifier import NO_STICTION, SIM_FALSE_CALL, STICTION, UNDETERMINED
 from .diagnose import Settings
@@ -44,7 +44,7 @@ WINDOW_ALPHA = 0.01
 PROGRESS_EVERY = 16
 
 
-def window_bounds(run: Run) -> list[tuple[int, int]]:
+def window_bounds(run: Record) -> list[tuple[int, int]]:
     """(start, stop) sample indices of the windows to screen: the stretches a sampled file was read as
     (``metadata["windows"]``), else windows of :data:`WINDOW` samples; at most :data:`MAX_WINDOWS`, evenly
     spread."""
@@ -62,12 +62,12 @@ def window_bounds(run: Run) -> list[tuple[int, int]]:
     return bounds
 
 
-def window_run(run: Run, a: int, b: int) -> Run:
+def window_run(run: Record, a: int, b: int) -> Record:
     """Samples a..b-1 of a run, with its metadata (a copy)."""
     meta = dict(run.metadata)
     meta.pop("windows", None)
     meta["notes"] = []
-    return Run({k: v[a:b].copy() for k, v in run.signals.items()}, meta)
+    return Record.of({"time_s": run.time_s[a:b].copy(), **{k: v[a:b].copy() for k, v in run.signals.items()}}, meta)
 
 
 def critical_count(m: int, false_rate: float = SIM_FALSE_CALL, alpha: float = WINDOW_ALPHA) -> int:
@@ -79,7 +79,7 @@ def critical_count(m: int, false_rate: float = SIM_FALSE_CALL, alpha: float = WI
     return m + 1
 
 
-def screen_windows(run: Run, settings: Settings, progress=None) -> list[dict]:
+def screen_windows(run: Record, settings: Settings, progress=None) -> list[dict]:
     """Per window: its bounds, the structure check and, for a closed loop, the screen's p and call."""
     process_type = settings.process_type or run.metadata.get("process_type", "self_regulating")
     out = []

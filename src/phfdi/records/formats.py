@@ -21,8 +21,10 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["Format", "FORMATS", "Table", "format_of", "historian_suffixes", "register_format", "run_suffixes",
-           "unregister_format"]
+from phfdi_base.errors import UserError
+
+__all__ = ["Format", "FORMATS", "Table", "WRITE_SUFFIXES", "format_of", "historian_suffixes", "register_format",
+           "run_suffixes", "unregister_format", "writable_format"]
 
 
 @dataclass
@@ -96,6 +98,19 @@ def is_format(path: str | Path, name: str) -> bool:
     """True when ``path`` (by suffix, or as a folder by marker) is of the format ``name``."""
     fmt = format_of(path)
     return fmt.name == name and (Path(path).suffix.lower() in fmt.suffixes or Path(path).is_dir())
+
+
+#: the formats a run is written to, by :meth:`phfdi.records.Record.save` (the readers are the registry's)
+WRITE_SUFFIXES = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet"}
+
+
+def writable_format(path: str | Path) -> str:
+    """The format :meth:`~phfdi.records.Record.save` writes ``path`` in ("csv" or "parquet"); a one-line
+    UserError for others."""
+    fmt = WRITE_SUFFIXES.get(Path(path).suffix.lower())
+    if fmt is None:
+        raise UserError(f"cannot write a run to {path}: use a .csv or .parquet file name")
+    return fmt
 
 
 def run_suffixes() -> tuple[str, ...]:

@@ -10,7 +10,6 @@ from typing import Callable
 
 import numpy as np
 
-from phfdi.run import Run
 from phfdi_base.errors import UserError
 from phfdi_base.signals import unit_of
 
@@ -104,7 +103,7 @@ def record_from_table(path: str | Path, table: Table, column_map: ColumnMap | di
 
 
 def read_run(path: str | Path, column_map: MapLike | Callable = None, *, encoding: str | None = None,
-             required: tuple[str, ...] = ()) -> Run:
+             required: tuple[str, ...] = ()) -> Record:
     """A run from a run file or a bag of the graph (any format of :mod:`.formats` a run is read from: .mcap,
     .parquet, .csv), read by :func:`read_record` under the run policy: the one way every command and
     :func:`phfdi.bagio.load_run` read a run.

@@ -1,17 +1,31 @@
-"""A measured record after the reading policy: samples, what is missing, and every repair made."""
+"""The one in-memory record of the project: a run the simulators make, a file the reader reads.
+
+A record is a time base ``time_s`` plus named signals of the same length; names carry their unit as a suffix
+(``_pct``, ``_ml_s``, ``_cm``, ``_s``) and pH signals start with ``ph``. Read from a file
+(:func:`~phfdi.records.read_record`) it keeps every repair made and where each sample came from; made by a
+simulator (:meth:`Record.of`) it is a run on a uniform time base. Files it is written to: CSV (one header line
+of signal names, then one row per sample) and Parquet (units and the run's metadata in the schema's
+metadata), atomically.
+"""
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field, replace
 from datetime import datetime
+from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
-from phfdi.run import Run
+from phfdi_base.errors import UserError
+from phfdi_base.outputs import staged
+from phfdi_base.signals import unit_of
 
 from .cells import iso_stamp
 from .columns import OUTPUTS, is_input
 from .errors import ReadError
+from .formats import writable_format
 from .notes import places
 from .policy import interval_s, spans
 
@@ -28,8 +42,12 @@ class Record:
     ``grid_s`` the step of the uniform grid the samples were put on by a reader that states one (the model
     diagnosis's, :func:`phfdi.diagnosis.make_record`), else None: :attr:`dt_s` is then the median interval.
 
-    Made by :func:`~phfdi.records.read_record`; :meth:`to_run` gives the project's run. The model diagnosis
-    reads the same record on its uniform grid, split into :attr:`inputs` and :attr:`outputs`.
+    ``uniform``: made as a run on a uniform time base (:meth:`of`: a simulator's run, or :meth:`to_run` of a
+    read record), whose :attr:`dt_s` is its first interval (``metadata["sample_time_s"]`` with one sample).
+
+    Made by :func:`~phfdi.records.read_record` or, from signals, by :meth:`of`; :meth:`to_run` gives it as a run
+    (one segment, its notes and units in the metadata). ``record["time_s"]`` is the time base as any signal.
+    The model diagnosis reads the same record on its uniform grid, split into :attr:`inputs` and :attr:`outputs`.
 
     Examples
     --------
@@ -41,8 +59,9 @@ class Record:
     >>> record = read_record(path)
     >>> len(record), record.names, record.units
     (3, ['ph_measured'], {'ph_measured': 'pH'})
-    >>> record.to_run().names
-    ['time_s', 'ph_measured']
+    >>> run = record.to_run()
+    >>> run["time_s"], run.metadata["units"]
+    (array([0., 1., 2.]), {'ph_measured': 'pH'})
     """
 
     path: str
@@ -61,9 +80,48 @@ class Record:
     #: record's own seconds only); :func:`~phfdi.records.cells.iso_stamp` turns a time into its stamp
     wall_clock: datetime | None = None
     grid_s: float | None = None
+    uniform: bool = False
+
+    @classmethod
+    def of(cls, signals: Mapping[str, np.ndarray], metadata: dict | None = None) -> "Record":
+        """A run made from signals (``time_s`` among them, every signal as long), the way the simulators, the bag
+        reader and the loop diagnosis's windows make one. ``metadata``: scenario, seed, sample time, what made it
+        (its ``source`` names the record). A one-line UserError when ``time_s`` is missing or a length differs.
+
+        >>> run = Record.of({"time_s": np.arange(3.0), "ph_measured": np.array([7.0, 7.1, 7.2])}, {"seed": 1})
+        >>> run.names, run.dt_s, run.units, len(run)
+        (['ph_measured'], 1.0, {'ph_measured': 'pH'}, 3)
+        >>> Record.of({"time_s": np.arange(3.0), "pv": np.zeros(2)})
+        Traceback (most recent call last):
+        ...
+        phfdi_base.errors.UserError: signal 'pv' has 2 samples, time_s has 3
+        """
+        if "time_s" not in signals:
+            raise UserError("a run needs a time_s signal")
+        time_s = signals["time_s"]
+        n = len(time_s)
+        for name, values in signals.items():
+            if len(values) != n:
+                raise UserError(f"signal {name!r} has {len(values)} samples, time_s has {n}")
+        metadata = {} if metadata is None else metadata
+        named = {k: v for k, v in signals.items() if k != "time_s"}
+        return cls(str(metadata.get("source", "run")), time_s, named, {k: unit_of(k) for k in named},
+                   {k: k for k in named}, np.arange(1, n + 1), "sample", metadata=metadata, uniform=True)
 
     def __len__(self) -> int:
         return len(self.time_s)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """A signal by name, ``time_s`` included."""
+        if name == "time_s":
+            return self.time_s
+        try:
+            return self.signals[name]
+        except KeyError:
+            raise KeyError(f"run has no signal {name!r}; it has: {', '.join(['time_s', *self.signals])}") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name == "time_s" or name in self.signals
 
     @property
     def name(self) -> str:
@@ -121,8 +179,14 @@ class Record:
 
     @property
     def dt_s(self) -> float:
-        """The sample interval (s): the grid's step on a stated grid (``grid_s``), else the median interval."""
-        return self.grid_s if self.grid_s is not None else interval_s(self.time_s)
+        """The sample interval (s): the grid's step on a stated grid (``grid_s``), a run's first interval
+        (``uniform``), else the median interval."""
+        if self.grid_s is not None:
+            return self.grid_s
+        if self.uniform:
+            t = self.time_s
+            return float(t[1] - t[0]) if len(t) > 1 else float(self.metadata.get("sample_time_s", 1.0))
+        return interval_s(self.time_s)
 
     # ---- reporting ------------------------------------------------------------------------
     def note_lines(self) -> list[str]:
@@ -138,13 +202,49 @@ class Record:
                 "segments": len(self.boundaries) + 1, "notes": self.note_lines()}
 
     # ---- conversions ----------------------------------------------------------------------
-    def to_run(self) -> Run:
-        """The project's :class:`~phfdi.run.Run` (NaN where missing; notes and units in the metadata)."""
+    def to_run(self) -> "Record":
+        """This record as a run (:meth:`of`): copies of its samples, NaN where missing, its source, notes and units
+        in the metadata; one segment only."""
         if self.boundaries:
             raise ReadError(self.path, f"{len(self.boundaries) + 1} segments (the clock resets or jumps); "
                                        f"take one with segments()")
         meta = {**self.metadata, "source": self.path, "notes": self.note_lines(), "units": dict(self.units)}
-        return Run({"time_s": self.time_s.copy(), **{k: v.copy() for k, v in self.signals.items()}}, meta)
+        return Record.of({"time_s": self.time_s.copy(), **{k: v.copy() for k, v in self.signals.items()}}, meta)
+
+    def segment(self, t0_s: float, t1_s: float) -> "Record":
+        """Samples with t0 <= t < t1 (a run of their own, the metadata copied)."""
+        m = (self.time_s >= t0_s) & (self.time_s < t1_s)
+        return Record.of({"time_s": self.time_s[m], **{k: v[m] for k, v in self.signals.items()}},
+                         dict(self.metadata))
+
+    # ---- files ----------------------------------------------------------------------------
+    def to_csv(self, path: str | Path, overwrite: bool = True) -> Path:
+        """Write as CSV (header of signal names, ``time_s`` first, full float precision), atomically
+        (:mod:`phfdi_base.outputs`)."""
+        names = ["time_s", *self.names]
+        data = np.column_stack([self[n] for n in names])
+        with staged(path, overwrite) as tmp:
+            np.savetxt(tmp, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        return Path(path)
+
+    def to_parquet(self, path: str | Path, overwrite: bool = True) -> Path:
+        """Write as Parquet (units in the fields' metadata, the metadata in the schema's), atomically."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        names = ["time_s", *self.names]
+        fields = [pa.field(n, pa.float64(), metadata={"unit": unit_of(n)}) for n in names]
+        schema = pa.schema(fields, metadata={"phfdi_run": json.dumps(self.metadata, default=str)})
+        table = pa.table({n: np.asarray(self[n], dtype=float) for n in names}, schema=schema)
+        with staged(path, overwrite) as tmp:
+            pq.write_table(table, tmp)
+        return Path(path)
+
+    def save(self, path: str | Path, overwrite: bool = True) -> Path:
+        """Write by extension: .csv or .parquet. The library replaces an existing file; the commands pass
+        ``overwrite=args.overwrite`` (an existing file is kept without ``--overwrite``)."""
+        writer = {"csv": self.to_csv, "parquet": self.to_parquet}[writable_format(path)]
+        return writer(path, overwrite)
 
     def select(self, channels: list[str] | tuple[str, ...]) -> "Record":
         """Only these channels (in this order)."""

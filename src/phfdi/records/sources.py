@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from phfdi_base.errors import UserError
+from phfdi_base.signals import unit_of
 
 from .errors import ReadError, regular_file
 from .formats import Format, Table, format_of, register_format
@@ -215,10 +216,10 @@ def read_bag(path: Path, data: bytes | None = None, encoding: str | None = None)
                               f"recorder was killed, run: phfdi bag recover {path} FIXED.mcap") from None
     if len(run) == 0:
         raise ReadError(path, "the bag holds no sample of /plant/measurement")
-    units = run.units()
+    units = {"time_s": unit_of("time_s"), **run.units}
     metadata = dict(run.metadata)
     notes = metadata.pop("notes", [])
-    return Table(str(path), dict(run.signals), np.arange(1, len(run) + 1), "sample", metadata, units, notes)
+    return Table(str(path), {"time_s": run.time_s, **run.signals}, np.arange(1, len(run) + 1), "sample", metadata, units, notes)
 
 
 # ---- the built-in formats (matching order: a bag, Parquet, then text; see :mod:`.formats`) ------------------

@@ -2,7 +2,7 @@
 
 A *multisignal* is a matrix whose rows are signals of equal length (the
 paper's Section 6, after MATLAB's Wavelet Toolbox). Rows come from runs
-(:class:`phfdi.run.Run` or anything with ``time_s`` and ``__getitem__``)
+(:class:`phfdi.records.Record` or anything with ``time_s`` and ``__getitem__``)
 resampled onto a common grid, each with a class label ("healthy",
 "backlash", ...) and a name.
 
