@@ -201,8 +201,8 @@ class LearnedSettings:
     against_feed_per_sample: float = setting(0.0, "feed checks (a reference that confirms its alarms and knows its "
                                                   "feeds' directions, the estimator): the probability that a healthy "
                                                   "sample's reading moves against the only feed that runs by the test's "
-                                                  "level (wavelet_fdi.feed_checks: a Newey-West t of the reading's "
-                                                  "slope, its level the t quantile); 0: off",
+                                                  "level (wavelet_fdi.feed_checks: a t of the slope of the reading's "
+                                                  "batch means, its level the t quantile); 0: off",
                                              range=(0.0, 0.1))
     energy_variance_ratio: float = setting(0.0, "energy CUSUMs on the detail bands designed for this variance "
                                                 "ratio, above 1 (0: off)")

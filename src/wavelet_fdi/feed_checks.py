@@ -8,9 +8,12 @@ model enters the test. It is what finds a probe that drifts up on a strong acid'
 filter follows the drift as a weaker acid and the band statistics see nothing (a 1 pH/min drift in the
 shared acid runs: three of five onsets raised nothing at all, two only a deviation no fault explained).
 
-The statistic (:func:`against_feed_t`): over the last ``window`` samples, the least-squares slope of the reading
-against the sample number, signed against the running feed, over its Newey-West standard error (residuals of
-the window's own line, Bartlett weights to lag ``NW_LAGS``: the pumps' stroke ripple correlates a few samples).
+The statistic (:func:`against_feed_t`): over the last ``window`` samples, the least-squares slope of the reading's
+batch means (``BATCH_SAMPLES`` readings each) against time, signed against the running feed, over its standard
+error from the means' own residuals about their line. Batch means because the pumps' stroke ripple correlates
+the readings over a few samples: their errors are nearly independent where the readings' are not (under AR(1)
+noise of correlation 0.3 the rate at the 1e-3 level was 1.9e-3 with batch means, 1.1e-2 with plain least
+squares on the readings and 8.3e-3 with a Newey-West error, tried first; docs/detector.md).
 Testable samples: exactly one feed has run (recorded flow above 0) in every row of the window and for
 ``settle_s`` before it (the mixing zone and the probe's lag: a reading still rising from the base that stopped
 is no evidence), the window's readings are all finite, and an earlier window of the same stretch had the reading
@@ -23,12 +26,12 @@ alone is not tested in that stretch.
 
 **The design rate.** Assumptions, stated: (1) while one feed runs the true pH is monotone in that feed's
 direction (well mixed, no other reagent, no unrecorded feed); (2) the reading's error about it is stationary
-over the window, Gaussian and correlated over at most ``NW_LAGS`` samples. Under them the statistic is at most a
-t with ``window - 2`` degrees of freedom (at most: a pH that moves with the feed only lowers it), and the level
-is its quantile for the stated probability per sample (``against_feed_per_sample``, 1e-6 by default for the
-estimator: 5.25 at 64 samples). A crossing is judged ``gap`` samples later by the reference's namer
-(:meth:`wavelet_fdi.learned_detector.LearnedDetector._check_feed`): it becomes a fault alarm when a probe offset or
-drift against the feed explains the window better than any healthy re-adaptation
+over the window, Gaussian and correlated over much less than a batch. Under them the statistic is at most a
+t with ``window / BATCH_SAMPLES - 2`` degrees of freedom (at most: a pH that moves with the feed only lowers it),
+and the level is its quantile for the stated probability per sample (``against_feed_per_sample``, 1e-6 for the
+estimator: 7.74 at 64 samples, 16 batches, 14 d.f.). A crossing is judged ``gap`` samples later by the
+reference's namer (:meth:`wavelet_fdi.learned_detector.LearnedDetector._check_feed`): it becomes a fault alarm
+when a probe offset or drift against the feed explains the window better than any healthy re-adaptation
 (:func:`wavelet_fdi.estimator_isolation.isolate`); else it is counted and dropped.
 
 What it cannot tell apart: a feed that runs while recorded off (the other pump leaking or running unrecorded)
