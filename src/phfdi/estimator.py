@@ -11,12 +11,10 @@ like a learned one.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
-from phfdi.learned import read_measured
 from phfdi.records import Record
 from phfdi_base.errors import UserError
 from wavelet_fdi.estimator_calibration import calibrate_estimator
@@ -83,10 +81,6 @@ def start_from_model(model: str, ph_channel: str = PH_CHANNEL, correct: bool = T
     if not feeds:
         raise UserError(f"--model {model}: no feed carries strong acid or base")
     return EstimatorReference(tuple(feeds), ph_channel, float(spec.tank.volume_ml), correct=correct)
-
-
-def read_runs(paths: Sequence[str | Path], channels: Sequence[str], column_map=None) -> list[Record]:
-    return [read_measured(p, column_map, channels=list(channels)) for p in paths]
 
 
 #: a reading outside this range is not a pH (a probe's range: 0 to 14)

@@ -388,7 +388,8 @@ def run_learn(args: argparse.Namespace) -> int:
 
 
 def run_estimator(args: argparse.Namespace) -> int:
-    from phfdi.estimator import ESTIMATOR_SETTINGS, fit_estimator, identifiability_notes, read_runs, start_from_model
+    from phfdi.estimator import ESTIMATOR_SETTINGS, fit_estimator, identifiability_notes, start_from_model
+    from phfdi.learned import read_measured
     from phfdi_base.errors import UserError
     from wavelet_fdi.config import LearnedSettings
 
@@ -399,7 +400,8 @@ def run_estimator(args: argparse.Namespace) -> int:
     if args.rows is not None or args.exclude or args.start or args.end:
         raise UserError("--rows, --from, --to and --exclude go with --learn (--estimator fits on whole runs)")
     start = start_from_model(args.model, correct=not args.open_loop)
-    records = read_runs(args.estimator, start.channels, column_map_from_args(args))
+    cmap = column_map_from_args(args)
+    records = [read_measured(p, cmap, channels=list(start.channels)) for p in args.estimator]
     for r in records:
         print_notes("calibrate", r.notes)
     with plant_runs_on(", ".join(args.estimator)):

@@ -65,12 +65,6 @@ def diagnosis_map(cmap: records.ColumnMap) -> records.ColumnMap:
     return cmap
 
 
-def read_mapped(path: Path, cmap: records.ColumnMap, encoding: str | None = None) -> tuple[dict, list[str]]:
-    """The mapped signals of any record file (project names and units) and the reader's notes."""
-    rec = records.read_record(path, cmap, policy="run", channels=cmap.channels(), encoding=encoding)
-    return {"time_s": rec.time_s, **rec.signals}, rec.note_lines()
-
-
 def read_project_run(path: Path, encoding: str | None = None) -> tuple[dict[str, np.ndarray], list[str]]:
     """The signals of a project run (CSV, Parquet or bag) that a plant would have measured, and the notes."""
     rec = records.read_record(path, policy="run", encoding=encoding)
@@ -237,7 +231,8 @@ def load_record(path: str | Path, cmap: records.ColumnMap | None = None, dt_s: f
     """
     path = Path(path)
     if cmap is not None:
-        signals, notes = read_mapped(path, cmap, encoding)
+        rec = records.read_record(path, cmap, policy="run", channels=cmap.channels(), encoding=encoding)
+        signals, notes = {"time_s": rec.time_s, **rec.signals}, rec.note_lines()
     else:
         signals, notes = read_project_run(path, encoding)
     prefix = f"{path}: "
