@@ -2,6 +2,8 @@
 
     .venv/bin/python benchmarks/physics_reference.py                  # paper severities, seeds 1-3 (Dask, minutes)
     .venv/bin/python benchmarks/physics_reference.py --all-severities
+    .venv/bin/python benchmarks/physics_reference.py --all-severities --healthy 48     # 133 h of healthy runs
+    .venv/bin/python benchmarks/physics_reference.py --all-severities --kind-setting aj_energy_variance_ratio=0
 
 Issue 37 asks for one detector core: the physics model as one more reference kind of the multichannel detector
 (``wavelet_fdi.reference_physics``, kind ``physics``), and the physics detector (``StreamingDetector``) retired
@@ -47,11 +49,12 @@ class Task:
     seed: int
 
 
-def physics_settings():
-    """The multichannel detector's settings with the physics detector's design (``reference_physics.design_settings``)."""
+def physics_settings(**given):
+    """The multichannel detector's settings with the physics detector's design (``reference_physics.design_settings``),
+    ``given`` set otherwise."""
     from wavelet_fdi.reference_physics import design_settings
 
-    return design_settings(sample_time_s=1.0)
+    return design_settings(sample_time_s=1.0, **given)
 
 
 def _spec(task: Task):
@@ -89,6 +92,7 @@ def score(task: Task, model) -> dict:
     rows = np.column_stack([np.asarray(run[c], float) for c in model.channels])
     _, _, kind_det = run_record(model, t, rows)
     kind = [(a["detection_time"], (a.get("isolation") or {}).get("fault_class", "pending")) for a in kind_det.alarms]
+    kind_statistics = [a["statistic"] for a in kind_det.alarms if onset is None or a["detection_time"] < onset]
     out = {"fault": task.fault, "params": task.params, "seed": task.seed,
            "monitored_h": float((t[-1] - t[0]) / 3600.0)}
     for name, alarms in (("physics_detector", physics), ("physics_kind", kind)):
@@ -96,13 +100,14 @@ def score(task: Task, model) -> dict:
         after = [(x, c) for x, c in alarms if onset is not None and x >= onset]
         out[name] = {"alarms_before": len(before), "delay_s": (after[0][0] - onset) if after else None,
                      "named": after[0][1] if after else None}
+    out["physics_kind"]["statistics_before"] = kind_statistics
     return out
 
 
-def tasks(all_severities: bool) -> list[Task]:
+def tasks(all_severities: bool, healthy: int = len(HEALTHY_SEEDS)) -> list[Task]:
     from phfdi.study.evaluation import PAPER_SEVERITY, severities
 
-    out = [Task("healthy", {}, s) for s in HEALTHY_SEEDS]
+    out = [Task("healthy", {}, s) for s in range(1, healthy + 1)]
     for fault, (_, levels) in severities().items():
         chosen = levels if all_severities else [levels[PAPER_SEVERITY]]
         out += [Task(fault, p, s) for p in chosen for s in FAULT_SEEDS]
@@ -129,6 +134,11 @@ def report(rows: list[dict]) -> None:
         right = sum(r[name]["named"] == expected(r["fault"]) for r in faulty)
         med = f"{np.median(found):.0f}" if found else "-"
         print(f"| {name} | {fa} | {fa / hours:.2f} | {len(found)}/{len(faulty)} | {med} | {right}/{len(faulty)} |")
+    by_statistic: dict[str, int] = {}
+    for r in healthy:
+        for name in r["physics_kind"]["statistics_before"]:
+            by_statistic[name] = by_statistic.get(name, 0) + 1
+    print("the physics kind's fault alarms on healthy runs, by statistic:", by_statistic or "none")
     print("\n| fault | parameters | physics detector: found, delays (s); named | physics kind: found, delays (s); "
           "named | alarms before the onset (detector / kind) |")
     print("|---|---|---|---|---|")
@@ -151,8 +161,16 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--all-severities", action="store_true", help="the three severities of every fault, not only "
                                                                  "the paper's")
+    p.add_argument("--healthy", type=int, default=len(HEALTHY_SEEDS),
+                   help=f"held-out healthy runs, seeds 1..N (default {len(HEALTHY_SEEDS)}, phfdi evaluate's)")
+    p.add_argument("--kind-setting", action="append", default=[], metavar="KEY=VALUE",
+                   help="a setting of the physics kind other than its design (e.g. aj_energy_variance_ratio=0)")
     p.add_argument("--scheduler", default=None, help="an existing Dask scheduler's address (default: a local one)")
     args = p.parse_args(argv)
+    given = {}
+    for item in args.kind_setting:
+        key, _, value = item.partition("=")
+        given[key.strip()] = float(value)
     from phfdi.loop import simulate  # noqa: F401  (fails early, before the cluster starts, if the install is broken)
     from phfdi.loopdiag.dask_run import dask_client, map_ordered
     from phfdi.scenario import load_scenario
@@ -168,12 +186,12 @@ def main(argv: list[str] | None = None) -> int:
         runs = map_ordered(client, healthy_rows, list(CALIBRATION_SEEDS), show)
         # the pH alone, as the physics detector watches it by default (DetectorSettings.channels)
         reference = PhysicsReference.from_spec(load_scenario("paper", fault="healthy"), watch_level=False)
-        model = calibrate_bands(reference, runs, physics_settings(), {"seeds": list(CALIBRATION_SEEDS)})
+        model = calibrate_bands(reference, runs, physics_settings(**given), {"seeds": list(CALIBRATION_SEEDS)})
         print("band scales (healthy RMS, sensor-noise units):", {c: np.round(row, 3).tolist() for c, row in
                                                                  zip(model.residual_channels, model.band_sigma)})
         print("thresholds measured for ARL0 =", f"{model.settings.arl0_samples:g} samples:",
               {k: round(v, 1) for k, v in model.thresholds.items()})
-        todo = tasks(args.all_severities)
+        todo = tasks(args.all_severities, args.healthy)
         rows = map_ordered(client, _score_with, [(t, model) for t in todo], show)
     report(rows)
     print(f"\n{time.perf_counter() - t0:.0f} s", file=sys.stderr)

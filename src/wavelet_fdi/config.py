@@ -251,6 +251,11 @@ class LearnedSettings:
                                            "no fault hypothesis explains is announced once (outside calibration, "
                                            "WARN); the next ones only after this long without one, s (each is "
                                            "still kept and counted)", range=(0.0, math.inf))
+    aj_energy_variance_ratio: float = setting(0.0, "energy CUSUMs on AJ (u^2 - k, u its deviation in healthy sigmas: "
+                                                   "the physics detector's approximation-band energy, which a slow "
+                                                   "change of the residual's spread or a probe's lag shows in) designed "
+                                                   "for this variance ratio, above 1 (0: off)")
+    aj_energy_h: float = setting(20.0, "those CUSUMs' threshold, above 0 (measured instead with arl0_samples)")
 
     def __post_init__(self) -> None:
         self.check()  # refused when made, as DetectorSettings are: a bad value never reaches a detector
@@ -270,10 +275,13 @@ class LearnedSettings:
             raise UserError("mean_h must be > 0")
         if self.energy_variance_ratio and not self.energy_variance_ratio > 1.0:
             raise UserError("energy_variance_ratio must be 0 (off) or above 1")
+        if self.aj_energy_variance_ratio and not self.aj_energy_variance_ratio > 1.0:
+            raise UserError("aj_energy_variance_ratio must be 0 (off) or above 1")
         if self.energy_down_variance_ratio and not 0.0 < self.energy_down_variance_ratio < 1.0:
             raise UserError("energy_down_variance_ratio must be 0 (off) or between 0 and 1")
-        if not (self.energy_h > 0 and self.energy_down_h > 0 and self.repeat_h > 0 and self.residual_mean_h > 0):
-            raise UserError("energy_h, energy_down_h, repeat_h and residual_mean_h must be positive")
+        if not (self.energy_h > 0 and self.energy_down_h > 0 and self.repeat_h > 0 and self.residual_mean_h > 0
+                and self.aj_energy_h > 0):
+            raise UserError("energy_h, energy_down_h, repeat_h, residual_mean_h and aj_energy_h must be positive")
         if not 0.0 <= self.repeat_probability < 1.0:
             raise UserError("repeat_probability must be 0 (off) or between 0 and 1")
         if not 0 < self.freeze_ratio <= 1:

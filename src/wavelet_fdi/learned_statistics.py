@@ -15,7 +15,7 @@ in your own module); ``tests/learned/test_learned_statistic_recipe.py`` adds one
 Examples
 --------
 >>> list(LEARNED_STATISTICS)
-['mean', 'energy', 'energy_down', 'repeats', 'residual_mean']
+['mean', 'energy', 'energy_down', 'repeats', 'residual_mean', 'aj_energy']
 """
 
 from __future__ import annotations
@@ -338,3 +338,28 @@ class ResidualMean(MeanShift):
         assert chunk.residual is not None, "the detector passes its residuals"
         r = chunk.residual[i0:i1] - self.detector.bias
         return np.where(chunk.missing[i0:i1], 0.0, r) if chunk.gappy else r
+
+
+@register_learned_statistic
+class ApproximationEnergy(LearnedStatistic):
+    """A variance increase by ``aj_energy_variance_ratio`` rho of AJ on every channel (u^2 - k, u its deviation from
+    the observer's level in healthy sigmas of AJ, k = ln(rho) / (1 - 1/rho)): the physics detector's energy of the
+    approximation band. AJ's mean CUSUMs see a shift that stays on one side; a slow change that swings both ways
+    (a probe whose lag grows lets the slow residual swing wider with every setpoint move) leaves them near zero and
+    raises this. k as the detail bands' energy; h = ``aj_energy_h``."""
+
+    kind = "aj_energy"
+
+    def rows(self) -> list[StatisticRow]:
+        if not self.settings.aj_energy_variance_ratio > 1.0:
+            return []
+        return [StatisticRow(c, self.settings.level, self.kind) for c in range(self.detector.m)]
+
+    def reference_value(self) -> float:
+        return energy_reference(self.settings.aj_energy_variance_ratio)
+
+    def threshold(self) -> float:
+        return self.settings.aj_energy_h
+
+    def values(self, out, chunk, i0, i1, g0, u) -> None:
+        out[:] = (u * u).T  # u is 0 where a sample is missing: it reads healthy

@@ -56,7 +56,8 @@ def design_settings(physics: DetectorSettings | None = None, sample_time_s: floa
     """The multichannel detector's settings that carry the physics detector's design (its
     :class:`~wavelet_fdi.config.DetectorSettings`): the same wavelet and level; the residual's own mean (R) and AJ's
     mean designed for a shift of ``mean_shift_sigma`` (k half of it: in the residual's sigmas for R, in AJ's for AJ,
-    where a shift of white noise reads 2^(J/2) times larger); energy CUSUMs for its ``variance_ratio``; its block
+    where a shift of white noise reads 2^(J/2) times larger); energy CUSUMs for its ``variance_ratio`` on every band,
+    the detail bands and AJ, as its own; its block
     (``block_samples``: an alarm clears only after a whole block without a crossing, so a valve that sticks and
     slips keeps one alarm up rather than raising one per slip); and its false-alarm target ``arl0_samples``, for
     which :func:`~wavelet_fdi.learned_detector.calibrate_bands` measures every threshold. ``given``: any setting
@@ -66,6 +67,7 @@ def design_settings(physics: DetectorSettings | None = None, sample_time_s: floa
     d = physics or DetectorSettings()
     design = dict(wavelet=d.wavelet, level=d.level, mean_k=0.5 * d.mean_shift_sigma * 2.0 ** (d.level / 2.0),
                   residual_mean_k=0.5 * d.mean_shift_sigma, energy_variance_ratio=d.variance_ratio,
+                  aj_energy_variance_ratio=d.variance_ratio,
                   arl0_samples=d.arl0_samples, block_samples=d.block_samples, sample_time_s=float(sample_time_s))
     return LearnedSettings(**{**design, **given})
 

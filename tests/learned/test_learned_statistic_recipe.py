@@ -106,12 +106,35 @@ def test_the_residual_mean_sees_a_step_before_the_approximation_band_does():
     assert det.alarms and det.alarms[0]["statistic"] == "b.R.mean_up"
 
 
+def test_the_approximation_energy_sees_a_slow_swing_the_mean_cusums_miss():
+    """AJ's energy (aj_energy_variance_ratio, the physics detector's approximation-band energy) against AJ's mean
+    CUSUMs, each threshold measured for ARL0 1e5 on the same healthy rows: a slow zero-mean swing of one channel (a
+    square wave moving AJ by +-1 of its healthy sigmas, 64-sample half-period) raises the energy row, while with
+    the energy off the same record raises no alarm (fixed seeds: the same numbers every run)."""
+    s = dict(level=3, mean_k=1.5 * 2 ** 1.5, arl0_samples=1e5)
+    base = healthy(20000, 1)
+    off = learn(base, ["a", "b"], LearnedSettings(**s))
+    on = learn(base, ["a", "b"], LearnedSettings(**s, aj_energy_variance_ratio=4.0))
+    assert set(on.thresholds) >= {"a.A3.aj_energy", "b.A3.aj_energy"}  # measured, not the declared 20
+    x = healthy(8000, 5)
+    swing = np.where((np.arange(6000) // 64) % 2 == 0, 1.0, -1.0)
+    x[2000:, 1] += off.band_sigma[1, -1] / 2 ** 1.5 * swing  # AJ reads a level 2^(J/2) times: +-1 of its sigmas
+    quiet = LearnedDetector(off)
+    quiet.process(np.arange(8000.0), x)
+    assert not quiet.alarms, quiet.alarms[:1]
+    det = LearnedDetector(on)
+    assert det.stat_names[-2:] == ["a.A3.aj_energy", "b.A3.aj_energy"]
+    det.process(np.arange(8000.0), x)
+    assert det.alarms and det.alarms[0]["statistic"] == "b.A3.aj_energy", det.alarms[:1]
+    assert 2000 < det.alarms[0]["detection_index"] < 4000
+
+
 @pytest.mark.parametrize("kind", list(LEARNED_STATISTICS))
 def test_every_kind_keeps_the_protocol(kind):
     """Rows inside the detector's channels and bands, k finite, h positive, values of the asked shape and finite on
     healthy rows."""
     s = LearnedSettings(level=2, energy_variance_ratio=4.0, energy_down_variance_ratio=0.25, repeat_probability=0.5,
-                        residual_mean_k=0.5)
+                        residual_mean_k=0.5, aj_energy_variance_ratio=4.0)
     det = LearnedDetector(learn(healthy(4000, 1), ["a", "b"], s))
     stat = next(st for st in det.statistics if st.kind == kind)
     rows = stat.rows()
