@@ -277,7 +277,11 @@ class StreamingDetector:
             if grid.reset[i] or not self._initialized:
                 events += self._restart(grid, i)
             if grid.rewarm[i]:
-                self.reference.realign(float(grid.ph[i]), float(grid.level[i]))
+                # the valve moved unseen: start again from the steady state of the returned command, re-aligned on
+                # pH and level (a re-alignment alone left the buffer's total where the held command had put it)
+                others = {f: float(v[i]) for f, v in grid.other_flows.items()}
+                self.reference.initialize(float(grid.t_s[i]), float(grid.command[i]), float(grid.outlet_command[i]),
+                                          float(grid.level[i]), others, float(grid.ph[i]))
                 self._guess = self.reference.ph
                 self._warmup_end = int(grid.index[i]) + self.warmup_samples
                 events.append(Event("input", float(grid.t_s[i]), int(grid.index[i]), "WARN",

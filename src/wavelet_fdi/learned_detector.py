@@ -474,7 +474,9 @@ class LearnedDetector:
         if self.feed_checks.level:
             self.feed_checks.scan(t, rows, self.samples_processed, self.fill_samples)
         missing = ~np.isfinite(r)
-        events += self._missing_events(missing, t)
+        held = getattr(self.stream, "last_held", None)  # rows the reference held by its own rule (its notices say why)
+        events += self._stream_notices(t)
+        events += self._missing_events(missing if held is None else missing & ~held[:, None], t)
         out = self.swt.process(np.where(missing, 0.0, r))
         details, approx = out.details, out.approx  # (J, n, m), (n, m)
         sig = self.model.band_sigma  # (m, J+1)
@@ -944,6 +946,17 @@ class LearnedDetector:
         return LearnedEvent("cleared", float(t_s), int(index), "OK",
                             f"{what} {a['alarm_id']} cleared: no statistic above its threshold for "
                             f"{self.settings.block_samples} samples", dict(a), announce=a.get("announced", True))
+
+    def _stream_notices(self, t: np.ndarray) -> list[LearnedEvent]:
+        """What the reference stream did on these rows by its own rule (the physics kind: detection held while the
+        valve command is missing, the model restarted when it returns), as input events."""
+        notices = getattr(self.stream, "notices", None)
+        if not notices:
+            return []
+        out = [LearnedEvent("input", float(t[index - self.samples_processed]), index, "WARN", text)
+               for index, text in notices]
+        notices.clear()
+        return out
 
     def _missing_events(self, missing: np.ndarray, t: np.ndarray) -> list[LearnedEvent]:
         out = []

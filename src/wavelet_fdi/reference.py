@@ -179,10 +179,12 @@ class HealthyReference:
         """Put the state on the measured pH (strong-ion balance) and level (volume), where they are usable.
 
         Used when the model's state cannot be trusted: at a start (the plant
-        need not be at the steady state of its first inputs) and after the
-        valve command was missing (the valve moved unseen). The third
-        direction of the composition (the buffer's total) is left to fade
-        with the dilution time constant during the warm-up.
+        need not be at the steady state of its first inputs) and, through
+        :meth:`initialize`, after the valve command was missing (the valve
+        moved unseen). The third direction of the composition (the buffer's
+        total) is left to fade with the dilution time constant during the
+        warm-up, which is why a restart starts from the steady state of the
+        returned command rather than from the held command's state.
         """
         if self.has_level and math.isfinite(level_cm) and level_cm > 0.0:
             self.correct(0.0, level_cm - self.plant.level_cm)

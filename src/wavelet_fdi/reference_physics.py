@@ -19,11 +19,17 @@ What the stream does, per sample, in the order of the record:
 * the pH solve starts from a guess fixed per block of ``block_samples`` (by global sample index), so that any
   chunking of a record gives bit-identical residuals.
 
-A missing command (NaN) holds the valve's last position, as the core valve does; a missing measurement gives a NaN
-residual (the detector counts it as healthy and reports it). An alarm's fault is named by the physics detector's
-isolation (:mod:`wavelet_fdi.physics_naming`, the kind's ``NAMERS`` entry), :data:`NAMING_AFTER_S` after the
-detection. What this kind does not do, and the physics detector does: the set-point hold-off, re-aligning
-after a command was missing for long, and naming again when the first naming was unsure.
+A missing command (NaN) holds the valve's last position, as the core valve does, for up to ``command_timeout_s``;
+missing longer, the valve may have moved unseen, so the model cannot be trusted: its residuals are NaN (the
+detector counts them as healthy, holding detection) until the command returns, and then the model restarts on that
+row as at a record's start (steady state of its commands, re-aligned on the measured pH and level) and warms up again
+for ``warmup_s`` (NaN residuals, the warm-up's pulls at block boundaries). The stream says both in
+:attr:`PhysicsStream.notices`, and marks the rows it holds in :attr:`PhysicsStream.last_held` (the detector reports
+them with that reason, not as a missing measurement). A missing measurement gives a NaN residual (the detector counts
+it as healthy and reports it). An alarm's fault is named by the physics detector's isolation
+(:mod:`wavelet_fdi.physics_naming`, the kind's ``NAMERS`` entry), :data:`NAMING_AFTER_S` after the detection. What
+this kind does not do, and the physics detector does: the set-point hold-off (off by default there), and naming
+again when the first naming was unsure.
 """
 
 from __future__ import annotations
@@ -97,6 +103,9 @@ class PhysicsReference:
     #: watch the level's residual too (where a controller holds the level); False: the pH alone, as the physics
     #: detector does by default (its ``channels``)
     watch_level: bool = True
+    #: a valve command missing longer than this holds detection and restarts the model when it returns (the
+    #: physics detector's ``command_timeout_s``)
+    command_timeout_s: float = 10.0
     spec: Any = field(default=None, compare=False, repr=False)
 
     kind = KIND
@@ -106,6 +115,8 @@ class PhysicsReference:
             raise UserError(f"physics reference: warmup_s must be >= 0, got {self.warmup_s}")
         if int(self.block_samples) < 1:
             raise UserError(f"physics reference: block_samples must be >= 1, got {self.block_samples}")
+        if not (math.isfinite(self.command_timeout_s) and self.command_timeout_s >= 0):
+            raise UserError(f"physics reference: command_timeout_s must be >= 0, got {self.command_timeout_s}")
         if self.spec is None:
             from phfdi_base.spec import validate_scenario  # the reference file's scenario, checked by its schema
 
@@ -113,10 +124,11 @@ class PhysicsReference:
 
     @classmethod
     def from_spec(cls, spec: ScenarioSpec, warmup_s: float = 600.0, block_samples: int = 256,
-                  watch_level: bool = True) -> "PhysicsReference":
+                  watch_level: bool = True, command_timeout_s: float = 10.0) -> "PhysicsReference":
         """The reference of a validated scenario (its faults are dropped: the reference is the healthy loop)."""
         healthy = spec.model_copy(update={"faults": []})
-        return cls(healthy.model_dump(mode="json"), float(warmup_s), int(block_samples), bool(watch_level), healthy)
+        return cls(healthy.model_dump(mode="json"), float(warmup_s), int(block_samples), bool(watch_level),
+                   float(command_timeout_s), healthy)
 
     # ---- the protocol every reference kind shares ------------------------------------------
     @property
@@ -144,6 +156,11 @@ class PhysicsReference:
         return int(math.ceil(self.warmup_s / self.spec.sample_time_s))
 
     @property
+    def command_timeout_samples(self) -> int:
+        """Consecutive samples without a valve command after which detection is held (at least 1)."""
+        return max(1, int(round(self.command_timeout_s / self.spec.sample_time_s)))
+
+    @property
     def sensor_noise(self) -> dict[str, float]:
         """The scenario's sensor noise standard deviations (1 where it says none), by channel ("ph", "level")."""
         s = self.spec.sensors
@@ -164,13 +181,14 @@ class PhysicsReference:
 
     def to_dict(self) -> dict:
         return {"kind": KIND, "scenario": self.scenario, "warmup_s": self.warmup_s,
-                "block_samples": self.block_samples, "watch_level": self.watch_level}
+                "block_samples": self.block_samples, "watch_level": self.watch_level,
+                "command_timeout_s": self.command_timeout_s}
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "PhysicsReference":
         try:
             return cls(dict(d["scenario"]), float(d.get("warmup_s", 600.0)), int(d.get("block_samples", 256)),
-                       bool(d.get("watch_level", True)))
+                       bool(d.get("watch_level", True)), float(d.get("command_timeout_s", 10.0)))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not a physics reference ({exc})") from None
 
@@ -190,6 +208,13 @@ class PhysicsStream:
         self._acc = np.zeros(4)  # this block's sums: pH residual, count, level residual, count
         self._last_pred = math.nan  # the last finite pH predicted (the next block's guess after the warm-up)
         self._unit = ref.noise
+        self._warm_end = ref.lags  # the warm-up's pulls run at block boundaries up to this global index
+        self._missing_for = 0  # rows without a valve command just before the next row
+        self._hold_until = 0  # rows before this global index give no residual (warming up after a restart)
+        #: (global row index, what the stream did) for the detector to report: detection held, model restarted
+        self.notices: list[tuple[int, str]] = []
+        #: the last call's rows whose residual the stream held (NaN by its own rule, not a missing measurement)
+        self.last_held = np.zeros(0, dtype=bool)
 
     def residuals(self, t_s: np.ndarray | None, rows: np.ndarray) -> np.ndarray:
         """The next rows' residuals (n, 1 or 2) in sensor-noise units; any chunking gives the same."""
@@ -198,21 +223,62 @@ class PhysicsStream:
         if t_s is None:
             t_s = (self.index + np.arange(n)) * self.ref.spec.sample_time_s
         t_s = np.asarray(t_s, dtype=float)
+        stale, restart = self._command_gaps(rows[:, 0])
+        was_stale = np.concatenate(([self._missing_for > self.ref.command_timeout_samples], stale[:-1]))
+        for k in np.flatnonzero(stale & ~was_stale):
+            self.notices.append((self.index + int(k), f"valve command missing for more than "
+                                                      f"{self.ref.command_timeout_s:g} s: detection held"))
         out = np.empty((n, len(self.ref.residual_channels)))
+        held = np.zeros(n, dtype=bool)
         i = 0
         while i < n:
             if self.index == 0:
                 self._start(float(t_s[i]), rows[i])
-            if self.kept is not None and self.index % self.ref.block_samples == 0:
+            elif restart[i]:
+                self._restart(float(t_s[i]), rows[i])
+            if self.kept is not None and (self.index % self.ref.block_samples == 0 or restart[i]):
                 self.kept["snapshots"][self.index] = self.model.snapshot()
             block = self.ref.block_samples
             end = min(n, i + block - self.index % block)
+            later = np.flatnonzero(restart[i + 1:end])
+            end = i + 1 + int(later[0]) if len(later) else end
             out[i:end] = self._segment(t_s[i:end], rows[i:end])
+            held[i:end] = stale[i:end] | (self.index + np.arange(end - i) < self._hold_until)
             self.index += end - i
             if self.index % block == 0:
                 self._end_block()
             i = end
+        self._missing_for = self._missing_after(rows[:, 0])
+        self.notices.sort(key=lambda notice: notice[0])
+        out[held] = math.nan
+        self.last_held = held
         return out
+
+    def _command_gaps(self, command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per row: the command has been missing longer than the timeout (stale), and the command is back after
+        such a stretch (restart), counting the rows missing before this call."""
+        n = len(command)
+        ok = np.isfinite(command)
+        pos = np.arange(n)
+        last_ok = np.maximum.accumulate(np.where(ok, pos, -1))
+        run = np.where(last_ok >= 0, pos - last_ok, pos + 1 + self._missing_for)  # rows missing, this one included
+        limit = self.ref.command_timeout_samples
+        stale = run > limit
+        before = np.concatenate(([self._missing_for], run[:-1]))  # rows missing just before each row
+        return stale, ok & (before > limit)
+
+    def _missing_after(self, command: np.ndarray) -> int:
+        ok = np.flatnonzero(np.isfinite(command))
+        return len(command) - 1 - int(ok[-1]) if len(ok) else self._missing_for + len(command)
+
+    def _restart(self, t_s: float, row: np.ndarray) -> None:
+        """The command is back after a long gap: the model starts again on this row, as at a record's start, and
+        warms up again (no residual, the warm-up's pulls) for ``warmup_s``."""
+        self._start(t_s, row)
+        self._acc[:] = 0.0
+        self._hold_until = self._warm_end = self.index + self.ref.lags
+        self.notices.append((self.index, f"valve command back: the model restarts on the measurements and warms up "
+                                         f"again for {self.ref.warmup_s:g} s"))
 
     def columns(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Rows in the reference's channel order as (valve command, level-controller output, pH, level); NaN for
@@ -250,7 +316,7 @@ class PhysicsStream:
         ph_sum, ph_n, lv_sum, lv_n = self._acc
         self._acc[:] = 0.0
         half = self.ref.block_samples // 2
-        if self.index <= self.ref.lags and ph_n >= half:
+        if self.index <= self._warm_end and ph_n >= half:
             self.model.correct(WARMUP_GAIN * ph_sum / ph_n, WARMUP_GAIN * lv_sum / lv_n if lv_n >= half else 0.0)
             self._guess = self.model.ph
         elif math.isfinite(self._last_pred):

@@ -12,6 +12,10 @@ into wavelet bands and watches with CUSUMs. Every kind provides
   its state between calls, so that any chunking of a record gives the same residuals;
 * ``to_dict()`` / ``from_dict(d, where)``: the reference file's ``reference`` entry, ``kind`` in it.
 
+A stream may also hold rows back by a rule of its own (the physics kind, while the valve command is missing): it
+gives them NaN residuals (counted as healthy), marks them in ``last_held`` (the last call's rows) and says why in
+``notices`` ((global row index, text) pairs the detector reports as input events and then clears).
+
 Kinds (chosen by the reference file, :data:`KINDS`):
 
 * ``arx`` (:class:`~wavelet_fdi.reference_learned.LearnedReference`): each channel from its own past and

@@ -196,3 +196,23 @@ def test_regulariser_emits_a_consecutive_grid_and_counts_every_sample(t, chunk):
         == len(t)
     assert len(idx) == c["samples_used"] + c["missing_samples"]
     assert math.isfinite(reg.dt_s)
+
+
+def test_a_setpoint_step_while_the_command_is_missing_is_no_fault_after_it_returns():
+    """The valve moves unseen (a setpoint step while the controller output is missing for 1200 s): when the command
+    returns the reference starts again from the steady state of that command, re-aligned on pH and level, so the
+    healthy run raises no alarm after the warm-up (a re-alignment of pH and level alone left the buffer's total
+    where the held command had put it: an alarm at the warm-up's end on 15 of 16 such runs,
+    benchmarks/physics_command_gap.py)."""
+    from phfdi.scenario import load_scenario
+    from wavelet_fdi import DetectorSettings, load_default_calibration
+
+    spec = load_scenario("paper", fault="healthy", overrides=["duration_s=4000", "setpoints.ph.initial=12", "seed=34",
+                                                              "setpoints.ph.changes=[{at_s: 1500, value: 8}]"])
+    cols = detector_inputs(simulate(spec), ["acid", "buffer", "base"], "acid")
+    cols["valve_command_pct"][(cols["time_s"] >= 1200.0) & (cols["time_s"] < 2400.0)] = np.nan
+    settings_ = DetectorSettings()
+    det, events = replay(spec, load_default_calibration("paper", settings_), cols, chunk=500, settings_=settings_)
+    assert [e.message for e in events if e.kind == "input"] == [
+        "valve command missing too long: detection held", "valve command back: reference warming up again"]
+    assert not det.alarms, [a.summary() for a in det.alarms]

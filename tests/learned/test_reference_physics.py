@@ -72,6 +72,40 @@ def test_an_alarm_is_named_by_the_physics_detectors_isolation(fault, params):
     assert iso["size"] == pytest.approx(params[main], rel=0.3) and iso["unit"] == "% of span"
 
 
+def test_a_command_missing_for_long_holds_detection_and_restarts_the_model():
+    """A setpoint step while the valve command is missing: the valve moves unseen. Past command_timeout_s the kind
+    holds its residuals and says so; when the command returns it restarts its model on the measurements and warms
+    up again, so the healthy run gives no fault alarm (holding the last command raised two on each of four such
+    runs, seeds 34-37, before: one in the gap, one after it); any chunking gives the same events; a gap within the
+    timeout is bridged by the last command, unreported."""
+    def run(seed: int, step: bool) -> tuple[np.ndarray, np.ndarray]:
+        changes = "[{at_s: 1500, value: 8.5}]" if step else "[]"
+        spec = load_scenario("paper", fault="healthy", overrides=["duration_s=4000", "setpoints.ph.initial=8",
+                                                                  f"setpoints.ph.changes={changes}", f"seed={seed}"])
+        rec = simulate(spec)
+        return np.asarray(rec.time_s, float), np.column_stack([np.asarray(rec[c], float) for c in ref.channels])
+
+    ref = PhysicsReference.from_spec(record(31)[0].spec, watch_level=False)
+    model = calibrate_bands(ref, [run(s, False) for s in (32, 33)],
+                            LearnedSettings(level=3, residual_mean_k=0.5, sample_time_s=1.0))
+    t, x = run(34, True)
+    x[(t >= 1200.0) & (t < 2400.0), 0] = np.nan
+    events, _, det = run_record(model, t, x)
+    assert not det.alarms, det.alarms
+    said = [(e.time_s, e.message.split(":")[0]) for e in events]
+    assert said == [(1210.0, "valve command missing for more than 10 s"),
+                    (2400.0, "valve command back")], said  # the measurement is not blamed
+    r = ref.residuals(t, x)[:, 0]
+    assert np.all(np.isnan(r[(t >= 1210.0) & (t < 3000.0)])) and np.all(np.isfinite(r[t >= 3000.0]))
+    assert np.std(r[t >= 3000.0]) < 1.3  # the restarted model follows the plant: the sensor's noise again
+    chunked = run_record(model, t, x, chunk=333)[0]
+    assert [(e.kind, e.index, e.message) for e in chunked] == [(e.kind, e.index, e.message) for e in events]
+    t, x = run(35, True)
+    x[(t >= 3300.0) & (t < 3308.0), 0] = np.nan  # 8 s, in a steady stretch: within the 10 s timeout
+    events, _, det = run_record(model, t, x)
+    assert not events and not det.alarms
+
+
 def test_a_reference_entry_that_is_not_a_scenario_is_one_clear_refusal():
     ref, _, _ = record(17)
     bad = {**ref.to_dict(), "scenario": {**ref.scenario, "sample_time_s": -1.0}}

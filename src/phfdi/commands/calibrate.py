@@ -320,7 +320,8 @@ def run_physics(args: argparse.Namespace) -> int:
         raise UserError("--rows, --from, --to and --exclude go with --learn (--physics calibrates on whole runs)")
     physics = settings_from_args(args)
     spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
-    ref = PhysicsReference.from_spec(spec, watch_level="level" in physics.channels)
+    ref = PhysicsReference.from_spec(spec, warmup_s=physics.warmup_s, watch_level="level" in physics.channels,
+                                     command_timeout_s=physics.command_timeout_s)
     settings = design_settings(physics, spec.sample_time_s, **given_settings(args, LearnedSettings))
     cmap = column_map_from_args(args)
     runs = []
