@@ -27,9 +27,10 @@ for ``warmup_s`` (NaN residuals, the warm-up's pulls at block boundaries). The s
 :attr:`PhysicsStream.notices`, and marks the rows it holds in :attr:`PhysicsStream.last_held` (the detector reports
 them with that reason, not as a missing measurement). A missing measurement gives a NaN residual (the detector counts
 it as healthy and reports it). An alarm's fault is named by the physics detector's isolation
-(:mod:`wavelet_fdi.physics_naming`, the kind's ``NAMERS`` entry), :data:`NAMING_AFTER_S` after the detection. What
-this kind does not do, and the physics detector does: the set-point hold-off (off by default there), and naming
-again when the first naming was unsure.
+(:mod:`wavelet_fdi.physics_naming`, the kind's ``NAMERS`` entry), :data:`NAMING_AFTER_S` after the detection.
+``setpoint_holdoff_s`` (off by default, as in the physics detector) holds the residuals that long after a pH
+setpoint change (the model still runs; for a plant whose model follows setpoint transients poorly); on, the reference
+reads ``ph_setpoint`` too.
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated sce
 
 KIND = "physics"
 COMMAND, OUTLET, PH, LEVEL = "valve_command_pct", "level_controller_output_pct", "ph_measured", "level_measured_cm"
+SETPOINT = "ph_setpoint"
 #: share of a block's mean residual the warm-up moves the model's state by (the physics detector's warm-up gain)
 WARMUP_GAIN = 0.5
 #: time after a detection at which the fault is named (the physics detector's isolation delay, DetectorSettings)
@@ -106,6 +108,9 @@ class PhysicsReference:
     #: a valve command missing longer than this holds detection and restarts the model when it returns (the
     #: physics detector's ``command_timeout_s``)
     command_timeout_s: float = 10.0
+    #: residuals are held this long after a pH setpoint change (0: off, the default; the physics detector's
+    #: ``setpoint_holdoff_s``); on, the reference reads the record's ``ph_setpoint`` too
+    setpoint_holdoff_s: float = 0.0
     spec: Any = field(default=None, compare=False, repr=False)
 
     kind = KIND
@@ -115,8 +120,10 @@ class PhysicsReference:
             raise UserError(f"physics reference: warmup_s must be >= 0, got {self.warmup_s}")
         if int(self.block_samples) < 1:
             raise UserError(f"physics reference: block_samples must be >= 1, got {self.block_samples}")
-        if not (math.isfinite(self.command_timeout_s) and self.command_timeout_s >= 0):
-            raise UserError(f"physics reference: command_timeout_s must be >= 0, got {self.command_timeout_s}")
+        for name in ("command_timeout_s", "setpoint_holdoff_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise UserError(f"physics reference: {name} must be >= 0, got {value}")
         if self.spec is None:
             from phfdi_base.spec import validate_scenario  # the reference file's scenario, checked by its schema
 
@@ -124,11 +131,12 @@ class PhysicsReference:
 
     @classmethod
     def from_spec(cls, spec: ScenarioSpec, warmup_s: float = 600.0, block_samples: int = 256,
-                  watch_level: bool = True, command_timeout_s: float = 10.0) -> "PhysicsReference":
+                  watch_level: bool = True, command_timeout_s: float = 10.0,
+                  setpoint_holdoff_s: float = 0.0) -> "PhysicsReference":
         """The reference of a validated scenario (its faults are dropped: the reference is the healthy loop)."""
         healthy = spec.model_copy(update={"faults": []})
         return cls(healthy.model_dump(mode="json"), float(warmup_s), int(block_samples), bool(watch_level),
-                   float(command_timeout_s), healthy)
+                   float(command_timeout_s), float(setpoint_holdoff_s), healthy)
 
     # ---- the protocol every reference kind shares ------------------------------------------
     @property
@@ -137,8 +145,10 @@ class PhysicsReference:
 
     @property
     def channels(self) -> tuple[str, ...]:
-        """The record's channels this reference reads, in the order of the rows it is given."""
-        return (COMMAND, OUTLET, PH, LEVEL) if self.has_level else (COMMAND, PH)
+        """The record's channels this reference reads, in the order of the rows it is given (the setpoint last,
+        read only for the hold-off)."""
+        plant = (COMMAND, OUTLET, PH, LEVEL) if self.has_level else (COMMAND, PH)
+        return plant + ((SETPOINT,) if self.setpoint_holdoff_s > 0 else ())
 
     @property
     def residual_channels(self) -> tuple[str, ...]:
@@ -182,13 +192,14 @@ class PhysicsReference:
     def to_dict(self) -> dict:
         return {"kind": KIND, "scenario": self.scenario, "warmup_s": self.warmup_s,
                 "block_samples": self.block_samples, "watch_level": self.watch_level,
-                "command_timeout_s": self.command_timeout_s}
+                "command_timeout_s": self.command_timeout_s, "setpoint_holdoff_s": self.setpoint_holdoff_s}
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "PhysicsReference":
         try:
             return cls(dict(d["scenario"]), float(d.get("warmup_s", 600.0)), int(d.get("block_samples", 256)),
-                       bool(d.get("watch_level", True)), float(d.get("command_timeout_s", 10.0)))
+                       bool(d.get("watch_level", True)), float(d.get("command_timeout_s", 10.0)),
+                       float(d.get("setpoint_holdoff_s", 0.0)))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not a physics reference ({exc})") from None
 
@@ -211,6 +222,8 @@ class PhysicsStream:
         self._warm_end = ref.lags  # the warm-up's pulls run at block boundaries up to this global index
         self._missing_for = 0  # rows without a valve command just before the next row
         self._hold_until = 0  # rows before this global index give no residual (warming up after a restart)
+        self._setpoint = math.nan  # the last finite pH setpoint seen
+        self._setpoint_changed = -(10**12)  # global index of the last setpoint change
         #: (global row index, what the stream did) for the detector to report: detection held, model restarted
         self.notices: list[tuple[int, str]] = []
         #: the last call's rows whose residual the stream held (NaN by its own rule, not a missing measurement)
@@ -249,6 +262,8 @@ class PhysicsStream:
                 self._end_block()
             i = end
         self._missing_for = self._missing_after(rows[:, 0])
+        if self.ref.setpoint_holdoff_s > 0:
+            held |= self._after_setpoint_change(rows[:, -1], self.index - n)
         self.notices.sort(key=lambda notice: notice[0])
         out[held] = math.nan
         self.last_held = held
@@ -266,6 +281,22 @@ class PhysicsStream:
         stale = run > limit
         before = np.concatenate(([self._missing_for], run[:-1]))  # rows missing just before each row
         return stale, ok & (before > limit)
+
+    def _after_setpoint_change(self, setpoint: np.ndarray, first: int) -> np.ndarray:
+        """Per row: a pH setpoint change (between finite values) happened less than ``setpoint_holdoff_s`` ago."""
+        finite = np.flatnonzero(np.isfinite(setpoint))
+        values = setpoint[finite]
+        before = np.concatenate(([self._setpoint], values[:-1]))
+        changes = finite[np.isfinite(before) & (values != before)]
+        last = np.full(len(setpoint), self._setpoint_changed, dtype=np.int64)
+        last[changes] = first + changes
+        last = np.maximum.accumulate(last)
+        if len(values):
+            self._setpoint = float(values[-1])
+        if len(last):
+            self._setpoint_changed = int(last[-1])
+        limit = int(math.ceil(self.ref.setpoint_holdoff_s / self.ref.spec.sample_time_s))
+        return first + np.arange(len(setpoint)) - last < limit
 
     def _missing_after(self, command: np.ndarray) -> int:
         ok = np.flatnonzero(np.isfinite(command))

@@ -106,6 +106,32 @@ def test_a_command_missing_for_long_holds_detection_and_restarts_the_model():
     assert not events and not det.alarms
 
 
+def test_the_setpoint_hold_off_holds_the_residuals_after_each_setpoint_change_and_nowhere_else():
+    """setpoint_holdoff_s (off by default, as in the physics detector): the residuals are held that long after each
+    pH setpoint change; elsewhere they are the residuals without it. On, the reference reads ph_setpoint; its file
+    keeps the setting; any chunking gives the same."""
+    spec = load_scenario("paper", fault="healthy", overrides=[
+        "duration_s=3000", "setpoints.ph.initial=8", "seed=41",
+        "setpoints.ph.changes=[{at_s: 1000, value: 8.5}, {at_s: 2000, value: 8}]"])
+    run = simulate(spec)
+    t = np.asarray(run.time_s, float)
+    off, on = PhysicsReference.from_spec(spec), PhysicsReference.from_spec(spec, setpoint_holdoff_s=150.0)
+    assert "ph_setpoint" not in off.channels and on.channels == off.channels + ("ph_setpoint",)
+    x_off, x_on = (np.column_stack([np.asarray(run[c], float) for c in ref.channels]) for ref in (off, on))
+    r_off, r_on = off.residuals(t, x_off), on.residuals(t, x_on)
+    setpoint = np.asarray(run["ph_setpoint"], float)
+    changes = np.flatnonzero(np.diff(setpoint) != 0) + 1
+    assert len(changes) == 2
+    since = np.arange(len(t))[:, None] - changes[None, :]
+    held = ((since >= 0) & (since < 150)).any(axis=1)
+    assert np.all(np.isnan(r_on[held])) and np.array_equal(r_on[~held], r_off[~held], equal_nan=True)
+    stream = on.new_state()
+    parts = [stream.residuals(t[a:a + 97], x_on[a:a + 97]) for a in range(0, len(t), 97)]
+    assert np.array_equal(np.concatenate(parts), r_on, equal_nan=True)
+    again = reference_from_dict(on.to_dict())
+    assert again.channels == on.channels and np.array_equal(again.residuals(t, x_on), r_on, equal_nan=True)
+
+
 def test_a_reference_entry_that_is_not_a_scenario_is_one_clear_refusal():
     ref, _, _ = record(17)
     bad = {**ref.to_dict(), "scenario": {**ref.scenario, "sample_time_s": -1.0}}

@@ -321,7 +321,8 @@ def run_physics(args: argparse.Namespace) -> int:
     physics = settings_from_args(args)
     spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
     ref = PhysicsReference.from_spec(spec, warmup_s=physics.warmup_s, watch_level="level" in physics.channels,
-                                     command_timeout_s=physics.command_timeout_s)
+                                     command_timeout_s=physics.command_timeout_s,
+                                     setpoint_holdoff_s=physics.setpoint_holdoff_s)
     settings = design_settings(physics, spec.sample_time_s, **given_settings(args, LearnedSettings))
     cmap = column_map_from_args(args)
     runs = []
