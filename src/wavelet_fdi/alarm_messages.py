@@ -36,10 +36,17 @@ def severity_of(summary: dict) -> tuple[float, str]:
 
 
 def from_summaries(alarms: list[dict]) -> list[dict]:
-    """Alarm summaries (``Alarm.summary()``, as the detector node reports them) in the shape of :func:`per_alarm`."""
+    """Alarm summaries, as the detector nodes report them (the physics detector's ``Alarm.summary()``, the
+    multichannel detector's alarms with their naming under ``isolation``), in the shape of :func:`per_alarm`."""
     out = []
     for a in alarms:
+        if "fault_class" not in a:  # the multichannel detector's: named (or not yet) under "isolation"
+            iso = a.get("isolation") or {}
+            a = {**a, "fault_class": iso.get("fault_class", "pending"), "confidence": iso.get("confidence", 0.0),
+                 "parameter": iso.get("parameter"), "severity": math.nan}
         severity, unit = severity_of(a)
+        if not math.isfinite(severity):
+            unit = ""
         out.append({"onset_time": a["onset_time"], "detection_time": a["detection_time"],
                     "fault_class": a["fault_class"], "confidence": a["confidence"], "severity": severity,
                     "severity_unit": unit, "cleared": a.get("cleared_time")})

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from phfdi_base.errors import UserError
+from phfdi_base.topics import CONTROLLER, MEASUREMENT
 from phfdi_base.yamlfile import read_mapping
 
 #: how a sample is formed from the channels' messages (wavelet_fdi.channel_align)
@@ -198,6 +199,35 @@ def parse_channel_map(data: dict[str, Any], where: str = "channel map",
 def load_channel_map(path: str | Path, reference_channels: Sequence[str] | None = None) -> ChannelMap:
     """The channel map in a YAML file (checked; see :func:`parse_channel_map`)."""
     return parse_channel_map(read_mapping(path, "channel map"), str(path), reference_channels)
+
+
+#: where the simulated loop graph publishes each signal a physics reference reads: (topic, field)
+LOOP_GRAPH_SOURCES = {
+    "valve_command_pct": (CONTROLLER, "ph_output_pct"),
+    "level_controller_output_pct": (CONTROLLER, "level_output_pct"),
+    "ph_setpoint": (CONTROLLER, "ph_setpoint"),
+    "ph_measured": (MEASUREMENT, "ph"),
+    "level_measured_cm": (MEASUREMENT, "level_cm"),
+}
+
+
+def loop_graph_map(reference_channels: Sequence[str]) -> ChannelMap:
+    """The loop graph's own topics as a channel map (``align: hold`` on their stamps): what the physics detector
+    node reads without a map, for a reference of the paper loop's signals (the ``physics`` kind).
+
+    Examples
+    --------
+    >>> m = loop_graph_map(["valve_command_pct", "ph_measured"])
+    >>> [(s.channel, s.topic, s.field) for s in m.sources]
+    [('valve_command_pct', '/controller/output', 'ph_output_pct'), ('ph_measured', '/plant/measurement', 'ph')]
+    """
+    unknown = [c for c in reference_channels if c not in LOOP_GRAPH_SOURCES]
+    if unknown:
+        raise UserError(f"the loop graph publishes no {', '.join(unknown)} (it has: {', '.join(LOOP_GRAPH_SOURCES)}): "
+                        f"give a channel map")
+    channels = {c: {"topic": LOOP_GRAPH_SOURCES[c][0].name, "type": LOOP_GRAPH_SOURCES[c][0].type,
+                    "field": LOOP_GRAPH_SOURCES[c][1]} for c in reference_channels}
+    return parse_channel_map({"align": "hold", "channels": channels}, "the loop graph's topics", reference_channels)
 
 
 def _source(name: str, spec: Any, where: str) -> ChannelSource:

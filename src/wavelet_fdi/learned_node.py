@@ -50,7 +50,7 @@ from phfdi_base.stamps import seconds_to_ns, stamp_seconds, time_ns
 from phfdi_base.topics import MEASURED_SAMPLE
 
 from .channel_align import grid_period_ns
-from .channel_map import load_channel_map
+from .channel_map import ChannelMap, load_channel_map, loop_graph_map
 from .healthy_range import RangeWatch, describe_first, healthy_span, span
 from .learned_detector import LearnedDetector, LearnedModel
 from .map_inputs import MappedInputs, SummedWarnings
@@ -60,7 +60,10 @@ PARAMS = (
     ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
     ParamSpec("loop", "measured", "name of the monitored plant or loop in /fault_alarm"),
     ParamSpec("channel_map_file", "", "YAML channel map: each reference channel's topic, type and field "
-              "('' = /measured/sample; docs/ros_graph.md)"),
+              "('' = /measured/sample, or the loop graph's topics with loop_graph_topics; docs/ros_graph.md)"),
+    ParamSpec("loop_graph_topics", False, "without a channel map: read the loop graph's own topics "
+              "(/plant/measurement, /controller/output) for a reference of its signals (phfdi calibrate --physics), "
+              "as the physics detector node does; phfdi launch sets it"),
     ParamSpec("silent_after_s", 10.0, "wall time after which a mapped topic that delivers nothing is reported",
               (0.1, 3600.0)),
     # wall time: a topic that went silent moves no record time (the physics nodes' diagnostics_period_s counts
@@ -113,20 +116,27 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._range_warnings = SummedWarnings(self.get_logger(), f"/diagnostics ('{self.get_name()}: healthy range')")
         self._received = 0
         self.inputs: MappedInputs | None = None
-        if self.param("channel_map_file"):
-            self._subscribe_map(self.param("channel_map_file"))
+        path = self.param("channel_map_file")
+        if path:
+            try:
+                self._subscribe_map(load_channel_map(path, self.model.channels))
+            except UserError as exc:
+                raise NodeStartError(f"parameter channel_map_file = {path!r}: {exc}") from None
+        elif self.param("loop_graph_topics"):
+            # the paper loop's signals from the loop graph's own topics, as the physics detector node reads them
+            try:
+                self._subscribe_map(loop_graph_map(self.model.channels))
+            except UserError as exc:
+                raise NodeStartError(f"parameter loop_graph_topics: {exc}") from None
         else:
             self.data_subscription(MeasuredSample, MEASURED_SAMPLE.name, self._on_sample)
         self.start_worker()
         self.start_barrier()
 
-    def _subscribe_map(self, path: str) -> None:
+    def _subscribe_map(self, cmap: ChannelMap) -> None:
         """The plant's own topics, as the channel map names them, aligned onto the reference's sample grid."""
         try:
-            cmap = load_channel_map(path, self.model.channels)
             dt_ns = grid_period_ns(self.model.settings.sample_time_s)
-        except UserError as exc:
-            raise NodeStartError(f"parameter channel_map_file = {path!r}: {exc}") from None
         except ValueError as exc:
             raise NodeStartError(f"parameter reference: {exc}") from None
         inputs = self.inputs = MappedInputs(self, cmap, dt_ns, self.enqueue, self.param("silent_after_s"))

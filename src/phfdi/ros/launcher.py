@@ -120,8 +120,9 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
             rec["split_after_s"] = float(split_after_s)
         nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", rec, OBSERVER))
     if detector is not None:
-        # the live view plots the detector's residuals and statistics: it asks the detector to publish them
-        nodes.append(detector_spec({**detector, "monitor_topic": True} if live is not None else detector))
+        # the live view plots the physics detector's residuals and statistics: it asks that node to publish them
+        monitored = live is not None and "reference" not in detector
+        nodes.append(detector_spec({**detector, "monitor_topic": True} if monitored else detector))
     if live is not None:
         nodes.append(live_view_spec(live))
     nodes += list(extra)
@@ -134,8 +135,16 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
 
 
 def detector_spec(params: dict | None = None) -> NodeSpec:
-    """The fault detector (wavelet_fdi.node): an observer, outside the lock-step ring."""
-    return NodeSpec(DETECTOR, "wavelet_fdi.node", dict(params or {}), OBSERVER)
+    """The fault detector, an observer outside the lock-step ring: the physics detector's node (wavelet_fdi.node),
+    or, given a ``reference`` file, the multichannel detector's (wavelet_fdi.learned_node; a physics reference of
+    ``phfdi calibrate --physics`` reads the graph's own topics, as the physics node does)."""
+    params = dict(params or {})
+    if "reference" not in params:
+        return NodeSpec(DETECTOR, "wavelet_fdi.node", params, OBSERVER)
+    params["reference"] = str(Path(str(params["reference"])).resolve())
+    if not params.get("channel_map_file"):
+        params.setdefault("loop_graph_topics", True)
+    return NodeSpec(DETECTOR, "wavelet_fdi.learned_node", params, OBSERVER)
 
 
 def live_view_spec(params: dict | None = None) -> NodeSpec:
