@@ -236,6 +236,9 @@ class PhysicsStream:
         if t_s is None:
             t_s = (self.index + np.arange(n)) * self.ref.spec.sample_time_s
         t_s = np.asarray(t_s, dtype=float)
+        if n == 0:
+            self.last_held = np.zeros(0, dtype=bool)
+            return np.empty((0, len(self.ref.residual_channels)))
         stale, restart = self._command_gaps(rows[:, 0])
         was_stale = np.concatenate(([self._missing_for > self.ref.command_timeout_samples], stale[:-1]))
         for k in np.flatnonzero(stale & ~was_stale):
