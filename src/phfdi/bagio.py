@@ -424,6 +424,8 @@ def read_messages(path: str | Path, topic: str) -> list:
     try:
         with AnyReader([path]) as reader:
             conns = [c for c in reader.connections if c.topic == topic]
+            if not conns:  # rosbags reads every topic when given no connection
+                return []
             return [reader.deserialize(raw, conn.msgtype) for conn, _t, raw in reader.messages(connections=conns)]
     except Exception as exc:  # noqa: BLE001 - rosbags, mcap and zstd raise many types on damaged bags
         raise UserError(f"{path}: cannot read the bag ({type(exc).__name__}: {_one_line(exc)}); if its recorder "

@@ -360,6 +360,9 @@ class LearnedDetector:
         self.alarms: list[dict] = []
         self._missing_open = np.zeros(m, dtype=bool)
         self.samples_processed = 0
+        self._last_t = math.nan  # the last row's time, residuals and statistics over thresholds (monitor)
+        self._last_residual = np.full(m, np.nan)
+        self._last_ratio = np.zeros(len(self.stat_names))
         self._times = np.full(TIME_RING, np.nan)  # times of the last TIME_RING samples (onset times)
         self._trace: dict[str, list] | None = ({"coef": [], "stat": [], "state": [], "increments": []}
                                                if record_trace else None)
@@ -473,6 +476,7 @@ class LearnedDetector:
             self.spikes.scan(getattr(self.stream, "last_unlimited", r), t, self.samples_processed, self.fill_samples)
         if self.feed_checks.level:
             self.feed_checks.scan(t, rows, self.samples_processed, self.fill_samples)
+        self._last_t, self._last_residual = float(t[-1]), r[-1].copy()
         missing = ~np.isfinite(r)
         held = getattr(self.stream, "last_held", None)  # rows the reference held by its own rule (its notices say why)
         events += self._stream_notices(t)
@@ -742,6 +746,24 @@ class LearnedDetector:
     def _named_ids(self) -> list[int]:
         return self._named + [a["alarm_id"] for a in self._to_name]
 
+    def monitor(self) -> tuple[float, dict[str, float]]:
+        """The last row processed, for a live view: its time (s), each residual (``residual:<channel>``, in the
+        reference's units: healthy or sensor-noise sigmas; NaN where held or missing) and every statistic over its
+        threshold (``ratio:<name>``; 1 raises the alarm). Time NaN before the first row.
+
+        >>> import numpy as np
+        >>> from wavelet_fdi import LearnedDetector, learn
+        >>> rows = np.random.default_rng(1).normal(size=(3000, 2))
+        >>> detector = LearnedDetector(learn(rows[:2000], ["flow", "pressure"]))
+        >>> _ = detector.process(np.arange(1000.0), rows[2000:])
+        >>> t, values = detector.monitor()
+        >>> t, sorted(values)[:3], bool(np.isfinite(values["residual:flow"]))
+        (999.0, ['ratio:flow.A2.mean_down', 'ratio:flow.A2.mean_up', 'ratio:pressure.A2.mean_down'], True)
+        """
+        values = {f"residual:{c}": float(v) for c, v in zip(self.channels, self._last_residual)}
+        values.update({f"ratio:{n}": float(v) for n, v in zip(self.stat_names, self._last_ratio)})
+        return self._last_t, values
+
     def trace(self) -> dict[str, np.ndarray]:
         if self._trace is None:
             raise RuntimeError("the detector was built without record_trace")
@@ -769,6 +791,7 @@ class LearnedDetector:
         events: list[LearnedEvent] = []
         S = self.cusum.update(z, g0)
         ratio = S / self.h[:, None]
+        self._last_ratio = ratio[:, -1].copy()
         cross = (ratio > 1.0).any(axis=0)
         if self._trace is not None:
             coef = np.concatenate((d_norm[:, i0:i1, :].transpose(1, 2, 0) * sig[:, :-1],

@@ -47,7 +47,7 @@ from rclpy.clock import Clock, ClockType
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
 from phfdi_base.stamps import seconds_to_ns, stamp_seconds, time_ns
-from phfdi_base.topics import MEASURED_SAMPLE
+from phfdi_base.topics import DETECTOR_MONITOR, MEASURED_SAMPLE
 
 from .channel_align import grid_period_ns
 from .channel_map import ChannelMap, load_channel_map, loop_graph_map
@@ -74,6 +74,10 @@ PARAMS = (
                                            "above 0 is taken for it, with a warning; 0: not set", (0.0, 3600.0)),
     # as the physics detector's (wavelet_fdi.node): on the stream's own time, so a replay faster than real time
     # gives the heartbeats the plant's time would have
+    ParamSpec("monitor_topic", False, "publish the residuals and the statistics over their thresholds on "
+                                      "/detector/monitor (phfdi_interfaces/MeasuredSample; phfdi launch --foxglove)"),
+    ParamSpec("monitor_period_s", 1.0, "at most one /detector/monitor message per this many s of the record's time "
+                                       "(0: one per batch the worker takes)", (0.0, 1e9)),
     ParamSpec("heartbeat_period_s", 60.0, "publish the state on /fault_alarm every this many s of the record's time "
                                           "(at most one per batch the worker takes); 0: only on changes",
               range=(0.0, 1e9), runtime=True),
@@ -81,6 +85,8 @@ PARAMS = (
 #: what a heartbeat during an alarm repeats from the alarm's last message (its statistic is the heartbeat's own)
 ALARM_FIELDS = ("fault_class", "severity", "severity_unit", "detection_time", "onset_time", "channels",
                 "channel_shares", "channel_bands", "wavelet_level")
+#: the live view's names of the physics kind's residuals (phfdi_base.live_view.MONITOR_RESIDUALS), in its units
+LIVE_RESIDUALS = {"ph_measured": "ph_residual", "level_measured_cm": "level_residual_cm"}
 #: wall time between the checks of a channel map's waits and silent topics
 TICK_S = 0.2
 STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
@@ -115,6 +121,10 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._pub_range = self.diagnostics_publisher()
         self._range_warnings = SummedWarnings(self.get_logger(), f"/diagnostics ('{self.get_name()}: healthy range')")
         self._received = 0
+        self._monitor_period_s = self.param("monitor_period_s")
+        self._last_monitor_t = -math.inf
+        self.pub_monitor = self.data_publisher(MeasuredSample, DETECTOR_MONITOR.name) if self.param(
+            "monitor_topic") else None
         self.inputs: MappedInputs | None = None
         path = self.param("channel_map_file")
         if path:
@@ -177,6 +187,25 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._received += 1
         self.enqueue([(stamp_seconds(time_ns(msg.stamp)), row)])
 
+    def _publish_monitor(self) -> None:
+        """The last row's residuals and statistics on /detector/monitor when due (worker thread): the physics
+        kind's residuals in the measurements' units under the live view's names, every other kind's in its
+        sigmas (``residual:<channel>``)."""
+        if self.pub_monitor is None:
+            return
+        t_s, values = self.core.monitor()
+        if not math.isfinite(t_s) or (self._monitor_period_s > 0 and
+                                      t_s < next_multiple(self._last_monitor_t, self._monitor_period_s)):
+            return
+        self._last_monitor_t = t_s
+        noise = getattr(self.model.reference, "noise", None) if self.model.reference.kind == "physics" else None
+        if noise is not None:
+            for channel, unit in zip(self.model.residual_channels, noise):
+                values[LIVE_RESIDUALS[channel]] = values.pop(f"residual:{channel}") * float(unit)
+        msg = MeasuredSample(source=DETECTOR_MONITOR.publisher, names=list(values), values=list(values.values()))
+        msg.stamp = self._stamp(t_s)
+        self.pub_monitor.publish(msg)
+
     def received(self) -> int:
         return self._received + (self.inputs.received if self.inputs is not None else 0)
 
@@ -204,6 +233,7 @@ class LearnedDetectorNode(DetectorNodeBase):
             self._last_heartbeat_t = self._t_last
         if self._heartbeat_s > 0 and self._t_last >= next_multiple(self._last_heartbeat_t, self._heartbeat_s):
             self._publish_heartbeat()
+        self._publish_monitor()
         new = self.range_watch.update(x)
         for o in new:  # once per channel: the reference extrapolates from here on (beyond a few: summed up)
             self._range_warnings.warn("range", o["channel"], describe_first(o))

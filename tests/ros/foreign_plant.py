@@ -32,7 +32,7 @@ ACK_TIMEOUT_S = 120.0
 def main(domain_id: int, spec_path: str) -> int:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
-    from phfdi_interfaces.msg import FaultAlarm
+    from phfdi_interfaces.msg import FaultAlarm, MeasuredSample
     from rclpy.duration import Duration
     from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Float32, Float64
@@ -76,7 +76,13 @@ def main(domain_id: int, spec_path: str) -> int:
                          "channel_bands": list(m.channel_bands), "fault_class": m.fault_class,
                          "severity": m.severity, "message": m.message})
 
+    monitor: list[dict] = []  # /detector/monitor, when the node publishes it
+
+    def on_monitor(m: MeasuredSample) -> None:
+        monitor.append({"stamp_ns": time_ns(m.stamp), **dict(zip(m.names, m.values))})
+
     node.create_subscription(FaultAlarm, "/fault_alarm", on_alarm, DATA_QOS)
+    node.create_subscription(MeasuredSample, "/detector/monitor", on_monitor, DATA_QOS)
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, DATA_QOS)
     deadline = time.monotonic() + 120.0
     # a topic published as another type than the detector reads is never matched: wait for the others
@@ -114,7 +120,7 @@ def main(domain_id: int, spec_path: str) -> int:
     while time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
     print(json.dumps({"event": "alarms", "received": received, "diagnostics": diagnostics,
-                      "healthy_range": ranges}), flush=True)
+                      "healthy_range": ranges, "monitor": monitor}), flush=True)
     node.destroy_node()
     executor.shutdown()
     rclpy.try_shutdown(context=context)

@@ -38,6 +38,14 @@ def test_write_run_then_load_run_gives_the_run_back(short_run, bag):
     assert back.metadata["scenario"] == short_run.metadata["scenario"]
 
 
+def test_read_messages_of_a_topic_the_bag_lacks_is_none(short_run, bag):
+    """One topic's messages, and none for a topic not in the bag (rosbags reads every topic when asked for no
+    connection: the whole bag came back, as other topics' messages)."""
+    measurements = bagio.read_messages(bag, T.MEASUREMENT.name)
+    assert len(measurements) == len(short_run) and all(hasattr(m, "ph") for m in measurements)
+    assert bagio.read_messages(bag, T.DETECTOR_MONITOR.name) == []
+
+
 def test_load_run_reads_run_files_too(short_run, tmp_path):
     for suffix in (".csv", ".parquet"):
         path = short_run.save(tmp_path / f"run{suffix}")

@@ -39,7 +39,7 @@ from wavelet_fdi.channel_align import grid_period_ns
 from wavelet_fdi.channel_map import load_channel_map
 from wavelet_fdi.config import DetectorSettings, load_default_calibration
 from wavelet_fdi.detector import StreamingDetector
-from wavelet_fdi.learned_detector import LearnedModel
+from wavelet_fdi.learned_detector import LearnedModel, run_record
 from wavelet_fdi.node import PHYSICS_CHANNELS
 
 from .conftest import node_cmd, ownerless_shm_files, read_until
@@ -321,6 +321,41 @@ def test_a_simulated_backlash_on_float64_topics_gives_the_physics_detectors_offl
     assert {m["detection_ns"] for m in raised} == {origin + seconds_to_ns(a["detection_time"]) for a in offline}
     assert {m["statistic_name"] for m in raised} >= {a["statistic"] for a in offline}
     assert any(m["fault_class"] == "backlash" for m in raised), raised
+
+
+def test_the_physics_kind_on_a_plants_own_topics_gives_the_offline_alarms_and_the_live_views_monitor(tmp_path):
+    """The multichannel detector's node with a physics reference (phfdi calibrate --physics) on a plant's own
+    Float64 topics, monitor_topic on: its alarms equal the core's offline run on the same rows, and
+    /detector/monitor (what the live view plots) carries the pH residual in pH (the sensor's noise, 0.01 pH, while
+    healthy), every statistic over its threshold, and the alarm's statistic at 1 or more by its detection."""
+    short = [x for o in ("duration_s=3000", "setpoints.ph.initial=8", "setpoints.ph.changes=[]") for x in ("--set", o)]
+    ref = tmp_path / "physics.json"
+    assert main(["calibrate", "--physics", "--seeds", "1001-1004", *short, "--out", str(ref)]) == 0
+    model = LearnedModel.load(ref)
+    spec = load_scenario("paper", fault="backlash", onset_s=1500.0,
+                         overrides=["duration_s=2500", "setpoints.ph.initial=8", "setpoints.ph.changes=[]"])
+    run = simulate(spec)
+    t = np.asarray(run.time_s, dtype=float)
+    rows = np.column_stack([np.asarray(run[c], dtype=float) for c in model.channels])
+    events, _, core = run_record(model, t, rows)
+    offline = {"alarms": json.loads(json.dumps(core.alarms)), "samples": len(rows)}
+    assert offline["alarms"] and offline["alarms"][0]["detection_time"] >= 1500.0
+    cmap = tmp_path / "physics_kind_map.yaml"
+    cmap.write_text("align: sequence\nchannels:\n" + "".join(
+        f"  {c}: {{topic: /my_plant/{c}, type: std_msgs/msg/Float64}}\n" for c in model.channels))
+    done, heard, _ = run_foreign_plant(tmp_path, ref, cmap, rows, node_params={"monitor_topic": True})
+    check_same_alarms(done, heard["received"], offline, grid_period_ns(1.0))
+    monitor = heard["monitor"]
+    origin = done["channel_map"]["grid_origin_ns"]
+    times = [(m["stamp_ns"] - origin) * 1e-9 for m in monitor]
+    assert len(monitor) > 100 and times == sorted(times)
+    assert sorted(k for k in monitor[-1] if k.startswith("ratio:")) == sorted(f"ratio:{k}" for k in model.thresholds)
+    healthy = [m["ph_residual"] for m, x in zip(monitor, times) if 700.0 < x < 1500.0]
+    assert len(healthy) > 50 and 0.005 < float(np.std(healthy)) < 0.02, np.std(healthy)
+    first = offline["alarms"][0]
+    name = "ratio:" + first["statistic"]
+    assert max(m[name] for m, x in zip(monitor, times) if first["detection_time"] <= x) >= 1.0
+    assert max(m[name] for m, x in zip(monitor, times) if 700.0 < x < first["onset_time"]) < 1.0
 
 
 def test_the_physics_node_refuses_a_map_without_a_signal_it_pairs_in_one_line(tmp_path):

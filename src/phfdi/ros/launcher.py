@@ -120,9 +120,8 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
             rec["split_after_s"] = float(split_after_s)
         nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", rec, OBSERVER))
     if detector is not None:
-        # the live view plots the physics detector's residuals and statistics: it asks that node to publish them
-        monitored = live is not None and "reference" not in detector
-        nodes.append(detector_spec({**detector, "monitor_topic": True} if monitored else detector))
+        # the live view plots the detector's residuals and statistics: it asks the detector to publish them
+        nodes.append(detector_spec({**detector, "monitor_topic": True} if live is not None else detector))
     if live is not None:
         nodes.append(live_view_spec(live))
     nodes += list(extra)
