@@ -22,14 +22,13 @@ FOXGLOVE_HOST = "127.0.0.1"
 EXAMPLES = """examples:
   phfdi launch --scenario paper --fault backlash --record bags/run.mcap
   phfdi launch --fault backlash --detector --record bags/run.mcap   # + the fault detector (/fault_alarm)
-  phfdi launch --fault stiction --set duration_s=2000 --set 'setpoints.ph.changes=[]' --onset 1000 \
-      --record bags/stiction.mcap
+  phfdi launch --fault stiction --set duration_s=2000 --set 'setpoints.ph.changes=[]' --onset 1000 --record bags/s.mcap
   phfdi launch --record bags/live.mcap --pace 20          # 20 x real time, for a live demo
   phfdi launch --record bags/day.mcap --pace 1 --split-s 3600   # live, a new bag file every hour
   phfdi launch --domain-id 42 --pace 1                    # real time, join with your own nodes on domain 42
   phfdi launch --fault backlash --detector --pace 20 --foxglove   # watch it live in Foxglove (ws://127.0.0.1:8765)
-  phfdi calibrate --physics --out physics.json && \
-  phfdi launch --fault stiction --detector-param reference=physics.json   # the multichannel detector's node
+  phfdi calibrate --physics --out physics.json                             # a physics reference (16 runs)
+  phfdi launch --fault stiction --detector-param reference=physics.json   # ... and its node in the graph
 
 Every node runs as its own process (python -m <package>.node) with
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST on a ROS domain of its own. Ctrl-C
