@@ -43,7 +43,7 @@ import numpy.typing as npt
 from phfdi_base.errors import UserError
 
 from .calibration import excess_tail_threshold, tail_threshold, window_maxima
-from .config import ARL_WINDOW_SAMPLES, LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
+from .config import ARL_WINDOW_SAMPLES, CALIBRATION_DIR, LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
 from .feed_checks import FeedCheck, FeedChecks
 from .feed_checks import level as feed_level
 from .filterbank import CausalSwt
@@ -112,7 +112,14 @@ class LearnedModel:
 
     @classmethod
     def load(cls, path: str | Path) -> "LearnedModel":
-        d = load_json(path, FORMAT)
+        """A reference file, or the name of one shipped with the detector when no such file exists
+        (:func:`shipped_reference_path`: ``paper_physics``, the paper loop's physics kind)."""
+        shipped = shipped_reference_path(str(path)) if not Path(path).exists() else None
+        if shipped is None and not Path(path).exists():
+            names = sorted(f.stem for f in CALIBRATION_DIR.glob("*.json"))
+            raise UserError(f"{path}: no such reference file (shipped, by name: {', '.join(names) or 'none'}; "
+                            f"make one with phfdi calibrate --learn, --estimator or --physics)")
+        d = load_json(shipped or path, FORMAT)
         return cls.from_dict(d, str(path))
 
     @classmethod
@@ -130,6 +137,20 @@ class LearnedModel:
         if "healthy_ranges" in source:  # kept since 2026-11-29; a file from before has none
             source["healthy_ranges"] = checked_ranges(source["healthy_ranges"], f"{where}: source.healthy_ranges")
         return cls(ref, settings, sigma, source, _checked_thresholds(d.get("thresholds") or {}, where))
+
+
+def shipped_reference_path(name: str) -> Path | None:
+    """The reference file shipped under this name (``wavelet_fdi/calibrations/<name>.json``), None if there is none.
+    Shipped: ``paper_physics`` (``phfdi calibrate --physics --scenario paper``: the paper loop's healthy plant and
+    valves, thresholds measured on the healthy runs of seeds 1001-1016 for the physics detector's design).
+
+    >>> shipped_reference_path("paper_physics").name, shipped_reference_path("my_plant.json")
+    ('paper_physics.json', None)
+    """
+    if not name or Path(name).name != name or name.endswith(".json"):
+        return None  # a path: the caller's file, not a shipped name
+    path = CALIBRATION_DIR / f"{name}.json"
+    return path if path.is_file() else None
 
 
 def _checked_thresholds(d: dict, where: str) -> dict[str, float]:

@@ -49,11 +49,12 @@ def test_a_sticky_valve_through_the_node_is_the_offline_alarm_and_name(physics_m
     assert "named: actuator fault, stiction" in proc.stderr
 
 
-def test_the_launched_graph_with_a_physics_reference_gives_its_bags_offline_alarms(physics_model, tmp_path, capsys):
-    """phfdi launch --detector-param reference=FILE: the multichannel detector's node in the loop graph, on the graph's
-    own topics (/plant/measurement, /controller/output; no channel map given), in place of the physics detector's
-    node. Its alarms and their names equal the offline replay of the bag the same launch recorded, and
-    /fault_alarm carried them."""
+def test_the_launched_graph_with_a_physics_reference_gives_its_bags_offline_alarms(tmp_path, capsys):
+    """phfdi launch --detector-param reference=paper_physics (the shipped physics reference, by name): the
+    multichannel detector's node in the loop graph, on the graph's own topics (/plant/measurement,
+    /controller/output; no channel map given), in place of the physics detector's node. Its alarms and their names
+    equal the offline replay of the bag the same launch recorded, and /fault_alarm carried them."""
+    physics_model = "paper_physics"
     bag, logs = tmp_path / "graph.mcap", tmp_path / "logs"
     proc = subprocess.run(phfdi_cmd("launch", "--fault", "stiction", "--onset", str(ONSET_S), *SHORT,
                                     "--detector-param", f"reference={physics_model}", "--record", str(bag),

@@ -132,6 +132,28 @@ def test_the_setpoint_hold_off_holds_the_residuals_after_each_setpoint_change_an
     assert again.channels == on.channels and np.array_equal(again.residuals(t, x_on), r_on, equal_nan=True)
 
 
+def test_the_shipped_physics_reference_is_the_paper_loop_with_the_physics_detectors_design():
+    """paper_physics, shipped (phfdi calibrate --physics --scenario paper --out
+    src/wavelet_fdi/calibrations/paper_physics.json; run that again if this fails): the paper scenario as it is now,
+    the physics detector's design, a threshold for every statistic, measured on seeds no evaluation uses; taken by
+    name wherever a reference file is (a file of that name, where one exists, comes first)."""
+    from phfdi.study.evaluation import EvalConfig
+    from wavelet_fdi.config import DetectorSettings
+    from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel
+    from wavelet_fdi.reference_physics import design_settings
+
+    model = LearnedModel.load("paper_physics")
+    healthy = PhysicsReference.from_spec(load_scenario("paper", fault="healthy"), watch_level=False)
+    assert model.reference.to_dict() == healthy.to_dict()
+    assert model.settings == design_settings(DetectorSettings(), 1.0)
+    assert set(model.thresholds) == set(LearnedDetector(model).stat_names)
+    seeds = {int(run.split()[1]) for run in model.source["runs"]}
+    assert seeds == set(range(1001, 1017))
+    assert not seeds & (set(EvalConfig().eval_seeds) | set(EvalConfig().healthy_seeds))
+    with pytest.raises(UserError, match="no_such_reference"):
+        LearnedModel.load("no_such_reference")
+
+
 def test_a_reference_entry_that_is_not_a_scenario_is_one_clear_refusal():
     ref, _, _ = record(17)
     bad = {**ref.to_dict(), "scenario": {**ref.scenario, "sample_time_s": -1.0}}

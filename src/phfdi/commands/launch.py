@@ -27,8 +27,7 @@ EXAMPLES = """examples:
   phfdi launch --record bags/day.mcap --pace 1 --split-s 3600   # live, a new bag file every hour
   phfdi launch --domain-id 42 --pace 1                    # real time, join with your own nodes on domain 42
   phfdi launch --fault backlash --detector --pace 20 --foxglove   # watch it live in Foxglove (ws://127.0.0.1:8765)
-  phfdi calibrate --physics --out physics.json                             # a physics reference (16 runs)
-  phfdi launch --fault stiction --detector-param reference=physics.json   # ... and its node in the graph
+  phfdi launch --fault stiction --detector-param reference=paper_physics  # the multichannel detector's node
 
 Every node runs as its own process (python -m <package>.node) with
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST on a ROS domain of its own. Ctrl-C
@@ -53,8 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detector-param", dest="detector_params", action="append", default=[], metavar="NAME=VALUE",
                    help="a parameter of the detector node, e.g. --detector-param calibration=my.yaml "
                         "(see python -m wavelet_fdi.node --help); implies --detector. With reference=FILE (a "
-                        "physics reference from phfdi calibrate --physics) the detector is the multichannel "
-                        "detector's node (wavelet_fdi.learned_node) on the graph's own topics")
+                        "physics reference from phfdi calibrate --physics, or paper_physics, the one shipped) the "
+                        "detector is the multichannel detector's node (wavelet_fdi.learned_node) on the graph's own "
+                        "topics")
     p.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
                    help=f"serve the graph's signals (with --detector also its residuals, statistics and alarm state) live "
                         f"over the Foxglove WebSocket protocol on PORT (default {FOXGLOVE_PORT}); open "

@@ -85,7 +85,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-isolation", action="store_true", help="detect only (no fault class)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
     p.add_argument("--reference", default=None, metavar="REF.json|MODEL.yaml",
-                   help="a learned reference (phfdi calibrate --learn): watch the record's channels with it; "
+                   help="a learned reference (phfdi calibrate --learn, --estimator, --physics; or "
+                        "paper_physics, shipped): watch the record's channels with it; "
                         "or a scenario/model .yaml (phfdi diagnose's extended_model.yaml): the physics "
                         "reference built from it")
     p.add_argument("--refit-rows", type=int, default=None, metavar="N",

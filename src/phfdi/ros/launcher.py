@@ -140,7 +140,8 @@ def detector_spec(params: dict | None = None) -> NodeSpec:
     params = dict(params or {})
     if "reference" not in params:
         return NodeSpec(DETECTOR, "wavelet_fdi.node", params, OBSERVER)
-    params["reference"] = str(Path(str(params["reference"])).resolve())
+    if Path(str(params["reference"])).exists():  # a file: the node may start elsewhere; else a shipped name
+        params["reference"] = str(Path(str(params["reference"])).resolve())
     if not params.get("channel_map_file"):
         params.setdefault("loop_graph_topics", True)
     return NodeSpec(DETECTOR, "wavelet_fdi.learned_node", params, OBSERVER)
