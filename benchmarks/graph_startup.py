@@ -10,6 +10,7 @@ after the launcher started the processes): spawned, imports done (interpreter an
 node built (part read, endpoints made), own endpoints matched with every peer, graph connected.
 
     .venv/bin/python benchmarks/graph_startup.py --repeat 3 --detector
+    .venv/bin/python benchmarks/graph_startup.py --repeat 3 --reference paper_physics   # the multichannel node
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--duration", type=float, default=200.0, help="simulated seconds of each run")
     ap.add_argument("--detector", action="store_true", help="add the fault detector node")
+    ap.add_argument("--reference", default=None, metavar="REF",
+                    help="the detector is the multichannel detector's node with this reference (a file, or "
+                         "paper_physics); implies --detector")
     ap.add_argument("--no-record", action="store_true", help="run without the recorder")
     ap.add_argument("--phases", action="store_true", help="print each node's start-up steps (median)")
     ap.add_argument("--domain-id", type=int, default=None, help="ROS domain of the launches (default: a free one)")
@@ -43,7 +47,8 @@ def main() -> int:
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             overrides = [f"duration_s={args.duration:g}", f"setpoints.ph.changes.0.at_s={args.duration / 4:g}"]
             nodes = loop_graph("paper", "backlash", args.duration / 2, overrides, bag,
-                               detector={} if args.detector else None)
+                               detector=({"reference": args.reference} if args.reference else
+                                         {} if args.detector else None))
             result = Launcher(nodes, domain_id=args.domain_id, status=lambda s: None).run()
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if result.status != 0:

@@ -84,8 +84,6 @@ from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
-from scipy.optimize import minimize_scalar
-from scipy.stats import chi2
 
 from .calibration import excess_tail_threshold
 from .feed_checks import SETTLE_S, WINDOW_SAMPLES, feed_codes, reading_rate_ph_per_min
@@ -230,6 +228,8 @@ def _window(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
 
 
 def _fit(cost, bounds: tuple[float, float]) -> tuple[float, float]:
+    from scipy.optimize import minimize_scalar  # here: half a second of import a node's start would pay
+
     res = minimize_scalar(cost, bounds=bounds, method="bounded", options={"xatol": 1e-3})
     return float(res.fun), float(res.x)
 
@@ -410,6 +410,8 @@ def _scale_change(square: np.ndarray, before: np.ndarray, window: np.ndarray, st
         var = (s_b + s_w / s2) / (n_b + n_w)
         return float(0.5 * np.sum((n_b + n_w) * np.log(np.maximum(var, floor)) + n_w * log_s2))
 
+    from scipy.optimize import minimize_scalar
+
     res = minimize_scalar(profile, bounds=(0.0 if upward else math.log(1e-4), math.log(1e4)), method="bounded",
                           options={"xatol": 1e-4})
     return max(0.0, profile(0.0) - float(res.fun))
@@ -479,6 +481,8 @@ def isolate(ref: EstimatorReference, t_s: np.ndarray, rows: np.ndarray, onset_in
     beaten = explanation is not None and ev[explanation][0] >= ev[sensor][0]
     # the fault hypothesis must explain the window itself: its gain over healthy beyond what a one-parameter fit
     # of a well-specified model gains by chance with probability alpha (chi-square(1) / 2)
+    from scipy.stats import chi2  # here: scipy.stats takes about 1 s to import, which every node start would pay
+
     alpha = float(conf.get("alpha_per_test") or DEFAULT_ALPHA)
     weak = ev[sensor][0] <= 0.5 * float(chi2.isf(alpha, 1))
     confirmation["best_healthy_explanation"] = explanation

@@ -44,7 +44,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import t as t_distribution
 
 #: the span of a pump's recent flow a feed state holds (s): three times the rig's mixing zone's time constant as
 #: fitted (5-11 s, docs/diagnosis.md); the estimator's change test holds its pump states as long
@@ -77,6 +76,8 @@ def level(per_sample: float, window: int = WINDOW_SAMPLES) -> float:
     >>> round(level(1e-6), 2)
     7.74
     """
+    from scipy.stats import t as t_distribution  # here: scipy.stats takes about 1 s to import (node start-up)
+
     return float(t_distribution.isf(per_sample, window // BATCH_SAMPLES - 2))
 
 
