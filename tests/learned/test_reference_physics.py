@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from phfdi.loop import simulate
 from phfdi.scenario import load_scenario
@@ -186,3 +188,41 @@ def test_calibrate_physics_writes_a_model_replay_watches_and_names_with(tmp_path
     # too few healthy rows for the thresholds' tails: one line, nothing written
     assert main(["calibrate", "--physics", "--seeds", "1001-1002", *short, "--out", str(tmp_path / "b.json")]) == 2
     assert "needs at least 8 windows" in capsys.readouterr().err and not (tmp_path / "b.json").exists()
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(gaps=st.lists(st.tuples(st.integers(0, 1199), st.integers(1, 40)), max_size=4), chunk=st.integers(1, 400))
+def test_any_chunking_gives_the_same_residuals_and_notices_whatever_the_command_gaps(gaps, chunk):
+    """Command gaps of any length anywhere (within the 10 s timeout or beyond it, at the start, back to back),
+    fed in chunks of any size: the residuals, held rows and notices of the whole record at once."""
+    ref, t, x = _short_record()
+    x = x.copy()
+    for start, length in gaps:
+        x[start:start + length, 0] = np.nan
+    whole = ref.new_state()
+    r = whole.residuals(t, x)
+    held = whole.last_held.copy()
+    stream = ref.new_state()
+    parts, held_parts = [], []
+    for a in range(0, len(t), chunk):
+        parts.append(stream.residuals(t[a:a + chunk], x[a:a + chunk]))
+        held_parts.append(stream.last_held.copy())
+    assert np.array_equal(np.concatenate(parts), r, equal_nan=True)
+    assert np.array_equal(np.concatenate(held_parts), held)
+    assert stream.notices == whole.notices
+    assert np.all(np.isnan(r[held]))
+
+
+_SHORT_RECORD: list = []
+
+
+def _short_record():
+    """A 1200 s healthy paper run (setpoint step at 600 s), made once for the property test."""
+    if not _SHORT_RECORD:
+        spec = load_scenario("paper", fault="healthy", overrides=[
+            "duration_s=1200", "setpoints.ph.initial=8", "setpoints.ph.changes=[{at_s: 600, value: 8.5}]", "seed=51"])
+        run = simulate(spec)
+        ref = PhysicsReference.from_spec(spec, warmup_s=300.0, block_samples=64)
+        _SHORT_RECORD.append((ref, np.asarray(run.time_s, float),
+                              np.column_stack([np.asarray(run[c], float) for c in ref.channels])))
+    return _SHORT_RECORD[0]
