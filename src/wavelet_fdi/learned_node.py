@@ -47,14 +47,14 @@ from rclpy.clock import Clock, ClockType
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
 from phfdi_base.stamps import seconds_to_ns, stamp_seconds, time_ns
-from phfdi_base.topics import DETECTOR_MONITOR, MEASURED_SAMPLE
+from phfdi_base.topics import MEASURED_SAMPLE
 
 from .channel_align import grid_period_ns
 from .channel_map import ChannelMap, load_channel_map, loop_graph_map
 from .healthy_range import RangeWatch, describe_first, healthy_span, span
 from .learned_detector import LearnedDetector, LearnedModel
 from .map_inputs import MappedInputs, SummedWarnings
-from .node_base import STATE_NAMES, DetectorNodeBase, next_multiple
+from .node_base import MONITOR_PARAMS, STATE_NAMES, DetectorNodeBase, next_multiple
 
 PARAMS = (
     ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
@@ -74,10 +74,7 @@ PARAMS = (
                                            "above 0 is taken for it, with a warning; 0: not set", (0.0, 3600.0)),
     # as the physics detector's (wavelet_fdi.node): on the stream's own time, so a replay faster than real time
     # gives the heartbeats the plant's time would have
-    ParamSpec("monitor_topic", False, "publish the residuals and the statistics over their thresholds on "
-                                      "/detector/monitor (phfdi_interfaces/MeasuredSample; phfdi launch --foxglove)"),
-    ParamSpec("monitor_period_s", 1.0, "at most one /detector/monitor message per this many s of the record's time "
-                                       "(0: one per batch the worker takes)", (0.0, 1e9)),
+    *MONITOR_PARAMS,
     ParamSpec("heartbeat_period_s", 60.0, "publish the state on /fault_alarm every this many s of the record's time "
                                           "(at most one per batch the worker takes); 0: only on changes",
               range=(0.0, 1e9), runtime=True),
@@ -121,10 +118,7 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._pub_range = self.diagnostics_publisher()
         self._range_warnings = SummedWarnings(self.get_logger(), f"/diagnostics ('{self.get_name()}: healthy range')")
         self._received = 0
-        self._monitor_period_s = self.param("monitor_period_s")
-        self._last_monitor_t = -math.inf
-        self.pub_monitor = self.data_publisher(MeasuredSample, DETECTOR_MONITOR.name) if self.param(
-            "monitor_topic") else None
+        self.open_monitor_output()
         self.inputs: MappedInputs | None = None
         path = self.param("channel_map_file")
         if path:
@@ -194,17 +188,13 @@ class LearnedDetectorNode(DetectorNodeBase):
         if self.pub_monitor is None:
             return
         t_s, values = self.core.monitor()
-        if not math.isfinite(t_s) or (self._monitor_period_s > 0 and
-                                      t_s < next_multiple(self._last_monitor_t, self._monitor_period_s)):
+        if not math.isfinite(t_s) or not self.monitor_due(t_s):
             return
-        self._last_monitor_t = t_s
         noise = getattr(self.model.reference, "noise", None) if self.model.reference.kind == "physics" else None
         if noise is not None:
             for channel, unit in zip(self.model.residual_channels, noise):
                 values[LIVE_RESIDUALS[channel]] = values.pop(f"residual:{channel}") * float(unit)
-        msg = MeasuredSample(source=DETECTOR_MONITOR.publisher, names=list(values), values=list(values.values()))
-        msg.stamp = self._stamp(t_s)
-        self.pub_monitor.publish(msg)
+        self.publish_monitor(t_s, values, self._stamp(t_s))
 
     def received(self) -> int:
         return self._received + (self.inputs.received if self.inputs is not None else 0)

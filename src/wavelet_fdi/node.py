@@ -50,14 +50,14 @@ from itertools import islice
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, MeasuredSample, Measurement
+from phfdi_interfaces.msg import ControllerOutput, FaultAlarm, Measurement
 from rclpy.clock import Clock, ClockType
 
 from phfdi_base import live_view
 from phfdi_base.errors import UserError
 from phfdi_base.ros.graph_node import NodeStartError, ParamSpec, main, to_time
 from phfdi_base.stamps import finite_or, seconds_to_ns, time_ns, time_on_grid_s, valid_stamp
-from phfdi_base.topics import CONTROLLER, DETECTOR_MONITOR, MEASUREMENT
+from phfdi_base.topics import CONTROLLER, MEASUREMENT
 
 from .alarm_messages import severity_of
 from .channel_map import load_channel_map
@@ -65,7 +65,7 @@ from .config import Calibration, load_default_calibration, setting_specs, settin
 from .detector import StreamingDetector
 from .inputs import INPUT_PROBLEMS
 from .map_inputs import MappedInputs
-from .node_base import STATE_OF_LEVEL, DetectorNodeBase, next_multiple
+from .node_base import MONITOR_PARAMS, STATE_OF_LEVEL, DetectorNodeBase, next_multiple
 from .reference import KnownStart
 
 PARAMS = (
@@ -90,13 +90,7 @@ PARAMS = (
     ParamSpec("input_problem_period_s", 1.0, "input problems on /fault_alarm at most once per this many s of "
                                              "wall time (one message with the counts; state changes always)",
               range=(0.05, 3600.0), runtime=True),
-    # the live view (docs/ros_graph.md, "Live view in Foxglove"): off unless asked for, so a graph without it
-    # publishes and records exactly what it did before
-    ParamSpec("monitor_topic", False, "publish the residuals and the statistics over their thresholds on "
-                                      "/detector/monitor (phfdi_interfaces/MeasuredSample; phfdi launch --foxglove)"),
-    ParamSpec("monitor_period_s", 1.0, "at most one /detector/monitor message (and live-view sample) per this many "
-                                       "s of simulated time; 0: one per batch the detector processes",
-              range=(0.0, 1e9)),
+    *MONITOR_PARAMS,
     ParamSpec("foxglove_port", 0, "serve what this detector sees (inputs, residuals, statistic ratios, alarm "
                                   "state) over the Foxglove WebSocket protocol on this port; 0: no live view",
               range=(0, 65535)),
@@ -315,10 +309,7 @@ class DetectorNode(DetectorNodeBase):
 
     def _open_monitor(self) -> None:
         """The live-view outputs asked for: the /detector/monitor topic and/or a Foxglove server of its own."""
-        self._monitor_period_s = self.param("monitor_period_s")
-        self._last_monitor_t = -math.inf
-        self.pub_monitor = self.data_publisher(MeasuredSample, DETECTOR_MONITOR.name) if self.param(
-            "monitor_topic") else None
+        self.open_monitor_output()
         self.live: live_view.LiveView | None = None
         self.live_errors = 0  # messages the live view could not send: counted, logged, never fatal
         if self.param("foxglove_port"):
@@ -497,17 +488,13 @@ class DetectorNode(DetectorNodeBase):
                         "level_output_pct": live_view.finite(outputs[1])}, ns)
         if (self.pub_monitor is None and self.live is None) or not rows:
             return
-        if self._monitor_period_s > 0 and t_now < next_multiple(self._last_monitor_t, self._monitor_period_s):
+        if not self.monitor_due(t_now):
             return
         t_s, values = self.core.monitor()
         if not math.isfinite(t_s):
             return
-        self._last_monitor_t = t_s
         ns = seconds_to_ns(t_s)
-        if self.pub_monitor is not None:
-            msg = MeasuredSample(source=DETECTOR_MONITOR.publisher, names=list(values), values=list(values.values()))
-            msg.stamp = self._ros_time(ns)
-            self.pub_monitor.publish(msg)
+        self.publish_monitor(t_s, values, self._ros_time(ns))
         if self.live is not None:
             self._to_live(live_view.MONITOR, live_view.monitor(t_s, values), ns)
 

@@ -21,10 +21,20 @@ import threading
 from typing import Any
 
 import numpy as np
-from phfdi_interfaces.msg import FaultAlarm
+from phfdi_interfaces.msg import FaultAlarm, MeasuredSample
 
-from phfdi_base.ros.graph_node import GraphNode
-from phfdi_base.topics import DETECTOR, FAULT_ALARM
+from phfdi_base.ros.graph_node import GraphNode, ParamSpec
+from phfdi_base.topics import DETECTOR, DETECTOR_MONITOR, FAULT_ALARM
+
+#: both detector nodes' live-view monitor (docs/ros_graph.md, "Live view in Foxglove"): off unless asked for, so a
+#: graph without it publishes and records exactly what it did before
+MONITOR_PARAMS = (
+    ParamSpec("monitor_topic", False, "publish the residuals and the statistics over their thresholds on "
+                                      "/detector/monitor (phfdi_interfaces/MeasuredSample; phfdi launch --foxglove)"),
+    ParamSpec("monitor_period_s", 1.0, "at most one /detector/monitor message (and live-view sample) per this many "
+                                       "s of the record's (simulated) time; 0: one per batch the detector processes",
+              range=(0.0, 1e9)),
+)
 
 #: FaultAlarm.state of the core's levels
 STATE_OF_LEVEL = {"OK": FaultAlarm.OK, "WARN": FaultAlarm.WARN, "ERROR": FaultAlarm.ALARM}
@@ -76,6 +86,25 @@ class DetectorNodeBase(GraphNode):
 
     def open_alarm_output(self) -> None:
         self.pub_alarm = self.data_publisher(FaultAlarm, FAULT_ALARM.name)
+
+    def open_monitor_output(self) -> None:
+        """The /detector/monitor publisher when ``monitor_topic`` asks for it (:data:`MONITOR_PARAMS`)."""
+        self._monitor_period_s = self.param("monitor_period_s")
+        self._last_monitor_t = -math.inf
+        self.pub_monitor = self.data_publisher(MeasuredSample, DETECTOR_MONITOR.name) if self.param(
+            "monitor_topic") else None
+
+    def monitor_due(self, t_s: float) -> bool:
+        """A monitor sample at record time ``t_s`` is due (``monitor_period_s`` after the last one)."""
+        return self._monitor_period_s <= 0 or t_s >= next_multiple(self._last_monitor_t, self._monitor_period_s)
+
+    def publish_monitor(self, t_s: float, values: dict[str, float], stamp) -> None:
+        """One monitor sample (worker thread): ``values`` by name on /detector/monitor, if it is open."""
+        self._last_monitor_t = t_s
+        if self.pub_monitor is not None:
+            msg = MeasuredSample(source=DETECTOR_MONITOR.publisher, names=list(values), values=list(values.values()))
+            msg.stamp = stamp
+            self.pub_monitor.publish(msg)
 
     # ---- executor thread: queue only ------------------------------------------------------
     def enqueue(self, rows: list) -> None:
