@@ -37,7 +37,7 @@ import numpy as np
 from phfdi_base.errors import UserError
 
 from .config import Calibration, DetectorSettings
-from .statistics import increments, parse_statistic
+from .statistics import CusumBank, increments, parse_statistic
 
 #: seeds of the calibration runs: disjoint from the evaluation's (1..99)
 DEFAULT_CALIBRATION_SEEDS = tuple(range(1001, 1017))
@@ -184,3 +184,38 @@ def calibrate_from_traces(traces: list[dict[str, np.ndarray]], settings: Detecto
         method=(f"window maxima of CUSUMs restarted every {window} samples, exponential fit to the upper "
                 f"{int(100 * TAIL_FRACTION)} %, P(max > h) = {window} / (ARL0 x {len(names)} statistics)"),
         tail_fits=fits)
+
+
+def alarm_positions(z: np.ndarray, h: np.ndarray, clear_samples: int, quiet_samples: int | None = None,
+                    clear_fraction: float = 0.5) -> list[int]:
+    """Alarms of a union of CUSUMs on increments z (n, N): the physics detector's raise/confirm/clear logic, offline
+    (for checking a calibration's false-alarm rate on long records)
+    (a crossing within clear_samples of the previous one confirms the alarm instead of raising one, unless the
+    alarm cleared before it: every statistic below clear_fraction of its threshold for quiet_samples)."""
+
+    out: list[int] = []
+    pos, last, active, loud_last = 0, -1, False, -1
+    n = z.shape[1]
+    bank = CusumBank(z.shape[0])
+    while pos < n:
+        end = min(n, pos + 65536)
+        s = bank.update(z[:, pos:end], pos)
+        over = np.flatnonzero((s > h[:, None]).any(axis=0))
+        stop = end if not len(over) else pos + int(over[0]) + 1  # values after a crossing are restarted
+        if quiet_samples is not None:
+            gi = np.arange(pos, stop)
+            loud = (s[:, :stop - pos] >= clear_fraction * h[:, None]).any(axis=0)
+            last_loud = np.maximum.accumulate(np.where(loud, gi, loud_last))
+            if active and ((gi - last_loud >= quiet_samples) & (gi > last)).any():
+                active = False
+            loud_last = int(last_loud[-1])
+        if not len(over):
+            pos = end
+            continue
+        x = stop - 1
+        if not active or x - last > clear_samples:
+            out.append(x)
+        last, active = x, True
+        bank.restart(x)
+        pos = x + 1
+    return out

@@ -385,7 +385,8 @@ class LearnedDetector:
         self._last_residual = np.full(m, np.nan)
         self._last_ratio = np.zeros(len(self.stat_names))
         self._times = np.full(TIME_RING, np.nan)  # times of the last TIME_RING samples (onset times)
-        self._trace: dict[str, list] | None = ({"coef": [], "stat": [], "state": [], "increments": []}
+        self._trace: dict[str, list] | None = ({"coef": [], "stat": [], "state": [], "increments": [],
+                                                "residual": []}
                                                if record_trace else None)
         self._init_naming(model, alarms)
 
@@ -820,6 +821,9 @@ class LearnedDetector:
             self._trace["coef"].append(np.where(missing[i0:i1][:, :, None], np.nan, coef))
             self._trace["stat"].append(ratio.T.copy())
             self._trace["increments"].append(z.T.copy())  # value - k per statistic (the warm-up's at -k)
+            # the residual less the observer's level (what R watches), NaN where missing or held
+            assert c.residual is not None, "process passes the residuals"
+            self._trace["residual"].append(np.where(missing[i0:i1], np.nan, c.residual[i0:i1] - self.bias))
         if self.alarms_enabled:
             events += self._alarm_logic(t, i0, i1, g0, ratio, cross, states, np.abs(u))
         if self._trace is not None:

@@ -62,7 +62,9 @@ class ReferenceStream(Protocol):
 
 class Reference(Protocol):
     kind: str
-    lags: int
+
+    @property
+    def lags(self) -> int: ...
 
     @property
     def channels(self) -> tuple[str, ...]: ...

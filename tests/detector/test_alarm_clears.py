@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from phfdi.loop import simulate
-from phfdi.study.evaluation import alarm_positions
+from wavelet_fdi.calibration import alarm_positions
 
 from .detector_helpers import SHORT, short_spec
 from .test_stream_equals_batch import replay
@@ -43,7 +43,7 @@ def test_a_fault_that_goes_away_clears_its_alarm_with_the_episode(bias_episode, 
         other, ev = replay(spec, run, calibration, chunk)
         assert [(e.kind, e.index, e.message) for e in ev] == [(e.kind, e.index, e.message) for e in events]
         assert [a.to_dict() for a in other.alarms] == [a.to_dict() for a in det.alarms]
-    # the evaluation's copy of the alarm logic agrees
+    # the offline copy of the alarm logic (wavelet_fdi.calibration.alarm_positions) agrees
     z = det.trace()["increments"].T
     assert alarm_positions(z, det.h, det.clear_samples, det.quiet_samples, SHORT.clear_fraction) == \
         [a.detection_index for a in det.alarms]

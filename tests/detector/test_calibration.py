@@ -7,9 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from phfdi.study.evaluation import EvalConfig, alarm_positions
+from phfdi.study.evaluation import EvalConfig
 from phfdi_base.errors import UserError
-from wavelet_fdi.calibration import DEFAULT_CALIBRATION_SEEDS, calibrate_from_traces, tail_threshold, window_maxima
+from wavelet_fdi.calibration import (
+    DEFAULT_CALIBRATION_SEEDS,
+    alarm_positions,
+    calibrate_from_traces,
+    tail_threshold,
+    window_maxima,
+)
 from wavelet_fdi.config import Calibration, DetectorSettings, load_default_calibration
 from wavelet_fdi.filterbank import CausalSwt
 from wavelet_fdi.statistics import increments, parse_statistic

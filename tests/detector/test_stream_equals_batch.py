@@ -7,7 +7,7 @@ import pytest
 
 from phfdi.loop import simulate
 from phfdi.replay import detector_inputs
-from phfdi.study.evaluation import alarm_positions
+from wavelet_fdi.calibration import alarm_positions
 from wavelet_fdi.detector import StreamingDetector
 
 from .detector_helpers import SHORT, short_spec
@@ -45,7 +45,8 @@ def test_any_chunking_gives_identical_statistics_alarms_and_diagnoses(faulty, ca
 
 
 def test_offline_alarm_logic_reproduces_the_detectors_alarms(faulty, calibration):
-    """The evaluation's alarm_positions (used for the bands-only ablation) is the detector's logic."""
+    """The offline alarm logic (wavelet_fdi.calibration.alarm_positions, which checks calibrations on long records) is
+    the detector's."""
     spec, run = faulty
     det, _ = replay(spec, run, calibration, len(run))
     z = det.trace()["increments"].T

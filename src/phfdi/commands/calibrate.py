@@ -303,6 +303,19 @@ def check_settings_given(args: argparse.Namespace) -> None:
         raise UserError(f"{', '.join(stray)} {what}")
 
 
+def physics_design(args: argparse.Namespace, sample_time_s: float):
+    """The physics reference's options (``PhysicsReference.from_spec``) and the multichannel detector's settings
+    with the physics detector's design (``reference_physics.design_settings``), from the options given: the physics
+    detector's (``--warmup``, ``--channels``, ...) set the design, any learned-detector setting given is set over it."""
+    from wavelet_fdi.config import LearnedSettings
+    from wavelet_fdi.reference_physics import design_settings
+
+    physics = settings_from_args(args)
+    options = dict(warmup_s=physics.warmup_s, watch_level="level" in physics.channels,
+                   command_timeout_s=physics.command_timeout_s, setpoint_holdoff_s=physics.setpoint_holdoff_s)
+    return options, design_settings(physics, sample_time_s, **given_settings(args, LearnedSettings))
+
+
 def run_physics(args: argparse.Namespace) -> int:
     """The scenario's physics as a reference kind of the multichannel detector, calibrated on healthy runs."""
     from phfdi.calibration import scenario_for_seed
@@ -310,20 +323,16 @@ def run_physics(args: argparse.Namespace) -> int:
     from phfdi.replay import load_any
     from phfdi.scenario import load_scenario
     from phfdi_base.errors import UserError
-    from wavelet_fdi.config import LearnedSettings
     from wavelet_fdi.learned_detector import calibrate_bands
-    from wavelet_fdi.reference_physics import PhysicsReference, design_settings
+    from wavelet_fdi.reference_physics import PhysicsReference
 
     if not args.out.endswith(".json"):
         raise UserError(f"--out {args.out}: a physics reference is written as .json")
     if args.rows is not None or args.exclude or args.start or args.end:
         raise UserError("--rows, --from, --to and --exclude go with --learn (--physics calibrates on whole runs)")
-    physics = settings_from_args(args)
     spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
-    ref = PhysicsReference.from_spec(spec, warmup_s=physics.warmup_s, watch_level="level" in physics.channels,
-                                     command_timeout_s=physics.command_timeout_s,
-                                     setpoint_holdoff_s=physics.setpoint_holdoff_s)
-    settings = design_settings(physics, spec.sample_time_s, **given_settings(args, LearnedSettings))
+    options, settings = physics_design(args, spec.sample_time_s)
+    ref = PhysicsReference.from_spec(spec, **options)
     cmap = column_map_from_args(args)
     runs = []
     if args.runs:

@@ -2,13 +2,14 @@
 
 ``phfdi evaluate`` runs: healthy runs and each fault at three severities
 (the paper's in the middle) with several noise seeds, faults at ``onset_s``.
-Calibration (ours and the peers') uses healthy runs with seeds disjoint from
-the evaluation's. Every detector sees the same residual stream (our
-reference model's pH residual over the monitored samples) and is held to the
-same ARL0. For each faulty run the delay bound is the time an oracle that
-knows the fault's noise-free residual signal s_t needs to gather ln(ARL0) of
-Kullback-Leibler information, sum s_t^2 / (2 sigma^2) (the CUSUM/Lorden
-bound; for a constant shift of delta sigma it is 2 ln(ARL0) / delta^2).
+Ours is the multichannel detector (:class:`~wavelet_fdi.learned_detector.LearnedDetector`) with the scenario's
+physics as its reference (kind ``physics``, :mod:`wavelet_fdi.reference_physics`), the model ``phfdi calibrate
+--physics`` writes. Calibration (ours and the peers') uses healthy runs with seeds disjoint from the evaluation's.
+Every peer sees the residual our detector watches (the reference's pH residual less the observer's level, over the
+monitored samples, divided by its healthy RMS), and every detector is held to the same ARL0. For each faulty run
+the delay bound is the time an oracle that knows the fault's noise-free residual signal s_t needs to gather
+ln(ARL0) of Kullback-Leibler information, sum s_t^2 / (2 sigma^2) (the CUSUM/Lorden bound; for a constant shift
+of delta sigma it is 2 ln(ARL0) / delta^2).
 """
 
 from __future__ import annotations
@@ -23,17 +24,16 @@ from typing import Callable
 
 import numpy as np
 
-from phfdi.calibration import healthy_traces, scenario_for_seed
+from phfdi.calibration import scenario_for_seed
 from phfdi.faults import catalogue
 from phfdi.loop import build_parts, simulate
-from phfdi.replay import run_chunks
 from phfdi.scenario import load_scenario
 from phfdi.study.detector_figures import plot_evaluation
 from phfdi_base.errors import UserError
 from phfdi_base.outputs import write_text
-from wavelet_fdi.calibration import calibrate_from_traces, statistic_increments, tail_probability, window_maxima
-from wavelet_fdi.config import Calibration, DetectorSettings
-from wavelet_fdi.detector import StreamingDetector
+from wavelet_fdi.calibration import tail_probability, window_maxima
+from wavelet_fdi.config import ARL_WINDOW_SAMPLES, LearnedSettings
+from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel, calibrate_bands
 from wavelet_fdi.peers import (
     DETECTORS,
     LABELS,
@@ -43,7 +43,7 @@ from wavelet_fdi.peers import (
     _page_hinkley_window_max,
     calibrate_peers,
 )
-from wavelet_fdi.statistics import CusumBank
+from wavelet_fdi.reference_physics import PhysicsReference, design_settings
 
 #: faults outside the fault library, as scenario fault entries, with their severities (main parameter, levels)
 CUSTOM_SEVERITIES: dict[str, tuple[str, list[dict]]] = {
@@ -79,9 +79,14 @@ class EvalConfig:
     faults: tuple[str, ...] = field(default_factory=lambda: tuple(severities()))
     #: scenario key=value overrides for every run (calibration included)
     overrides: tuple[str, ...] = ()
-    #: calibration window (samples): much shorter than ARL0, long against the statistics' memory
+    #: the peers' calibration window (samples): much shorter than ARL0, long against the statistics' memory (ours
+    #: are measured on windows of wavelet_fdi.config.ARL_WINDOW_SAMPLES)
     window_samples: int = 1000
-    settings: DetectorSettings = field(default_factory=DetectorSettings)
+    #: our detector's settings: the physics detector's design (reference_physics.design_settings); the sample
+    #: time is the scenario's
+    settings: LearnedSettings = field(default_factory=design_settings)
+    #: the physics reference's options (PhysicsReference.from_spec): the pH alone by default
+    reference_options: dict = field(default_factory=lambda: {"watch_level": False})
     jobs: int = 2
 
     @classmethod
@@ -101,9 +106,26 @@ class EvalConfig:
         for f in self.faults:
             if f not in known:
                 raise UserError(f"no severities defined for fault {f!r}; known: {', '.join(known)}")
+        if self.settings.residual_mean_k <= 0:
+            raise UserError("residual_mean_k 0: the peers' reference value and the bands-only variant are the "
+                            "detector's R statistic's; give it above 0")
 
 
 # ---- one run ---------------------------------------------------------------------------------
+@dataclass
+class Calibrated:
+    """What every run is scored with: our model, its bands-only variant, the residual's healthy RMS (in the
+    reference's units) and the peers' thresholds."""
+    model: LearnedModel
+    bands_only: LearnedModel
+    sigma: float
+    unit: float  # the residual's unit in pH (the scenario's pH sensor noise)
+    peers: dict[str, float]  # peer -> threshold
+    peer_k: float  # the peers' reference value (half the design shift, residual sigmas)
+    peer_window: int  # the peers' calibration window (samples)
+    adwin_note: str = ""  # why ADWIN's delta is what it is, where it could not reach the target
+
+
 @dataclass
 class RunTask:
     scenario: str
@@ -111,10 +133,7 @@ class RunTask:
     params: dict
     seed: int
     onset_s: float
-    settings: DetectorSettings
-    calibration: Calibration
-    peers: dict[str, float]  # peer -> threshold
-    bands_only: dict[str, float]  # thresholds of the paper's bands without R (detection-only ablation)
+    calibrated: Calibrated
     overrides: tuple[str, ...] = ()
     keep_signals: bool = False
 
@@ -166,91 +185,89 @@ def bound_delay(signal: np.ndarray, t: np.ndarray, onset_s: float, arl0: float,
     return float(tt[j] - onset_s), float(np.sqrt(np.mean(s[: j + 1] ** 2)))
 
 
-def alarm_positions(z: np.ndarray, h: np.ndarray, clear_samples: int, quiet_samples: int | None = None,
-                    clear_fraction: float = 0.5) -> list[int]:
-    """Alarms of a union of CUSUMs on increments z (n, N): the detector's raise/confirm/clear logic
-    (a crossing within clear_samples of the previous one confirms the alarm instead of raising one, unless the
-    alarm cleared before it: every statistic below clear_fraction of its threshold for quiet_samples)."""
+def run_detector(model: LearnedModel, t: np.ndarray, rows: np.ndarray, record_trace: bool = False,
+                 alarms: bool = True, chunk: int = 4096) -> LearnedDetector:
+    """A whole run through a fresh detector, in chunks as a stream would give it; pending namings made at its end."""
+    det = LearnedDetector(model, alarms=alarms, record_trace=record_trace)
+    for a in range(0, len(rows), chunk):
+        det.process(t[a:a + chunk], rows[a:a + chunk])
+    if alarms:
+        det.finish()
+    return det
 
-    out: list[int] = []
-    pos, last, active, loud_last = 0, -1, False, -1
-    n = z.shape[1]
-    bank = CusumBank(z.shape[0])
-    while pos < n:
-        end = min(n, pos + 65536)
-        s = bank.update(z[:, pos:end], pos)
-        over = np.flatnonzero((s > h[:, None]).any(axis=0))
-        stop = end if not len(over) else pos + int(over[0]) + 1  # values after a crossing are restarted
-        if quiet_samples is not None:
-            gi = np.arange(pos, stop)
-            loud = (s[:, :stop - pos] >= clear_fraction * h[:, None]).any(axis=0)
-            last_loud = np.maximum.accumulate(np.where(loud, gi, loud_last))
-            if active and ((gi - last_loud >= quiet_samples) & (gi > last)).any():
-                active = False
-            loud_last = int(last_loud[-1])
-        if not len(over):
-            pos = end
-            continue
-        x = stop - 1
-        if not active or x - last > clear_samples:
-            out.append(x)
-        last, active = x, True
-        bank.restart(x)
-        pos = x + 1
-    return out
+
+def run_rows(run, channels) -> tuple[np.ndarray, np.ndarray]:
+    """A simulated run's time and the reference's channels."""
+    return np.asarray(run.time_s, float), np.column_stack([np.asarray(run[c], float) for c in channels])
+
+
+def monitored(det: LearnedDetector) -> tuple[np.ndarray, np.ndarray]:
+    """(mask of the monitored samples, the watched pH residual less the observer's level): after the warm-up,
+    where the residual is neither missing nor held."""
+    res = det.trace()["residual"][:, 0]
+    mask = (np.arange(len(res)) >= det.fill_samples) & np.isfinite(res)
+    return mask, res
+
+
+def alarm_summary(a: dict) -> dict:
+    """One alarm of ours as the tables read it: detection, onset (the namer's fitted onset where it gives one, else
+    the statistic's), the statistic, and the named fault."""
+    iso = a.get("isolation") or {}
+    onset = (iso.get("evidence") or {}).get("onset_fit_s")  # the namer's fitted onset, as the physics detector's
+    if onset is None:
+        onset = a["onset_time"] if a.get("onset_time") is not None else a["detection_time"]
+    return {"detection_time": float(a["detection_time"]), "onset_time": float(onset),
+            "statistic": a["statistic"], "fault_class": iso.get("fault_class", "pending"),
+            "confidence": iso.get("confidence"), "parameter": iso.get("parameter")}
 
 
 def evaluate_run(task: RunTask) -> dict:
-    """Simulate one run, run our detector and the peers on its residual, compute the bound."""
-
-
+    """Simulate one run, run our detector (and its bands-only variant) and the peers on its residual, compute
+    the bound."""
+    cal = task.calibrated
     spec = _spec(task.scenario, task.fault, task.params, task.seed, task.onset_s, task.overrides)
     run = simulate(spec)
-    det = StreamingDetector(spec, task.calibration, task.settings, isolate=True, record_trace=True)
-    run_chunks(det, run)
-    tr = det.trace()
-    sigma = task.calibration.sigma["ph"]["raw"]
-    mon = tr["ph_monitored"]
-    t_mon = tr["time_s"][mon]
-    u = tr["ph_residual"][mon] / sigma
+    t, rows = run_rows(run, cal.model.channels)
+    det = run_detector(cal.model, t, rows, record_trace=True)
+    mon, res = monitored(det)
+    t_mon = t[mon]
+    u = res[mon] / cal.sigma
     onset = task.onset_s if task.fault != "healthy" else None
+    dt = spec.sample_time_s
     rec: dict = {"fault": task.fault, "params": task.params, "seed": task.seed, "onset_s": onset,
-                 "monitored_s": float(len(t_mon) * spec.sample_time_s),
-                 "monitored_before_onset_s": float(np.sum(t_mon < onset) * spec.sample_time_s) if onset else
-                 float(len(t_mon) * spec.sample_time_s)}
-    rec["alarms"] = {"wavelet": [a.summary() for a in det.alarms]}
-    bands = replace(task.settings, raw_band=False)
-    names = bands.statistic_names()
-    z = np.vstack([statistic_increments(tr, n, task.calibration.sigma, bands) for n in names])
-    h = np.array([task.bands_only[n] for n in names])
-    rec["alarms"]["wavelet_bands"] = [{"detection_time": float(t_mon[p])}
-                                      for p in alarm_positions(z, h, det.clear_samples, det.quiet_samples,
-                                                                 det.settings.clear_fraction)]
+                 "monitored_s": float(len(t_mon) * dt),
+                 "monitored_before_onset_s": float(np.sum(t_mon < onset) * dt) if onset else float(len(t_mon) * dt)}
+    bands = run_detector(cal.bands_only, t, rows, record_trace=onset is None)
+    rec["alarms"] = {"wavelet": [alarm_summary(a) for a in det.alarms],
+                     "wavelet_bands": [{"detection_time": float(a["detection_time"])} for a in bands.alarms]}
     for name in PEERS:
-        pos = Peer(name, task.peers[name], 0.5 * task.settings.mean_shift_sigma).alarms(u)
+        pos = Peer(name, cal.peers[name], cal.peer_k).alarms(u)
         rec["alarms"][name] = [{"detection_time": float(t_mon[p])} for p in pos]
+    unit = cal.unit
+    predicted = run["ph_measured"] - res * unit  # the model's pH prediction plus the observer's level
     if onset is None:  # held-out healthy data: window maxima to check the false-alarm calibration
-        rec["window_maxima"] = heldout_maxima(tr, u, task)
-    if onset is not None:
+        rec["window_maxima"] = heldout_maxima({"wavelet": det, "wavelet_bands": bands}, u, task)
+    else:
         clean = noise_free_ph(spec, run["ph_true"], run.time_s)
-        signal = (clean - tr["ph_predicted"])[mon] / sigma
-        rho = 1.0 + (task.params["std"] / sigma) ** 2 if task.fault == "probe_noise" else 1.0
-        rec["bound_delay_s"], rec["snr_delta"] = bound_delay(signal, t_mon, onset, task.settings.arl0_samples, rho)
+        signal = (clean - predicted)[mon] / (cal.sigma * unit)
+        rho = 1.0 + (task.params["std"] / (cal.sigma * unit)) ** 2 if task.fault == "probe_noise" else 1.0
+        rec["bound_delay_s"], rec["snr_delta"] = bound_delay(signal, t_mon, onset, cal.model.settings.arl0_samples,
+                                                             rho)
     if task.keep_signals:
-        rec["signals"] = {"time_s": tr["time_s"], "ph_measured": tr["ph_measured"], "ph_predicted": tr["ph_predicted"]}
+        rec["signals"] = {"time_s": t, "ph_measured": np.asarray(run["ph_measured"], float),
+                          "ph_predicted": predicted}
     return rec
 
 
-def heldout_maxima(tr: dict, u: np.ndarray, task: RunTask) -> dict[str, list]:
-    """Window maxima (calibration windows) of every statistic on a healthy run."""
-
-    window = task.calibration.window_samples
-    k = 0.5 * task.settings.mean_shift_sigma
+def heldout_maxima(ours: dict[str, LearnedDetector], u: np.ndarray, task: RunTask) -> dict[str, list]:
+    """Window maxima of every statistic on a healthy run: ours (and the bands-only variant's) on the windows their
+    thresholds were measured on, each statistic's increments after the warm-up; the peers' on theirs."""
     out: dict[str, list] = {}
-    for prefix, settings in (("wavelet", task.settings), ("wavelet_bands", replace(task.settings, raw_band=False))):
-        for name in settings.statistic_names():
-            z = statistic_increments(tr, name, task.calibration.sigma, settings)
-            out[f"{prefix}:{name}"] = window_maxima(z, window).tolist()
+    for prefix, det in ours.items():
+        z = det.trace()["increments"][det.fill_samples:]
+        for j, name in enumerate(det.stat_names):
+            out[f"{prefix}:{name}"] = window_maxima(z[:, j], ARL_WINDOW_SAMPLES).tolist()
+    window, k = task.calibrated.peer_window, task.calibrated.peer_k
     out["cusum"] = np.maximum(window_maxima(u - k, window), window_maxima(-u - k, window)).tolist()
     windows = [u[i:i + window] for i in range(0, len(u) - window + 1, window)]
     out["focus"] = [_focus_window_max(w) for w in windows]
@@ -258,9 +275,9 @@ def heldout_maxima(tr: dict, u: np.ndarray, task: RunTask) -> dict[str, list]:
     return out
 
 
-def heldout_arl(records: list[dict], summary_thresholds: dict, window: int) -> dict[str, float | None]:
+def heldout_arl(records: list[dict], summary_thresholds: dict, peer_window: int) -> dict[str, float | None]:
     """ARL0 (samples) of each detector estimated on the held-out healthy runs at its calibrated threshold(s):
-    L / P(window max > h), from the same tail fit; a union sums its statistics' probabilities."""
+    window / P(window max > h), from the same tail fit; a union sums its statistics' probabilities."""
 
     pooled: dict[str, list] = {}
     for r in records:
@@ -269,6 +286,7 @@ def heldout_arl(records: list[dict], summary_thresholds: dict, window: int) -> d
     out: dict[str, float | None] = {}
     for d in DETECTORS:
         th = summary_thresholds[d]
+        window = ARL_WINDOW_SAMPLES if isinstance(th, dict) else peer_window
         try:
             if isinstance(th, dict):
                 p = sum(tail_probability(np.array(pooled[f"{d}:{n}"]), h) for n, h in th.items())
@@ -285,75 +303,88 @@ def heldout_arl(records: list[dict], summary_thresholds: dict, window: int) -> d
 
 
 # ---- calibration of everyone on the same healthy runs --------------------------------------
-def _calibration_trace(args) -> dict:
-    scenario, seed, settings, overrides = args
-
-    tr = healthy_traces(scenario_for_seed(scenario, overrides), [seed], settings)[0]
-    keep = ("ph_residual", "level_residual_cm", "ph_monitored", "level_monitored", "ph_coefficients",
-            "level_coefficients")
-    return {k: tr[k] for k in keep}
+def _healthy_run(args) -> tuple[np.ndarray, np.ndarray]:
+    scenario, seed, overrides, channels = args
+    return run_rows(simulate(scenario_for_seed(scenario, overrides)(seed)), channels)
 
 
-def calibrate_all(cfg: EvalConfig, pool, say: Callable[[str], None]) -> tuple[Calibration, dict]:
+def _healthy_residual(args) -> np.ndarray:
+    """A calibration run's monitored residual through the calibrated detector (no alarms, as calibrated)."""
+    model, t, rows = args
+    mask, res = monitored(run_detector(model, t, rows, record_trace=True, alarms=False))
+    return res[mask]
 
+
+def calibrate_all(cfg: EvalConfig, pool, say: Callable[[str], None]) -> Calibrated:
+    """Our detector, its bands-only variant and the peers, calibrated on the same healthy runs."""
+    spec = scenario_for_seed(cfg.scenario, cfg.overrides)(cfg.calibration_seeds[0])
+    reference = PhysicsReference.from_spec(spec, **cfg.reference_options)
+    settings = replace(cfg.settings, sample_time_s=spec.sample_time_s)
     say(f"calibration: {len(cfg.calibration_seeds)} healthy runs (seeds {cfg.calibration_seeds[0]}.."
         f"{cfg.calibration_seeds[-1]})")
-    traces = list(pool.map(_calibration_trace, [(cfg.scenario, s, cfg.settings, cfg.overrides)
-                                                 for s in cfg.calibration_seeds]))
-    dt = scenario_for_seed(cfg.scenario, cfg.overrides)(cfg.calibration_seeds[0]).sample_time_s
-    cal = calibrate_from_traces(traces, cfg.settings, cfg.scenario, dt, cfg.calibration_seeds, cfg.window_samples)
-    bands = calibrate_from_traces(traces, replace(cfg.settings, raw_band=False), cfg.scenario, dt,
-                                  cfg.calibration_seeds, cfg.window_samples)
-    sigma = cal.sigma["ph"]["raw"]
-    streams = [t["ph_residual"][t["ph_monitored"]] / sigma for t in traces]
+    runs = list(pool.map(_healthy_run, [(cfg.scenario, s, cfg.overrides, reference.channels)
+                                         for s in cfg.calibration_seeds]))
+    source = {"seeds": list(cfg.calibration_seeds), "scenario": spec.name}
+    say("calibration: our detector's band scales and thresholds, and without R (bands only)")
+    model = calibrate_bands(reference, runs, settings, source)
+    bands_only = calibrate_bands(reference, runs, replace(settings, residual_mean_k=0.0), source)
+    streams = list(pool.map(_healthy_residual, [(model, t, rows) for t, rows in runs]))
+    sigma = float(np.sqrt(np.mean(np.concatenate(streams) ** 2)))
     say("calibration: peers on the same residual streams")
-    peers = calibrate_peers(streams, cfg.settings.arl0_samples, 0.5 * cfg.settings.mean_shift_sigma,
-                            cal.window_samples, progress=lambda name: say(f"  calibrated {name}"))
-    peers["wavelet_bands"] = {"thresholds": bands.thresholds, "method": "as ours, paper bands only"}
-    cal.peers = peers
-    return cal, peers
+    k = settings.residual_mean_k
+    peers = calibrate_peers([x / sigma for x in streams], settings.arl0_samples, k, cfg.window_samples,
+                            progress=lambda name: say(f"  calibrated {name}"))
+    return Calibrated(model, bands_only, sigma, float(reference.noise[0]), {name: peers[name]["threshold"] for name in PEERS}, k,
+                      cfg.window_samples, peers.get("adwin", {}).get("note", ""))
 
 
 # ---- the matrix ------------------------------------------------------------------------------
-def tasks(cfg: EvalConfig, cal: Calibration, peers: dict) -> list[RunTask]:
-    thresholds = {k: peers[k]["threshold"] for k in PEERS}
-    bands = peers["wavelet_bands"]["thresholds"]
-    out = [RunTask(cfg.scenario, "healthy", {}, s, cfg.onset_s, cfg.settings, cal, thresholds, bands, cfg.overrides)
-           for s in cfg.healthy_seeds]
+def tasks(cfg: EvalConfig, cal: Calibrated) -> list[RunTask]:
+    out = [RunTask(cfg.scenario, "healthy", {}, s, cfg.onset_s, cal, cfg.overrides) for s in cfg.healthy_seeds]
     for fault in cfg.faults:
         _, levels = severities()[fault]
         for i in cfg.severity_indices:
             for s in cfg.eval_seeds:
                 keep = i == PAPER_SEVERITY and s == cfg.eval_seeds[0] and fault == "backlash"
-                out.append(RunTask(cfg.scenario, fault, levels[i], s, cfg.onset_s, cfg.settings, cal, thresholds,
-                                   bands, cfg.overrides, keep_signals=keep))
+                out.append(RunTask(cfg.scenario, fault, levels[i], s, cfg.onset_s, cal, cfg.overrides,
+                                   keep_signals=keep))
     return out
 
 
 def run_evaluation(cfg: EvalConfig, out_dir: str | Path, progress: Callable[[str], None] | None = None) -> dict:
-    """Calibrate, run the matrix, write DIR/evaluation.md, DIR/results.json and the figures."""
+    """Calibrate, run the matrix, write DIR/evaluation.md, DIR/results.json, DIR/reference.json (our calibrated
+    detector: ``phfdi replay RUN --reference DIR/reference.json``), DIR/peers.json and the figures."""
     cfg.check()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     say = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
     with ProcessPoolExecutor(max_workers=max(1, cfg.jobs)) as pool:
-        cal, peers = calibrate_all(cfg, pool, say)
-        cal.save(out / "calibration.yaml")
-        todo = tasks(cfg, cal, peers)
+        cal = calibrate_all(cfg, pool, say)
+        cal.model.save(out / "reference.json")
+        write_text(out / "peers.json", json.dumps(_peers_file(cal), indent=1), overwrite=True)
+        todo = tasks(cfg, cal)
         say(f"evaluation: {len(todo)} runs")
         records = []
         for i, rec in enumerate(pool.map(evaluate_run, todo)):
             records.append(rec)
             say(f"  [{i + 1}/{len(todo)}] {rec['fault']} {rec['params']} seed {rec['seed']}")
     signals = next((r.pop("signals") for r in records if "signals" in r), None)
-    summary = summarise(records, cfg, cal, peers)
+    summary = summarise(records, cfg, cal)
     write_text(out / "results.json", json.dumps({"config": _config_dict(cfg), "summary": summary,
                                                  "runs": records}, indent=1, default=_json_default), overwrite=True)
-    write_text(out / "evaluation.md", markdown(summary, cfg, cal, peers), overwrite=True)
+    write_text(out / "evaluation.md", markdown(summary, cfg), overwrite=True)
 
-    plot_evaluation(summary, records, out, signals, cfg.settings)
-    say(f"wrote {out / 'evaluation.md'}, results.json and figures")
+    plot_evaluation(summary, records, out, signals, cal.model.settings)
+    say(f"wrote {out / 'evaluation.md'}, results.json, reference.json, peers.json and figures")
     return summary
+
+
+def _peers_file(cal: Calibrated) -> dict:
+    """The peers' thresholds and what they are calibrated on, and the bands-only variant's thresholds."""
+    return {"residual_sigma": cal.sigma, "residual_unit": "the scenario's pH sensor noise",
+            "reference_value_k": cal.peer_k, "window_samples": cal.peer_window,
+            "arl0_samples": cal.model.settings.arl0_samples, "thresholds": cal.peers,
+            "wavelet_bands": cal.bands_only.thresholds}
 
 
 def _config_dict(cfg: EvalConfig) -> dict:
@@ -375,7 +406,7 @@ def first_after(alarms: list[dict], onset: float) -> dict | None:
     return next((a for a in alarms if a["detection_time"] >= onset), None)
 
 
-def summarise(records: list[dict], cfg: EvalConfig, cal: Calibration, peers: dict) -> dict:
+def summarise(records: list[dict], cfg: EvalConfig, cal: Calibrated) -> dict:
     # healthy operation, each noise realisation once: a faulty run is its seed's healthy run until
     # the onset, so its pre-onset part counts only when that seed has no healthy run
     hours = 0.0
@@ -432,26 +463,27 @@ def summarise(records: list[dict], cfg: EvalConfig, cal: Calibration, peers: dic
                                                      for e in estimates])) if estimates else None)
             row["onset_error_s"] = float(np.mean(np.abs(onsets))) if onsets else None
             rows.append(row)
-    thresholds = {"wavelet": cal.thresholds, "wavelet_bands": peers["wavelet_bands"]["thresholds"],
-                  **{k: peers[k]["threshold"] for k in PEERS}}
-    return {"rows": rows, "heldout_arl0": heldout_arl(records, thresholds, cal.window_samples),
+    thresholds = {"wavelet": cal.model.thresholds, "wavelet_bands": cal.bands_only.thresholds, **cal.peers}
+    return {"rows": rows, "heldout_arl0": heldout_arl(records, thresholds, cal.peer_window),
             "false_alarms": false, "healthy_hours": hours,
             "false_per_hour": {d: false[d] / hours if hours else None for d in DETECTORS},
-            "arl0_samples": cfg.settings.arl0_samples, "thresholds": thresholds,
-            "sigma_ph": cal.sigma["ph"]["raw"], "adwin_note": peers.get("adwin", {}).get("note", "")}
+            "arl0_samples": cal.model.settings.arl0_samples, "thresholds": thresholds,
+            "sigma_ph": cal.sigma * cal.unit,
+            "watched": list(cal.model.residual_channels), "adwin_note": cal.adwin_note}
 
 
 def _fmt(x, spec: str = ".0f", none: str = "-") -> str:
     return none if x is None else format(x, spec)
 
 
-def markdown(summary: dict, cfg: EvalConfig, cal: Calibration, peers: dict) -> str:
+def markdown(summary: dict, cfg: EvalConfig) -> str:
     s = cfg.settings
     lines = [f"# Detector evaluation: {cfg.scenario} scenario, faults at {cfg.onset_s:g} s", "",
-             f"ARL0 = {s.arl0_samples:g} samples for every detector (thresholds calibrated on healthy seeds "
+             f"ARL0 = {summary['arl0_samples']:g} samples for every detector (thresholds calibrated on healthy seeds "
              f"{cfg.calibration_seeds[0]}..{cfg.calibration_seeds[-1]}; evaluation seeds {list(cfg.eval_seeds)}, "
-             f"healthy seeds {list(cfg.healthy_seeds)}). Ours: {s.wavelet} level {s.level}, channels "
-             f"{', '.join(s.channels)}. Residual noise sigma = {summary['sigma_ph']:.4f} pH.", "",
+             f"healthy seeds {list(cfg.healthy_seeds)}). Ours: the multichannel detector with the scenario's physics "
+             f"as its reference (phfdi calibrate --physics; reference.json), {s.wavelet} level {s.level}, watching "
+             f"{', '.join(summary['watched'])}. Residual noise sigma = {summary['sigma_ph']:.4f} pH.", "",
              "## Detection delay (s after the onset; mean over the seeds that detected; +N missed)", "",
              "| fault | parameter | " + " | ".join(LABELS[d] for d in DETECTORS) + " | bound | delta |",
              "|---|---|" + "---:|" * (len(DETECTORS) + 2)]
