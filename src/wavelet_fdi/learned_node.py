@@ -55,6 +55,7 @@ from .healthy_range import RangeWatch, describe_first, healthy_span, span
 from .learned_detector import LearnedDetector, LearnedModel
 from .map_inputs import MappedInputs, SummedWarnings
 from .node_base import MONITOR_PARAMS, STATE_NAMES, DetectorNodeBase, next_multiple
+from .reference_physics import follow_scenario
 
 PARAMS = (
     ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
@@ -105,6 +106,10 @@ class LearnedDetectorNode(DetectorNodeBase):
             self.model = LearnedModel.load(path)
         except UserError as exc:
             raise NodeStartError(f"parameter reference = {path!r}: {exc}") from None
+        if self.param("loop_graph_topics"):  # in the loop graph: a physics reference runs the launch's own plant
+            self.model, note = follow_scenario(self.model, self.spec, "launch")
+            if note:
+                self.get_logger().warning(note)
         self.core = LearnedDetector(self.model)
         self.quiet_events = 0  # deviations (and their verdicts) kept but not published: the hold of the last one
         # where the inputs leave what the reference's healthy runs had (a reference file from before: nothing)

@@ -59,6 +59,38 @@ WARMUP_GAIN = 0.5
 NAMING_AFTER_S = 300.0
 
 
+#: the scenario's settings the healthy model runs on (the commands are the record's, so the controllers, setpoints,
+#: duration and seed are not among them)
+MODEL_KEYS = ("plant", "sample_time_s", "valves", "sensors", "feeds", "plugins")
+
+
+def _differences(a: Any, b: Any, where: str) -> list[str]:
+    """Dotted paths where two parsed scenario values differ (dicts compared key by key)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [k for key in sorted(set(a) | set(b)) for k in _differences(a.get(key), b.get(key), f"{where}.{key}")]
+    return [] if a == b else [where]
+
+
+def follow_scenario(model: Any, spec: ScenarioSpec, what: str = "record") -> tuple[Any, str | None]:
+    """A detector model (:class:`~wavelet_fdi.learned_detector.LearnedModel`) whose physics reference runs
+    ``spec``'s plant where it differs from the scenario it was calibrated on, and a note saying so (None: no
+    change; other reference kinds are returned as they are). Its band scales and thresholds stay the calibration's,
+    as the physics detector keeps its shipped calibration for a scenario's variants."""
+    ref = model.reference
+    if getattr(ref, "kind", None) != KIND:
+        return model, None
+    followed, changed = ref.for_scenario(spec)
+    if not changed:
+        return model, None
+    from dataclasses import replace
+
+    shown = ", ".join(changed[:4]) + (f" and {len(changed) - 4} more" if len(changed) > 4 else "")
+    verb = "differs" if len(changed) == 1 else "differ"
+    return replace(model, reference=followed), (
+        f"the physics reference's model follows the {what}'s own scenario ({shown} {verb} from scenario "
+        f"{ref.spec.name!r}, which its band scales and thresholds were calibrated on)")
+
+
 def design_settings(physics: DetectorSettings | None = None, sample_time_s: float = 1.0, **given: Any
                     ) -> LearnedSettings:
     """The multichannel detector's settings that carry the physics detector's design (its
@@ -137,6 +169,19 @@ class PhysicsReference:
         healthy = spec.model_copy(update={"faults": []})
         return cls(healthy.model_dump(mode="json"), float(warmup_s), int(block_samples), bool(watch_level),
                    float(command_timeout_s), float(setpoint_holdoff_s), healthy)
+
+    def for_scenario(self, spec: ScenarioSpec) -> tuple["PhysicsReference", list[str]]:
+        """This reference with ``spec``'s healthy loop as its model (its options kept), and the settings of the
+        model that differ (:data:`MODEL_KEYS`, dotted: ``valves.ph.max_flow_ml_s``); itself and ``[]`` when
+        none does. A record that says its own scenario (a simulated run, a bag of the loop graph) is watched with
+        that scenario's plant, as the physics detector watches it, rather than with the one calibrated on."""
+        mine = self.spec.model_copy(update={"faults": []}).model_dump(mode="json")
+        theirs = spec.model_copy(update={"faults": []}).model_dump(mode="json")
+        changed = [k for key in MODEL_KEYS for k in _differences(mine.get(key), theirs.get(key), key)]
+        if not changed:
+            return self, []
+        return PhysicsReference.from_spec(spec, self.warmup_s, self.block_samples, self.watch_level,
+                                          self.command_timeout_s, self.setpoint_holdoff_s), changed
 
     # ---- the protocol every reference kind shares ------------------------------------------
     @property

@@ -76,3 +76,19 @@ def test_the_launched_graph_with_a_physics_reference_gives_its_bags_offline_alar
     assert [(a["detection_time"], a["fault_class"]) for a in received] == [
         (a["detection_time"], a["isolation"]["fault_class"]) for a in offline]
     assert offline[0]["isolation"]["fault_class"] == "stiction"
+
+
+def test_the_launched_node_runs_the_launchs_own_plant_with_the_references_calibration(tmp_path):
+    """A launch whose plant differs from the one the physics reference was calibrated on (a bigger acid valve:
+    45 mL/s, the shipped reference's paper loop has 40): the node runs the launch's plant with the reference's band
+    scales and thresholds, as the physics detector's node runs the launch's scenario with its shipped calibration,
+    and says so; the healthy run raises no alarm (with the reference's own plant its prediction was 175 sensor
+    sigmas off, and it alarmed)."""
+    logs = tmp_path / "logs"
+    proc = subprocess.run(phfdi_cmd("launch", *SHORT, "--set", "valves.ph.max_flow_ml_s=45",
+                                    "--detector-param", "reference=paper_physics", "--log-dir", str(logs), "--json"),
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["alarms"] == []
+    said = (logs / "detector.stderr").read_text() + (logs / "detector.stdout").read_text()
+    assert "valves.ph.max_flow_ml_s differs from scenario 'paper'" in said, said[-2000:]

@@ -167,6 +167,44 @@ def test_a_reference_entry_that_is_not_a_scenario_is_one_clear_refusal():
         PhysicsReference(ref.scenario, warmup_s=-1.0)
 
 
+#: a plant the shipped reference was not calibrated on: the acid valve's capacity 45 mL/s instead of 40
+BIGGER_VALVE = "valves.ph.max_flow_ml_s=45"
+
+
+def test_a_physics_reference_follows_the_plant_of_the_record_it_watches(tmp_path, capsys):
+    """A record that says its own scenario (a simulated run) is watched with that scenario's plant, its band scales
+    and thresholds the calibration's, and a note says so: the shipped paper reference on a healthy run of a bigger
+    acid valve predicted the pH 175 sensor sigmas off and raised an alarm. A replay of the record says it, and raises
+    none; a record of the calibrated scenario itself is watched as calibrated."""
+    import json
+
+    from phfdi.cli import main
+    from wavelet_fdi.learned_detector import LearnedModel
+    from wavelet_fdi.reference_physics import follow_scenario
+
+    model = LearnedModel.load("paper_physics")
+    spec = load_scenario("paper", fault="healthy", overrides=SHORT + [BIGGER_VALVE, "seed=21"])
+    run = simulate(spec)
+    t = np.asarray(run.time_s, float)
+    rows = np.column_stack([np.asarray(run[c], float) for c in model.channels])
+    followed, note = follow_scenario(model, spec)
+    assert note is not None and "valves.ph.max_flow_ml_s differs from scenario 'paper'" in note
+    assert followed.band_sigma is model.band_sigma and followed.thresholds == model.thresholds
+    lags = model.reference.lags
+    as_calibrated = model.reference.residuals(t, rows)[lags:, 0]
+    own = followed.reference.residuals(t, rows)[lags:, 0]
+    assert abs(np.mean(as_calibrated)) > 10.0  # the effect: the calibrated plant is not this run's
+    assert abs(np.mean(own)) < 0.2 and 0.8 < np.std(own) < 1.25  # the run's own plant: the sensor noise
+    same, none = follow_scenario(model, load_scenario("paper", fault="stiction", overrides=SHORT, onset_s=ONSET_S))
+    assert same is model and none is None  # setpoints, duration and faults are not the model's
+    path = tmp_path / "bigger_valve.parquet"
+    run.save(path)
+    capsys.readouterr()
+    assert main(["replay", str(path), "--reference", "paper_physics", "--json"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    assert document["alarms"] == [] and any("follows the record's own scenario" in n for n in document["notes"])
+
+
 def test_calibrate_physics_writes_a_model_replay_watches_and_names_with(tmp_path, capsys):
     """phfdi calibrate --physics: the scenario's physics calibrated on simulated healthy runs, written as a detector
     model file; phfdi replay --reference then detects a sticky valve in a simulated run and names it."""

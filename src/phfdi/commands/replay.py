@@ -246,7 +246,9 @@ class _Learned(_Kind):
         cmap, columns_said = reference_column_map(args, model, args.reference)
         rec, columns_said = _read_with_stored_map(args, model, cmap, columns_said)
         print(f"phfdi replay: {columns_said}", file=sys.stderr)
-        print_notes("replay", rec.notes)
+        model, followed = _follow_record_scenario(model, rec)
+        notes = rec.notes + ([followed] if followed else [])
+        print_notes("replay", notes)
         t0 = time.perf_counter()
         events, states, model = replay_measured(rec, model, args.refit_rows)
         elapsed = time.perf_counter() - t0
@@ -255,7 +257,7 @@ class _Learned(_Kind):
         alarms = alarm_summaries(events, rec)
         inputs = [event_dict(e, rec) for e in events if e.kind == "input"]
         document = {"file": args.file, "reference": args.reference, "samples": len(rec.x),
-                    "channels": list(model.channels), "columns": columns_said, "notes": rec.notes,
+                    "channels": list(model.channels), "columns": columns_said, "notes": notes,
                     "input_problems": inputs, "outside_healthy_range": outside, "alarm_rows": int(states.sum()),
                     "alarms": alarms}
         lines = [format_alarms(alarms)]
@@ -294,6 +296,18 @@ class _Learned(_Kind):
         document = {"file": args.file, "reference": args.reference, "samples": report["samples"],
                     "channels": list(self.model.channels), "outside_healthy_range": outside, "alarms": alarms}
         return _Replayed(document, format_alarms(alarms), result.status)
+
+
+def _follow_record_scenario(model, rec):
+    """A physics reference runs the record's own scenario where the record says one (a simulated run, a bag of the
+    loop graph), as the launched node runs the launch's (``reference_physics.follow_scenario``); the note, or None."""
+    from phfdi_base.spec import validate_scenario
+    from wavelet_fdi.reference_physics import KIND, follow_scenario
+
+    spec = rec.metadata.get("spec") if isinstance(rec.metadata, dict) else None
+    if getattr(model.reference, "kind", None) != KIND or not isinstance(spec, dict):
+        return model, None
+    return follow_scenario(model, validate_scenario(spec, source=f"{rec.path}: run metadata"))
 
 
 def _is_model_file(path: str) -> bool:
