@@ -54,6 +54,7 @@ import time
 from pathlib import Path
 
 from phfdi.bagio import bag_parts
+from wavelet_fdi import alarm_messages
 
 #: /proc/<pid>/status fields sampled (kB)
 MEMORY_FIELDS = ("VmRSS", "RssAnon", "RssFile", "RssShmem", "VmHWM")
@@ -189,6 +190,18 @@ def stamp_check(bags: list[Path], topics: list[str], n_samples: int, dt_ns: int)
     return out
 
 
+def detector_counts(done: dict) -> dict:
+    """The detector node's input counts from its final report, in the physics node's names: its own counters, or
+    the multichannel node's channel map (the measured pH stands for /plant/measurement, the valve command for
+    /controller/output)."""
+    if "diagnostics" in done:
+        return done["diagnostics"]
+    counts = done["channel_map"]["counts"]
+    ph, command = counts["ph_measured"], counts["valve_command_pct"]
+    return {"measurements": ph["received"], "controller_outputs": command["received"],
+            "commands_missing": command["missing"], "late_controller_outputs": command["late"]}
+
+
 def message_summary(result, n_samples: int, dt_ns: int) -> dict:
     """Messages lost: published vs recorded per topic, stamps of per-sample topics, the detector's inputs."""
     from phfdi_base.topics import BY_NAME, CONTROLLER, MEASUREMENT
@@ -209,14 +222,14 @@ def message_summary(result, n_samples: int, dt_ns: int) -> dict:
     done = [e for e in result.node_events.get("detector", []) if e.get("event") == "detector_done"]
     detector = {}
     if done:
-        diag = done[-1]["diagnostics"]
+        diag = detector_counts(done[-1])
         detector = {"measurements_received": diag.get("measurements"),
                     "controller_outputs_received": diag.get("controller_outputs"),
                     "samples_processed": done[-1]["samples"],
                     "commands_missing": diag.get("commands_missing"),
                     "late_controller_outputs": diag.get("late_controller_outputs"),
                     "alarms": [{k: a.get(k) for k in ("onset_time", "detection_time", "fault_class", "confidence")}
-                               for a in done[-1]["alarms"]],
+                               for a in alarm_messages.from_summaries(done[-1]["alarms"])],
                     "lag": done[-1].get("lag")}
         detector["measurements_lost"] = result.published.get(MEASUREMENT.name, 0) - (detector["measurements_received"] or 0)
         detector["controller_outputs_lost"] = (result.published.get(CONTROLLER.name, 0)

@@ -95,3 +95,26 @@ def replay_run(run: Record, spec: ScenarioSpec | None = None, calibration: Calib
     det = StreamingDetector(spec, calibration, settings, isolate=isolate)
     events = run_chunks(det, run, chunk)
     return ReplayResult(det.alarms, events, det.diagnostics(), len(run))
+
+
+def shipped_physics_name(spec: ScenarioSpec | None) -> str:
+    """The physics reference shipped for a scenario (``<base scenario>_physics``; the paper's for None); one line
+    naming how to make one when none ships."""
+    from wavelet_fdi.learned_detector import shipped_reference_path
+
+    base = "paper" if spec is None else base_scenario(spec.name)
+    name = f"{base}_physics"
+    if shipped_reference_path(name) is None:
+        raise UserError(f"no physics reference ships for scenario {base!r}: make one with phfdi calibrate --physics "
+                        f"--scenario {base} --out REF.json and give it as the reference")
+    return name
+
+
+def shipped_physics_model(spec: ScenarioSpec):
+    """(model, note): the multichannel detector's model with the physics reference shipped for ``spec``'s scenario,
+    its model running ``spec``'s own plant (``reference_physics.follow_scenario``; the note says where it differs
+    from the one calibrated on, None where it does not)."""
+    from wavelet_fdi.learned_detector import LearnedModel
+    from wavelet_fdi.reference_physics import follow_scenario
+
+    return follow_scenario(LearnedModel.load(shipped_physics_name(spec)), spec)

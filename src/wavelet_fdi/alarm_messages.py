@@ -42,9 +42,11 @@ def from_summaries(alarms: list[dict]) -> list[dict]:
     for a in alarms:
         if "fault_class" not in a:  # the multichannel detector's: named (or not yet) under "isolation"
             iso = a.get("isolation") or {}
-            a = {**a, "fault_class": iso.get("fault_class", "pending"), "confidence": iso.get("confidence", 0.0),
-                 "parameter": iso.get("parameter"), "severity": math.nan}
-        severity, unit = severity_of(a)
+            a = {**a, "fault_class": iso.get("fault_class", "pending"), "confidence": iso.get("confidence", 0.0)}
+            # as its node publishes them: the namer's size and unit once named
+            severity, unit = (float(iso["size"]), str(iso["unit"])) if iso else (math.nan, "")
+        else:
+            severity, unit = severity_of(a)
         if not math.isfinite(severity):
             unit = ""
         out.append({"onset_time": a["onset_time"], "detection_time": a["detection_time"],

@@ -569,7 +569,7 @@ class LearnedDetector:
             k = (np.arange(first, end)) % NAMING_RING
             iso = namer(self._ring_t[k], self._ring_x[k], a["onset_index"] - first,
                              a["detection_index"] - first, a["statistic"])
-            a["isolation"] = iso
+            _take_naming(a, iso)
             self._to_name.remove(a)
             self._named.append(a["alarm_id"])
             if self.confirming:
@@ -682,7 +682,7 @@ class LearnedDetector:
                 waiting.remove(up)
         if up["alarm_id"] not in self._named:
             self._named.append(up["alarm_id"])
-        up["isolation"] = iso
+        _take_naming(up, iso)
         return self._verdict(up, iso, t_now, at)
 
     def _named_event(self, a: dict, iso: dict, end: int) -> LearnedEvent:
@@ -730,7 +730,7 @@ class LearnedDetector:
                          a["statistic"], after=after)
         if not self.confirming:  # a naming made again with more samples
             a.setdefault("namings", []).append(a.get("isolation"))
-            a["isolation"] = iso
+            _take_naming(a, iso)
             self._name_again_later(a, iso, look, end)
             return [self._named_event(a, iso, end)]
         conf = iso.get("confirmation") or {}
@@ -739,7 +739,7 @@ class LearnedDetector:
         if not iso.get("confirmed"):
             self._wait_for_next_look(a, iso, look, end)
             return []
-        a["isolation"] = iso
+        _take_naming(a, iso)
         at = max(end - 1, int(a.get("cleared_index", -1)))
         return self._verdict(a, iso, float(self._ring_t[at % NAMING_RING]), at)
 
@@ -1021,6 +1021,16 @@ class LearnedDetector:
         return out
 
 
+def _take_naming(a: dict, iso: dict) -> None:
+    """An alarm's naming: kept under ``isolation``; where the namer fits the onset (``onset_time``, s: the physics
+    kind's isolation), that is the alarm's onset from then on, the statistic's kept as ``statistic_onset_time``."""
+    a["isolation"] = iso
+    onset = iso.get("onset_time")
+    if onset is not None and math.isfinite(float(onset)):
+        a.setdefault("statistic_onset_time", a.get("onset_time"))
+        a["onset_time"] = float(onset)
+
+
 def _running_sum(total: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray:
     """``total`` plus ``values`` summed along ``axis`` one sample after another (np.cumsum adds in order;
     ndarray.sum adds pairwise), so that a block split across two chunks sums to the same last bit."""
@@ -1030,10 +1040,11 @@ def _running_sum(total: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray
     return np.take(np.cumsum(stacked, axis=axis), -1, axis=axis)
 
 
-def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096
-               ) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
+def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096,
+               record_trace: bool = False) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
     """A whole record through a fresh detector, in chunks of ``chunk`` rows (None: at once; the
-    result is the same, chunks of a few thousand rows are fastest).
+    result is the same, chunks of a few thousand rows are fastest); ``record_trace``: the detector keeps its
+    trace (:meth:`LearnedDetector.trace`; memory grows with the record).
 
     Returns
     -------
@@ -1053,7 +1064,7 @@ def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int |
     >>> events, int(states.max())  # healthy rows: no alarm
     ([], 0)
     """
-    det = LearnedDetector(model)
+    det = LearnedDetector(model, record_trace=record_trace)
     n = len(x)
     step = n if not chunk else int(chunk)
     events, states = [], []

@@ -81,7 +81,7 @@ PARAMS = (
               range=(0.0, 1e9), runtime=True),
 )
 #: what a heartbeat during an alarm repeats from the alarm's last message (its statistic is the heartbeat's own)
-ALARM_FIELDS = ("fault_class", "severity", "severity_unit", "detection_time", "onset_time", "channels",
+ALARM_FIELDS = ("fault_class", "confidence", "severity", "severity_unit", "detection_time", "onset_time", "channels",
                 "channel_shares", "channel_bands", "wavelet_level")
 #: the live view's names of the physics kind's residuals (phfdi_base.live_view.MONITOR_RESIDUALS), in its units
 LIVE_RESIDUALS = {"ph_measured": "ph_residual", "level_measured_cm": "level_residual_cm"}
@@ -167,7 +167,9 @@ class LearnedDetectorNode(DetectorNodeBase):
     def _report_map(self) -> None:
         """The channel map's status on /diagnostics (periodically; at once when a new problem is seen)."""
         assert self.inputs is not None
-        array = DiagnosticArray(status=[self.inputs.status()])
+        status = self.inputs.status()
+        status.values.append(KeyValue(key="reference", value=str(self.param("reference"))))  # what it watches with
+        array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._pub_map_diag.publish(array)
         self._problems_said = len(self.inputs.problems)
@@ -266,12 +268,15 @@ class LearnedDetectorNode(DetectorNodeBase):
         if a:
             iso = a.get("isolation") or {}
             # named NAMING_AFTER samples after the detection; a deviation no fault explains is no fault class
+            # not named yet: "pending" where the reference names faults (the physics kind, 300 s after the
+            # detection), "unknown" where it never does
             msg.fault_class = {"pending": "pending", "outside calibration": "outside_calibration"}.get(
-                a.get("verdict", ""), iso.get("fault_class", "unknown"))
+                a.get("verdict", ""), iso.get("fault_class", "pending" if self.core.namer is not None else "unknown"))
             if a.get("verdict") == "outside calibration":
                 iso = {}
             if iso:
                 msg.severity, msg.severity_unit = float(iso["size"]), str(iso["unit"])
+                msg.confidence = float(iso.get("confidence", 0.0))
             msg.detection_time = self._stamp(a["detection_time"])
             if a.get("onset_time") is not None:
                 msg.onset_time = self._stamp(a["onset_time"])

@@ -9,7 +9,8 @@ valve and probe hypothesis from the last snapshot before the onset. The isolator
 sensor noise, the residual unit of the kind.
 
 The answer has the keys every namer gives (``family``, ``fault_class``, ``description``, ``size``, ``unit``) and
-the isolator's ``confidence``, ``parameter``, ``alternatives`` and ``evidence``. ``unknown`` (no hypothesis
+the isolator's ``confidence``, ``parameter``, ``alternatives`` and ``evidence``, and where it names a fault the
+onset its fit found (``onset_time``, s), which the detector takes as the alarm's onset. ``unknown`` (no hypothesis
 explains the residual) is family ``none``.
 """
 
@@ -100,6 +101,7 @@ def _named(result: IsolationResult | None) -> dict:
         return {"family": "none", "fault_class": "unknown", "description": why, "size": 0.0, "unit": "",
                 "confidence": float(result.confidence) if result is not None else 0.0,
                 "parameter": None if result is None else result.parameter}
+    onset = result.evidence.get("onset_fit_s")  # the isolation's fitted onset (s), as the physics detector reports
     fault = faults().get(result.fault_class)
     p = result.parameter or {}
     size = float(p.get("value", math.nan))  # the fitted main parameter: {"name", "value", "unit", "fault_class"}
@@ -107,4 +109,5 @@ def _named(result: IsolationResult | None) -> dict:
             "description": result.fault_class.replace("_", " "),  # the fitted size follows in size and unit
             "size": round(size, 4) if math.isfinite(size) else 0.0, "unit": str(p.get("unit", "")),
             "confidence": round(float(result.confidence), 4), "parameter": result.parameter,
-            "alternatives": result.alternatives, "evidence": result.evidence}
+            "alternatives": result.alternatives, "evidence": result.evidence,
+            **({"onset_time": float(onset)} if onset is not None else {})}

@@ -26,12 +26,13 @@ def test_replay_json_lists_the_alarm_with_its_diagnosis(backlash_file, capsys):
     report = json.loads(capsys.readouterr().out)
     assert report["notes"] == [] and report["file"] == str(backlash_file)
     alarms = report["alarms"]
-    assert len(alarms) == 1
+    assert len(alarms) == 1 and report["reference"] == "paper_physics"  # the shipped physics reference, by default
     a = alarms[0]
-    for key in ("onset_time", "detection_time", "fault_class", "severity", "confidence", "parameter"):
+    for key in ("onset_time", "detection_time", "statistic", "contributions", "isolation"):
         assert key in a
     assert 1000.0 <= a["detection_time"] < 1200.0
-    assert a["fault_class"] == "backlash" and a["parameter"]["name"] == "width_pct"
+    iso = a["isolation"]
+    assert iso["fault_class"] == "backlash" and iso["parameter"]["name"] == "width_pct" and iso["confidence"] > 0.9
 
 
 def test_replay_of_a_bag_gives_the_alarms_of_the_run_it_holds(backlash_file, tmp_path, capsys):
@@ -45,7 +46,7 @@ def test_replay_of_a_bag_gives_the_alarms_of_the_run_it_holds(backlash_file, tmp
     from_file = json.loads(capsys.readouterr().out)
     assert main(["replay", str(bag), "--json"]) == 0
     from_bag = json.loads(capsys.readouterr().out)
-    assert from_bag["alarms"] == from_file["alarms"] and from_bag["alarms"][0]["fault_class"] == "backlash"
+    assert from_bag["alarms"] == from_file["alarms"] and from_bag["alarms"][0]["isolation"]["fault_class"] == "backlash"
     assert from_bag["notes"] == from_file["notes"] == []
 
 

@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 
 from phfdi_base import live_view
-from wavelet_fdi.config import DetectorSettings
+from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel
 
 LAYOUT = Path(__file__).resolve().parents[2] / "config" / "foxglove_layout.json"
 
@@ -50,7 +50,8 @@ def test_every_path_names_a_served_channel_and_a_field_of_its_schema():
 def test_the_ratio_plot_has_every_default_statistic_and_the_line_at_one():
     plot = _layout()["configById"]["Plot!ratios"]
     values = {p["value"] for p in plot["paths"]}
-    keys = {live_view.statistic_key(n) for n in DetectorSettings().statistic_names()}
+    default = LearnedModel.load("paper_physics")  # the loop graph's default detector's reference
+    keys = {live_view.statistic_key(n) for n in LearnedDetector(default).stat_names}
     assert values == {f"{live_view.MONITOR}.ratio.{k}" for k in keys} | {f"{live_view.MONITOR}.limit"}
 
 

@@ -66,7 +66,7 @@ def test_bag_of_a_faulty_rig_run_through_the_node_gives_the_offline_alarms(rig, 
     keys = ("alarm_id", "detection_time", "detection_index", "onset_index", "onset_time", "statistic",
             "statistic_value", "threshold", "channels", "contributions", "cleared_time", "episode_contributions")
     assert [{k: a.get(k) for k in keys} for a in live["alarms"]] == [{k: a.get(k) for k in keys} for a in alarms]
-    assert "/fault_alarm ALARM at" in proc.stderr and "learned detector node" in proc.stderr
+    assert "/fault_alarm ALARM at" in proc.stderr and "through the detector node" in proc.stderr
     # both say where the run leaves the calibration runs' healthy range: the base pump at 6.45 mL/s (3.87 at most)
     assert live["outside_healthy_range"] == offline["outside_healthy_range"]
     assert [o["channel"] for o in live["outside_healthy_range"]] == ["base_flow_ml_s"]

@@ -48,7 +48,7 @@ def test_bag_of_a_skab_record_through_the_node_gives_the_offline_alarms(skab_fil
             "where", "detection_line", "cleared_line", "onset_stamp", "detection_stamp", "cleared_stamp")
     assert [{k: a.get(k) for k in keys} for a in live["alarms"]] == \
         [{k: a.get(k) for k in keys} for a in offline["alarms"]]
-    assert "/fault_alarm ALARM at" in proc.stderr and "learned detector node" in proc.stderr
+    assert "/fault_alarm ALARM at" in proc.stderr and "through the detector node" in proc.stderr
 
 
 @pytest.mark.parametrize("reference", ["", "missing.json", "bad.json"])

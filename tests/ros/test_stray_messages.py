@@ -3,6 +3,10 @@ the detector's /fault_alarm stays bounded, the run ends as if nothing happened (
 
 Before: one message stamped in the future became the controllers' clock and the ring stalled for good; stamp
 garbage made the detector publish one /fault_alarm per clock reset.
+
+The detector here is the physics detector's node (wavelet_fdi.node, asked for by one of its own parameters), whose
+input counters these assertions read; the loop graph's default detector is the multichannel detector's node since
+2026-12-07, and the physics node stays while it is retired.
 """
 
 from __future__ import annotations
@@ -52,8 +56,8 @@ def disturbed(tmp_path_factory):
     bag, logs = tmp / "run.mcap", tmp / "logs"
     before = ownerless_shm_files()
     t0 = time.monotonic()
-    cmd = ["launch", "--fault", "backlash", "--onset", "100", "--pace", "10", "--detector", "--record", str(bag),
-           "--log-dir", str(logs), "--json"]
+    cmd = ["launch", "--fault", "backlash", "--onset", "100", "--pace", "10", "--detector-param", "isolate=true",
+           "--record", str(bag), "--log-dir", str(logs), "--json"]
     for o in OVERRIDES:
         cmd += ["--set", o]
     launch = subprocess.Popen(phfdi_cmd(*cmd), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from .common import EPILOG_FORMAT, Progress, add_overwrite_arg
@@ -155,15 +156,16 @@ def _in_process(spec, out: Path):
 
 # ---- 2. offline replay ---------------------------------------------------------------------
 def _offline(run_, record_trace: bool = False):
-    from phfdi.replay import run_chunks, scenario_of
-    from wavelet_fdi.config import DetectorSettings, load_default_calibration
-    from wavelet_fdi.detector import StreamingDetector
+    """The run through the multichannel detector with the paper's shipped physics reference, its model running the
+    run's own plant (``phfdi replay RUN`` does the same)."""
+    import numpy as np
 
-    spec = scenario_of(run_)
-    settings = DetectorSettings()
-    det = StreamingDetector(spec, load_default_calibration("paper", settings), settings, record_trace=record_trace)
-    run_chunks(det, run_)
-    return det
+    from phfdi.replay import scenario_of, shipped_physics_model
+    from wavelet_fdi.learned_detector import run_record
+
+    model, _note = shipped_physics_model(scenario_of(run_))
+    rows = np.column_stack([np.asarray(run_[c], float) for c in model.channels])
+    return run_record(model, np.asarray(run_.time_s, float), rows, record_trace=record_trace)[2]
 
 
 def _replay_and_compare(run_, received, out: Path, no_ros: bool):
@@ -171,43 +173,42 @@ def _replay_and_compare(run_, received, out: Path, no_ros: bool):
     import json
 
     from phfdi.alarm_text import format_alarms
+    from wavelet_fdi.alarm_messages import from_summaries
 
     _say("\n[3/4] offline replay of " + ("the run" if no_ros else "the bag") + " through the same detector core:")
     t0 = time.perf_counter()
     det = _offline(run_, record_trace=True)
     _say(f"      {len(run_)} samples in {time.perf_counter() - t0:.1f} s")
-    _say("      " + format_alarms(det.alarms, det.diagnostics()).replace("\n", "\n      "))
+    _say("      " + format_alarms(det.alarms).replace("\n", "\n      "))
     from phfdi_base.outputs import write_text
 
     # the demo's own folder: each run replaces its outputs (the README's command is idempotent)
-    write_text(out / "alarms.json", json.dumps([a.summary() for a in det.alarms], indent=2) + "\n", overwrite=True)
+    write_text(out / "alarms.json", json.dumps(det.alarms, indent=2, default=_json_value) + "\n", overwrite=True)
     if received is None:
         return True, det
-    differences = _differences(det.alarms, received)
+    differences = _differences(from_summaries(det.alarms), received)
     if differences:
         _say("      DIFFERENT from the alarms published on /fault_alarm: " + "; ".join(differences))
         return False, det
     _say(f"      same alarms as published live on /fault_alarm ({len(received)}: detection, onset, class, "
-         f"confidence and parameter identical)")
+         f"confidence and size identical)")
     return True, det
 
 
-def _differences(offline: list, received: list[dict]) -> list[str]:
+def _json_value(x):
+    import numpy as np
+
+    return x.item() if isinstance(x, (np.floating, np.integer)) else x.tolist() if isinstance(x, np.ndarray) else str(x)
+
+
+def _differences(offline: list[dict], received: list[dict]) -> list[str]:
     if len(offline) != len(received):
         return [f"{len(offline)} alarm(s) offline, {len(received)} live"]
-    from wavelet_fdi.alarm_messages import severity_of
-
     out = []
-    for a, b in zip(offline, received):
-        s = a.summary()
-        severity, _unit = severity_of(s)
-        for key, mine, theirs in (("detection_time", s["detection_time"], b["detection_time"]),
-                                  ("onset_time", s["onset_time"], b["onset_time"]),
-                                  ("fault_class", s["fault_class"], b["fault_class"]),
-                                  ("confidence", s["confidence"], b["confidence"]),
-                                  ("severity", severity, b["severity"])):
-            if mine != theirs:
-                out.append(f"alarm {a.alarm_id} {key}: {mine} offline, {theirs} live")
+    for i, (a, b) in enumerate(zip(offline, received), 1):
+        for key in ("detection_time", "onset_time", "fault_class", "confidence", "severity"):
+            if a[key] != b[key]:
+                out.append(f"alarm {i} {key}: {a[key]} offline, {b[key]} live")
     return out
 
 
@@ -224,17 +225,43 @@ def _healthy_check(args) -> None:
 
 
 # ---- 3. figures --------------------------------------------------------------------------
+@dataclass
+class _Marks:
+    """What the detection figure marks of an alarm (phfdi.study.detector_figures.plot_detection)."""
+    detection_time_s: float
+    onset_time_s: float
+    onset_refined_s: float | None
+    isolation_time_s: float | None
+    fault_class: str
+    statistic: str
+
+
+def _marks(a: dict, naming_after_s: float) -> _Marks:
+    iso = a.get("isolation") or {}
+    named = a["detection_time"] + naming_after_s if iso else None
+    return _Marks(a["detection_time"], a.get("statistic_onset_time") or a["onset_time"], a["onset_time"], named,
+                  iso.get("fault_class", "pending"), a["statistic"])
+
+
 def _figures(run_, det, out: Path) -> None:
+    import numpy as np
+
     from phfdi.figures import plot_run
     from phfdi.study.detector_figures import plot_detection
+    from wavelet_fdi.reference_physics import NAMING_AFTER_S
 
     _say("\n[4/4] figures")
     plot_run(run_, out / "run.png")
     onsets = [f["onset_s"] for f in run_.metadata.get("faults") or []]
-    s = det.settings
-    title = (f"{run_.metadata.get('scenario', 'run')}: wavelet-residual detector ({s.wavelet} level {s.level}, "
-             f"ARL0 {s.arl0_samples:g} samples) on the recorded run")
-    plot_detection(det.trace(), det.names, det.h, det.calibration.sigma["ph"]["raw"], det.alarms,
+    s, tr = det.settings, det.trace()
+    unit = float(det.model.reference.noise[0])  # the residual's unit: the pH sensor's noise (pH)
+    measured = np.asarray(run_["ph_measured"], float)
+    residual = tr["residual"][:, 0] * unit
+    trace = {"time_s": np.asarray(run_.time_s, float), "ph_measured": measured, "ph_predicted": measured - residual,
+             "ph_residual": residual, "ratio": tr["stat"]}
+    title = (f"{run_.metadata.get('scenario', 'run')}: multichannel wavelet-residual detector, the paper's physics "
+             f"as its reference ({s.wavelet} level {s.level}, ARL0 {s.arl0_samples:g} samples) on the recorded run")
+    plot_detection(trace, det.stat_names, det.h, unit, [_marks(a, NAMING_AFTER_S) for a in det.alarms],
                    out / "detection.png", title, onsets)
     _say(f"      {out / 'run.png'}: pH and setpoint, controller output and valve position, level")
     _say(f"      {out / 'detection.png'}: measured vs healthy-model pH, residual, statistics/threshold, alarm")

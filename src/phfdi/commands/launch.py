@@ -48,13 +48,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="start a new bag file every S s of simulated time (run.mcap, run.1.mcap, ...): bounds the "
                         "recorder's memory in runs of days; 0 (default): one file")
     p.add_argument("--detector", action="store_true",
-                   help="add the fault detector node (wavelet_fdi.node): publishes /fault_alarm and /diagnostics")
+                   help="add the fault detector node (wavelet_fdi.learned_node with the physics reference shipped "
+                        "for the scenario): publishes /fault_alarm and /diagnostics")
     p.add_argument("--detector-param", dest="detector_params", action="append", default=[], metavar="NAME=VALUE",
-                   help="a parameter of the detector node, e.g. --detector-param calibration=my.yaml "
-                        "(see python -m wavelet_fdi.node --help); implies --detector. With reference=FILE (a "
-                        "physics reference from phfdi calibrate --physics, or paper_physics, the one shipped) the "
-                        "detector is the multichannel detector's node (wavelet_fdi.learned_node) on the graph's own "
-                        "topics")
+                   help="a parameter of the detector node, e.g. --detector-param reference=my_physics.json (a "
+                        "physics reference from phfdi calibrate --physics; see python -m wavelet_fdi.learned_node "
+                        "--help); implies --detector. One of the physics detector node's own parameters "
+                        "(calibration=my.yaml, isolate, level, ...: python -m wavelet_fdi.node --help) runs that node "
+                        "instead, while it is retired")
     p.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
                    help=f"serve the graph's signals (with --detector also its residuals, statistics and alarm state) live "
                         f"over the Foxglove WebSocket protocol on PORT (default {FOXGLOVE_PORT}); open "

@@ -31,7 +31,14 @@ EXAMPLES = """examples:
   phfdi replay rig.csv --reference ref.json --refit-rows 400 --json
   phfdi replay plant.csv --reference out/diagnose/extended_model.yaml   # the model phfdi diagnose extended
 
-With --reference the record's channels go through the learned reference and the
+Without --reference a run goes through the multichannel wavelet detector with the
+physics reference shipped for its scenario (paper_physics): the healthy plant and
+valves on the run's measured commands predict the pH, their model the run's own
+plant (its metadata, --scenario or a model .yaml; a note says where it differs
+from the one calibrated on). --calibration, --no-isolation or a physics detector
+setting (--level, ...) runs the physics detector instead, while it is retired.
+
+With --reference the record's channels go through that reference and the
 multichannel wavelet detector instead (any number of channels, no plant model):
 each alarm names the channels and bands that carry it; --refit-rows N re-fits
 the reference on the record's own first N rows with the file's settings. The
@@ -64,7 +71,7 @@ note and listed in --json ("notes").
 --live plays the bag's topics (raw CDR, each message at its simulated time
 stamp, and /clock) into a ROS graph of two processes started for the
 purpose on a ROS domain of their own: a player (phfdi.ros.player) and the
-detector node (wavelet_fdi.node), which publishes /fault_alarm. It prints
+detector node (wavelet_fdi.learned_node), which publishes /fault_alarm. It prints
 the alarms the node raised; they equal the offline replay's.
 """
 
@@ -80,7 +87,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the alarms as a JSON list")
     p.add_argument("--scenario", default=None,
                    help="plant/loop model (preset or .yaml) when the run does not carry one (default paper)")
-    p.add_argument("--calibration", default=None, help="calibration file from phfdi calibrate (default: shipped)")
+    p.add_argument("--calibration", default=None,
+                   help="a physics detector's calibration file (phfdi calibrate): runs the physics detector "
+                        "(StreamingDetector), as do --no-isolation and its settings below, while it is retired; "
+                        "default: the multichannel detector with the physics reference shipped for the run's scenario")
     add_detector_args(p)
     p.add_argument("--no-isolation", action="store_true", help="detect only (no fault class)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
@@ -122,13 +132,20 @@ def run(args: argparse.Namespace) -> int:
         flags = ", ".join(f"--{n.replace('_', '-')}" for n in given_settings(args)).replace("--arl0-samples", "--arl0")
         raise UserError(f"{flags}: a learned or estimator --reference carries its detector's settings (set them with "
                         f"phfdi calibrate --learn or --estimator); these options set the physics detector")
-    kind: _Kind = _Learned() if args.reference else _Physics()
+    kind: _Kind = _Learned() if args.reference else _Physics() if _physics_detector_asked(args) else _ShippedPhysics()
     if args.live and (args.map or args.column or args.encoding or args.refit_rows is not None):
         raise UserError(f"{kind.offline_options} apply to an offline replay, not to --live")
     replayed = _run_live(args, kind) if args.live else kind.offline(args)
     if replayed.document is not None:
         print(json.dumps(replayed.document, indent=2) if args.json else replayed.text)
     return replayed.status
+
+
+def _physics_detector_asked(args: argparse.Namespace) -> bool:
+    """--calibration, --no-isolation or a physics detector setting: the physics detector (StreamingDetector) runs,
+    as before 2026-12-07, while it is retired; otherwise the multichannel detector with the shipped physics
+    reference."""
+    return bool(args.calibration or args.no_isolation or given_settings(args))
 
 
 @dataclass
@@ -243,10 +260,10 @@ class _Learned(_Kind):
         from wavelet_fdi.learned_detector import LearnedModel
 
         model = LearnedModel.load(args.reference)
-        cmap, columns_said = reference_column_map(args, model, args.reference)
-        rec, columns_said = _read_with_stored_map(args, model, cmap, columns_said)
-        print(f"phfdi replay: {columns_said}", file=sys.stderr)
-        model, followed = _follow_record_scenario(model, rec)
+        rec, columns_said = self.read(args, model)
+        if columns_said:
+            print(f"phfdi replay: {columns_said}", file=sys.stderr)
+        model, followed = self.model_for(args, model, rec)
         notes = rec.notes + ([followed] if followed else [])
         print_notes("replay", notes)
         t0 = time.perf_counter()
@@ -266,19 +283,29 @@ class _Learned(_Kind):
             lines.append(f"input: {e['message']} ({stamp}{rec.where} {e['line']})")
         return _Replayed(document, "\n".join(lines))
 
+    def read(self, args: argparse.Namespace, model) -> tuple:
+        """The record in the reference's channels, and what says where its columns came from."""
+        cmap, columns_said = reference_column_map(args, model, args.reference)
+        return _read_with_stored_map(args, model, cmap, columns_said)
+
+    def model_for(self, args: argparse.Namespace, model, rec) -> tuple:
+        """The model the record is watched with, and a note (None: none): a physics reference runs the record's
+        own plant where the record says its scenario."""
+        return _follow_record_scenario(model, rec)
+
     def check_live(self, args: argparse.Namespace) -> None:
         from wavelet_fdi.learned_detector import LearnedModel
 
         self.model = LearnedModel.load(args.reference)  # one line for a bad file before any process starts
+        self.live_notes: list[str] = []
 
     def live_nodes(self, args: argparse.Namespace, common: dict) -> list:
-        from pathlib import Path
+        from phfdi.ros.launcher import detector_spec
 
-        from phfdi.ros.launcher import OBSERVER, NodeSpec
-        from phfdi_base.topics import DETECTOR
+        return [detector_spec({**common, "reference": args.reference, "loop_graph_topics": self.graph_bag})]
 
-        return [NodeSpec(DETECTOR, "wavelet_fdi.learned_node",
-                         {**common, "reference": str(Path(args.reference).resolve())}, OBSERVER)]
+    #: the bag is one of the loop graph's (its own topics, read by a physics reference), not a measured record's
+    graph_bag = False
 
     def event_line(self, event: dict) -> str | None:
         if event.get("event") == "fault_alarm":
@@ -288,13 +315,14 @@ class _Learned(_Kind):
     def live_result(self, args: argparse.Namespace, report: dict, result, elapsed: float, say) -> _Replayed:
         from wavelet_fdi.healthy_range import describe
 
-        say(f"played {report['samples']} rows through the learned detector node in {elapsed:.1f} s "
-            f"(ROS domain {result.domain_id})")
+        say(f"played {report['samples']} rows through the detector node ({self.model.reference.kind} reference) in "
+            f"{elapsed:.1f} s (ROS domain {result.domain_id})")
         alarms = _located_live(args.file, report["alarms"], report["samples"])
         outside = report.get("outside_healthy_range") or []  # what the node's core counted (the offline replay's)
         print_notes("replay", [describe(o) for o in outside])
         document = {"file": args.file, "reference": args.reference, "samples": report["samples"],
-                    "channels": list(self.model.channels), "outside_healthy_range": outside, "alarms": alarms}
+                    "channels": list(self.model.channels), "notes": self.live_notes,
+                    "outside_healthy_range": outside, "alarms": alarms}
         return _Replayed(document, format_alarms(alarms), result.status)
 
 
@@ -308,6 +336,68 @@ def _follow_record_scenario(model, rec):
     if getattr(model.reference, "kind", None) != KIND or not isinstance(spec, dict):
         return model, None
     return follow_scenario(model, validate_scenario(spec, source=f"{rec.path}: run metadata"))
+
+
+class _ShippedPhysics(_Learned):
+    """No reference given: the multichannel detector with the physics reference shipped for the record's scenario
+    (``<scenario>_physics``), its model running the record's own plant (its metadata, --scenario or a model .yaml;
+    the paper loop for a record that says none), as the physics detector ran the run's scenario with its shipped
+    calibration."""
+
+    offline_options = "--map, --column and --encoding"
+    bag_topic, bag_hint = "/plant/measurement", ("not a bag of the phfdi graph (a measured record's bag: give "
+                                                 "--reference REF.json)")
+    graph_bag = True
+
+    def offline(self, args: argparse.Namespace) -> _Replayed:
+        from phfdi.replay import shipped_physics_name
+
+        args.reference = shipped_physics_name(_given_scenario(args))
+        return super().offline(args)
+
+    def read(self, args: argparse.Namespace, model) -> tuple:
+        """The run as the physics detector reads one (the measured pH and the pH controller output required, by
+        name or through --map/--column; the level and its controller output where the run has them, else missing:
+        the model holds the outlet at its starting opening), in the reference's channels."""
+        from dataclasses import replace
+
+        import numpy as np
+
+        from phfdi.replay import load_any
+
+        run = load_any(args.file, column_map_from_args(args), args.encoding)
+        signals = {c: np.asarray(run[c], float) if c in run else np.full(len(run), np.nan) for c in model.channels}
+        if "valve_command_pct" not in run:
+            signals["valve_command_pct"] = np.asarray(run["ph_controller_output_pct"], float)
+        rec = replace(run, signals=signals, units={c: run.units.get(c, "") for c in signals},
+                      notes=list(run.metadata.get("notes", [])), path=str(args.file))
+        return rec, ""
+
+    def model_for(self, args: argparse.Namespace, model, rec) -> tuple:
+        from phfdi.replay import scenario_of, shipped_physics_model, shipped_physics_name
+
+        spec = _given_scenario(args) or scenario_of(rec)
+        args.reference = shipped_physics_name(spec)
+        return shipped_physics_model(spec)
+
+    def check_live(self, args: argparse.Namespace) -> None:
+        from phfdi.replay import shipped_physics_model, shipped_physics_name
+
+        spec = _given_scenario(args) or _replay_scenario(args.file, None)
+        args.reference = shipped_physics_name(spec)
+        super().check_live(args)
+        _, note = shipped_physics_model(spec)  # the node in the graph follows the bag's scenario the same way
+        self.live_notes = [note] if note else []
+        print_notes("replay", self.live_notes)
+
+
+def _given_scenario(args: argparse.Namespace):
+    """The scenario given on the command line (a model .yaml or --scenario), None when none is."""
+    from phfdi.scenario import load_scenario
+
+    if getattr(args, "model_spec", None) is not None:
+        return args.model_spec
+    return load_scenario(args.scenario, fault="healthy") if args.scenario else None
 
 
 def _is_model_file(path: str) -> bool:

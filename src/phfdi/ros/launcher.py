@@ -120,6 +120,7 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
             rec["split_after_s"] = float(split_after_s)
         nodes.append(NodeSpec(RECORDER, "phfdi.ros.recorder", rec, OBSERVER))
     if detector is not None:
+        detector = with_default_reference(detector, part.scenario)
         # the live view plots the detector's residuals and statistics: it asks the detector to publish them
         nodes.append(detector_spec({**detector, "monitor_topic": True} if live is not None else detector))
     if live is not None:
@@ -133,10 +134,28 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
     return nodes
 
 
+#: the physics detector node's own parameters (wavelet_fdi.node): given one, that node runs, as before 2026-12-07
+PHYSICS_NODE_PARAMS = ("calibration", "isolate", "level", "wavelet", "arl0_samples", "channels", "pairing_window",
+                       "pairing_timeout_s", "input_problem_period_s", "foxglove_host", "foxglove_port")
+
+
+def with_default_reference(params: dict, spec) -> dict:
+    """The loop graph's detector: the multichannel detector with the physics reference shipped for the scenario
+    (``<scenario>_physics``; its model runs the launch's own plant, ``reference_physics.follow_scenario``) unless
+    the parameters name a reference, or one of the physics detector node's own (:data:`PHYSICS_NODE_PARAMS`: that
+    node runs, while it is retired)."""
+    if "reference" in params or any(name in params for name in PHYSICS_NODE_PARAMS):
+        return params
+    from phfdi.replay import shipped_physics_name
+
+    return {"loop": "ph", **params, "reference": shipped_physics_name(spec)}  # the loop's name, as the physics node
+
+
 def detector_spec(params: dict | None = None) -> NodeSpec:
-    """The fault detector, an observer outside the lock-step ring: the physics detector's node (wavelet_fdi.node),
-    or, given a ``reference`` file, the multichannel detector's (wavelet_fdi.learned_node; a physics reference of
-    ``phfdi calibrate --physics`` reads the graph's own topics, as the physics node does)."""
+    """The fault detector, an observer outside the lock-step ring: given a ``reference`` (a file or a shipped name),
+    the multichannel detector's node (wavelet_fdi.learned_node; a physics reference reads the graph's own topics),
+    else the physics detector's node (wavelet_fdi.node; :func:`with_default_reference` gives the loop graph's
+    detector a reference unless the physics node's own parameters are given)."""
     params = dict(params or {})
     if "reference" not in params:
         return NodeSpec(DETECTOR, "wavelet_fdi.node", params, OBSERVER)

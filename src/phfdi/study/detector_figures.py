@@ -228,8 +228,8 @@ def statistic_paths(increments: np.ndarray, thresholds: np.ndarray, start: int =
 
 
 STATISTIC_KINDS = {"mean_up": "mean shift up", "mean_down": "mean shift down", "energy": "variance increase",
-                   "energy_down": "variance decrease"}
-CHANNEL_NAMES = {"ph": "pH", "level": "level"}
+                   "energy_down": "variance decrease", "aj_energy": "variance increase"}
+CHANNEL_NAMES = {"ph": "pH", "level": "level", "ph_measured": "pH", "level_measured_cm": "level"}
 #: the statistic panels draw each statistic's peak over this many bins (whole run, around the alarm): after an
 #: alarm the detector restarts its statistics at every crossing, which drawn sample by sample is a solid block
 PEAK_BINS = (100, 300)
@@ -359,9 +359,10 @@ def plot_detection(trace: dict, names: list[str], thresholds: np.ndarray, sigma_
                    path: Path, title: str, true_onsets_s: Sequence[float] = ()) -> Path:
     """Measured pH against the healthy reference's prediction, the residual, and every CUSUM statistic
     as a ratio to its threshold (log scale, a line at 1), with the fault onset, the estimated onset and the
-    alarm marked; left the whole run, right around the first alarm."""
+    alarm marked; left the whole run, right around the first alarm. ``trace["ratio"]``, where given, is each
+    statistic over its threshold as the detector ran it; else it is rebuilt from the increments."""
     t = trace["time_s"]
-    ratio = statistic_paths(trace["increments"], thresholds) / thresholds[None, :]
+    ratio = trace["ratio"] if "ratio" in trace else statistic_paths(trace["increments"], thresholds) / thresholds[None, :]
     sample_time_s = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
     labels = [statistic_label(n, sample_time_s) for n in names]
     alarmed = statistic_label(alarms[0].statistic, sample_time_s) if alarms else None
