@@ -21,7 +21,9 @@ Two rules (the channel map's ``align``):
     message of a later sample (then nothing stamped k can still come in order), or ``max_wait_s`` of wall
     time after the first message of a later sample arrived (a late or silent channel does not stop the
     detector: it is held or missing). A message for a sample that went out already is late: dropped and
-    counted; so is one stamped before the grid or more than ``MAX_AHEAD_SAMPLES`` ahead of it.
+    counted; so is one stamped before the grid or more than ``MAX_AHEAD_SAMPLES`` ahead of it. A message more
+    than ``hold_samples + 1`` samples ahead of its channel's latest is a jump, taken only once the channel's next
+    message follows it (else dropped and counted: one stray stamped far ahead must not move the grid there).
 ``sequence`` (a plant or replayer that publishes every channel once per sample, at any speed)
     The k-th message of each channel belongs to sample k, whatever its stamp: sample k goes out once every
     channel has delivered its k-th message, or ``max_wait_s`` of wall time after the oldest waiting message
@@ -70,6 +72,9 @@ class ChannelCounts:
     used: int = 0  # values that went into a sample
     late: int = 0  # hold: for a sample already out, before the grid or far ahead: dropped
     superseded: int = 0  # hold: a newer value of the same sample replaced it
+    jumps_dropped: int = 0  # hold: a message far ahead of the channel's own stream that the next one did not follow
+    off_grid: int = 0  # hold: stamped further off its grid point than the map's grid_tolerance: dropped
+    invalid_stamps: int = 0  # a stamp that is no time (nanoseconds outside 0..1e9, or before 0 s): dropped
     held: int = 0  # samples that took an earlier value (zero-order hold)
     missing: int = 0  # samples that went out without this channel (NaN)
     last_stamp_ns: int | None = None
@@ -85,6 +90,8 @@ class ChannelAligner:
     max_wait_s: float = 5.0
     hold_samples: int = 5
     origin_ns: int | None = None
+    #: hold: how far off its grid point (fraction of dt) a stamp may lie (0.5: any, the nearest point)
+    grid_tolerance: float = 0.5
     #: sequence: per channel, whether its stamps are the message's own (a header or stamp field; not receive times)
     stamped: tuple[bool, ...] = ()
     counts: list[ChannelCounts] = field(init=False)
@@ -103,6 +110,8 @@ class ChannelAligner:
         self._top = [-1] * self.n_channels
         self._last: list[tuple[int, float] | None] = [None] * self.n_channels
         self._advances: deque[tuple[int, float]] = deque()  # (sample now seen, wall time): when samples fell due
+        # per channel, a message far ahead of its stream not yet followed by the next one: (sample, value, wall time)
+        self._jump: list[tuple[int, float, float] | None] = [None] * self.n_channels
         self._seen_top = -1
         # sequence: per channel (value, wall time of arrival, stamp ns); the time of the last sample out (ns from
         # the origin); whether sample times come from the stamps
@@ -130,14 +139,44 @@ class ChannelAligner:
             return
         assert self.origin_ns is not None  # hold: set by the first message
         k = (stamp_ns - self.origin_ns + self.dt_ns // 2) // self.dt_ns
-        if k < self.samples_out or k > self.samples_out + MAX_AHEAD_SAMPLES:
-            counts.late += 1
+        if self.grid_tolerance < 0.5 and abs(stamp_ns - self.origin_ns - k * self.dt_ns) > self.grid_tolerance * self.dt_ns:
+            counts.off_grid += 1
             return
+        for sample, v, t in self._admitted(channel, k, value, now_s):
+            if sample < self.samples_out or sample > self.samples_out + MAX_AHEAD_SAMPLES:
+                counts.late += 1
+            else:
+                self._take(channel, sample, v, t)
+
+    def _admitted(self, channel: int, k: int, value: float, now_s: float) -> list[tuple[int, float, float]]:
+        """hold: the messages taken now. One more than ``hold_samples + 1`` samples ahead of the channel's own latest
+        is a jump: kept aside until the channel's next message says whether its stream went there (stamped from
+        there to ``hold_samples + 1`` after it: both are taken) or not (a stray from another clock or a wrong
+        stamp: dropped and counted, ``jumps_dropped``). One stray stamped far ahead would otherwise move the grid
+        there, and every real sample after it would come late."""
+        reach = self.hold_samples + 1
+        jump, self._jump[channel] = self._jump[channel], None
+        if jump is not None:
+            if jump[0] <= k <= jump[0] + reach:
+                return [jump, (k, value, now_s)]
+            self.counts[channel].jumps_dropped += 1
+        top = self._top[channel]
+        if top >= 0 and k > top + reach:
+            self._jump[channel] = (k, value, now_s)
+            return []
+        return [(k, value, now_s)]
+
+    def _take(self, channel: int, k: int, value: float, now_s: float) -> None:
         self._pending[channel].append((k, value))
         self._top[channel] = max(self._top[channel], k)
         if k > self._seen_top:
             self._seen_top = k
             self._advances.append((k, now_s))
+
+    def invalid_stamp(self, channel: int) -> None:
+        """A message whose stamp is no time: counted, dropped."""
+        self.counts[channel].received += 1
+        self.counts[channel].invalid_stamps += 1
 
     def off_grid(self, at_least: int = 10) -> list[int]:
         """hold: channels whose every message (``at_least`` of them) fell outside the grid: stamps on another
@@ -168,7 +207,12 @@ class ChannelAligner:
         return t_ns
 
     def flush(self) -> list[tuple[float, np.ndarray]]:
-        """At the end of the stream: every sample begun, without waiting (missing channels NaN)."""
+        """At the end of the stream: every sample begun, without waiting (missing channels NaN); a jump no message
+        followed is taken (the stream ended there: nothing says it did not go there)."""
+        for c, jump in enumerate(self._jump):
+            self._jump[c] = None
+            if jump is not None and self.samples_out <= jump[0] <= self.samples_out + MAX_AHEAD_SAMPLES:
+                self._take(c, *jump)
         return self._emit(math.inf, final=True)
 
     def _emit(self, now_s: float, final: bool) -> list[tuple[float, np.ndarray]]:
@@ -238,10 +282,12 @@ class ChannelAligner:
 
 def align_messages(messages: Iterable[tuple[int, int, float, float]], n_channels: int, dt_ns: int,
                    rule: str = "hold", max_wait_s: float = 5.0, hold_samples: int = 5,
-                   stamped: Sequence[bool] = ()) -> tuple[np.ndarray, np.ndarray, ChannelAligner]:
+                   stamped: Sequence[bool] = (), grid_tolerance: float = 0.5
+                   ) -> tuple[np.ndarray, np.ndarray, ChannelAligner]:
     """Messages (channel, stamp ns, value, arrival wall time s) in arrival order through one aligner, then its
     end: the times (s from the first sample), the rows (n, n_channels) and the aligner (its counts)."""
-    aligner = ChannelAligner(n_channels, dt_ns, rule, max_wait_s, hold_samples, stamped=tuple(stamped))
+    aligner = ChannelAligner(n_channels, dt_ns, rule, max_wait_s, hold_samples, stamped=tuple(stamped),
+                             grid_tolerance=grid_tolerance)
     out: list[tuple[float, np.ndarray]] = []
     for channel, stamp_ns, value, now_s in messages:
         aligner.add(channel, stamp_ns, value, now_s)

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -128,6 +128,10 @@ class ChannelMap:
     hold_samples: int = 5
     path: str = ""
     reliability: str = "reliable"
+    #: hold: how far off its grid point (a fraction of the sample time) a stamp may lie; further, the message is
+    #: dropped and counted (``off_grid``). 0.5: any stamp lands on its nearest point (receive times, jittery clocks);
+    #: the loop graph stamps every sample on the grid exactly, so a stamp off it is no sample of its
+    grid_tolerance: float = 0.5
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -141,7 +145,7 @@ class ChannelMap:
         """The same map with its sources in the order of ``channels`` (the reference's)."""
         by_name = {s.channel: s for s in self.sources}
         return ChannelMap(tuple(by_name[c] for c in channels), self.align, self.max_wait_s, self.hold_samples,
-                          self.path, self.reliability)
+                          self.path, self.reliability, self.grid_tolerance)
 
 
 def type_named(name: str) -> MessageType | None:
@@ -211,6 +215,10 @@ LOOP_GRAPH_SOURCES = {
 }
 
 
+#: the loop graph's stamps are k * sample time to the ns: a stamp more than 1 % of it off the grid is a stray
+LOOP_GRAPH_GRID_TOLERANCE = 0.01
+
+
 def loop_graph_map(reference_channels: Sequence[str]) -> ChannelMap:
     """The loop graph's own topics as a channel map (``align: hold`` on their stamps): what the physics detector
     node reads without a map, for a reference of the paper loop's signals (the ``physics`` kind).
@@ -227,7 +235,8 @@ def loop_graph_map(reference_channels: Sequence[str]) -> ChannelMap:
                         f"give a channel map")
     channels = {c: {"topic": LOOP_GRAPH_SOURCES[c][0].name, "type": LOOP_GRAPH_SOURCES[c][0].type,
                     "field": LOOP_GRAPH_SOURCES[c][1]} for c in reference_channels}
-    return parse_channel_map({"align": "hold", "channels": channels}, "the loop graph's topics", reference_channels)
+    cmap = parse_channel_map({"align": "hold", "channels": channels}, "the loop graph's topics", reference_channels)
+    return replace(cmap, grid_tolerance=LOOP_GRAPH_GRID_TOLERANCE)
 
 
 def _source(name: str, spec: Any, where: str) -> ChannelSource:

@@ -85,7 +85,8 @@ class MappedInputs:
                  silent_after_s: float) -> None:
         self.node, self.cmap, self.deliver, self.silent_after_s = node, cmap, deliver, silent_after_s
         self.aligner = ChannelAligner(len(cmap.sources), dt_ns, cmap.align, cmap.max_wait_s, cmap.hold_samples,
-                                      stamped=tuple(s.stamp != STAMP_RECEIVE for s in cmap.sources))
+                                      stamped=tuple(s.stamp != STAMP_RECEIVE for s in cmap.sources),
+                                      grid_tolerance=cmap.grid_tolerance)
         self.received = 0
         self.problems: dict[str, str] = {}  # key -> the one line said about it (each said once)
         self.warnings = SummedWarnings(node.get_logger(), f"/diagnostics ('{node.get_name()}: channel map')")
@@ -108,6 +109,10 @@ class MappedInputs:
         self._last_arrival[topic] = now
         self.problems.pop(f"silent {topic}", None)
         stamp_ns = self._stamp_ns(sources[0][1], msg)
+        if stamp_ns is None:  # no time: dropped, counted on each of its channels
+            for i, _ in sources:
+                self.aligner.invalid_stamp(i)
+            return
         for i, source in sources:
             value, problem = value_of(source, msg)
             if problem:
@@ -125,10 +130,16 @@ class MappedInputs:
                 "counts": {s.channel: vars(c) for s, c in zip(self.cmap.sources, a.counts)},
                 "problems": list(self.problems.values())}
 
-    def _stamp_ns(self, source: ChannelSource, msg: Any) -> int:
+    def _stamp_ns(self, source: ChannelSource, msg: Any) -> int | None:
+        """The message's stamp (ns), None for one that is no time (nanoseconds outside 0..1e9, before 0 s)."""
         if source.stamp == STAMP_RECEIVE:
             return self.node.get_clock().now().nanoseconds
-        ns = time_ns(msg.header.stamp if source.stamp == STAMP_HEADER else msg.stamp)
+        stamp = msg.header.stamp if source.stamp == STAMP_HEADER else msg.stamp
+        if not 0 <= stamp.nanosec < 1_000_000_000 or stamp.sec < 0:
+            self.say(f"invalid stamp {source.topic}", f"{source.topic}: a message stamped {stamp.sec} s "
+                     f"{stamp.nanosec} ns, which is no time: dropped (each is counted)")
+            return None
+        ns = time_ns(stamp)
         # a stamp that repeats is a publisher that does not fill it in (hold would keep one value of many);
         # sequence does not place by stamp
         last, repeats = self._last_stamp.get(source.topic, (None, 0))
@@ -210,7 +221,8 @@ class MappedInputs:
             values.append(KeyValue(key=source.channel, value=source.describe()))
             values.append(KeyValue(key=f"{source.channel} counts",
                                    value=f"received {c.received}, used {c.used}, held {c.held}, missing {c.missing}, "
-                                         f"late {c.late}, superseded {c.superseded}"))
+                                         f"late {c.late}, superseded {c.superseded}, jumps dropped {c.jumps_dropped}, "
+                                         f"off grid {c.off_grid}, invalid stamps {c.invalid_stamps}"))
         values += [KeyValue(key="problem", value=line) for line in self.problems.values()]
         lines = list(self.problems.values())
         summary = "; ".join(lines[:SAY_EACH]) + (f"; and {len(lines) - SAY_EACH} more problems (each under "

@@ -189,3 +189,39 @@ def test_a_value_the_message_does_not_hold_is_nan_with_the_reason():
     assert value_of(ph, SimpleNamespace(names=["T", "pH"], values=[20.0, 7.1])) == (7.1, None)
     value, why = value_of(ph, SimpleNamespace(names=["T"], values=[20.0]))
     assert math.isnan(value) and why == "no value named 'pH'"
+
+
+def test_one_message_stamped_far_ahead_does_not_move_the_grid_but_a_stream_that_goes_there_does():
+    """hold: a stray stamped 500 s ahead of a 1 s stream (then the stream goes on) is dropped and counted; a stream
+    that really jumps (a gap of 17 samples) is followed once its next message comes after the jump."""
+    from wavelet_fdi.channel_align import align_messages
+
+    s = 1_000_000_000
+
+    def stream(stamps):
+        return [(0, t * s, float(t), 0.1 * i) for i, t in enumerate(stamps)]
+
+    t, rows, aligner = align_messages(stream([0, 1, 2, 500, 3, 4, 5]), 1, s)
+    assert t.tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0] and rows[:, 0].tolist() == [0, 1, 2, 3, 4, 5]
+    assert aligner.counts[0].jumps_dropped == 1 and aligner.counts[0].used == 6
+    t, rows, aligner = align_messages(stream([0, 1, 2, 20, 21]), 1, s, hold_samples=5)
+    assert len(t) == 22 and rows[20, 0] == 20.0 and rows[21, 0] == 21.0
+    assert rows[3:8, 0].tolist() == [2.0] * 5 and np.isnan(rows[8:20, 0]).all()  # held 5 samples, then missing
+    assert aligner.counts[0].jumps_dropped == 0
+
+
+def test_a_stamp_off_the_grid_is_dropped_where_the_map_says_samples_sit_on_it():
+    """The loop graph stamps every sample on the grid (channel_map.loop_graph_map: grid_tolerance 0.01): a message
+    stamped half-way is no sample of its and is dropped, counted; with the default tolerance (0.5) it lands on the
+    nearest point, as a receive time does."""
+    from wavelet_fdi.channel_align import align_messages
+    from wavelet_fdi.channel_map import LOOP_GRAPH_GRID_TOLERANCE, loop_graph_map
+
+    s = 1_000_000_000
+    msgs = [(0, 0, 0.0, 0.0), (0, s, 1.0, 0.1), (0, 2 * s, 2.0, 0.2), (0, 2 * s + s // 2, -77.0, 0.3),
+            (0, 3 * s, 3.0, 0.4), (0, 4 * s, 4.0, 0.5)]
+    _, rows, aligner = align_messages(msgs, 1, s, grid_tolerance=LOOP_GRAPH_GRID_TOLERANCE)
+    assert rows[:, 0].tolist() == [0, 1, 2, 3, 4] and aligner.counts[0].off_grid == 1
+    _, rows, aligner = align_messages(msgs, 1, s)
+    assert aligner.counts[0].off_grid == 0 and aligner.counts[0].superseded == 1  # -77 on sample 3, then 3.0 later
+    assert loop_graph_map(["ph_measured"]).grid_tolerance == LOOP_GRAPH_GRID_TOLERANCE

@@ -51,12 +51,17 @@ INPUT_PERIOD_S = 1.0  # the detector's input_problem_period_s (its default)
 
 @pytest.fixture(scope="module")
 def disturbed(tmp_path_factory):
-    """One paced launch with the detector, and a stray writer on its domain while it runs."""
-    tmp = tmp_path_factory.mktemp("stray")
+    """One paced launch with the physics detector's node, and a stray writer on its domain while it runs."""
+    return launch_disturbed(tmp_path_factory.mktemp("stray"), ["--detector-param", "isolate=true"])
+
+
+def launch_disturbed(tmp: Path, detector_args: list[str]) -> dict:
+    """One paced launch with a detector (``detector_args`` of phfdi launch), and a stray writer on its domain while
+    it runs."""
     bag, logs = tmp / "run.mcap", tmp / "logs"
     before = ownerless_shm_files()
     t0 = time.monotonic()
-    cmd = ["launch", "--fault", "backlash", "--onset", "100", "--pace", "10", "--detector-param", "isolate=true",
+    cmd = ["launch", "--fault", "backlash", "--onset", "100", "--pace", "10", *detector_args,
            "--record", str(bag), "--log-dir", str(logs), "--json"]
     for o in OVERRIDES:
         cmd += ["--set", o]
