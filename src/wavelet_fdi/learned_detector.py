@@ -1041,10 +1041,12 @@ def _running_sum(total: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray
 
 
 def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096,
-               record_trace: bool = False) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
+               record_trace: bool = False, alarms: bool = True
+               ) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
     """A whole record through a fresh detector, in chunks of ``chunk`` rows (None: at once; the
     result is the same, chunks of a few thousand rows are fastest); ``record_trace``: the detector keeps its
-    trace (:meth:`LearnedDetector.trace`; memory grows with the record).
+    trace (:meth:`LearnedDetector.trace`; memory grows with the record); ``alarms`` False: statistics only, as
+    calibration runs them (no alarm, no naming).
 
     Returns
     -------
@@ -1064,7 +1066,7 @@ def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int |
     >>> events, int(states.max())  # healthy rows: no alarm
     ([], 0)
     """
-    det = LearnedDetector(model, record_trace=record_trace)
+    det = LearnedDetector(model, alarms=alarms, record_trace=record_trace)
     n = len(x)
     step = n if not chunk else int(chunk)
     events, states = [], []

@@ -76,6 +76,16 @@ def test_node_parameters_are_derived_from_the_declaration():
                                                       for s in setting_specs(exposed_only=True)}
 
 
+def test_the_launcher_knows_every_parameter_only_the_physics_node_takes():
+    """launcher.PHYSICS_NODE_PARAMS (given one, the loop graph runs the physics detector's node instead of the
+    default, the multichannel one) is exactly the physics node's parameters the multichannel node does not take."""
+    from phfdi.ros.launcher import PHYSICS_NODE_PARAMS
+    from wavelet_fdi import learned_node, node
+
+    only_physics = {p.name for p in node.PARAMS} - {p.name for p in learned_node.PARAMS}
+    assert set(PHYSICS_NODE_PARAMS) == only_physics
+
+
 def test_a_range_is_checked_where_it_is_declared():
     for spec in setting_specs():
         if spec.range is None or spec.type is not float:

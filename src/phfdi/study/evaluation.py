@@ -33,7 +33,7 @@ from phfdi_base.errors import UserError
 from phfdi_base.outputs import write_text
 from wavelet_fdi.calibration import tail_probability, window_maxima
 from wavelet_fdi.config import ARL_WINDOW_SAMPLES, LearnedSettings
-from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel, calibrate_bands
+from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel, calibrate_bands, run_record
 from wavelet_fdi.peers import (
     DETECTORS,
     LABELS,
@@ -186,14 +186,9 @@ def bound_delay(signal: np.ndarray, t: np.ndarray, onset_s: float, arl0: float,
 
 
 def run_detector(model: LearnedModel, t: np.ndarray, rows: np.ndarray, record_trace: bool = False,
-                 alarms: bool = True, chunk: int = 4096) -> LearnedDetector:
-    """A whole run through a fresh detector, in chunks as a stream would give it; pending namings made at its end."""
-    det = LearnedDetector(model, alarms=alarms, record_trace=record_trace)
-    for a in range(0, len(rows), chunk):
-        det.process(t[a:a + chunk], rows[a:a + chunk])
-    if alarms:
-        det.finish()
-    return det
+                 alarms: bool = True) -> LearnedDetector:
+    """A whole run through a fresh detector (``learned_detector.run_record``), the detector after it."""
+    return run_record(model, t, rows, record_trace=record_trace, alarms=alarms)[2]
 
 
 def run_rows(run, channels) -> tuple[np.ndarray, np.ndarray]:
