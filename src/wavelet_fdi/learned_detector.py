@@ -380,6 +380,8 @@ class LearnedDetector:
         self._episode = np.zeros(len(self.stat_names))
         self.alarms: list[dict] = []
         self._missing_open = np.zeros(m, dtype=bool)
+        self._missing_since = np.zeros(m, dtype=np.int64)  # global index where each open missing stretch began
+        self._stream_holds = False  # the reference stream held detection at the last row (its notices say why)
         self.samples_processed = 0
         self._last_t = math.nan  # the last row's time, residuals and statistics over thresholds (monitor)
         self._last_residual = np.full(m, np.nan)
@@ -503,6 +505,7 @@ class LearnedDetector:
         held = getattr(self.stream, "last_held", None)  # rows the reference held by its own rule (its notices say why)
         events += self._stream_notices(t)
         events += self._missing_events(missing if held is None else missing & ~held[:, None], t)
+        events += self._hold_events(t)
         out = self.swt.process(np.where(missing, 0.0, r))
         details, approx = out.details, out.approx  # (J, n, m), (n, m)
         sig = self.model.band_sigma  # (m, J+1)
@@ -1007,18 +1010,50 @@ class LearnedDetector:
         return out
 
     def _missing_events(self, missing: np.ndarray, t: np.ndarray) -> list[LearnedEvent]:
+        """Each channel's stretch of missing residuals: said where it begins (WARN) and where it ends (OK)."""
         out = []
         for c in np.flatnonzero(missing.any(axis=0) | self._missing_open):
             col = missing[:, c]
-            prev = self._missing_open[c]
-            starts = np.flatnonzero(col & ~np.concatenate(([prev], col[:-1])))
-            for i in starts:
-                out.append(LearnedEvent("input", float(t[i]), self.samples_processed + int(i), "WARN",
-                                        f"{self.channels[c]}: missing from {t[i]:g} s (counted as healthy "
-                                        f"until it returns)"))
+            before = np.concatenate(([self._missing_open[c]], col[:-1]))
+            for i in np.flatnonzero(col != before):
+                index = self.samples_processed + int(i)
+                if col[i]:
+                    self._missing_since[c] = index
+                    out.append(LearnedEvent("input", float(t[i]), index, "WARN",
+                                            f"{self.channels[c]}: missing from {t[i]:g} s (counted as healthy "
+                                            f"until it returns)"))
+                else:
+                    n = index - int(self._missing_since[c])
+                    out.append(LearnedEvent("input", float(t[i]), index, "OK",
+                                            f"{self.channels[c]}: back at {t[i]:g} s after {n} sample"
+                                            f"{'s' if n != 1 else ''} missing"))
             self._missing_open[c] = bool(col[-1])
         out.sort(key=lambda e: e.index)
         return out
+
+    def _hold_events(self, t: np.ndarray) -> list[LearnedEvent]:
+        """Where the reference stream's hold of detection (its own rule: a missing valve command, a restart's
+        warm-up) ended in these rows: detection resumes (OK)."""
+        held = getattr(self.stream, "last_held", None)
+        holding = getattr(self.stream, "holding", None)
+        if held is None or holding is None or not len(held):
+            return []
+        was, self._stream_holds = self._stream_holds, bool(holding)
+        if not was or self._stream_holds:
+            return []
+        last_held = np.flatnonzero(held)
+        i = min(int(last_held[-1]) + 1 if len(last_held) else 0, len(held) - 1)
+        return [LearnedEvent("input", float(t[i]), self.samples_processed + i, "OK",
+                             f"detection resumed at {t[i]:g} s")]
+
+    @property
+    def input_problem(self) -> str:
+        """What keeps the detector from watching every channel after the last row ('' when nothing): channels
+        missing, detection held by the reference's own rule."""
+        parts = [f"{c} missing" for c, o in zip(self.channels, self._missing_open) if o]
+        if self._stream_holds:
+            parts.append("detection held")
+        return ", ".join(parts)
 
 
 def _take_naming(a: dict, iso: dict) -> None:

@@ -15,9 +15,12 @@ reference's by name (a channel a message lacks is missing for that row). Output:
 with the channels that carry the alarm (``channels``, ``channel_shares``, ``channel_bands``); for a
 reference that names faults (the estimator), once more when the alarm is named (``fault_class``,
 ``severity`` and ``severity_unit``: the hypothesis that explains it best and its size); every message about an
-alarm names its statistic (``statistic_name``). A heartbeat every ``heartbeat_period_s`` of the record's time (at
-most one per batch, and one at the end) gives the state, the worst statistic against its threshold and, while an
-alarm is open, its times and channels, as the physics detector's heartbeat does.
+alarm names its statistic (``statistic_name``). Input problems (a channel missing and back, detection held by the
+reference's own rule and resumed) go out at once where they change the state (WARN while one is open, unless an
+alarm is up), else at most once per ``input_problem_period_s`` of wall time, in one message that sums up those
+held back (a burst of gaps in the stamps would otherwise send two messages per gap). A heartbeat every
+``heartbeat_period_s`` of the record's time (at most one per batch, and one at the end) gives the state, the
+worst statistic against its threshold and, while an alarm is open, its times and channels.
 
 The reference is the kind the model file names (a learned ARX reference from ``phfdi calibrate --learn``,
 the rig's Kalman estimator from ``phfdi calibrate --estimator``, ...). The core takes each row at its
@@ -37,6 +40,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 import traceback
 
 import numpy as np
@@ -76,6 +80,9 @@ PARAMS = (
     # as the physics detector's (wavelet_fdi.node): on the stream's own time, so a replay faster than real time
     # gives the heartbeats the plant's time would have
     *MONITOR_PARAMS,
+    ParamSpec("input_problem_period_s", 1.0, "input problems on /fault_alarm at most once per this many s of "
+                                             "wall time (one message summing those held back; state changes always)",
+              range=(0.05, 3600.0), runtime=True),
     ParamSpec("heartbeat_period_s", 60.0, "publish the state on /fault_alarm every this many s of the record's time "
                                           "(at most one per batch the worker takes); 0: only on changes",
               range=(0.0, 1e9), runtime=True),
@@ -85,6 +92,8 @@ ALARM_FIELDS = ("fault_class", "confidence", "severity", "severity_unit", "detec
                 "channel_shares", "channel_bands", "wavelet_level")
 #: the live view's names of the physics kind's residuals (phfdi_base.live_view.MONITOR_RESIDUALS), in its units
 LIVE_RESIDUALS = {"ph_measured": "ph_residual", "level_measured_cm": "level_residual_cm"}
+#: input events an input message gives in words (the others are counted)
+INPUT_TEXTS = 3
 #: wall time between the checks of a channel map's waits and silent topics
 TICK_S = 0.2
 STATE_OF_KIND = {"alarm": FaultAlarm.ALARM, "cleared": FaultAlarm.OK}
@@ -119,6 +128,10 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._heartbeat_s = self.param("heartbeat_period_s")
         self._last_heartbeat_t = -math.inf
         self._alarm_said: FaultAlarm | None = None
+        self._alarm_state = FaultAlarm.OK  # the state the alarms and deviations alone give (inputs aside)
+        self._input_period_s = self.param("input_problem_period_s")
+        self._inputs_held: list = []  # input events not yet on /fault_alarm (the rate limit)
+        self._inputs_sent_at = -math.inf  # monotonic time of the last input message
         self.open_alarm_output()
         self._pub_range = self.diagnostics_publisher()
         self._range_warnings = SummedWarnings(self.get_logger(), f"/diagnostics ('{self.get_name()}: healthy range')")
@@ -177,6 +190,8 @@ class LearnedDetectorNode(DetectorNodeBase):
     def after_spin(self) -> None:
         if self.inputs is not None and len(self.inputs.problems) > self._problems_said:
             self._report_map()
+        if self._inputs_held and self._inputs_due():  # held-back input problems go out even if nothing follows
+            self.poke()
 
     # ---- executor thread: queue only ----------------------------------------------------------
     def _on_sample(self, msg: MeasuredSample) -> None:
@@ -215,6 +230,10 @@ class LearnedDetectorNode(DetectorNodeBase):
 
     # ---- worker thread: the core and the publisher --------------------------------------------
     def process(self, rows: list[tuple[float, np.ndarray]]) -> None:
+        if not rows:  # poked: only the input problems held back by the rate limit
+            if self._inputs_held and self._inputs_due():
+                self._publish_inputs()
+            return
         t = np.array([r[0] for r in rows])
         x = np.vstack([r[1] for r in rows])
         try:
@@ -225,7 +244,15 @@ class LearnedDetectorNode(DetectorNodeBase):
             return
         self._t_last = float(t[-1])
         for ev in events:
-            self._publish(ev)
+            if ev.kind == "input":  # rate-limited below
+                self._inputs_held.append(ev)
+            else:
+                self._publish(ev)
+        # an input problem that changes the state (a channel missing or back, detection held or resumed) goes
+        # out at once, the others when due
+        if self._inputs_held and (self._combined_state() != self._state or self._inputs_due()):
+            self._publish_inputs()
+        self._state = self._combined_state()
         if self._t_last < self._last_heartbeat_t:  # the record's clock went back: the schedule follows it
             self._last_heartbeat_t = self._t_last
         if self._heartbeat_s > 0 and self._t_last >= next_multiple(self._last_heartbeat_t, self._heartbeat_s):
@@ -259,9 +286,11 @@ class LearnedDetectorNode(DetectorNodeBase):
             self.quiet_events += 1
             return
         if ev.kind in ("deviation", "outside_calibration"):
-            state = STATE_OF_LEVEL[ev.level]
+            self._alarm_state = STATE_OF_LEVEL[ev.level]
         else:
-            state = STATE_OF_KIND.get(ev.kind, self._state if self._state == FaultAlarm.ALARM else FaultAlarm.WARN)
+            self._alarm_state = STATE_OF_KIND.get(ev.kind, self._alarm_state if self._alarm_state == FaultAlarm.ALARM
+                                                  else FaultAlarm.WARN)
+        state = self._combined_state()
         msg = FaultAlarm(loop=self._loop, state=state, message=ev.message, severity=math.nan, wavelet_level=-1)
         msg.stamp = self._stamp(ev.time_s)
         a = ev.alarm
@@ -293,6 +322,32 @@ class LearnedDetectorNode(DetectorNodeBase):
         self._state = state
         self._alarm_said = msg if a else self._alarm_said  # what the heartbeat repeats of an open alarm
 
+    def _combined_state(self) -> int:
+        """The state to publish: the alarms' (ALARM wins), else WARN while an input problem is open."""
+        if self._alarm_state == FaultAlarm.ALARM:
+            return FaultAlarm.ALARM
+        return FaultAlarm.WARN if self.core.input_problem else self._alarm_state
+
+    def _inputs_due(self) -> bool:
+        return time.monotonic() - self._inputs_sent_at >= self._input_period_s
+
+    def _publish_inputs(self) -> None:
+        """One /fault_alarm message for the input events held since the last one: the first few in words, the
+        number of the others, and what is still open (worker thread)."""
+        held, self._inputs_held = self._inputs_held, []
+        texts = list(dict.fromkeys(ev.message for ev in held))[:INPUT_TEXTS]
+        text = "; ".join(texts)
+        if len(held) > len(texts):
+            text += f" ({len(held)} input events since the last report)"
+        open_now = self.core.input_problem
+        text += f"; still: {open_now}" if open_now else "; inputs complete"
+        state = self._combined_state()
+        msg = FaultAlarm(loop=self._loop, state=state, message=text, severity=math.nan, wavelet_level=-1)
+        msg.stamp = self._stamp(held[-1].time_s)
+        self.publish_alarm(msg, "input", held[-1].time_s, None)
+        self._state = state
+        self._inputs_sent_at = time.monotonic()
+
     def _publish_heartbeat(self) -> None:
         """The state now on /fault_alarm (no JSON line: not a change): the worst statistic against its threshold,
         and the open alarm's times and channels while there is one (as the physics detector's heartbeat)."""
@@ -314,6 +369,7 @@ class LearnedDetectorNode(DetectorNodeBase):
 
     def apply_parameters(self, params) -> None:
         self._heartbeat_s = self.param("heartbeat_period_s")  # from the next batch the worker takes
+        self._input_period_s = self.param("input_problem_period_s")
 
     def _stamp(self, t_s: float):
         """A core time as a ROS time: with a channel map on the plant's clock (the grid's origin added)."""
@@ -325,6 +381,8 @@ class LearnedDetectorNode(DetectorNodeBase):
         """The stream ended: name the alarms still waiting for their window (as the offline replay does)."""
         for ev in self.core.finish():
             self._publish(ev)
+        if self._inputs_held:  # the last ones held back by the rate limit
+            self._publish_inputs()
         if self.core.samples_processed:
             self._publish_heartbeat()  # the state at the end, as the physics detector's last heartbeat
         self._report_range()

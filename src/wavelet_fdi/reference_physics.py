@@ -43,6 +43,7 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 
+from .inputs import LEVEL_RANGE_CM, PH_RANGE
 from .reference import HealthyReference
 
 if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
@@ -59,6 +60,9 @@ WARMUP_GAIN = 0.5
 NAMING_AFTER_S = 300.0
 
 
+#: readings no plant gives (a pH off any pH scale, a level below the tank's bottom or absurdly high): a broken
+#: reading, taken as missing (the physics detector's input check, wavelet_fdi.inputs)
+MEASUREMENT_RANGES = {"ph_measured": PH_RANGE, "level_measured_cm": LEVEL_RANGE_CM}
 #: the scenario's settings the healthy model runs on (the commands are the record's, so the controllers, setpoints,
 #: duration and seed are not among them)
 MODEL_KEYS = ("plant", "sample_time_s", "valves", "sensors", "feeds", "plugins")
@@ -271,6 +275,7 @@ class PhysicsStream:
         self._setpoint_changed = -(10**12)  # global index of the last setpoint change
         #: (global row index, what the stream did) for the detector to report: detection held, model restarted
         self.notices: list[tuple[int, str]] = []
+        self._bad_before: dict[str, bool] = {}  # per measurement: the last row's reading was off any plausible one
         #: the last call's rows whose residual the stream held (NaN by its own rule, not a missing measurement)
         self.last_held = np.zeros(0, dtype=bool)
 
@@ -284,6 +289,7 @@ class PhysicsStream:
         if n == 0:
             self.last_held = np.zeros(0, dtype=bool)
             return np.empty((0, len(self.ref.residual_channels)))
+        rows = self._measurements_checked(rows)
         stale, restart = self._command_gaps(rows[:, 0])
         was_stale = np.concatenate(([self._missing_for > self.ref.command_timeout_samples], stale[:-1]))
         for k in np.flatnonzero(stale & ~was_stale):
@@ -316,6 +322,35 @@ class PhysicsStream:
         out[held] = math.nan
         self.last_held = held
         return out
+
+    def _measurements_checked(self, rows: np.ndarray) -> np.ndarray:
+        """The rows with a pH off any pH scale or a level off any tank (:data:`MEASUREMENT_RANGES`) as missing (NaN):
+        such a value is a broken reading, not a plant state, and would put a residual of thousands of sensor sigmas
+        into the statistics. Each stretch of them is said in :attr:`notices`."""
+        out = None
+        for channel, (low, high) in MEASUREMENT_RANGES.items():
+            col = self.ref.channels.index(channel) if channel in self.ref.channels else None
+            if col is None:
+                continue
+            v = rows[:, col]
+            bad = ~np.isnan(v) & ~((v >= low) & (v <= high))
+            if not bad.any():
+                self._bad_before[channel] = False
+                continue
+            before = np.concatenate(([self._bad_before.get(channel, False)], bad[:-1]))
+            for k in np.flatnonzero(bad & ~before):
+                self.notices.append((self.index + int(k), f"{channel} = {v[k]:g}: off any plausible reading "
+                                                           f"({low:g} to {high:g}); taken as missing"))
+            self._bad_before[channel] = bool(bad[-1])
+            out = rows.copy() if out is None else out
+            out[bad, col] = math.nan
+        return rows if out is None else out
+
+    @property
+    def holding(self) -> bool:
+        """Detection is held after the last row by the stream's own rule: the valve command missing too long, or
+        the model warming up again after it returned (not the setpoint hold-off, which is operation)."""
+        return self._missing_for > self.ref.command_timeout_samples or self.index < self._hold_until
 
     def _command_gaps(self, command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per row: the command has been missing longer than the timeout (stale), and the command is back after

@@ -99,8 +99,9 @@ def test_nan_stretch_in_the_monitored_part_is_reported_not_fatal(files, tmp_path
     capsys.readouterr()
     assert main(["replay", str(path), "--reference", str(ref), "--refit-rows", "400", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    (problem,) = report["input_problems"]
-    assert "flow" in problem["message"] and problem["line"] == 902
+    start, end = report["input_problems"]  # where the stretch begins and where it ends
+    assert "flow: missing" in start["message"] and start["line"] == 902
+    assert "flow: back" in end["message"] and end["line"] == 962
 
 
 def test_a_measured_records_bag_replays_offline_as_its_csv(files, capsys):

@@ -92,14 +92,28 @@ def test_any_chunking_gives_the_same_states_and_events():
         [(e.kind, e.index, e.message, e.alarm) for e in ev_whole]  # statistic values included, bit for bit
 
 
-def test_missing_stretch_is_reported_once_and_counts_as_healthy():
+def test_missing_stretch_is_reported_where_it_begins_and_ends_and_counts_as_healthy():
     x = plant(2000, 6)
     x[800:900, 3] = np.nan
     model = learn(x[:400], CHANNELS)
-    events, states, _ = run_record(model, np.arange(len(x), dtype=float), x)
+    events, states, det = run_record(model, np.arange(len(x), dtype=float), x)
     inputs = [e for e in events if e.kind == "input"]
-    assert len(inputs) == 1 and inputs[0].index == 800 and "vibration" in inputs[0].message
-    assert states.sum() == 0
+    assert [(e.index, e.level) for e in inputs] == [(800, "WARN"), (900, "OK")]
+    assert "vibration: missing from 800 s" in inputs[0].message
+    assert "vibration: back at 900 s after 100 samples missing" in inputs[1].message
+    assert states.sum() == 0 and det.input_problem == ""
+
+
+def test_an_open_input_problem_is_said_until_it_ends():
+    x = plant(1000, 7)
+    x[900:, 1] = np.nan
+    model = learn(x[:400], CHANNELS)
+    det = LearnedDetector(model)
+    det.process(np.arange(950, dtype=float), x[:950])
+    assert det.input_problem == f"{CHANNELS[1]} missing"
+    events, _ = det.process(np.arange(950, 1000, dtype=float), np.vstack([x[950:999], plant(1, 8)]))
+    assert det.input_problem == "" and [e.message for e in events if e.kind == "input"] == \
+        [f"{CHANNELS[1]}: back at 999 s after 99 samples missing"]
 
 
 def test_model_file_round_trip(tmp_path):

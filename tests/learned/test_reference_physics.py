@@ -96,7 +96,9 @@ def test_a_command_missing_for_long_holds_detection_and_restarts_the_model():
     assert not det.alarms, det.alarms
     said = [(e.time_s, e.message.split(":")[0]) for e in events]
     assert said == [(1210.0, "valve command missing for more than 10 s"),
-                    (2400.0, "valve command back")], said  # the measurement is not blamed
+                    (2400.0, "valve command back"),
+                    (3000.0, "detection resumed at 3000 s")], said  # the measurement is not blamed
+    assert [e.level for e in events] == ["WARN", "WARN", "OK"] and det.input_problem == ""
     r = ref.residuals(t, x)[:, 0]
     assert np.all(np.isnan(r[(t >= 1210.0) & (t < 3000.0)])) and np.all(np.isfinite(r[t >= 3000.0]))
     assert np.std(r[t >= 3000.0]) < 1.3  # the restarted model follows the plant: the sensor's noise again

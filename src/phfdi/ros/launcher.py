@@ -136,7 +136,7 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
 
 #: the physics detector node's own parameters (wavelet_fdi.node): given one, that node runs, as before 2026-12-07
 PHYSICS_NODE_PARAMS = ("calibration", "isolate", "level", "wavelet", "arl0_samples", "channels", "pairing_window",
-                       "pairing_timeout_s", "input_problem_period_s", "foxglove_host", "foxglove_port")
+                       "pairing_timeout_s", "foxglove_host", "foxglove_port")
 
 
 def with_default_reference(params: dict, spec) -> dict:
