@@ -49,7 +49,13 @@ start() { setsid setpriv --pdeathsig TERM "$PY" -m "$@" & }
 rec=""; if [ -n "$record" ]; then start phfdi.ros.recorder --ros-args "${common[@]}" -p "path:=$record"; rec=$!; fi
 start pi_controllers.node --ros-args "${common[@]}"; ctl=$!
 start valve_actuator.node --ros-args "${common[@]}"; valve=$!
-det=""; if [ -n "$detector" ]; then start wavelet_fdi.node --ros-args "${common[@]}"; det=$!; fi
+det=""
+if [ -n "$detector" ]; then  # the multichannel detector with the physics reference shipped for the scenario
+  ref=$("$PY" -c 'import sys; from phfdi.replay import shipped_physics_name; from phfdi.scenario import load_scenario
+print(shipped_physics_name(load_scenario(sys.argv[1])))' "$scenario")
+  start wavelet_fdi.learned_node --ros-args "${common[@]}" -p "reference:=$ref" -p loop:=ph -p loop_graph_topics:=true
+  det=$!
+fi
 start ph_plant_sim.node --ros-args "${common[@]}" -p "pace:=$pace" -p progress:=false; plant=$!
 
 stop() {  # plant first (no new samples), the loop, the detector (last alarms), the recorder (finishes the bag)

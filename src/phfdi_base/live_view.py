@@ -1,8 +1,7 @@
 """The live view: the graph's signals over the Foxglove WebSocket protocol (foxglove-sdk), loopback by default.
 
-One table of channels (topic, JSON schema) for the two places that serve them: the bridge node of
-``phfdi launch --foxglove`` (:mod:`phfdi.ros.live_bridge`, every signal of the graph) and the detector node
-started alone with ``foxglove_port`` (:mod:`wavelet_fdi.node`, what the detector sees). The channels carry
+One table of channels (topic, JSON schema) for the bridge node that serves them (``phfdi launch --foxglove``, or
+started alone: :mod:`phfdi.ros.live_bridge`, every signal of the graph). The channels carry
 JSON with units in the field names, stamped with the simulated time of their sample (log time, ns), so
 Foxglove's plots run on the graph's own clock. The layout that plots them ships as
 ``config/foxglove_layout.json`` (docs/ros_graph.md, "Live view in Foxglove").

@@ -1,5 +1,5 @@
-"""Online wavelet-residual fault detection. ROS-free; the nodes live in :mod:`wavelet_fdi.node` and
-:mod:`wavelet_fdi.learned_node` (their shared base :mod:`wavelet_fdi.node_base`).
+"""Online wavelet-residual fault detection. ROS-free; the detector node lives in :mod:`wavelet_fdi.learned_node`
+(on :mod:`wavelet_fdi.node_base`).
 
 :class:`StreamingDetector` (the physics reference's residual, calibrated by :class:`DetectorSettings` and
 :class:`Calibration`) and :class:`LearnedDetector` (a reference learned from healthy records, :func:`learn`),

@@ -364,12 +364,6 @@ def settings_from_values(values: dict[str, Any], base: DetectorSettings | None =
     return DetectorSettings(**out)
 
 
-def settings_as_params(settings: DetectorSettings) -> dict[str, Any]:
-    """The exposed settings as detector-node parameter values (lists for list settings)."""
-    return {s.name: list(getattr(settings, s.name)) if s.is_list else getattr(settings, s.name)
-            for s in setting_specs(exposed_only=True)}
-
-
 def _check_range(spec: SettingSpec, value: Any, what: str = "detector setting") -> None:
     if spec.range is None:
         return

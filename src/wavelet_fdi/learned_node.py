@@ -1,5 +1,6 @@
-"""ROS 2 node of the learned detector (thin wrapper of wavelet_fdi.learned_detector.LearnedDetector):
-/measured/sample or your plant's own topics in, /fault_alarm out.
+"""The fault detector's ROS 2 node (thin wrapper of the multichannel detector,
+wavelet_fdi.learned_detector.LearnedDetector): the loop graph's topics, /measured/sample or your plant's own topics
+in, /fault_alarm out. ``phfdi launch --detector`` starts it with the physics reference shipped for the scenario.
 
 Input, with ``channel_map_file`` (a YAML channel map, :mod:`wavelet_fdi.channel_map`): each channel of the
 reference from the topic, message type and field the map names (std_msgs numbers and arrays, sensor_msgs
@@ -62,13 +63,14 @@ from .node_base import MONITOR_PARAMS, STATE_NAMES, DetectorNodeBase, next_multi
 from .reference_physics import follow_scenario
 
 PARAMS = (
-    ParamSpec("reference", "", "learned reference file (.json) from phfdi calibrate --learn or --estimator"),
+    ParamSpec("reference", "", "reference file (.json) from phfdi calibrate --learn, --estimator or --physics, or "
+                               "a shipped one by name (paper_physics: the paper loop's physics)"),
     ParamSpec("loop", "measured", "name of the monitored plant or loop in /fault_alarm"),
     ParamSpec("channel_map_file", "", "YAML channel map: each reference channel's topic, type and field "
               "('' = /measured/sample, or the loop graph's topics with loop_graph_topics; docs/ros_graph.md)"),
     ParamSpec("loop_graph_topics", False, "without a channel map: read the loop graph's own topics "
-              "(/plant/measurement, /controller/output) for a reference of its signals (phfdi calibrate --physics), "
-              "as the physics detector node does; phfdi launch sets it"),
+              "(/plant/measurement, /controller/output) for a reference of its signals (phfdi calibrate --physics); "
+              "phfdi launch sets it"),
     ParamSpec("silent_after_s", 10.0, "wall time after which a mapped topic that delivers nothing is reported",
               (0.1, 3600.0)),
     # wall time: a topic that went silent moves no record time (the physics nodes' diagnostics_period_s counts
@@ -77,8 +79,7 @@ PARAMS = (
               (0.1, 3600.0)),
     ParamSpec("diagnostics_period_s", 0.0, "the old name of channel_map_report_period_s (before 2026-12-06): a value "
                                            "above 0 is taken for it, with a warning; 0: not set", (0.0, 3600.0)),
-    # as the physics detector's (wavelet_fdi.node): on the stream's own time, so a replay faster than real time
-    # gives the heartbeats the plant's time would have
+    # on the stream's own time, so a replay faster than real time gives the heartbeats the plant's time would have
     *MONITOR_PARAMS,
     ParamSpec("input_problem_period_s", 1.0, "input problems on /fault_alarm at most once per this many s of "
                                              "wall time (one message summing those held back; state changes always)",
@@ -110,7 +111,8 @@ class LearnedDetectorNode(DetectorNodeBase):
         super().__init__()
         path = self.param("reference")
         if not path:
-            raise NodeStartError("parameter reference: give the learned reference file (phfdi calibrate --learn)")
+            raise NodeStartError("parameter reference: give a reference file (phfdi calibrate --learn, --estimator "
+                                 "or --physics) or a shipped one by name (paper_physics)")
         try:
             self.model = LearnedModel.load(path)
         except UserError as exc:
@@ -145,7 +147,7 @@ class LearnedDetectorNode(DetectorNodeBase):
             except UserError as exc:
                 raise NodeStartError(f"parameter channel_map_file = {path!r}: {exc}") from None
         elif self.param("loop_graph_topics"):
-            # the paper loop's signals from the loop graph's own topics, as the physics detector node reads them
+            # the paper loop's signals from the loop graph's own topics
             try:
                 self._subscribe_map(loop_graph_map(self.model.channels))
             except UserError as exc:
@@ -350,7 +352,7 @@ class LearnedDetectorNode(DetectorNodeBase):
 
     def _publish_heartbeat(self) -> None:
         """The state now on /fault_alarm (no JSON line: not a change): the worst statistic against its threshold,
-        and the open alarm's times and channels while there is one (as the physics detector's heartbeat)."""
+        and the open alarm's times and channels while there is one."""
         core = self.core
         ratio = core.cusum.value / core.h
         worst = int(np.argmax(ratio)) if len(ratio) else -1
@@ -384,7 +386,7 @@ class LearnedDetectorNode(DetectorNodeBase):
         if self._inputs_held:  # the last ones held back by the rate limit
             self._publish_inputs()
         if self.core.samples_processed:
-            self._publish_heartbeat()  # the state at the end, as the physics detector's last heartbeat
+            self._publish_heartbeat()  # the state at the end
         self._report_range()
 
     def done_report(self) -> dict:

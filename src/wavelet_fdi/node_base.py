@@ -1,5 +1,5 @@
-"""What the detector nodes share: the physics detector (:mod:`wavelet_fdi.node`) and the learned detector
-(:mod:`wavelet_fdi.learned_node`). Imports rclpy; no side effects at import.
+"""The detector node's ROS side apart from its core (:mod:`wavelet_fdi.learned_node`: the multichannel detector; the
+physics detector's own node, which shared it, was retired on 2026-12-07). Imports rclpy; no side effects at import.
 
 * the states of /fault_alarm (phfdi_interfaces/FaultAlarm OK, WARN, ALARM) and their names in the JSON lines;
 * the worker: the executor's callbacks only queue rows (:meth:`DetectorNodeBase.enqueue`); one worker thread

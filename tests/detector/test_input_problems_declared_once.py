@@ -1,18 +1,12 @@
-"""The physics detector's bad-input counters are named once (wavelet_fdi.inputs.INPUT_PROBLEMS): the node's
-report and replay's input problems derive from it (issue 37: two hand-written lists, 17 and 12 names, had drifted:
-replay did not say a bad level or a non-finite outlet command)."""
+"""The physics detector's bad-input counters are named once (wavelet_fdi.inputs.INPUT_PROBLEMS): replay's input
+problems derive from it (issue 37: two hand-written lists, 17 and 12 names, had drifted: replay did not say a bad
+level or a non-finite outlet command; the physics detector's node, which had the other list, was retired on
+2026-12-07)."""
 
 from __future__ import annotations
 
 from phfdi.commands.replay import input_problems
-from wavelet_fdi.inputs import INPUT_PROBLEMS, InputRegularizer
-
-
-def test_the_node_reports_the_declared_counters_first():
-    from wavelet_fdi.node import PROBLEM_COUNTERS
-
-    assert PROBLEM_COUNTERS[: len(INPUT_PROBLEMS)] == INPUT_PROBLEMS
-    assert set(INPUT_PROBLEMS) < set(InputRegularizer.COUNTERS)
+from wavelet_fdi.inputs import InputRegularizer
 
 
 def test_replay_says_every_declared_counter_that_grew_and_nothing_else():

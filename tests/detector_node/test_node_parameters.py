@@ -1,4 +1,5 @@
-"""The detector node's parameters: listed with ranges, bad ones refused with one line (exit status 2)."""
+"""The detector node's parameters: listed with ranges, bad ones refused with one line (exit status 2); the retired
+physics detector node's parameters refused by phfdi launch in one line that says what does their work now."""
 
 from __future__ import annotations
 
@@ -14,21 +15,23 @@ pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 
 
 def test_help_lists_the_parameters_with_ranges():
-    out = subprocess.run(node_cmd("wavelet_fdi.node")[:3] + ["--help"], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(node_cmd("wavelet_fdi.learned_node")[:3] + ["--help"], capture_output=True, text=True,
+                         timeout=60)
     assert out.returncode == 0
-    for text in ("calibration", "wavelet", "level", "[1, 10]", "heartbeat_period_s", "changeable at runtime",
-                 "pairing_timeout_s"):
-        assert text in out.stdout
+    for text in ("reference", "paper_physics", "loop_graph_topics", "channel_map_file", "heartbeat_period_s",
+                 "changeable at runtime", "input_problem_period_s", "[0.05, 3600]"):
+        assert text in out.stdout, text
 
 
 def test_bad_parameters_are_refused_with_one_line(ros_env):
     cases = {
-        "range": (node_cmd("wavelet_fdi.node", level="12"), ["level", "[1, 10]"]),
-        "type": (node_cmd("wavelet_fdi.node", heartbeat_period_s="60"), ["heartbeat_period_s", "double"]),
-        "no calibration": (node_cmd("wavelet_fdi.node", wavelet="db4"), ["no shipped calibration", "db4"]),
-        "missing file": (node_cmd("wavelet_fdi.node", calibration="/nonexistent/cal.yaml"),
-                         ["no such calibration file"]),
-        "channel": (node_cmd("wavelet_fdi.node", channels="[ph, flow]"), ["channel 'flow'"]),
+        "range": (node_cmd("wavelet_fdi.learned_node", reference="paper_physics", input_problem_period_s="0.01"),
+                  ["input_problem_period_s", "[0.05, 3600]"]),
+        "type": (node_cmd("wavelet_fdi.learned_node", reference="paper_physics", heartbeat_period_s="60"),
+                 ["heartbeat_period_s", "double"]),
+        "no reference": (node_cmd("wavelet_fdi.learned_node"), ["parameter reference", "paper_physics"]),
+        "missing file": (node_cmd("wavelet_fdi.learned_node", reference="/nonexistent/ref.json"),
+                         ["no such reference file"]),
     }
     procs = {k: subprocess.Popen(cmd, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for k, (cmd, _) in cases.items()}
@@ -43,6 +46,9 @@ def test_bad_parameters_are_refused_with_one_line(ros_env):
 
 @pytest.mark.parametrize("args, words", [
     (["launch", "--detector-param", "level"], ["--detector-param", "NAME=VALUE"]),
+    (["launch", "--detector-param", "calibration=my.yaml"],
+     ["'calibration'", "retired", "phfdi calibrate --physics", "reference="]),
+    (["launch", "--detector-param", "foxglove_port=8765"], ["'foxglove_port'", "phfdi launch --foxglove"]),
     (["replay", "--live", "run.csv"], ["--live", ".mcap"]),
     (["replay", "--live", "missing.mcap"], ["no such file"]),
 ])

@@ -109,8 +109,8 @@ def test_installed_code_is_the_installed_copy(workspace):
     """The executables import the workspace's install, not the repository's src/ or another editable install."""
     assert workspace["build"].returncode == 0, workspace["build"].stderr
     prefix = workspace["prefix"]
-    code = ("import importlib.metadata as m, ph_plant_sim.node, phfdi.ros.recorder, wavelet_fdi.node;"
-            "print(ph_plant_sim.node.__file__); print(phfdi.ros.recorder.__file__); print(wavelet_fdi.node.__file__);"
+    code = ("import importlib.metadata as m, ph_plant_sim.node, phfdi.ros.recorder, wavelet_fdi.learned_node as d;"
+            "print(ph_plant_sim.node.__file__); print(phfdi.ros.recorder.__file__); print(d.__file__);"
             "print(sorted(e.value for e in m.entry_points(group='phfdi.node_parts'))[0])")
     out = subprocess.run([sys.executable, "-c", code], env=sourced_env(workspace["ws"]), capture_output=True,
                          text=True, timeout=60)
@@ -212,8 +212,9 @@ def test_symlink_install_links_to_the_sources_and_leaves_them_alone(tmp_path):
     assert build.returncode == 0, build.stdout + build.stderr
     assert clone.is_dir() and not clone.is_symlink()
     assert sorted(str(p.relative_to(clone)) for p in clone.rglob("*")) == before
-    out = subprocess.run([sys.executable, "-c", "import wavelet_fdi.node as m, os; print(os.path.realpath(m.__file__))"],
+    out = subprocess.run([sys.executable, "-c", "import wavelet_fdi.learned_node as m, os; "
+                                            "print(os.path.realpath(m.__file__))"],
                          env=sourced_env(ws), capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == str((clone / "src" / "wavelet_fdi" / "node.py").resolve())
+    assert out.stdout.strip() == str((clone / "src" / "wavelet_fdi" / "learned_node.py").resolve())
     assert (ws / "install" / PACKAGE / "lib" / PACKAGE / "phfdi-detector-node").exists()

@@ -34,13 +34,10 @@ from phfdi.loop import simulate
 from phfdi.records import ColumnMap
 from phfdi.scenario import load_scenario
 from phfdi_base.ros.env import graph_env, reserve_domain_id
-from phfdi_base.stamps import seconds_to_ns, stamp_seconds
+from phfdi_base.stamps import stamp_seconds
 from wavelet_fdi.channel_align import grid_period_ns
 from wavelet_fdi.channel_map import load_channel_map
-from wavelet_fdi.config import DetectorSettings, load_default_calibration
-from wavelet_fdi.detector import StreamingDetector
 from wavelet_fdi.learned_detector import LearnedModel, run_record
-from wavelet_fdi.node import PHYSICS_CHANNELS
 
 from .conftest import node_cmd, ownerless_shm_files, read_until
 
@@ -85,19 +82,14 @@ def wait_for_event(proc: subprocess.Popen, event: str, timeout_s: float) -> tupl
     raise AssertionError(f"no {event!r} line within {timeout_s} s; stdout: {seen[-2000:]}\nstderr: {err[-4000:]}")
 
 
-def run_foreign_plant(tmp_path: Path, ref: Path | None, cmap_path: Path, rows: np.ndarray,
+def run_foreign_plant(tmp_path: Path, ref: Path, cmap_path: Path, rows: np.ndarray,
                       node_params: dict | None = None, plant_spec: dict | None = None,
                       expect_stderr: tuple[str, ...] = ()) -> tuple[dict, dict, str]:
     """The detector node on the map's topics and the plant publishing ``rows`` (``plant_spec``: more of its spec);
     with ``expect_stderr``, once the plant is done, the node must say each of those in its log and still run.
-    ``ref`` None: the physics detector node (wavelet_fdi.node; its scenario in ``node_params``), else the learned
-    one with that reference. The node's ``detector_done`` report, what the plant received (/fault_alarm, the
-    channel map's /diagnostics), the node's stderr."""
-    if ref is None:
-        module, channels, node_args = "wavelet_fdi.node", PHYSICS_CHANNELS, {}
-    else:
-        module, channels, node_args = "wavelet_fdi.learned_node", LearnedModel.load(ref).channels, {"reference": ref}
-    cmap = load_channel_map(cmap_path, channels)
+    The node's ``detector_done`` report, what the plant received (/fault_alarm, the channel map's /diagnostics),
+    the node's stderr."""
+    cmap = load_channel_map(cmap_path, LearnedModel.load(ref).channels)
     spec = tmp_path / "plant.json"
     # the plant waits until the node has taken every row but the last (hold puts it out at the end), so that the
     # stop does not find thousands of messages left in the node's readers on a loaded machine
@@ -108,11 +100,10 @@ def run_foreign_plant(tmp_path: Path, ref: Path | None, cmap_path: Path, rows: n
     env = graph_env(lease.domain_id)
     detector = plant = None
     try:
-        # the channel map's reports every half second (the learned node's name for it; the physics node's counts
-        # simulated time)
-        report = "diagnostics_period_s" if ref is None else "channel_map_report_period_s"
-        detector = subprocess.Popen(node_cmd(module, **node_args, channel_map_file=cmap_path, graph_nodes="[detector]",
-                                             **{report: 0.5, **(node_params or {})}),
+        # the channel map's reports every half second
+        detector = subprocess.Popen(node_cmd("wavelet_fdi.learned_node", reference=ref, channel_map_file=cmap_path,
+                                             graph_nodes="[detector]",
+                                             **{"channel_map_report_period_s": 0.5, **(node_params or {})}),
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=tmp_path)
         started, out0 = wait_for_event(detector, "startup", START_S)  # connected
         plant = subprocess.Popen([sys.executable, "-m", "tests.ros.foreign_plant", str(lease.domain_id), str(spec)],
@@ -289,40 +280,6 @@ def test_a_rig_run_with_a_probe_bias_through_the_estimator_reference(shared_data
     assert heard["healthy_range"][-1]["values"]["base_flow_ml_s"].startswith("17.1 % of 2885 samples outside (6.45;")
 
 
-def test_a_simulated_backlash_on_float64_topics_gives_the_physics_detectors_offline_alarms(tmp_path):
-    """The physics detector node (wavelet_fdi.node) on a plant's own topics: a paper run with a valve backlash from
-    700 s (phfdi simulate), each signal the detector pairs published as std_msgs/Float64 by the stand-in plant,
-    the node configured by a channel map (align: sequence). Its alarms (detection, statistic, fault class and
-    size) equal the core's run offline on the same rows, and /fault_alarm carried them."""
-    overrides = ["duration_s=1200", "setpoints.ph.changes.0.at_s=400"]
-    spec = load_scenario("paper", fault="backlash", onset_s=700.0, overrides=overrides)
-    run = simulate(spec)
-    rows = np.column_stack([np.asarray(run[c], dtype=float) for c in PHYSICS_CHANNELS])
-    settings = DetectorSettings()
-    core = StreamingDetector(spec, load_default_calibration("paper", settings), settings)
-    core.process({"time_s": np.asarray(run.time_s, dtype=float)} | {c: rows[:, i] for i, c in enumerate(PHYSICS_CHANNELS)})
-    core.flush()
-    offline = json.loads(json.dumps([{"alarm_id": a.alarm_id, **a.summary()} for a in core.alarms]))
-    assert [a["fault_class"] for a in offline] == ["backlash"], offline  # a real alarm to compare
-    cmap = tmp_path / "physics_map.yaml"
-    cmap.write_text("align: sequence\nchannels:\n" + "".join(
-        f"  {c}: {{topic: /my_plant/{c}, type: std_msgs/msg/Float64}}\n" for c in PHYSICS_CHANNELS))
-    done, heard, err = run_foreign_plant(tmp_path, None, cmap, rows, node_params={
-        "scenario": "paper", "fault": "backlash", "fault_onset_s": 700.0, "overrides": json.dumps(overrides)})
-    assert done["samples"] == len(rows) == done["channel_map"]["counts"]["ph_measured"]["used"]
-    assert all(c["received"] == c["used"] == len(rows) and c["missing"] == 0
-               for c in done["channel_map"]["counts"].values()), done["channel_map"]
-    assert done["channel_map"]["problems"] == []
-    assert not any(done["diagnostics"].get(k) for k in ("nonfinite_ph", "nonfinite_command", "missing_samples",
-                                                        "bad_time", "commands_missing")), done["diagnostics"]
-    assert done["alarms"] == offline
-    raised = [m for m in heard["received"] if m["state"] == 2 and m["detection_ns"]]
-    origin = done["channel_map"]["grid_origin_ns"]  # /fault_alarm is on the plant's clock (here: receive times)
-    assert {m["detection_ns"] for m in raised} == {origin + seconds_to_ns(a["detection_time"]) for a in offline}
-    assert {m["statistic_name"] for m in raised} >= {a["statistic"] for a in offline}
-    assert any(m["fault_class"] == "backlash" for m in raised), raised
-
-
 def test_the_physics_kind_on_a_plants_own_topics_gives_the_offline_alarms_and_the_live_views_monitor(tmp_path):
     """The multichannel detector's node with a physics reference (phfdi calibrate --physics) on a plant's own
     Float64 topics, monitor_topic on: its alarms equal the core's offline run on the same rows, and
@@ -358,20 +315,21 @@ def test_the_physics_kind_on_a_plants_own_topics_gives_the_offline_alarms_and_th
     assert max(m[name] for m, x in zip(monitor, times) if 700.0 < x < first["onset_time"]) < 1.0
 
 
-def test_the_physics_node_refuses_a_map_without_a_signal_it_pairs_in_one_line(tmp_path):
+def test_the_node_refuses_a_map_without_a_channel_of_its_reference_in_one_line(tmp_path):
+    channels = LearnedModel.load("paper_physics").channels
     cmap = tmp_path / "short_map.yaml"
     cmap.write_text("channels:\n" + "".join(f"  {c}: {{topic: /p/{c}, type: std_msgs/msg/Float64}}\n"
-                                            for c in PHYSICS_CHANNELS if c != "ph_setpoint"))
+                                            for c in channels if c != "ph_measured"))
     lease = reserve_domain_id()
     try:
-        proc = subprocess.run(node_cmd("wavelet_fdi.node", scenario="paper", channel_map_file=cmap,
+        proc = subprocess.run(node_cmd("wavelet_fdi.learned_node", reference="paper_physics", channel_map_file=cmap,
                                        graph_nodes="[detector]"),
                               capture_output=True, text=True, timeout=START_S, env=graph_env(lease.domain_id))
     finally:
         lease.release()
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     errors = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-    assert len(errors) == 1 and "channel_map_file" in errors[0] and "'ph_setpoint'" in errors[0], errors
+    assert len(errors) == 1 and "channel_map_file" in errors[0] and "ph_measured" in errors[0], errors
 
 
 @pytest.fixture

@@ -214,19 +214,19 @@ def test_a_port_in_use_stops_the_launch_with_one_line_before_any_node_starts():
     assert f"--foxglove {port}" in lines[0] and "already in use" in lines[0]
 
 
-def test_the_detector_alone_serves_its_view_and_refuses_a_taken_port_with_one_line(ros_env):
+def test_the_live_view_alone_serves_its_channels_and_refuses_a_taken_port_with_one_line(ros_env):
+    """The live view's bridge started alone (beside a graph or a detector node of one's own, as the physics
+    detector's node once served its own view): it serves the graph's channels, and a second one asking for the
+    same port is refused in one line while the first runs on."""
     port = free_port()
-    proc = subprocess.Popen(node_cmd("wavelet_fdi.node", scenario="paper", graph_nodes="[detector]",
-                                     foxglove_port=str(port)),
+    proc = subprocess.Popen(node_cmd("phfdi.ros.live_bridge", graph_nodes="[foxglove]", port=str(port)),
                             env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         client = _connect_when_up(port, proc, timeout_s=120)
         topics = {c["topic"] for c in client.channels.values()}
         client.close()
-        assert topics == CHANNELS - {"/valve/state"}  # what the detector sees: no valve position
-        # a second detector asking for the same port: one line, exit status 2
-        second = subprocess.run(node_cmd("wavelet_fdi.node", scenario="paper", graph_nodes="[detector]",
-                                         foxglove_port=str(port)),
+        assert topics == CHANNELS
+        second = subprocess.run(node_cmd("phfdi.ros.live_bridge", graph_nodes="[foxglove]", port=str(port)),
                                 env=ros_env, capture_output=True, text=True, timeout=120)
         assert second.returncode == 2, second.stderr
         lines = [ln for ln in second.stderr.splitlines() if ln.strip()]

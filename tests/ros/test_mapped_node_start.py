@@ -19,8 +19,7 @@ import numpy as np
 import pytest
 
 from wavelet_fdi.channel_map import load_channel_map
-from wavelet_fdi.learned_detector import learn
-from wavelet_fdi.node import PHYSICS_CHANNELS
+from wavelet_fdi.learned_detector import LearnedModel, learn
 
 from .conftest import node_cmd
 from .test_foreign_topics import wait_for_event
@@ -46,9 +45,10 @@ def skab_like_reference(tmp_path) -> Path:
 
 @pytest.fixture
 def physics_map(tmp_path) -> Path:
+    """A map of the shipped physics reference's channels onto topics of a plant of one's own."""
     path = tmp_path / "physics_map.yaml"
     path.write_text("channels:\n" + "".join(f"  {c}: {{topic: /my_plant/{c}, type: std_msgs/msg/Float64}}\n"
-                                            for c in PHYSICS_CHANNELS))
+                                            for c in LearnedModel.load("paper_physics").channels))
     return path
 
 
@@ -67,11 +67,9 @@ def test_a_mapped_node_without_graph_nodes_waits_for_no_simulator_node(detector,
                                                                         ros_env, tmp_path):
     if detector == "learned":  # the README's command, as written, plus the shortened limit
         params = {"reference": skab_like_reference, "channel_map_file": SKAB_MAP}
-        module = "wavelet_fdi.learned_node"
-    else:
-        params = {"scenario": "paper", "channel_map_file": physics_map}
-        module = "wavelet_fdi.node"
-    proc = subprocess.Popen(node_cmd(module, **params, connect_timeout_s=CONNECT_TIMEOUT_S),
+    else:  # the shipped physics reference on a plant of one's own
+        params = {"reference": "paper_physics", "channel_map_file": physics_map}
+    proc = subprocess.Popen(node_cmd("wavelet_fdi.learned_node", **params, connect_timeout_s=CONNECT_TIMEOUT_S),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ros_env, cwd=tmp_path)
     try:
         event, _ = wait_for_event(proc, "startup", START_S)  # printed when the start barrier connects

@@ -12,8 +12,7 @@ import sys
 
 import pytest
 
-NODE_MODULES = ["ph_plant_sim.node", "valve_actuator.node", "pi_controllers.node", "wavelet_fdi.node",
-                "wavelet_fdi.learned_node",
+NODE_MODULES = ["ph_plant_sim.node", "valve_actuator.node", "pi_controllers.node", "wavelet_fdi.learned_node",
                 "phfdi.ros.recorder", "phfdi.ros.player", "phfdi.ros.live_bridge"]
 
 PROBE = """

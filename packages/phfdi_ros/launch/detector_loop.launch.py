@@ -30,7 +30,7 @@ NODES = {
     "valve": "phfdi-valve-node",
     "plant": "phfdi-plant-node",
     "recorder": "phfdi-recorder-node",
-    "detector": "phfdi-learned-detector-node",  # the multichannel detector with the shipped physics reference
+    "detector": "phfdi-detector-node",  # the multichannel detector with the shipped physics reference
 }
 
 

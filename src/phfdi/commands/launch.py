@@ -53,9 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detector-param", dest="detector_params", action="append", default=[], metavar="NAME=VALUE",
                    help="a parameter of the detector node, e.g. --detector-param reference=my_physics.json (a "
                         "physics reference from phfdi calibrate --physics; see python -m wavelet_fdi.learned_node "
-                        "--help); implies --detector. One of the physics detector node's own parameters "
-                        "(calibration=my.yaml, isolate, level, ...: python -m wavelet_fdi.node --help) runs that node "
-                        "instead, while it is retired")
+                        "--help); implies --detector")
     p.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
                    help=f"serve the graph's signals (with --detector also its residuals, statistics and alarm state) live "
                         f"over the Foxglove WebSocket protocol on PORT (default {FOXGLOVE_PORT}); open "
@@ -144,8 +142,6 @@ def detector_params(items: list[str]) -> dict:
             raise
         except UserError:
             raise UserError(f"--detector-param {item!r}: cannot read the value") from None
-    if "calibration" in out and out["calibration"]:
-        out["calibration"] = str(Path(out["calibration"]).resolve())
     return out
 
 

@@ -216,36 +216,13 @@ class _Physics(_Kind):
         return _Replayed(document, format_alarms(result.alarms, result.diagnostics))
 
     def check_live(self, args: argparse.Namespace) -> None:
-        from phfdi.replay import load_any
+        from phfdi_base.errors import UserError
 
-        # the offline reader first: what offline replay refuses, --live refuses with the same line (it played
-        # such a bag as "0 samples", exit 0); what it repairs is said the same way
-        print_notes("replay", load_any(args.file, None, None).metadata.get("notes", []))
-        self.settings = settings_from_args(args)  # one line for bad detector settings before any process starts
-
-    def live_nodes(self, args: argparse.Namespace, common: dict) -> list:
-        from pathlib import Path
-
-        from phfdi.ros.launcher import detector_spec
-        from wavelet_fdi.config import settings_as_params
-
-        detector = {**common, **settings_as_params(self.settings), "isolate": not args.no_isolation}
-        if args.calibration:
-            detector["calibration"] = str(Path(args.calibration).resolve())
-        return [detector_spec(detector)]
-
-    def event_line(self, event: dict) -> str | None:
-        from .launch import alarm_event_line
-
-        return alarm_event_line(event)
-
-    def live_result(self, args: argparse.Namespace, report: dict, result, elapsed: float, say) -> _Replayed:
-        say(f"played {report['samples']} samples through the detector node in {elapsed:.1f} s "
-            f"({result.run_wall_s:.1f} s after the graph connected; ROS domain {result.domain_id})")
-        alarms = report["alarms"]
-        document = replay_json(args.file, report["samples"], [], report["diagnostics"],
-                               [{k: v for k, v in a.items() if k != "alarm_id"} for a in alarms])
-        return _Replayed(document, format_alarms(alarms, report["diagnostics"]), result.status)
+        # the physics detector's own node was retired on 2026-12-07 (one detector node, issue 37)
+        raise UserError("--live plays the bag into the detector node, the multichannel detector since 2026-12-07: "
+                        "without --calibration, --no-isolation and the physics detector's settings it runs the "
+                        "shipped physics reference (or give --reference REF.json from phfdi calibrate --physics); "
+                        "with them, replay offline")
 
 
 class _Learned(_Kind):

@@ -134,31 +134,46 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
     return nodes
 
 
-#: the physics detector node's own parameters (wavelet_fdi.node): given one, that node runs, as before 2026-12-07
-PHYSICS_NODE_PARAMS = ("calibration", "isolate", "level", "wavelet", "arl0_samples", "channels", "pairing_window",
-                       "pairing_timeout_s", "foxglove_host", "foxglove_port")
+#: parameters of the physics detector's own node (wavelet_fdi.node, retired on 2026-12-07: one detector node, issue
+#: 37), and what does their work now
+RETIRED_NODE_PARAMS = {
+    "calibration": "a physics reference of your calibration: phfdi calibrate --physics --out REF.json, then "
+                   "reference=REF.json",
+    "isolate": "the physics reference always names the fault",
+    "level": "a setting of phfdi calibrate --physics (its reference file carries it)",
+    "wavelet": "a setting of phfdi calibrate --physics (its reference file carries it)",
+    "arl0_samples": "a setting of phfdi calibrate --physics (its reference file carries it)",
+    "channels": "a reference of the channels you want (phfdi calibrate --physics) or channel_map_file",
+    "pairing_window": "the channel map's align rule and max_wait_s (channel_map_file)",
+    "pairing_timeout_s": "the channel map's align rule and max_wait_s (channel_map_file)",
+    "foxglove_host": "phfdi launch --foxglove PORT --foxglove-host ADDRESS, or python -m phfdi.ros.live_bridge",
+    "foxglove_port": "phfdi launch --foxglove PORT, or python -m phfdi.ros.live_bridge",
+}
 
 
 def with_default_reference(params: dict, spec) -> dict:
     """The loop graph's detector: the multichannel detector with the physics reference shipped for the scenario
     (``<scenario>_physics``; its model runs the launch's own plant, ``reference_physics.follow_scenario``) unless
-    the parameters name a reference, or one of the physics detector node's own (:data:`PHYSICS_NODE_PARAMS`: that
-    node runs, while it is retired)."""
-    if "reference" in params or any(name in params for name in PHYSICS_NODE_PARAMS):
+    the parameters name a reference. A parameter of the retired physics detector node is refused in one line that
+    says what does its work now (:data:`RETIRED_NODE_PARAMS`)."""
+    retired = [name for name in params if name in RETIRED_NODE_PARAMS]
+    if retired:
+        name = retired[0]
+        raise UserError(f"detector parameter {name!r} belonged to the physics detector's own node, retired on "
+                        f"2026-12-07 (one detector node: python -m wavelet_fdi.learned_node --help); instead: "
+                        f"{RETIRED_NODE_PARAMS[name]}")
+    if "reference" in params:
         return params
     from phfdi.replay import shipped_physics_name
 
-    return {"loop": "ph", **params, "reference": shipped_physics_name(spec)}  # the loop's name, as the physics node
+    return {"loop": "ph", **params, "reference": shipped_physics_name(spec)}  # the loop's name, as before
 
 
-def detector_spec(params: dict | None = None) -> NodeSpec:
-    """The fault detector, an observer outside the lock-step ring: given a ``reference`` (a file or a shipped name),
-    the multichannel detector's node (wavelet_fdi.learned_node; a physics reference reads the graph's own topics),
-    else the physics detector's node (wavelet_fdi.node; :func:`with_default_reference` gives the loop graph's
-    detector a reference unless the physics node's own parameters are given)."""
-    params = dict(params or {})
-    if "reference" not in params:
-        return NodeSpec(DETECTOR, "wavelet_fdi.node", params, OBSERVER)
+def detector_spec(params: dict) -> NodeSpec:
+    """The fault detector, an observer outside the lock-step ring: the multichannel detector's node
+    (wavelet_fdi.learned_node) with ``params["reference"]`` (a file or a shipped name); a physics reference reads
+    the graph's own topics unless a channel map is given."""
+    params = dict(params)
     if Path(str(params["reference"])).exists():  # a file: the node may start elsewhere; else a shipped name
         params["reference"] = str(Path(str(params["reference"])).resolve())
     if not params.get("channel_map_file"):
