@@ -170,9 +170,10 @@ def outside_healthy_range(model: LearnedModel, rec: Record) -> list[dict]:
     return outside_ranges(model.source.get("healthy_ranges") or {}, rec.x, rec.channels)
 
 
-def replay_measured(rec: Record, model: LearnedModel, refit_rows: int | None = None
+def replay_measured(rec: Record, model: LearnedModel, refit_rows: int | None = None, name_faults: bool = True
                     ) -> tuple[list[LearnedEvent], np.ndarray, LearnedModel]:
-    """Run the learned detector over a record (optionally re-fitting the reference on its first rows)."""
+    """Run the learned detector over a record (optionally re-fitting the reference on its first rows;
+    ``name_faults`` False: detection only)."""
     missing = [c for c in model.channels if c not in rec.channels]
     if missing:
         raise UserError(f"{rec.path}: no column {missing[0]!r} (the reference was learned on "
@@ -184,7 +185,8 @@ def replay_measured(rec: Record, model: LearnedModel, refit_rows: int | None = N
                             f"(phfdi calibrate --estimator fits it on healthy runs)")
         model = learn_from(rec, refit_rows, model.settings)
     # alarms in the record's own time, to the ns as a bag's stamps carry it: the learned node gets the same floats
-    events, states, _ = run_record(model, stamps_seconds(record_stamps_ns(rec.time_s)), rec.x)
+    events, states, _ = run_record(model, stamps_seconds(record_stamps_ns(rec.time_s)), rec.x,
+                                   name_faults=name_faults)
     return events, states, model
 
 

@@ -339,6 +339,9 @@ class LearnedEvent:
 class LearnedDetector:
     """Feed rows of a measured record in time order; get events (and per-row alarm states) back.
 
+    ``alarms`` False: statistics only (calibration runs); ``name_faults`` False: alarms are raised and cleared but
+    no fault is named (a reference that names faults does not; one that confirms them raises plain alarms).
+
     Examples
     --------
     >>> import numpy as np
@@ -352,7 +355,8 @@ class LearnedDetector:
     ([('alarm', True)], 1)
     """
 
-    def __init__(self, model: LearnedModel, alarms: bool = True, record_trace: bool = False) -> None:
+    def __init__(self, model: LearnedModel, alarms: bool = True, record_trace: bool = False,
+                 name_faults: bool = True) -> None:
         self.model = model
         self.settings = s = model.settings.check()
         self.inputs = model.channels  # what the rows hold
@@ -390,7 +394,7 @@ class LearnedDetector:
         self._trace: dict[str, list] | None = ({"coef": [], "stat": [], "state": [], "increments": [],
                                                 "residual": []}
                                                if record_trace else None)
-        self._init_naming(model, alarms)
+        self._init_naming(model, alarms and name_faults)
 
     def _init_statistics(self, s: LearnedSettings, m: int) -> None:
         """The CUSUM statistics: every registered kind that has rows under these settings
@@ -1076,11 +1080,12 @@ def _running_sum(total: np.ndarray, values: np.ndarray, axis: int) -> np.ndarray
 
 
 def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int | None = 4096,
-               record_trace: bool = False, alarms: bool = True
+               record_trace: bool = False, alarms: bool = True, name_faults: bool = True
                ) -> tuple[list[LearnedEvent], np.ndarray, LearnedDetector]:
     """A whole record through a fresh detector, in chunks of ``chunk`` rows (None: at once; the
     result is the same, chunks of a few thousand rows are fastest); ``record_trace``: the detector keeps its
-    trace (:meth:`LearnedDetector.trace`; memory grows with the record); ``alarms`` False: statistics only, as
+    trace (:meth:`LearnedDetector.trace`; memory grows with the record); ``name_faults`` False: detection only;
+    ``alarms`` False: statistics only, as
     calibration runs them (no alarm, no naming).
 
     Returns
@@ -1101,7 +1106,7 @@ def run_record(model: LearnedModel, t_s: np.ndarray, x: np.ndarray, chunk: int |
     >>> events, int(states.max())  # healthy rows: no alarm
     ([], 0)
     """
-    det = LearnedDetector(model, alarms=alarms, record_trace=record_trace)
+    det = LearnedDetector(model, alarms=alarms, record_trace=record_trace, name_faults=name_faults)
     n = len(x)
     step = n if not chunk else int(chunk)
     events, states = [], []

@@ -66,6 +66,8 @@ PARAMS = (
     ParamSpec("reference", "", "reference file (.json) from phfdi calibrate --learn, --estimator or --physics, or "
                                "a shipped one by name (paper_physics: the paper loop's physics)"),
     ParamSpec("loop", "measured", "name of the monitored plant or loop in /fault_alarm"),
+    ParamSpec("name_faults", True, "name the fault behind each alarm where the reference can (false: detection "
+                                   "only; phfdi replay --live --no-isolation)"),
     ParamSpec("channel_map_file", "", "YAML channel map: each reference channel's topic, type and field "
               "('' = /measured/sample, or the loop graph's topics with loop_graph_topics; docs/ros_graph.md)"),
     ParamSpec("loop_graph_topics", False, "without a channel map: read the loop graph's own topics "
@@ -121,7 +123,7 @@ class LearnedDetectorNode(DetectorNodeBase):
             self.model, note = follow_scenario(self.model, self.spec, "launch")
             if note:
                 self.get_logger().warning(note)
-        self.core = LearnedDetector(self.model)
+        self.core = LearnedDetector(self.model, name_faults=self.param("name_faults"))
         self.quiet_events = 0  # deviations (and their verdicts) kept but not published: the hold of the last one
         # where the inputs leave what the reference's healthy runs had (a reference file from before: nothing)
         self.range_watch = RangeWatch(self.model.source.get("healthy_ranges") or {}, self.model.channels)

@@ -58,7 +58,21 @@ def test_replay_of_a_csv_without_metadata_uses_the_scenario_option(backlash_file
     # never comes in this 1500 s run, whose own setpoint moved at 200 s); detection only
     assert main(["replay", str(csv), "--no-isolation"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("alarm 1: pending") or out.startswith("no alarm")
+    # the backlash from 1000 s detected, and not named (--no-isolation)
+    assert out.startswith("alarm 1: detected 10") and "named" not in out, out
+
+
+def test_no_isolation_detects_as_the_default_and_names_nothing(backlash_file, capsys):
+    """--no-isolation runs the default detector (the shipped physics reference) without its naming: the same
+    detections, no fault named (before 2026-12-07 it switched to the physics detector)."""
+    assert main(["replay", str(backlash_file), "--json"]) == 0
+    named = json.loads(capsys.readouterr().out)["alarms"]
+    assert main(["replay", str(backlash_file), "--json", "--no-isolation"]) == 0
+    detected = json.loads(capsys.readouterr().out)["alarms"]
+    assert named and named[0]["isolation"]["fault_class"] == "backlash"
+    assert [(a["detection_time"], a["statistic"]) for a in detected] == \
+        [(a["detection_time"], a["statistic"]) for a in named]
+    assert all(a.get("isolation") is None for a in detected)
 
 
 @pytest.mark.parametrize("args, message", [

@@ -106,6 +106,17 @@ def test_live_replay_gives_the_same_alarms_as_offline_replay(launched, offline):
     assert "/fault_alarm ALARM at" in proc.stderr and "through the detector node" in proc.stderr
 
 
+def test_live_replay_without_naming_gives_the_offline_detections(launched, offline):
+    """--live --no-isolation: the node runs without naming (its name_faults parameter), as offline."""
+    proc = subprocess.run(phfdi_cmd("replay", "--live", str(launched["bag"]), "--json", "--no-isolation"),
+                          capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr
+    live = json.loads(proc.stdout)["alarms"]
+    assert [(a["detection_time"], a["statistic"]) for a in live] == \
+        [(a["detection_time"], a["statistic"]) for a in offline]
+    assert live and all(a.get("isolation") is None for a in live)
+
+
 def test_without_a_bag_the_launcher_reports_what_the_detector_published(launched):
     """phfdi launch --detector without --record lists the detector's own report: the same alarms as the bag."""
     from phfdi.commands.launch import received_alarms

@@ -54,7 +54,11 @@ def test_nonfinite_ph_is_missing_held_and_said(short_run, tmp_path, run_cli, val
     (note,) = [n for n in rep["notes"] if "'ph_measured'" in n]
     assert "3 cells not a number" in note and "line 301" in note
     assert f"note: {note}" in err
-    assert rep["input_problems"]["nonfinite_ph"] == 3  # the detector held them, counted
+    # the detector took them as missing and said where they began and ended (a run's positions are its samples,
+    # 1-based: file line 301 is sample 300)
+    start, end = rep["input_problems"]
+    assert "ph_measured: missing from 299 s" in start["message"] and start["line"] == 300
+    assert "ph_measured: back at 302 s after 3 samples missing" in end["message"] and end["line"] == 303
 
 
 def test_all_nan_ph_is_an_error(short_run, tmp_path, run_cli):

@@ -35,8 +35,9 @@ Without --reference a run goes through the multichannel wavelet detector with th
 physics reference shipped for its scenario (paper_physics): the healthy plant and
 valves on the run's measured commands predict the pH, their model the run's own
 plant (its metadata, --scenario or a model .yaml; a note says where it differs
-from the one calibrated on). --calibration, --no-isolation or a physics detector
-setting (--level, ...) runs the physics detector instead, while it is retired.
+from the one calibrated on). --no-isolation detects without naming the fault
+(any reference). --calibration or a physics detector setting (--level, ...) runs
+the physics detector instead, offline, while it is retired.
 
 With --reference the record's channels go through that reference and the
 multichannel wavelet detector instead (any number of channels, no plant model):
@@ -89,10 +90,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="plant/loop model (preset or .yaml) when the run does not carry one (default paper)")
     p.add_argument("--calibration", default=None,
                    help="a physics detector's calibration file (phfdi calibrate): runs the physics detector "
-                        "(StreamingDetector), as do --no-isolation and its settings below, while it is retired; "
+                        "(StreamingDetector), as do its settings below, offline, while it is retired; "
                         "default: the multichannel detector with the physics reference shipped for the run's scenario")
     add_detector_args(p)
-    p.add_argument("--no-isolation", action="store_true", help="detect only (no fault class)")
+    p.add_argument("--no-isolation", action="store_true", help="detect only: no fault named (any detector)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
     p.add_argument("--reference", default=None, metavar="REF.json|MODEL.yaml",
                    help="a learned reference (phfdi calibrate --learn, --estimator, --physics; or "
@@ -142,10 +143,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _physics_detector_asked(args: argparse.Namespace) -> bool:
-    """--calibration, --no-isolation or a physics detector setting: the physics detector (StreamingDetector) runs,
-    as before 2026-12-07, while it is retired; otherwise the multichannel detector with the shipped physics
-    reference."""
-    return bool(args.calibration or args.no_isolation or given_settings(args))
+    """--calibration or a physics detector setting: the physics detector (StreamingDetector) runs, as before
+    2026-12-07, while it is retired; otherwise the multichannel detector with the shipped physics reference
+    (--no-isolation: without naming the fault, since 2026-12-07)."""
+    return bool(args.calibration or given_settings(args))
 
 
 @dataclass
@@ -220,7 +221,7 @@ class _Physics(_Kind):
 
         # the physics detector's own node was retired on 2026-12-07 (one detector node, issue 37)
         raise UserError("--live plays the bag into the detector node, the multichannel detector since 2026-12-07: "
-                        "without --calibration, --no-isolation and the physics detector's settings it runs the "
+                        "without --calibration and the physics detector's settings it runs the "
                         "shipped physics reference (or give --reference REF.json from phfdi calibrate --physics); "
                         "with them, replay offline")
 
@@ -244,7 +245,7 @@ class _Learned(_Kind):
         notes = rec.notes + ([followed] if followed else [])
         print_notes("replay", notes)
         t0 = time.perf_counter()
-        events, states, model = replay_measured(rec, model, args.refit_rows)
+        events, states, model = replay_measured(rec, model, args.refit_rows, name_faults=not args.no_isolation)
         elapsed = time.perf_counter() - t0
         print(f"replayed {len(rec.x)} rows x {len(model.channels)} channels in {elapsed:.2f} s", file=sys.stderr)
         outside = outside_healthy_range(model, rec)
@@ -279,7 +280,8 @@ class _Learned(_Kind):
     def live_nodes(self, args: argparse.Namespace, common: dict) -> list:
         from phfdi.ros.launcher import detector_spec
 
-        return [detector_spec({**common, "reference": args.reference, "loop_graph_topics": self.graph_bag})]
+        return [detector_spec({**common, "reference": args.reference, "loop_graph_topics": self.graph_bag,
+                               "name_faults": not args.no_isolation})]
 
     #: the bag is one of the loop graph's (its own topics, read by a physics reference), not a measured record's
     graph_bag = False
