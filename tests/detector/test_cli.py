@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from phfdi.cli import main
 from phfdi.loop import simulate
-from wavelet_fdi.config import Calibration, DetectorSettings
+from wavelet_fdi.learned_detector import LearnedModel
 
 from .detector_helpers import short_spec
 
@@ -79,7 +80,7 @@ def test_no_isolation_detects_as_the_default_and_names_nothing(backlash_file, ca
     (["replay", "nope.csv"], "no such file"),
     (["replay", "run.mcap"], "cannot read the bag"),
     (["replay", "{run}", "--wavelet", "db4"], "phfdi calibrate"),
-    (["replay", "{run}", "--calibration", "missing.yaml"], "no such calibration file"),
+    (["replay", "{run}", "--calibration", "my.yaml"], "make a physics reference"),
 ])
 def test_user_errors_are_one_line_with_exit_status_2(args, message, backlash_file, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -91,35 +92,37 @@ def test_user_errors_are_one_line_with_exit_status_2(args, message, backlash_fil
 
 
 def test_calibrate_with_the_level_channel_and_replay_with_it(tmp_path, backlash_file, capsys):
-    out = tmp_path / "cal.yaml"
+    """phfdi calibrate (the physics reference, the default mode since 2026-12-07) with --channels ph,level watches
+    the level too; replay --reference finds the backlash with it."""
+    out = tmp_path / "ref.json"
     assert main(["calibrate", "--seeds", "1001-1002", "--set", "duration_s=6000", "--channels", "ph,level",
                  "--out", str(out)]) == 0
-    cal = Calibration.load(out)
-    assert cal.seeds == [1001, 1002]
-    settings = DetectorSettings(channels=("ph", "level"))
-    cal.check(settings, 1.0)
-    assert {"level.R.mean_up", "level.D1.energy"} <= set(cal.thresholds)
+    model = LearnedModel.load(out)
+    assert model.reference.kind == "physics" and model.source["runs"] == ["seed 1001", "seed 1002"]
+    assert model.residual_channels == ("ph_measured", "level_measured_cm")
+    assert {"level_measured_cm.R.mean_up", "level_measured_cm.D1.energy"} <= set(model.thresholds)
     capsys.readouterr()
-    assert main(["replay", str(backlash_file), "--json", "--no-isolation", "--channels", "ph,level",
-                 "--calibration", str(out)]) == 0
+    assert main(["replay", str(backlash_file), "--json", "--no-isolation", "--reference", str(out)]) == 0
     alarms = json.loads(capsys.readouterr().out)["alarms"]
     assert alarms and alarms[0]["detection_time"] >= 1000.0
 
 
 def test_calibrate_on_recorded_runs(tmp_path, capsys):
-    """A plant's own healthy recordings (here: simulated ones saved to files) set the thresholds."""
+    """A plant's own healthy recordings (here: simulated ones saved to files) set the physics reference's noise and
+    thresholds: the pH residual's healthy RMS is the sensor's noise (1 in its units)."""
     files = []
     for seed in (2001, 2002):
         path = tmp_path / f"healthy{seed}.parquet"
         simulate(short_spec("healthy", duration_s=5000.0, seed=seed)).save(path)
         files.append(str(path))
-    out = tmp_path / "plant.yaml"
+    out = tmp_path / "plant.json"
     overrides = ["--set", "duration_s=5000", "--set", "setpoints.ph.changes=[{at_s: 200, value: 8.0}]"]
     assert main(["calibrate", "--runs", *files, *overrides, "--out", str(out)]) == 0
-    cal = Calibration.load(out)
-    assert cal.sources == files and cal.seeds == []
-    assert cal.healthy_samples == 2 * (5001 - 600)
-    assert cal.sigma["ph"]["raw"] == pytest.approx(0.01, rel=0.1)
+    model = LearnedModel.load(out)
+    assert model.source["runs"] == files
+    # in sensor-noise units: the healthy model leaves the noise, about 1 in every band of the orthonormal wavelet
+    assert model.band_sigma.shape == (1, len(model.settings.bands()))
+    assert np.allclose(model.band_sigma, 1.0, rtol=0.1), model.band_sigma
 
 
 @pytest.mark.parametrize("command", ["replay", "evaluate", "calibrate"])

@@ -1,11 +1,11 @@
-"""The physics detector's bad-input counters are named once (wavelet_fdi.inputs.INPUT_PROBLEMS): replay's input
-problems derive from it (issue 37: two hand-written lists, 17 and 12 names, had drifted: replay did not say a bad
+"""The physics detector's bad-input counters are named once (wavelet_fdi.inputs.INPUT_PROBLEMS): the alarm text's
+input problems derive from it (issue 37: two hand-written lists, 17 and 12 names, had drifted: replay did not say a bad
 level or a non-finite outlet command; the physics detector's node, which had the other list, was retired on
 2026-12-07)."""
 
 from __future__ import annotations
 
-from phfdi.commands.replay import input_problems
+from phfdi.alarm_text import input_problems
 from wavelet_fdi.inputs import InputRegularizer
 
 

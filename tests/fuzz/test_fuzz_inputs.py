@@ -241,7 +241,7 @@ SET = [x for o in SHORT for x in ("--set", o)]
 CLI_CASES = {
     "replay": (["run.csv", "run.parquet", "run.mcap", "ph_rig.csv"], lambda f, o: ["replay", f, "--no-isolation"]),
     "calibrate": (["run.csv", "run.parquet", "run.mcap"],
-                  lambda f, o: ["calibrate", "--runs", f, *SET, "--out", o / "c.yaml", "--overwrite"]),
+                  lambda f, o: ["calibrate", "--runs", f, *SET, "--out", o / "c.json", "--overwrite"]),
     "diagnose": (["run.csv", "run.parquet", "run.mcap"],
                  lambda f, o: ["diagnose", "--data", f, "--candidates", "sensor_bias", "--no-pairs", "--workers",
                                "1", "--quiet", "--out", o, "--overwrite"]),
@@ -256,8 +256,6 @@ CLI_CASES = {
     "simulate-inputs": (["run.csv"], lambda f, o: ["simulate", "--inputs", f, "--out", o / "o.csv", "--overwrite"]),
     "scenario": (["scenario.yaml"], lambda f, o: ["simulate", "--scenario", f, *SET]),
     "replay-map": (["map.yaml"], lambda f, o: ["replay", "{ph_rig}", "--map", f, "--no-isolation"]),
-    "replay-calibration": (["calibration.yaml"], lambda f, o: ["replay", "{run}", "--calibration", f,
-                                                              "--no-isolation"]),
     "loop-columns": (["loopmap.yaml"], lambda f, o: ["loop-diagnose", "{loop}", "--columns", f, "--no-baselines",
                                                      "--causes", "stiction", "--workers", "1"]),
 }

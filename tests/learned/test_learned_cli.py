@@ -158,9 +158,11 @@ def test_every_detector_setting_is_an_option_of_its_own(files, tmp_path, capsys)
     # --arl0 is both detectors' (the false-alarm target): here it asks for thresholds the record is too short for
     assert "arl0_samples 1e+06: measuring the thresholds needs at least 8 windows" in one_error_line(
         capsys, ["calibrate", "--learn", str(files["healthy"]), "--arl0", "1e6", "--out", str(tmp_path / "a.json")])
-    assert "--mean-h" in one_error_line(capsys, ["calibrate", "--mean-h", "8", "--out", str(tmp_path / "b.yaml")])
+    # the physics reference (phfdi calibrate's default) takes --mean-h over its design, but not the old form
+    assert "--learned mean_h=8" in one_error_line(capsys, ["calibrate", "--learned", "mean_h=8", "--out",
+                                                          str(tmp_path / "b.json")])
     assert "mean_h" in one_error_line(capsys, ["calibrate", "--learn", str(files["healthy"]), "--mean-h", "8",
                                                "--learned", "mean_h=7", "--out", str(tmp_path / "c.json")])
     assert "--level" in one_error_line(capsys, ["replay", str(files["faulty"]), "--reference", str(ref),
                                                 "--level", "4"])
-    assert not any((tmp_path / n).exists() for n in ("a.json", "b.yaml", "c.json"))
+    assert not any((tmp_path / n).exists() for n in ("a.json", "b.json", "c.json"))

@@ -19,17 +19,30 @@ from .common import (
 )
 
 EXAMPLES = """examples:
-  phfdi calibrate --out my_calibration.yaml                 # paper scenario, sym4 level 3, ARL0 1e5 samples
-  phfdi calibrate --wavelet db8 --level 3 --out db8.yaml
-  phfdi calibrate --scenario my_loop.yaml --seeds 2001-2032 --arl0 1e6 --out my_loop.yaml
-  phfdi calibrate --scenario my_loop.yaml --runs healthy1.parquet healthy2.parquet --out plant.yaml
-  phfdi calibrate --scenario my_loop.yaml --runs h1.csv h2.csv --map plant_columns.yaml --out plant.yaml
+  phfdi calibrate --out my_physics.json                    # paper scenario: its physics reference, sym4 L3, ARL0 1e5
+  phfdi calibrate --wavelet db8 --level 4 --out db8.json
+  phfdi calibrate --scenario my_loop.yaml --seeds 2001-2032 --arl0 1e6 --out my_loop.json
+  phfdi calibrate --scenario my_loop.yaml --runs healthy1.parquet healthy2.parquet --out plant.json
+  phfdi calibrate --scenario my_loop.yaml --runs h1.csv h2.csv --map plant_columns.yaml --out plant.json
   phfdi calibrate --learn healthy.csv --rows 400 --exclude anomaly,changepoint --out ref.json
   phfdi calibrate --learn export.csv --from 2020-03-09T11:14:34 --to 2020-03-09T11:21:13 --map tags.yaml --out ref.json
   phfdi calibrate --learn healthy.csv --rows 400 --form oe --correction-samples 100 --out ref.json
   phfdi calibrate --estimator runs/*.csv --map ph_rig --repeat-probability 0 --out rig.json  # no repeats test
   phfdi calibrate --estimator ../shared/data/ph_rig/2025.02.24-*.csv --model rig_flask --map ph_rig --out rig.json
-  phfdi calibrate --physics --scenario paper --out paper_physics.json   # then phfdi replay RUN --reference paper_physics.json
+  (then: phfdi replay RUN --reference FILE.json, phfdi launch --detector-param reference=FILE.json)
+
+Without --learn or --estimator, the scenario's healthy plant and valves are
+calibrated as the physics reference of the multichannel detector (docs/detector.md,
+"The paper's physics as a reference kind"), on the --seeds' healthy runs or on
+--runs: the physics detector's design (--wavelet, --level, --arl0, --channels)
+carried over, the band noise and every threshold measured on the healthy runs
+for --arl0; any learned-detector option given sets that setting over the design.
+The seeds default to 1001-1016, disjoint from the evaluation's (1-99). The
+shipped one for the paper scenario is paper_physics (made with the defaults).
+Recorded runs are read under the reading policy of docs/records.md (--map,
+--column, --encoding as in phfdi replay); every repair is printed as a note.
+Before 2026-12-07 this wrote the physics detector's .yaml calibration (for
+replay --calibration); that detector was retired. --physics is the same mode.
 
 --learn fits a learned healthy reference (no plant model needed) on the first
 --rows rows of a measured record (all of them by default), or on the rows from
@@ -49,19 +62,6 @@ the same physics simulated, never corrected). --model gives the feeds and first
 guesses; the channels are the model's feeds' flows (<feed>_flow_ml_s) and
 ph_measured, so a --map is needed for other column names (ph_rig is shipped).
 phfdi replay RUN --map ph_rig --reference rig.json watches a run with it.
-
-The seeds default to 1001-1016, disjoint from the evaluation's (1-99). The file
-records the seeds, the noise level per band and each threshold; pass it to
-phfdi replay --calibration. The shipped default for the paper scenario is
-wavelet_fdi/calibrations/paper_sym4_L3.yaml (made with the defaults).
-Recorded runs are read under the reading policy of docs/records.md (--map,
---column, --encoding as in phfdi replay); every repair is printed as a note.
-
---physics calibrates the scenario's healthy plant and valves as a reference of the
-multichannel detector (docs/detector.md, "The paper's physics as a reference kind"):
-the physics detector's design (--wavelet, --level, --arl0, --channels) carried over,
-the band noise and every threshold measured on the healthy runs for --arl0; any
-learned-detector option given sets that setting over the design.
 
 Every detector setting is an option of its own, --NAME VALUE, derived from its
 one declaration (docs/detector.md, "Detector settings"): --level, --wavelet and
@@ -189,12 +189,13 @@ def learned_settings(pairs: list[str], base=None):
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("calibrate", help="calibrate the fault detector's thresholds on healthy runs",
-                       description="Simulate a scenario healthy with several noise seeds, measure the residual's "
-                                   "noise per wavelet band and set each CUSUM threshold so that the detector's "
-                                   "average run length to a false alarm is the target. Writes a YAML (or JSON) "
-                                   "file the detector loads. With --learn: fit a learned healthy reference on a "
-                                   "measured healthy record instead (any channels, no plant model).",
+    p = sub.add_parser("calibrate", help="calibrate the fault detector's reference and thresholds on healthy runs",
+                       description="Simulate a scenario healthy with several noise seeds (or read recorded healthy "
+                                   "runs), measure the physics reference's residual noise per wavelet band and set "
+                                   "each CUSUM threshold so that the detector's average run length to a false alarm "
+                                   "is the target. Writes the reference (.json) the detector loads. With --learn: "
+                                   "fit a learned healthy reference on a measured healthy record instead (any "
+                                   "channels, no plant model); with --estimator: the rig's estimator reference.",
                        epilog=EXAMPLES, formatter_class=EPILOG_FORMAT)
     p.add_argument("--scenario", default="paper", help="scenario preset or .yaml (default paper)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -228,20 +229,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --estimator: simulate the model from each run's first pH, never correct it")
     g = p.add_argument_group("physics reference kind (the scenario's model in the multichannel detector)")
     g.add_argument("--physics", action="store_true",
-                   help="calibrate the scenario's healthy plant and valves as a reference of the multichannel "
-                        "detector (kind physics) on the --seeds' healthy runs, or on --runs: band noise and every "
-                        "threshold for --arl0, its alarms named by the physics detector's isolation; writes .json "
-                        "for phfdi replay --reference")
-    p.add_argument("--out", required=True, help="file to write (.yaml or .json; --learn, --estimator: .json)")
+                   help="the default without --learn or --estimator (kept for the command lines that name it): the "
+                        "scenario's healthy plant and valves as the physics reference, on the --seeds' healthy runs "
+                        "or on --runs")
+    p.add_argument("--out", required=True, help="file to write (.json)")
     add_overwrite_arg(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from phfdi.calibration import calibrate, calibrate_from_runs
-    from phfdi.replay import load_any
-    from phfdi.scenario import load_scenario
-    from phfdi_base.errors import UserError
     from phfdi_base.outputs import refuse_existing
 
     refuse_existing(args.out, args.overwrite)  # before any fitting
@@ -250,57 +246,27 @@ def run(args: argparse.Namespace) -> int:
         return run_estimator(args)
     if args.learn:
         return run_learn(args)
-    if args.physics:
-        return run_physics(args)
-    if args.rows is not None or args.exclude or args.start or args.end:
-        raise UserError("--rows, --from, --to and --exclude go with --learn")
-    settings = settings_from_args(args)
-    cmap = column_map_from_args(args)
-    if not args.runs and (cmap is not None or args.encoding):
-        raise UserError("--map, --column and --encoding read recorded runs: give them with --runs")
-    if args.runs:
-        spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
-        runs = []
-        for path in args.runs:
-            runs.append(load_any(path, cmap, args.encoding))
-            print_notes("calibrate", runs[-1].metadata.get("notes", []))
-        with plant_runs_on(", ".join(args.runs)):
-            cal = calibrate_from_runs(args.runs, spec, settings, runs=runs,
-                                      progress=Progress(f"calibrate on {len(args.runs)} recorded runs", enabled=True))
-        source = f"{len(args.runs)} recorded runs"
-    else:
-        seeds = parse_seeds(args.seeds)
-        cal = calibrate(args.scenario, settings, seeds, args.overrides,
-                        progress=Progress(f"calibrate on {len(seeds)} healthy runs", enabled=True))
-        source = f"seeds {seeds[0]}..{seeds[-1]}"
-    path = cal.save(args.out, overwrite=args.overwrite)
-    print(f"calibrated {settings.wavelet} level {settings.level} on {cal.healthy_samples} healthy samples "
-          f"({source}), ARL0 {settings.arl0_samples:g} samples:")
-    for name, h in cal.thresholds.items():
-        print(f"  {name:22s} threshold {h:8.2f}")
-    print(f"wrote {path}")
-    return 0
+    return run_physics(args)
 
 
 def check_settings_given(args: argparse.Namespace) -> None:
-    """Each detector setting given goes with the detector being calibrated (one line naming those that do not)."""
+    """Each detector setting given goes with the detector being calibrated (one line naming those that do not): the
+    physics reference takes the physics detector's design and any learned-detector setting over it; --learn and
+    --estimator take the learned detector's settings only."""
     from phfdi_base.errors import UserError
     from wavelet_fdi.config import LearnedSettings, setting_specs
 
-    physics = {s.name: s.flag for s in setting_specs(exposed_only=True)}
-    learned = {s.name: s.flag for s in setting_specs(of=LearnedSettings)}
-    given = set(given_settings(args)) | set(given_settings(args, LearnedSettings))
-    if getattr(args, "physics", False) and not (args.learn or args.estimator):
-        return  # the physics detector's design, then any learned-detector setting given over it
-    if args.learn or args.estimator:
-        stray = [physics[n] for n in physics if n in given and n not in learned]
-        what = "set the physics detector (phfdi calibrate without --learn or --estimator)"
-    else:
-        stray = [learned[n] for n in learned if n in given and n not in physics] + (["--learned"] if args.learned
-                                                                                    else [])
-        what = "set the learned or estimator detector: give them with --learn or --estimator"
+    if not (args.learn or args.estimator):
+        if args.learned:  # the old form is read by --learn and --estimator only
+            raise UserError(f"--learned {args.learned[0]}: give a setting of the physics reference as its own "
+                            f"option (--NAME VALUE; phfdi calibrate --help)")
+        return
+    learned = {s.name for s in setting_specs(of=LearnedSettings)}
+    given = set(given_settings(args))
+    stray = [s.flag for s in setting_specs(exposed_only=True) if s.name in given and s.name not in learned]
     if stray:
-        raise UserError(f"{', '.join(stray)} {what}")
+        raise UserError(f"{', '.join(stray)} set the physics reference (phfdi calibrate without --learn or "
+                        f"--estimator)")
 
 
 def physics_design(args: argparse.Namespace, sample_time_s: float):
@@ -327,7 +293,9 @@ def run_physics(args: argparse.Namespace) -> int:
     from wavelet_fdi.reference_physics import PhysicsReference
 
     if not args.out.endswith(".json"):
-        raise UserError(f"--out {args.out}: a physics reference is written as .json")
+        old = " (the physics detector's .yaml calibration was retired with it on 2026-12-07)" \
+            if args.out.endswith((".yaml", ".yml")) else ""
+        raise UserError(f"--out {args.out}: a physics reference is written as .json{old}")
     if args.rows is not None or args.exclude or args.start or args.end:
         raise UserError("--rows, --from, --to and --exclude go with --learn (--physics calibrates on whole runs)")
     spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)

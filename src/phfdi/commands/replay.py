@@ -8,15 +8,14 @@ import sys
 import time
 from dataclasses import dataclass
 
-from phfdi.alarm_text import format_alarms, input_problems
+from phfdi.alarm_text import format_alarms
 from phfdi_base.topics import MEASURED_SAMPLE
 
-from .calibrate import add_detector_args, given_settings, settings_from_args
+from .calibrate import add_detector_args, given_settings
 from .common import (
     EPILOG_FORMAT,
     add_record_args,
     column_map_from_args,
-    plant_runs_on,
     print_notes,
     reference_column_map,
 )
@@ -24,7 +23,7 @@ from .common import (
 EXAMPLES = """examples:
   phfdi simulate --fault backlash --out runs/backlash.parquet && phfdi replay runs/backlash.parquet
   phfdi replay runs/backlash.csv --json                 # machine-readable list of alarms
-  phfdi replay bags/run.mcap --calibration my.yaml      # a bag recorded by phfdi launch, own calibration
+  phfdi replay bags/run.mcap --reference my_physics.json   # a bag of phfdi launch, own calibration (calibrate)
   phfdi replay --live bags/run.mcap                     # through a detector NODE, over ROS topics
   phfdi replay plant.csv --column time_s=t --column ph_measured=pH --column valve_command_pct=OP
   phfdi replay rig.csv --reference ref.json              # a learned reference (phfdi calibrate --learn)
@@ -36,8 +35,9 @@ physics reference shipped for its scenario (paper_physics): the healthy plant an
 valves on the run's measured commands predict the pH, their model the run's own
 plant (its metadata, --scenario or a model .yaml; a note says where it differs
 from the one calibrated on). --no-isolation detects without naming the fault
-(any reference). --calibration or a physics detector setting (--level, ...) runs
-the physics detector instead, offline, while it is retired.
+(any reference). The physics detector's own options (--calibration, --level, ...)
+were retired with it on 2026-12-07: give them to phfdi calibrate, which writes
+the physics reference, and replay with --reference.
 
 With --reference the record's channels go through that reference and the
 multichannel wavelet detector instead (any number of channels, no plant model):
@@ -88,11 +88,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the alarms as a JSON list")
     p.add_argument("--scenario", default=None,
                    help="plant/loop model (preset or .yaml) when the run does not carry one (default paper)")
-    p.add_argument("--calibration", default=None,
-                   help="a physics detector's calibration file (phfdi calibrate): runs the physics detector "
-                        "(StreamingDetector), as do its settings below, offline, while it is retired; "
-                        "default: the multichannel detector with the physics reference shipped for the run's scenario")
-    add_detector_args(p)
+    retired = p.add_argument_group("retired with the physics detector on 2026-12-07 (refused with where they go "
+                                   "now: phfdi calibrate writes a physics reference with them, --reference takes it)")
+    retired.add_argument("--calibration", default=None, help="a physics detector calibration file")
+    add_detector_args(retired)
     p.add_argument("--no-isolation", action="store_true", help="detect only: no fault named (any detector)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
     p.add_argument("--reference", default=None, metavar="REF.json|MODEL.yaml",
@@ -133,7 +132,9 @@ def run(args: argparse.Namespace) -> int:
         flags = ", ".join(f"--{n.replace('_', '-')}" for n in given_settings(args)).replace("--arl0-samples", "--arl0")
         raise UserError(f"{flags}: a learned or estimator --reference carries its detector's settings (set them with "
                         f"phfdi calibrate --learn or --estimator); these options set the physics detector")
-    kind: _Kind = _Learned() if args.reference else _Physics() if _physics_detector_asked(args) else _ShippedPhysics()
+    if not args.reference:
+        _refuse_physics_detector_options(args)
+    kind: _Kind = _Learned() if args.reference else _ShippedPhysics()
     if args.live and (args.map or args.column or args.encoding or args.refit_rows is not None):
         raise UserError(f"{kind.offline_options} apply to an offline replay, not to --live")
     replayed = _run_live(args, kind) if args.live else kind.offline(args)
@@ -142,11 +143,21 @@ def run(args: argparse.Namespace) -> int:
     return replayed.status
 
 
-def _physics_detector_asked(args: argparse.Namespace) -> bool:
-    """--calibration or a physics detector setting: the physics detector (StreamingDetector) runs, as before
-    2026-12-07, while it is retired; otherwise the multichannel detector with the shipped physics reference
-    (--no-isolation: without naming the fault, since 2026-12-07)."""
-    return bool(args.calibration or given_settings(args))
+def _refuse_physics_detector_options(args: argparse.Namespace) -> None:
+    """--calibration or a physics detector setting: the physics detector (StreamingDetector) ran them until it was
+    retired on 2026-12-07 (issue 37: one detector); one line saying where they go now."""
+    from phfdi_base.errors import UserError
+
+    if args.calibration:
+        raise UserError(f"--calibration {args.calibration}: the physics detector's calibration, retired with it on "
+                        f"2026-12-07: make a physics reference with the options you calibrated with (phfdi calibrate "
+                        f"... --out REF.json) and replay with --reference REF.json")
+    given = given_settings(args)
+    if given:
+        flags = ", ".join(f"--{n.replace('_', '-')}" for n in given).replace("--arl0-samples", "--arl0")
+        raise UserError(f"{flags}: the physics detector's settings, retired with it on 2026-12-07: give them to phfdi "
+                        f"calibrate (it writes the physics reference with them: --out REF.json) and replay with "
+                        f"--reference REF.json")
 
 
 @dataclass
@@ -186,44 +197,6 @@ class _Kind:
     def live_result(self, args: argparse.Namespace, report: dict, result, elapsed: float, say) -> _Replayed:
         """The detector node's final report as the replay's result."""
         raise NotImplementedError
-
-
-class _Physics(_Kind):
-    """The physics reference (the run's own scenario, --scenario or a model .yaml) and the streaming detector."""
-
-    offline_options = "--map, --column and --encoding"
-    bag_topic, bag_hint = "/plant/measurement", "not a bag of the phfdi graph"
-
-    def offline(self, args: argparse.Namespace) -> _Replayed:
-        from phfdi.replay import load_any, replay_run, scenario_of
-        from phfdi.scenario import load_scenario
-        from wavelet_fdi.config import Calibration
-
-        run_ = load_any(args.file, column_map_from_args(args), args.encoding)
-        notes = run_.metadata.get("notes", [])
-        print_notes("replay", notes)
-        spec = getattr(args, "model_spec", None) or (load_scenario(args.scenario, fault="healthy") if args.scenario
-                                                     else scenario_of(run_))
-        settings = settings_from_args(args)
-        cal = Calibration.load(args.calibration) if args.calibration else None
-        t0 = time.perf_counter()
-        with plant_runs_on(args.file):
-            result = replay_run(run_, spec, cal, settings, chunk=args.chunk, isolate=not args.no_isolation)
-        elapsed = time.perf_counter() - t0
-        print(f"replayed {result.samples} samples in {elapsed:.2f} s ({result.samples / max(elapsed, 1e-9):.0f} "
-              f"samples/s, isolation included)", file=sys.stderr)
-        document = replay_json(args.file, result.samples, notes, result.diagnostics,
-                               [a.summary() for a in result.alarms])
-        return _Replayed(document, format_alarms(result.alarms, result.diagnostics))
-
-    def check_live(self, args: argparse.Namespace) -> None:
-        from phfdi_base.errors import UserError
-
-        # the physics detector's own node was retired on 2026-12-07 (one detector node, issue 37)
-        raise UserError("--live plays the bag into the detector node, the multichannel detector since 2026-12-07: "
-                        "without --calibration and the physics detector's settings it runs the "
-                        "shipped physics reference (or give --reference REF.json from phfdi calibrate --physics); "
-                        "with them, replay offline")
 
 
 class _Learned(_Kind):
@@ -460,12 +433,6 @@ def _located_live(bag: str, alarms: list[dict], samples: int) -> list[dict]:
     else:
         lines, where = np.arange(1, samples + 1), "sample"
     return [located(a, lines, where, wall_clock) for a in alarms]
-
-
-def replay_json(file: str, samples: int, notes: list[str], diagnostics: dict, alarms: list[dict]) -> dict:
-    """--json output: the file, what the reader repaired, what the detector counted as bad input, the alarms."""
-    return {"file": file, "samples": samples, "notes": notes, "input_problems": input_problems(diagnostics),
-            "alarms": alarms}
 
 
 def _replay_scenario(bag: str, fallback: str | None):
