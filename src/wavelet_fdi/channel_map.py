@@ -217,6 +217,12 @@ LOOP_GRAPH_SOURCES = {
 
 #: the loop graph's stamps are k * sample time to the ns: a stamp more than 1 % of it off the grid is a stray
 LOOP_GRAPH_GRID_TOLERANCE = 0.01
+#: wall time a sample waits for a late channel of the loop graph's own topics (reliable and keep-all: nothing is
+#: lost, a late message is a stalled one): full-speed replays stalled one topic for 2.7-5.2 s while the other flowed
+#: (5 of 9 runs, measured for the physics detector's node; docs/detector.md), past a map's default 5 s, which would
+#: let samples out with a held value and the live alarms differ from the offline ones; 15 s keeps a margin of three
+#: and says a command topic that really stopped (detection held) 15 s after it did
+LOOP_GRAPH_MAX_WAIT_S = 15.0
 
 
 def loop_graph_map(reference_channels: Sequence[str]) -> ChannelMap:
@@ -235,7 +241,8 @@ def loop_graph_map(reference_channels: Sequence[str]) -> ChannelMap:
                         f"give a channel map")
     channels = {c: {"topic": LOOP_GRAPH_SOURCES[c][0].name, "type": LOOP_GRAPH_SOURCES[c][0].type,
                     "field": LOOP_GRAPH_SOURCES[c][1]} for c in reference_channels}
-    cmap = parse_channel_map({"align": "hold", "channels": channels}, "the loop graph's topics", reference_channels)
+    cmap = parse_channel_map({"align": "hold", "max_wait_s": LOOP_GRAPH_MAX_WAIT_S, "channels": channels},
+                             "the loop graph's topics", reference_channels)
     return replace(cmap, grid_tolerance=LOOP_GRAPH_GRID_TOLERANCE)
 
 
