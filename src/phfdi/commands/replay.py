@@ -128,12 +128,7 @@ def run(args: argparse.Namespace) -> int:
         _model_as_scenario(args)
     if args.refit_rows is not None and not args.reference:
         raise UserError("--refit-rows goes with a learned --reference (REF.json)")
-    if args.reference and given_settings(args):
-        flags = ", ".join(f"--{n.replace('_', '-')}" for n in given_settings(args)).replace("--arl0-samples", "--arl0")
-        raise UserError(f"{flags}: a learned or estimator --reference carries its detector's settings (set them with "
-                        f"phfdi calibrate --learn or --estimator); these options set the physics detector")
-    if not args.reference:
-        _refuse_physics_detector_options(args)
+    _refuse_detector_options(args)
     kind: _Kind = _Learned() if args.reference else _ShippedPhysics()
     if args.live and (args.map or args.column or args.encoding or args.refit_rows is not None):
         raise UserError(f"{kind.offline_options} apply to an offline replay, not to --live")
@@ -143,9 +138,10 @@ def run(args: argparse.Namespace) -> int:
     return replayed.status
 
 
-def _refuse_physics_detector_options(args: argparse.Namespace) -> None:
-    """--calibration or a physics detector setting: the physics detector (StreamingDetector) ran them until it was
-    retired on 2026-12-07 (issue 37: one detector); one line saying where they go now."""
+def _refuse_detector_options(args: argparse.Namespace) -> None:
+    """--calibration or a detector setting (--level, ...): a reference carries its detector's settings, set when
+    phfdi calibrate makes it; the physics detector (StreamingDetector) took them here until it was retired on
+    2026-12-07 (issue 37: one detector). One line saying where they go now."""
     from phfdi_base.errors import UserError
 
     if args.calibration:
@@ -155,9 +151,9 @@ def _refuse_physics_detector_options(args: argparse.Namespace) -> None:
     given = given_settings(args)
     if given:
         flags = ", ".join(f"--{n.replace('_', '-')}" for n in given).replace("--arl0-samples", "--arl0")
-        raise UserError(f"{flags}: the physics detector's settings, retired with it on 2026-12-07: give them to phfdi "
-                        f"calibrate (it writes the physics reference with them: --out REF.json) and replay with "
-                        f"--reference REF.json")
+        raise UserError(f"{flags}: a reference carries its detector's settings: give them to phfdi calibrate when "
+                        f"you make it (--out REF.json) and replay with --reference REF.json (the physics detector "
+                        f"that took them here was retired on 2026-12-07)")
 
 
 @dataclass
