@@ -68,6 +68,25 @@ def main(argv: list[str] | None = None) -> int:
         # does on SIGPIPE, and keep the interpreter's final flush of stdout from raising again
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141  # 128 + SIGPIPE, what a shell reports for a tool ended by a closed pipe
+    except Exception as exc:
+        if not _caused_by_interrupt(exc):
+            raise
+        # a Ctrl-C inside an extension module's import comes out as another error (a pybind11 module's "ImportError:
+        # initialization failed", seen from scipy in a launch, the KeyboardInterrupt as its context): a Ctrl-C
+        print(f"{_prog(argv)}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is in the chain of causes and contexts of ``exc``."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return True
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return False
 
 
 def _prog(argv: list[str] | None) -> str:

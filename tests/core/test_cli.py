@@ -143,3 +143,30 @@ def test_non_finite_and_unbounded_values_are_one_line_before_any_work(argv, word
     assert code == 2 and out == ""
     lines = err.strip().splitlines()
     assert len(lines) == 1 and words in lines[0], err
+
+
+@pytest.mark.parametrize("link", ["__cause__", "__context__"])
+def test_ctrl_c_that_surfaces_as_another_error_is_still_a_ctrl_c(monkeypatch, capsys, link):
+    """A Ctrl-C inside an extension module's import can come out as ``ImportError: initialization failed`` (a pybind11
+    module of scipy did, in a launch at 0.6 s): one line and status 130, as for the KeyboardInterrupt itself."""
+    import phfdi.commands.scenarios as scenarios_command
+
+    def interrupted_import(_args):
+        error = ImportError("initialization failed")
+        setattr(error, link, KeyboardInterrupt())
+        raise error
+
+    monkeypatch.setattr(scenarios_command, "run", interrupted_import)
+    assert main(["scenarios"]) == 130
+    assert capsys.readouterr().err.strip() == "phfdi scenarios: interrupted"
+
+
+def test_an_error_with_no_ctrl_c_behind_it_is_not_taken_for_one(monkeypatch):
+    import phfdi.commands.scenarios as scenarios_command
+
+    def broken(_args):
+        raise ImportError("initialization failed")
+
+    monkeypatch.setattr(scenarios_command, "run", broken)
+    with pytest.raises(ImportError):
+        main(["scenarios"])
