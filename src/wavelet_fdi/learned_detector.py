@@ -43,7 +43,7 @@ import numpy.typing as npt
 from phfdi_base.errors import UserError
 
 from .calibration import excess_tail_threshold, tail_threshold, window_maxima
-from .config import ARL_WINDOW_SAMPLES, CALIBRATION_DIR, LEARNED_FORMS, LearnedSettings  # noqa: F401  (declared with the physics detector's)
+from .config import ARL_WINDOW_SAMPLES, CALIBRATION_DIR, LEARNED_FORMS, LearnedSettings  # noqa: F401  (LearnedSettings also imported from here)
 from .feed_checks import FeedCheck, FeedChecks
 from .feed_checks import level as feed_level
 from .filterbank import CausalSwt
@@ -694,9 +694,12 @@ class LearnedDetector:
 
     def _named_event(self, a: dict, iso: dict, end: int) -> LearnedEvent:
         when = float(self._ring_t[(end - 1) % NAMING_RING])
-        return LearnedEvent("named", when, end - 1, "ERROR" if self.in_alarm else "OK",
-                            f"alarm {a['alarm_id']} named: {iso['family']} fault, {iso['description']} "
-                            f"({iso['size']:g} {iso['unit']})", dict(a))
+        if iso.get("family") == "none":  # no hypothesis explains it: say so, not "none fault (0 )"
+            text = f"alarm {a['alarm_id']} not named: {iso['description']}"
+        else:
+            size = f" ({iso['size']:g} {iso['unit']})" if iso.get("unit") else ""
+            text = f"alarm {a['alarm_id']} named: {iso['family']} fault, {iso['description']}{size}"
+        return LearnedEvent("named", when, end - 1, "ERROR" if self.in_alarm else "OK", text, dict(a))
 
     def _name_again_later(self, a: dict, iso: dict, look: int, end: int) -> None:
         """A naming that is unsure (the namer says ``name_again``: more samples may separate its candidates, as a

@@ -346,9 +346,12 @@ class ApproximationEnergy(LearnedStatistic):
     the observer's level in healthy sigmas of AJ, k = ln(rho) / (1 - 1/rho)): the physics detector's energy of the
     approximation band. AJ's mean CUSUMs see a shift that stays on one side; a slow change that swings both ways
     (a probe whose lag grows lets the slow residual swing wider with every setpoint move) leaves them near zero and
-    raises this. k as the detail bands' energy; h = ``aj_energy_h``."""
+    raises this. k as the detail bands' energy; h = ``aj_energy_h``. It reads AJ's level, as the mean statistics do,
+    so it is held by that level as they are (``clear_fraction``): a channel that came most of the way back does not
+    hold an alarm by the small offset an observer learned while it was up."""
 
     kind = "aj_energy"
+    holds_by_level = True
 
     def rows(self) -> list[StatisticRow]:
         if not self.settings.aj_energy_variance_ratio > 1.0:
