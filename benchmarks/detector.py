@@ -1,11 +1,12 @@
-"""Detector speed: offline replay throughput, per-sample latency, isolation time, memory.
+"""Detector speed: offline replay throughput, per-sample latency, fault naming time, memory.
 
     .venv/bin/python benchmarks/detector.py            # about a minute
 
-Prints figures (no pass/fail): the lead re-measures on a quiet machine.
-Throughput includes the healthy reference model (the core plant, stepped
-per sample with CstrPlant.simulate_flows on blocks of samples). On a shared
-machine each throughput figure is the best of three interleaved repetitions.
+The detector is the one every command runs: the multichannel detector (``wavelet_fdi.learned_detector``) with the
+physics reference shipped for the paper scenario (``paper_physics``), as ``phfdi replay`` runs a paper record.
+Prints figures (no pass/fail): the lead re-measures on a quiet machine. Throughput includes the healthy reference
+model (the core plant, stepped per sample with CstrPlant.simulate_flows on blocks of samples). On a shared machine
+each throughput figure is the best of three interleaved repetitions.
 """
 
 from __future__ import annotations
@@ -17,11 +18,9 @@ import time
 import numpy as np
 
 from phfdi.loop import simulate
-from phfdi.replay import detector_inputs, run_chunks
+from phfdi.replay import shipped_physics_model
 from phfdi.scenario import load_scenario
-from wavelet_fdi.config import DetectorSettings, load_default_calibration
-from wavelet_fdi.detector import StreamingDetector
-from wavelet_fdi.reference import HealthyReference
+from wavelet_fdi.learned_detector import LearnedDetector, run_record
 
 
 def main() -> int:
@@ -29,88 +28,65 @@ def main() -> int:
     spec = load_scenario("paper", fault="healthy")
     run = simulate(spec)
     n = len(run)
-    settings = DetectorSettings()
-    cal = load_default_calibration("paper", settings)
-
     t0 = time.perf_counter()
-    StreamingDetector(spec, cal, settings)
-    print(f"detector construction: {time.perf_counter() - t0:.3f} s")
+    model, _ = shipped_physics_model(spec)
+    LearnedDetector(model)
+    print(f"detector construction (the shipped reference read): {time.perf_counter() - t0:.3f} s")
+    t_s = np.asarray(run.time_s, float)
+    rows = np.column_stack([np.asarray(run[c], float) for c in model.channels])
 
-    # 1. offline replay of a healthy 10000-sample run (no alarm, so no isolation), and its parts
+    # 1. offline replay of a healthy 10000-sample run (no alarm, so no naming), and the reference alone
     def replay(chunk: int) -> float:
-        det = StreamingDetector(spec, cal, settings)
         t0 = time.perf_counter()
-        run_chunks(det, run, chunk)
+        run_record(model, t_s, rows, chunk)
         return time.perf_counter() - t0
-
-    ref = HealthyReference(spec)
-    cols = detector_inputs(run, ref.feed_names, ref.valve_feed)
 
     def reference_only() -> float:
-        ref.initialize(0.0, cols["valve_command_pct"][0], cols["level_controller_output_pct"][0],
-                       cols["level_measured_cm"][0], ph=cols["ph_measured"][0])
         t0 = time.perf_counter()
-        for a in range(0, n, 256):
-            sl = slice(a, a + 256)
-            ref.advance(cols["time_s"][sl], cols["valve_command_pct"][sl],
-                        cols["level_controller_output_pct"][sl], 8.0)
-        return time.perf_counter() - t0
-
-    plant = ref.plant
-    q = np.full(n, 27.0)
-
-    def plant_map_only() -> float:
-        v = plant.volume_ml
-        t0 = time.perf_counter()
-        for k in range(n):
-            v = plant.sample_map(v, float(q[k]), 0.5, 1.0)[0]
+        model.reference.residuals(t_s, rows)
         return time.perf_counter() - t0
 
     best: dict[str, float] = {}
     for _ in range(3):  # interleaved, so that all see the same machine load on average
         for name, fn in (("4096", lambda: replay(4096)), ("256", lambda: replay(256)),
-                         ("reference", reference_only), ("sample_map", plant_map_only)):
+                         ("reference", reference_only)):
             best[name] = min(best.get(name, np.inf), fn())
     best["10"] = replay(10)
     best["1"] = replay(1)
     for name in ("4096", "256", "10", "1"):
         t = best[name]
         print(f"replay, {name:>4s} samples per call: {n / t:8.0f} samples/s ({1e6 * t / n:7.1f} us/sample)")
-    for name, label in (("reference", "healthy reference model alone"), ("sample_map", "CstrPlant.sample_map alone")):
-        t = best[name]
-        print(f"  {label:30s} {n / t:8.0f} samples/s ({1e6 * t / n:7.1f} us/sample)")
+    t = best["reference"]
+    print(f"  {'physics reference alone':30s} {n / t:8.0f} samples/s ({1e6 * t / n:7.1f} us/sample)")
 
-    # 2. per-sample latency of update() (a node calling the core once per message)
-    det = StreamingDetector(spec, cal, settings)
+    # 2. per-sample latency of process() with one row (a node calling the core once per message)
+    det = LearnedDetector(model)
     lat = []
     for k in range(3000):
         t0 = time.perf_counter()
-        det.update(float(run.time_s[k]), float(run["ph_measured"][k]), float(run["valve_command_pct"][k]),
-                   float(run["level_measured_cm"][k]), float(run["level_controller_output_pct"][k]),
-                   float(run["ph_setpoint"][k]))
+        det.process(t_s[k:k + 1], rows[k:k + 1])
         lat.append(time.perf_counter() - t0)
     lat_us = 1e6 * np.array(lat)
-    print(f"update() per sample: median {np.median(lat_us):.0f} us, p99 {np.percentile(lat_us, 99):.0f} us, "
+    print(f"process() of one row: median {np.median(lat_us):.0f} us, p99 {np.percentile(lat_us, 99):.0f} us, "
           f"max {lat_us.max():.0f} us")
 
-    # 3. isolation, once per alarm (backlash at 7000 s)
+    # 3. naming, once per alarm (backlash at 7000 s): the same record with and without naming
     faulty = simulate(load_scenario("paper", fault="backlash"))
-    det = StreamingDetector(spec, cal, settings)
+    f_rows = np.column_stack([np.asarray(faulty[c], float) for c in model.channels])
+    f_t = np.asarray(faulty.time_s, float)
     t0 = time.perf_counter()
-    run_chunks(det, faulty, flush=False)
+    _, _, named = run_record(model, f_t, f_rows)
     total = time.perf_counter() - t0
-    plain = StreamingDetector(spec, cal, settings, isolate=False)
     t0 = time.perf_counter()
-    run_chunks(plain, faulty, flush=False)
+    run_record(model, f_t, f_rows, name_faults=False)
     t_plain = time.perf_counter() - t0
-    print(f"isolation of one alarm (backlash): {total - t_plain:.2f} s "
-          f"({det.isolator.hypotheses_screened} hypotheses screened, {det.isolator.simulations} exact "
-          f"re-simulations); result {det.alarms[0].fault_class}")
+    first = named.alarms[0] if named.alarms else {}
+    print(f"naming of one alarm (backlash): {total - t_plain:.2f} s; named "
+          f"{(first.get('isolation') or {}).get('fault_class', 'nothing')}")
 
-    # 4. memory: the state is bounded by history_samples
-    hist = sum(a.nbytes for a in det.history.data.values())
-    print(f"history buffers: {hist / 1024:.0f} KiB for {settings.history_samples} samples; "
-          f"snapshots kept: {len(det.snapshots)}")
+    # 4. memory: the detector's state is bounded: rings of fixed size (times, and the rows kept for naming)
+    rings = sum(a.nbytes for a in (named._times, named._ring_t, named._ring_x))
+    print(f"rings of recent samples: {rings / 1024:.0f} KiB, whatever the record's length")
     return 0
 
 

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from phfdi.benchmarks import skab
-from phfdi.commands.calibrate import add_learned_args, learned_settings_from_args
+from phfdi.commands.calibrate import add_detector_args, learned_settings_from_args
 from phfdi_base.errors import UserError
 from wavelet_fdi.peers import PEER_LABELS, PEERS
 
@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="also run the peer change detectors (CUSUM, FOCuS, Page-Hinkley, ADWIN) on our residuals")
     ap.add_argument("--toggler-seeds", type=int, default=0, metavar="N",
                     help="also print the random togglers' NAB over N seeds (mean, min, max)")
-    add_learned_args(ap.add_argument_group("learned detector settings for ours and the peers (phfdi calibrate's "
+    add_detector_args(ap.add_argument_group("learned detector settings for ours and the peers (phfdi calibrate's "
                                            "options; e.g. --form oe --correction-samples 100 for the output-error "
                                            "reference)"))
     ap.add_argument("--learned", action="append", default=[], metavar="KEY=VALUE",

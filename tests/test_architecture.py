@@ -244,8 +244,8 @@ PHFDI_FLOORS = {
     # 0 a run and its files, the fault vocabulary of the application
     "bagread": 0, "rosbag2_meta": 0, "records": 0, "bagio": 0, "faults": 0, "inject_kinds": 0,
     "summary": 0, "figures": 0, "alarm_text": 0,
-    # 1 the loop: scenarios, the in-process simulation, replay through the detector, calibration, the ROS graph
-    "scenario": 1, "loop": 1, "replay": 1, "calibration": 1, "ros": 1,
+    # 1 the loop: scenarios, the in-process simulation, replay's reading side, the ROS graph
+    "scenario": 1, "loop": 1, "replay": 1, "ros": 1,
     # 2 measured data: learned and estimator references, injected faults, the simulated rig, diagnosis
     "learned": 2, "estimator": 2, "inject": 2, "rigsim": 2, "diagnosis": 2, "loopdiag": 2,
     # 3 evaluation: the paper's study, the benchmarks' shared code
@@ -627,7 +627,7 @@ OWN_WAVELET_OPTIONS = {"phfdi.commands.analyze": "the offline analysis's wavelet
 def setting_redeclarations(src: Path, names: set[str], flags: set[str],
                            home: str = "wavelet_fdi.config") -> dict[str, list[str]]:
     """module -> lines outside ``home`` that declare a detector setting again: an ``add_argument`` of one of
-    its option flags or a ``ParamSpec`` of its name (both are derived from DetectorSettings' declaration)."""
+    its option flags or a ``ParamSpec`` of its name (both are derived from LearnedSettings' declaration)."""
     out: dict[str, list[str]] = {}
     for module, path in project_modules(src).items():
         if module == home or module in OWN_WAVELET_OPTIONS:
@@ -644,14 +644,10 @@ def setting_redeclarations(src: Path, names: set[str], flags: set[str],
 
 def test_detector_settings_are_declared_once():
     from wavelet_fdi.config import setting_specs
-    from wavelet_fdi.learned_detector import LearnedSettings
 
     specs = setting_specs()
     assert setting_redeclarations(SRC, {s.name for s in specs}, {s.flag for s in specs}) == {}, \
-        "declare a detector setting in wavelet_fdi.config.DetectorSettings (setting(...)); derive the rest"
-    learned = setting_specs(of=LearnedSettings)
-    assert setting_redeclarations(SRC, {s.name for s in learned}, {s.flag for s in learned}) == {}, \
-        "declare a learned-detector setting in wavelet_fdi.learned_detector.LearnedSettings (setting(...))"
+        "declare a detector setting in wavelet_fdi.config.LearnedSettings (setting(...)); derive the rest"
 
 
 def test_settings_checker_catches_a_second_declaration(tmp_path):

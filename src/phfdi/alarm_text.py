@@ -1,71 +1,21 @@
-"""Alarms as lines for people, one function for every detector: the physics detector's (its ``Alarm`` objects or
-their summaries: a fault class, confidence and parameter) and the multichannel detector's (``LearnedDetector``
-alarm dicts: the channels and bands behind each, and with a confirming reference its verdict, fault alarm or
-deviation outside calibration). ``phfdi replay``, ``phfdi demo`` and the live replay print these."""
+"""Alarms as lines for people: the multichannel detector's (``LearnedDetector`` alarm dicts: the channels and bands
+behind each, and with a confirming reference its verdict, fault alarm or deviation outside calibration). ``phfdi
+replay``, ``phfdi demo`` and the live replay print these."""
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Sequence
 
 from wavelet_fdi.alarm_messages import exceedance
 
 
-def format_alarms(alarms: Sequence[Any], diagnostics: dict | None = None, unit_of_time: str = "s") -> str:
-    """Each alarm for people, then (``diagnostics``: a physics detector's counters) its input problems.
-
-    A multichannel detector's alarm (a dict with ``contributions``) says where it was detected, the channels behind
-    it, its name, verdict and when it cleared; a physics detector's alarm its fault class, parameter, onset,
-    statistic and dominant band."""
+def format_alarms(alarms: Sequence[dict], unit_of_time: str = "s") -> str:
+    """Each alarm for people: where it was detected, the channels behind it, its name, verdict and when it
+    cleared."""
     lines = ["no alarm"] if not alarms else []
-    for i, a in enumerate(alarms, 1):
-        lines += _alarm_lines(a, unit_of_time) if isinstance(a, dict) and "contributions" in a \
-            else _physics_lines(a, i)
-    if diagnostics is not None:
-        lines += _input_problem_lines(diagnostics)
+    for a in alarms:
+        lines += _alarm_lines(a, unit_of_time)
     return "\n".join(lines)
-
-
-def input_problems(diagnostics: dict) -> dict:
-    """The physics detector's bad-input counters that are not zero (wavelet_fdi.inputs.INPUT_PROBLEMS), and the
-    reference's resets."""
-    from wavelet_fdi.inputs import input_problems as problems
-
-    return problems(diagnostics, extra=("reference_resets",))
-
-
-def _physics_lines(a: Any, i: int) -> list[str]:
-    """A physics detector's alarm (an ``Alarm`` or its summary with an ``alarm_id``)."""
-    s = a.summary() if hasattr(a, "summary") else a
-    alarm_id = getattr(a, "alarm_id", None) or s.get("alarm_id", i)
-    p = s["parameter"]
-    what = s["fault_class"]
-    if what != "pending":
-        what += f" (confidence {s['confidence']:.2f})"
-    if p and s["fault_class"] not in ("pending", "unknown"):
-        what += f", {p['name']} = {p['value']:.3g} {p['unit']}"
-    elif p and s["fault_class"] == "unknown":
-        what += f"; closest: {p['fault_class']}"
-    lines = [f"alarm {alarm_id}: {what}",
-             f"  onset {s['onset_time']:g} s, detected {s['detection_time']:g} s by {s['statistic']} "
-             f"({exceedance(s['statistic_value'], s['threshold'], '> threshold')}), dominant band "
-             f"{s['dominant_level']}, severity {s['severity']:.3g} pH RMS"]
-    if s["cleared_time"] is not None:
-        end = s.get("episode_end_time")
-        lines.append(f"  cleared {s['cleared_time']:g} s"
-                     + (f"; episode {s['onset_time']:g} s to {end:g} s" if end is not None else ""))
-    return lines
-
-
-def _input_problem_lines(diagnostics: dict) -> list[str]:
-    problems = input_problems(diagnostics)
-    if not problems:
-        return []
-    lines = ["input problems: " + ", ".join(f"{k} {v}" for k, v in problems.items())]
-    held = problems.get("nonfinite_ph", 0) + problems.get("out_of_range_ph", 0)
-    if held:
-        lines.append(f"  {held} pH samples missing or out of range: no residual there, the statistics held "
-                     f"(not fed as numbers)")
-    return lines
 
 
 def _alarm_lines(a: dict, u: str) -> list[str]:

@@ -1,11 +1,10 @@
-"""Offline replay: a recorded run through the same streaming detector, as fast as the CPU allows."""
+"""Offline replay's reading side: a recorded run as the detector takes it, its scenario, and the physics reference
+shipped for that scenario (the detector itself is ``wavelet_fdi.learned_detector``, one for every command)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
+from typing import Callable, Sequence
 
 from phfdi.faults import base_scenario
 from phfdi.records import ReadError, read_run
@@ -13,44 +12,6 @@ from phfdi.records.record import Record
 from phfdi.scenario import load_scenario
 from phfdi_base.errors import UserError
 from phfdi_base.spec import ScenarioSpec, validate_scenario
-from wavelet_fdi.config import Calibration, DetectorSettings, load_default_calibration
-from wavelet_fdi.detector import Event, StreamingDetector
-from wavelet_fdi.inputs import INPUT_SIGNALS
-
-DEFAULT_CHUNK = 4096
-
-
-def detector_inputs(run: Record, feed_names: list[str], valve_feed: str) -> dict[str, np.ndarray]:
-    """The signals the detector may see: measurements, commands, setpoint and the flows of feeds
-    that no valve under test drives. Never the valve's own flow or position, nor ground truth
-    (true pH, fault severity)."""
-    if "ph_measured" not in run:
-        raise UserError("run has no ph_measured signal: the detector needs the measured pH")
-    cols = {}
-    for name in INPUT_SIGNALS:
-        if name in run:
-            cols[name] = np.asarray(run[name], dtype=float)
-    if "valve_command_pct" not in cols:
-        if "ph_controller_output_pct" not in run:
-            raise UserError("run has neither valve_command_pct nor ph_controller_output_pct: the detector "
-                            "needs the pH controller output")
-        cols["valve_command_pct"] = np.asarray(run["ph_controller_output_pct"], dtype=float)
-    for feed in feed_names:
-        if feed != valve_feed and f"{feed}_flow_ml_s" in run:
-            cols[f"{feed}_flow_ml_s"] = np.asarray(run[f"{feed}_flow_ml_s"], dtype=float)
-    return cols
-
-
-def run_chunks(detector: StreamingDetector, run: Record, chunk: int = DEFAULT_CHUNK, flush: bool = True) -> list[Event]:
-    ref = detector.reference
-    cols = detector_inputs(run, ref.feed_names, ref.valve_feed)
-    n = len(run)
-    events: list[Event] = []
-    for a in range(0, n, chunk):
-        events += detector.process({k: v[a:a + chunk] for k, v in cols.items()})
-    if flush:
-        events += detector.flush()
-    return events
 
 
 def scenario_of(run: Record, fallback: str = "paper") -> ScenarioSpec:
@@ -78,23 +39,12 @@ def load_any(path: str | Path, column_map=None, encoding: str | None = None) -> 
     return run
 
 
-@dataclass
-class ReplayResult:
-    alarms: list = field(default_factory=list)
-    events: list = field(default_factory=list)
-    diagnostics: dict = field(default_factory=dict)
-    samples: int = 0
+def scenario_for_seed(scenario: str, overrides: Sequence[str] = ()) -> Callable[[int], ScenarioSpec]:
+    """The healthy scenario with each noise seed (the healthy runs a calibration is measured on)."""
+    def spec(seed: int) -> ScenarioSpec:
+        return load_scenario(scenario, fault="healthy", overrides=list(overrides) + [f"seed={seed}"])
 
-
-def replay_run(run: Record, spec: ScenarioSpec | None = None, calibration: Calibration | None = None,
-               settings: DetectorSettings | None = None, chunk: int = DEFAULT_CHUNK,
-               isolate: bool = True) -> ReplayResult:
-    spec = spec or scenario_of(run)
-    settings = settings or DetectorSettings()
-    calibration = calibration or load_default_calibration(base_scenario(spec.name), settings)
-    det = StreamingDetector(spec, calibration, settings, isolate=isolate)
-    events = run_chunks(det, run, chunk)
-    return ReplayResult(det.alarms, events, det.diagnostics(), len(run))
+    return spec
 
 
 def shipped_physics_name(spec: ScenarioSpec | None) -> str:
@@ -105,7 +55,7 @@ def shipped_physics_name(spec: ScenarioSpec | None) -> str:
     base = "paper" if spec is None else base_scenario(spec.name)
     name = f"{base}_physics"
     if shipped_reference_path(name) is None:
-        raise UserError(f"no physics reference ships for scenario {base!r}: make one with phfdi calibrate --physics "
+        raise UserError(f"no physics reference ships for scenario {base!r}: make one with phfdi calibrate "
                         f"--scenario {base} --out REF.json and give it as the reference")
     return name
 

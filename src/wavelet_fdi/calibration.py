@@ -1,29 +1,19 @@
-"""Thresholds for a false-alarm target, measured on healthy runs.
+"""Thresholds for a false-alarm target, measured on healthy data: the tail fits every calibration uses.
 
-Procedure (reproducible: the seeds are stored in the file):
+A CUSUM's threshold for a target average run length to a false alarm (ARL0) is measured, not assumed:
 
-1. simulate the scenario healthy with each calibration seed (seeds distinct
-   from the evaluation's) and run the detector's front end on it: residuals
-   and their wavelet coefficients after the warm-up;
-2. sigma per channel and band = RMS of the coefficients (healthy mean 0);
-3. cut the monitored stream of each statistic into windows of L samples and
-   run the CUSUM afresh in each window; M_w = the window's maximum;
-4. fit an exponential tail P(M > h) = exp(a - theta h) to the upper half of
-   the M_w (CUSUM maxima have exponential tails; the up and down mean CUSUMs
-   of a band are pooled, the healthy residual being symmetric) and solve
-   P(M > h) = L / ARL0_stat for h: an alarm within a window of L samples
-   has probability about L / ARL when ARL >> L;
-5. ARL0 is the target for the whole detector, which alarms when any of its
-   n statistics crosses: each statistic gets ARL0_stat = n ARL0 (Bonferroni;
-   conservative since the statistics are correlated).
+1. cut each statistic's healthy increments into windows of L samples and run the CUSUM afresh in each window;
+   M_w = the window's maximum (:func:`window_maxima`);
+2. fit an exponential tail P(M > h) = exp(a - theta h) to the upper half of the M_w (CUSUM maxima have
+   exponential tails) and solve P(M > h) = L / ARL0_stat for h (:func:`tail_threshold`): an alarm within a window
+   of L samples has probability about L / ARL when ARL >> L;
+3. ARL0 is the target for the whole detector, which alarms when any of its n statistics crosses: each statistic
+   gets ARL0_stat = n ARL0 (Bonferroni; conservative since the statistics are correlated).
 
-The same window maxima and tail fit calibrate the peer detectors of the
-evaluation (:mod:`wavelet_fdi.peers`), so every detector is held to the same
-false-alarm rate on the same residual streams.
-
-This module holds the statistics (steps 2-5, :func:`calibrate_from_traces`);
-simulating the healthy runs and running the front end on them (step 1) is the
-application's (:mod:`phfdi.calibration`).
+:func:`~wavelet_fdi.learned_detector.calibrate_bands` does this for the multichannel detector, and the same window
+maxima and tail fit calibrate the peer detectors of the evaluation (:mod:`wavelet_fdi.peers`), so every detector is
+held to the same false-alarm rate on the same residual streams. :func:`excess_tail_threshold` places a margin on
+single values (the estimator's confirmation statistics, the spike level).
 """
 
 from __future__ import annotations
@@ -36,12 +26,7 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 
-from .config import Calibration, DetectorSettings
-from .statistics import CusumBank, increments, parse_statistic
-
-#: seeds of the calibration runs: disjoint from the evaluation's (1..99)
-DEFAULT_CALIBRATION_SEEDS = tuple(range(1001, 1017))
-WINDOW_SAMPLES = 1000
+#: the share of the window maxima, largest first, the exponential tail is fitted to
 TAIL_FRACTION = 0.5
 
 
@@ -119,103 +104,3 @@ def window_maxima(z: np.ndarray, window: int) -> np.ndarray:
     c = np.cumsum(z[:n].reshape(-1, window), axis=1)
     s = c - np.minimum(np.minimum.accumulate(c, axis=1), 0.0)
     return s.max(axis=1)
-
-
-def provisional(settings: DetectorSettings, scenario: str, dt_s: float) -> Calibration:
-    """Unit sigmas and infinite thresholds: runs the detector's front end without alarms."""
-    bands = settings.bands() + ["raw"]
-    names = [n for rb in (True, False) for n in
-             DetectorSettings(**{**settings.__dict__, "channels": ("ph", "level"), "raw_band": rb}).statistic_names()]
-    return Calibration(scenario, settings.wavelet, settings.level, dt_s, settings.arl0_samples,
-                       {ch: {b: 1.0 for b in bands} for ch in ("ph", "level")},
-                       {n: math.inf for n in names})
-
-
-def measure_sigma(traces: list[dict[str, np.ndarray]], bands: list[str]) -> dict[str, dict[str, float]]:
-    sigma: dict[str, dict[str, float]] = {}
-    for ch, key in (("ph", "ph_residual"), ("level", "level_residual_cm")):
-        mask = np.concatenate([t[f"{ch}_monitored"] for t in traces])
-        coef = np.concatenate([t[f"{ch}_coefficients"] for t in traces])[mask]
-        raw = np.concatenate([t[key] for t in traces])[mask]
-        if len(raw) == 0:
-            raise UserError(f"calibration runs have no usable {ch} samples after the warm-up")
-        sigma[ch] = {b: float(np.sqrt(np.mean(coef[:, j] ** 2))) for j, b in enumerate(bands)}
-        sigma[ch]["raw"] = float(np.sqrt(np.mean(raw**2)))
-    return sigma
-
-
-def statistic_increments(trace: dict[str, np.ndarray], name: str, sigma: dict[str, dict[str, float]],
-                         settings: DetectorSettings) -> np.ndarray:
-    """Increments of one detector statistic on the monitored samples of a trace."""
-
-    ch, band, kind = parse_statistic(name)
-    j = settings.rows().index(band)
-    mask = trace[f"{ch}_monitored"]
-    u = trace[f"{ch}_coefficients"][mask, j] / sigma[ch]["raw" if band == "R" else band]
-    return increments(kind, u, settings.reference_value(name))
-
-
-def calibrate_from_traces(traces: list[dict[str, np.ndarray]], settings: DetectorSettings, scenario: str,
-                          dt_s: float, seeds: Sequence[int], window: int = WINDOW_SAMPLES) -> Calibration:
-    sigma = measure_sigma(traces, settings.bands())
-    names = settings.statistic_names()
-    p_target = window / (settings.arl0_samples * len(names))
-    thresholds, fits = {}, {}
-    for name in names:
-        if name in thresholds:
-            continue
-        # statistics of one group share one threshold (up and down mean CUSUMs: the healthy residual is
-        # symmetric, and pooling their window maxima halves the fit's scatter)
-        group = settings.threshold_group(name)
-        maxima = np.concatenate([window_maxima(statistic_increments(t, g, sigma, settings), window)
-                                 for t in traces for g in group])
-        fit = tail_threshold(maxima, p_target)
-        for g in group:
-            thresholds[g] = fit.threshold
-            fits[g] = fit.as_dict()
-    n_samples = int(sum(int(np.count_nonzero(t["ph_monitored"])) for t in traces))
-    return Calibration(
-        scenario=scenario, wavelet=settings.wavelet, level=settings.level, sample_time_s=dt_s,
-        arl0_samples=settings.arl0_samples, sigma=sigma, thresholds=thresholds,
-        design={"mean_shift_sigma": settings.mean_shift_sigma, "variance_ratio": settings.variance_ratio,
-                "arl0_samples": settings.arl0_samples, "warmup_s": settings.warmup_s,
-                "channels": list(settings.channels), "raw_band": settings.raw_band},
-        seeds=[int(s) for s in seeds], healthy_samples=n_samples, window_samples=window,
-        method=(f"window maxima of CUSUMs restarted every {window} samples, exponential fit to the upper "
-                f"{int(100 * TAIL_FRACTION)} %, P(max > h) = {window} / (ARL0 x {len(names)} statistics)"),
-        tail_fits=fits)
-
-
-def alarm_positions(z: np.ndarray, h: np.ndarray, clear_samples: int, quiet_samples: int | None = None,
-                    clear_fraction: float = 0.5) -> list[int]:
-    """Alarms of a union of CUSUMs on increments z (n, N): the physics detector's raise/confirm/clear logic, offline
-    (for checking a calibration's false-alarm rate on long records)
-    (a crossing within clear_samples of the previous one confirms the alarm instead of raising one, unless the
-    alarm cleared before it: every statistic below clear_fraction of its threshold for quiet_samples)."""
-
-    out: list[int] = []
-    pos, last, active, loud_last = 0, -1, False, -1
-    n = z.shape[1]
-    bank = CusumBank(z.shape[0])
-    while pos < n:
-        end = min(n, pos + 65536)
-        s = bank.update(z[:, pos:end], pos)
-        over = np.flatnonzero((s > h[:, None]).any(axis=0))
-        stop = end if not len(over) else pos + int(over[0]) + 1  # values after a crossing are restarted
-        if quiet_samples is not None:
-            gi = np.arange(pos, stop)
-            loud = (s[:, :stop - pos] >= clear_fraction * h[:, None]).any(axis=0)
-            last_loud = np.maximum.accumulate(np.where(loud, gi, loud_last))
-            if active and ((gi - last_loud >= quiet_samples) & (gi > last)).any():
-                active = False
-            loud_last = int(last_loud[-1])
-        if not len(over):
-            pos = end
-            continue
-        x = stop - 1
-        if not active or x - last > clear_samples:
-            out.append(x)
-        last, active = x, True
-        bank.restart(x)
-        pos = x + 1
-    return out

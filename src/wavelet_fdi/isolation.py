@@ -51,7 +51,6 @@ import valve_actuator.blocks  # noqa: F401  (registers the valve's faults)
 from phfdi_base.blocks import Chain, Injected, make_block
 from phfdi_base.faults import Fault, faults
 
-from .config import Calibration, DetectorSettings
 from .history import History
 from .reference import HealthyReference, KnownStart, ReferenceState
 
@@ -236,15 +235,18 @@ class FaultIsolator:
     CONFIRMED = 3
     REFINED = 5
 
-    def __init__(self, spec: ScenarioSpec, calibration: Calibration, settings: DetectorSettings,
+    def __init__(self, spec: ScenarioSpec, sigma_ph: float, sigma_level_cm: float, level: int,
                  known: KnownStart | None = None) -> None:
+        """``sigma_ph`` and ``sigma_level_cm``: the residuals' healthy standard deviations (the fits' cost unit; the
+        band energies the evidence reports are in units of ``sigma_ph`` too); ``level``: the wavelet level of the
+        coefficients the history holds (D1..DJ, AJ, then the residual)."""
         self.reference = HealthyReference(spec, known)  # its own copy: re-simulations never touch the detector's
         self.hypotheses = hypotheses()
         self.dt_s = spec.sample_time_s
-        self.sigma_ph = calibration.sigma["ph"]["raw"]
-        self.sigma_level = calibration.sigma["level"]["raw"]
-        self.bands = settings.bands()
-        self.band_sigma = calibration.sigma["ph"]
+        self.sigma_ph = float(sigma_ph)
+        self.sigma_level = float(sigma_level_cm)
+        self.bands = [f"D{j}" for j in range(1, level + 1)] + [f"A{level}"]
+        self.band_sigma = {b: self.sigma_ph for b in self.bands}
         self.simulations = 0
         self.hypotheses_screened = 0
 

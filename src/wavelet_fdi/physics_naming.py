@@ -22,30 +22,27 @@ import numpy as np
 
 from phfdi_base.faults import faults
 
-from .config import Calibration, DetectorSettings
 from .filterbank import CausalSwt
 from .history import History
 from .isolation import FaultIsolator, IsolationResult
-from .reference_physics import PhysicsReference, PhysicsStream
+from .reference_physics import PHYSICS_DESIGN, PhysicsReference, PhysicsStream
+
+#: the filter bank of the residual the isolator reads (its evidence's band energies): the physics detector's
+WAVELET, LEVEL = str(PHYSICS_DESIGN["wavelet"]), int(PHYSICS_DESIGN["level"])
 
 
-def _isolator(ref: PhysicsReference) -> tuple[FaultIsolator, DetectorSettings]:
+def _isolator(ref: PhysicsReference) -> FaultIsolator:
     """One isolator per reference (its hypotheses and the model it re-simulates are built once, kept on it)."""
     cached = ref.__dict__.get("_isolator")
     if cached is not None:
         return cached
-    settings = DetectorSettings()
     noise = ref.sensor_noise
-    bands = settings.bands() + ["raw"]
-    cal = Calibration(str(ref.spec.name), settings.wavelet, settings.level, ref.spec.sample_time_s,
-                      settings.arl0_samples, {ch: {b: v for b in bands} for ch, v in noise.items()}, {})
-    made = (FaultIsolator(ref.spec, cal, settings), settings)
+    made = FaultIsolator(ref.spec, noise["ph"], noise["level"], LEVEL)
     object.__setattr__(ref, "_isolator", made)  # a cache, not a field: the reference stays what its file says
     return made
 
 
-def _history(ref: PhysicsReference, t_s: np.ndarray, rows: np.ndarray, settings: DetectorSettings
-             ) -> tuple[History, dict]:
+def _history(ref: PhysicsReference, t_s: np.ndarray, rows: np.ndarray) -> tuple[History, dict]:
     """The kind's model re-run over the rows: what the isolator reads, and the snapshots it starts from."""
     stream = PhysicsStream(ref, keep=True)
     stream.residuals(t_s, rows)
@@ -54,19 +51,19 @@ def _history(ref: PhysicsReference, t_s: np.ndarray, rows: np.ndarray, settings:
     cmd, _, ph, level = stream.columns(rows)
     ph_pred = np.concatenate(kept["ph_pred"])
     residual = np.where(np.isfinite(ph - ph_pred), ph - ph_pred, 0.0)
-    out = CausalSwt(settings.wavelet, settings.level).process(residual)
+    out = CausalSwt(WAVELET, LEVEL).process(residual)
     coef = np.vstack((out.details, out.approx[None, :], residual[None, :])).T
     flows = np.concatenate(kept["flows"])
     n = len(rows)
     hist = History(n + 1, {"t": 1, "ph": 1, "level": 1, "command": 1, "ph_pred": 1, "level_pred": 1,
-                           "flows": flows.shape[1], "opening": 1, "setpoint": 1, "coef": settings.level + 2})
+                           "flows": flows.shape[1], "opening": 1, "setpoint": 1, "coef": LEVEL + 2})
     hist.write(0, {"t": np.asarray(t_s, float), "ph": ph, "level": level, "command": cmd, "ph_pred": ph_pred,
                    "level_pred": np.concatenate(kept["level_pred"]), "flows": flows,
                    "opening": np.concatenate(kept["opening"]), "setpoint": np.full(n, math.nan), "coef": coef})
     return hist, kept["snapshots"]
 
 
-#: namings made while the first stays unsure: the physics detector's isolation retries (DetectorSettings)
+#: namings made while the first stays unsure: the physics detector's isolation retries
 RETRIES = 2
 #: below this confidence a naming is unsure (the physics detector's isolation_confidence)
 SURE = 0.9
@@ -80,8 +77,8 @@ def naming_looks(first: int) -> tuple[int, ...]:
 def name_fault(ref: PhysicsReference, t_s: np.ndarray, rows: np.ndarray, onset_index: int, detection_index: int,
                statistic: str = "", after: int | None = None) -> dict:
     """The fault behind an alarm (module docstring); ``rows`` in ``ref.channels`` order, indices into them."""
-    isolator, settings = _isolator(ref)
-    hist, snapshots = _history(ref, np.asarray(t_s, float), np.asarray(rows, float), settings)
+    isolator = _isolator(ref)
+    hist, snapshots = _history(ref, np.asarray(t_s, float), np.asarray(rows, float))
     start = [k for k in snapshots if k <= onset_index]
     result = (isolator.isolate(hist, snapshots[max(start)], max(start), onset_index, len(rows) - 1)
               if start else None)

@@ -1,7 +1,7 @@
 """The paper loop's physics as a reference kind of the multichannel detector (issue 37: one detector core).
 
 ``physics``: the healthy plant and valves of a scenario (:class:`~wavelet_fdi.reference.HealthyReference`, the same
-model the physics detector :class:`~wavelet_fdi.detector.StreamingDetector` runs) driven by the record's measured
+model the paper's physics detector ran, retired on 2026-12-07 for this kind) driven by the record's measured
 valve commands; the residuals are the measured pH (and level, where a controller holds it) minus the model's
 prediction, divided by the scenario's sensor noise, so that :class:`~wavelet_fdi.learned_detector.LearnedDetector`
 watches them like any other reference's.
@@ -43,26 +43,30 @@ import numpy as np
 
 from phfdi_base.errors import UserError
 
-from .inputs import LEVEL_RANGE_CM, PH_RANGE
 from .reference import HealthyReference
 
 if TYPE_CHECKING:  # the schema (pydantic) is not needed to read a validated scenario
     from phfdi_base.spec import ScenarioSpec
 
-    from .config import DetectorSettings, LearnedSettings
+    from .config import LearnedSettings
 
 KIND = "physics"
 COMMAND, OUTLET, PH, LEVEL = "valve_command_pct", "level_controller_output_pct", "ph_measured", "level_measured_cm"
 SETPOINT = "ph_setpoint"
 #: share of a block's mean residual the warm-up moves the model's state by (the physics detector's warm-up gain)
 WARMUP_GAIN = 0.5
-#: time after a detection at which the fault is named (the physics detector's isolation delay, DetectorSettings)
+#: time after a detection at which the fault is named by default (the physics detector's isolation delay)
 NAMING_AFTER_S = 300.0
+#: the physics detector's design, which :func:`design_settings` carries over: its filter bank (wavelet, level), the
+#: residual mean shift its mean CUSUMs are designed for (residual sigmas), the variance ratio of its energy CUSUMs,
+#: its false-alarm target (samples) and block (samples)
+PHYSICS_DESIGN: dict[str, Any] = {"wavelet": "sym4", "level": 3, "mean_shift_sigma": 1.0, "variance_ratio": 4.0,
+                  "arl0_samples": 1e5, "block_samples": 256}
 
 
 #: readings no plant gives (a pH off any pH scale, a level below the tank's bottom or absurdly high): a broken
-#: reading, taken as missing (the physics detector's input check, wavelet_fdi.inputs)
-MEASUREMENT_RANGES = {"ph_measured": PH_RANGE, "level_measured_cm": LEVEL_RANGE_CM}
+#: reading, taken as missing (the physics detector's input check)
+MEASUREMENT_RANGES = {"ph_measured": (-1.0, 15.0), "level_measured_cm": (0.0, 1e4)}
 #: the scenario's settings the healthy model runs on (the commands are the record's, so the controllers, setpoints,
 #: duration and seed are not among them)
 MODEL_KEYS = ("plant", "sample_time_s", "valves", "sensors", "feeds", "plugins")
@@ -95,24 +99,23 @@ def follow_scenario(model: Any, spec: ScenarioSpec, what: str = "record") -> tup
         f"{ref.spec.name!r}, which its band scales and thresholds were calibrated on)")
 
 
-def design_settings(physics: DetectorSettings | None = None, sample_time_s: float = 1.0, **given: Any
-                    ) -> LearnedSettings:
-    """The multichannel detector's settings that carry the physics detector's design (its
-    :class:`~wavelet_fdi.config.DetectorSettings`): the same wavelet and level; the residual's own mean (R) and AJ's
-    mean designed for a shift of ``mean_shift_sigma`` (k half of it: in the residual's sigmas for R, in AJ's for AJ,
-    where a shift of white noise reads 2^(J/2) times larger); energy CUSUMs for its ``variance_ratio`` on every band,
-    the detail bands and AJ, as its own; its block
+def design_settings(sample_time_s: float = 1.0, **given: Any) -> LearnedSettings:
+    """The multichannel detector's settings that carry the physics detector's design (:data:`PHYSICS_DESIGN`): the
+    same wavelet and level; the residual's own mean (R) and AJ's mean designed for a shift of ``mean_shift_sigma``
+    (k half of it: in the residual's sigmas for R, in AJ's for AJ, where a shift of white noise reads 2^(J/2) times
+    larger); energy CUSUMs for its ``variance_ratio`` on every band, the detail bands and AJ, as its own; its block
     (``block_samples``: an alarm clears only after a whole block without a crossing, so a valve that sticks and
     slips keeps one alarm up rather than raising one per slip); and its false-alarm target ``arl0_samples``, for
     which :func:`~wavelet_fdi.learned_detector.calibrate_bands` measures every threshold. ``given``: any setting
-    of :class:`~wavelet_fdi.config.LearnedSettings` set otherwise."""
-    from .config import DetectorSettings, LearnedSettings
+    of :class:`~wavelet_fdi.config.LearnedSettings` set otherwise (a ``level`` given moves AJ's k with it)."""
+    from .config import LearnedSettings
 
-    d = physics or DetectorSettings()
-    design = dict(wavelet=d.wavelet, level=d.level, mean_k=0.5 * d.mean_shift_sigma * 2.0 ** (d.level / 2.0),
-                  residual_mean_k=0.5 * d.mean_shift_sigma, energy_variance_ratio=d.variance_ratio,
-                  aj_energy_variance_ratio=d.variance_ratio,
-                  arl0_samples=d.arl0_samples, block_samples=d.block_samples, sample_time_s=float(sample_time_s))
+    d = PHYSICS_DESIGN
+    level = int(given.get("level", d["level"]))
+    design = dict(wavelet=d["wavelet"], level=level, mean_k=0.5 * d["mean_shift_sigma"] * 2.0 ** (level / 2.0),
+                  residual_mean_k=0.5 * d["mean_shift_sigma"], energy_variance_ratio=d["variance_ratio"],
+                  aj_energy_variance_ratio=d["variance_ratio"], arl0_samples=d["arl0_samples"],
+                  block_samples=d["block_samples"], sample_time_s=float(sample_time_s))
     return LearnedSettings(**{**design, **given})
 
 
@@ -148,6 +151,10 @@ class PhysicsReference:
     #: ``setpoint_holdoff_s``); on, the reference reads the record's ``ph_setpoint`` too
     setpoint_holdoff_s: float = 0.0
     spec: Any = field(default=None, compare=False, repr=False)
+    #: the fault is named this long after a detection (and again as long after that while the naming is unsure;
+    #: the physics detector's ``isolation_delays_s``): long enough for a stick-slip to show over a few controller
+    #: cycles, short enough that the fit's window holds little else
+    naming_after_s: float = NAMING_AFTER_S
 
     kind = KIND
 
@@ -160,6 +167,8 @@ class PhysicsReference:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise UserError(f"physics reference: {name} must be >= 0, got {value}")
+        if not (math.isfinite(self.naming_after_s) and self.naming_after_s > 0):
+            raise UserError(f"physics reference: naming_after_s must be > 0, got {self.naming_after_s}")
         if self.spec is None:
             from phfdi_base.spec import validate_scenario  # the reference file's scenario, checked by its schema
 
@@ -168,11 +177,11 @@ class PhysicsReference:
     @classmethod
     def from_spec(cls, spec: ScenarioSpec, warmup_s: float = 600.0, block_samples: int = 256,
                   watch_level: bool = True, command_timeout_s: float = 10.0,
-                  setpoint_holdoff_s: float = 0.0) -> "PhysicsReference":
+                  setpoint_holdoff_s: float = 0.0, naming_after_s: float = NAMING_AFTER_S) -> "PhysicsReference":
         """The reference of a validated scenario (its faults are dropped: the reference is the healthy loop)."""
         healthy = spec.model_copy(update={"faults": []})
         return cls(healthy.model_dump(mode="json"), float(warmup_s), int(block_samples), bool(watch_level),
-                   float(command_timeout_s), float(setpoint_holdoff_s), healthy)
+                   float(command_timeout_s), float(setpoint_holdoff_s), healthy, float(naming_after_s))
 
     def for_scenario(self, spec: ScenarioSpec) -> tuple["PhysicsReference", list[str]]:
         """This reference with ``spec``'s healthy loop as its model (its options kept), and the settings of the
@@ -185,7 +194,8 @@ class PhysicsReference:
         if not changed:
             return self, []
         return PhysicsReference.from_spec(spec, self.warmup_s, self.block_samples, self.watch_level,
-                                          self.command_timeout_s, self.setpoint_holdoff_s), changed
+                                          self.command_timeout_s, self.setpoint_holdoff_s,
+                                          self.naming_after_s), changed
 
     # ---- the protocol every reference kind shares ------------------------------------------
     @property
@@ -205,9 +215,8 @@ class PhysicsReference:
 
     @property
     def naming_after_samples(self) -> int:
-        """Samples after a detection the detector waits before naming the fault (the physics detector's isolation
-        delay, :data:`NAMING_AFTER_S`: a stick-slip shows over a few controller cycles)."""
-        return int(round(NAMING_AFTER_S / self.spec.sample_time_s))
+        """Samples after a detection the detector waits before naming the fault (:attr:`naming_after_s`)."""
+        return max(1, int(round(self.naming_after_s / self.spec.sample_time_s)))
 
     @property
     def lags(self) -> int:
@@ -241,14 +250,16 @@ class PhysicsReference:
     def to_dict(self) -> dict:
         return {"kind": KIND, "scenario": self.scenario, "warmup_s": self.warmup_s,
                 "block_samples": self.block_samples, "watch_level": self.watch_level,
-                "command_timeout_s": self.command_timeout_s, "setpoint_holdoff_s": self.setpoint_holdoff_s}
+                "command_timeout_s": self.command_timeout_s, "setpoint_holdoff_s": self.setpoint_holdoff_s,
+                "naming_after_s": self.naming_after_s}
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "PhysicsReference":
         try:
             return cls(dict(d["scenario"]), float(d.get("warmup_s", 600.0)), int(d.get("block_samples", 256)),
                        bool(d.get("watch_level", True)), float(d.get("command_timeout_s", 10.0)),
-                       float(d.get("setpoint_holdoff_s", 0.0)))
+                       float(d.get("setpoint_holdoff_s", 0.0)), None,
+                       float(d.get("naming_after_s", NAMING_AFTER_S)))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{where}: not a physics reference ({exc})") from None
 

@@ -28,12 +28,10 @@ Kinds (chosen by the reference file, :data:`KINDS`):
 * the same physics run open loop (``correct: false``): the model simulated from the record's first pH on
   the measured pump flows, never corrected, the way ``phfdi diagnose`` compares a model with a run;
 * ``physics`` (:class:`~wavelet_fdi.reference_physics.PhysicsReference`): a scenario's healthy plant and valves
-  (the paper's loop) run on the measured valve commands, the model the physics detector runs; its alarms are
-  named by the physics detector's isolation (:mod:`wavelet_fdi.physics_naming`).
+  (the paper's loop) run on the measured valve commands, the model the paper's physics detector ran (retired for
+  this kind on 2026-12-07); its alarms are named by that detector's isolation (:mod:`wavelet_fdi.physics_naming`).
 
-The valve loop of the paper keeps its own physics detector (:class:`~wavelet_fdi.detector.StreamingDetector`)
-until the ``physics`` kind is shown to do what it does; benchmarks/physics_reference.py measures the two side by
-side. A kind whose namer needs more (or fewer) samples after a detection than the detector's
+A kind whose namer needs more (or fewer) samples after a detection than the detector's
 ``NAMING_AFTER`` says so with ``naming_after_samples``.
 Adding a kind: a class with the members above, one entry in :data:`KINDS` (and, if it can name the fault
 behind an alarm, one in :data:`NAMERS`).

@@ -12,13 +12,9 @@ whole-record processing agree bit for bit. :meth:`CusumBank.renormalise`
 (C := S, M := 0) keeps the state bounded; it leaves S unchanged and is called
 at fixed sample indices so that it too is independent of chunking.
 
-Increments used by the detector, with u a coefficient divided by its healthy
-standard deviation:
-
-* ``energy``: u^2 - k (k = ln(rho) / (1 - 1/rho): the CUSUM of the Gaussian
-  log-likelihood ratio for a variance increase by rho, scaled);
-* ``mean_up`` / ``mean_down``: +u - k / -u - k (k = delta / 2: a mean shift of
-  delta standard deviations).
+The reference values of the energy CUSUMs (:func:`energy_reference`,
+:func:`energy_decrease_reference`) are here; each statistic's increments are
+its class's in :mod:`wavelet_fdi.learned_statistics`.
 """
 
 from __future__ import annotations
@@ -56,108 +52,6 @@ def energy_decrease_reference(variance_ratio: float) -> float:
     if not 0.0 < variance_ratio < 1.0:
         raise ValueError(f"variance ratio of a decrease must be between 0 and 1, got {variance_ratio}")
     return math.log(1.0 / variance_ratio) / (1.0 / variance_ratio - 1.0)
-
-
-class Statistic:
-    """One kind of CUSUM statistic the detector can run: where it looks, its reference value, its increment.
-
-    A new statistic is one subclass registered with :func:`register_statistic` and named in
-    :attr:`wavelet_fdi.DetectorSettings.statistics`; ``phfdi calibrate`` then measures its threshold like any
-    other (window maxima on healthy runs, tail fit for the false-alarm target; statistics of one channel and
-    band with the same ``group`` share one threshold). ``settings`` is a :class:`wavelet_fdi.DetectorSettings`.
-
-    Examples
-    --------
-    >>> STATISTICS["mean_up"].increments(np.array([0.0, 2.0]), 0.5)
-    array([-0.5,  1.5])
-    """
-
-    kind: str = ""
-    #: statistics of one channel and band with the same group share a threshold (pooled window maxima)
-    group: str = ""
-
-    def rows(self, settings) -> tuple[str, ...]:
-        """The coefficient rows watched: wavelet bands D1..DJ, AJ, or R (the residual itself)."""
-        raise NotImplementedError
-
-    def reference_value(self, settings, band: str) -> float:
-        raise NotImplementedError
-
-    def increments(self, u: np.ndarray, k: float) -> np.ndarray:
-        """CUSUM increments (drift below 0 when healthy, above after the change) of normalised coefficients u."""
-        raise NotImplementedError
-
-
-#: kind -> statistic, in the order the detector lists a band's statistics
-STATISTICS: dict[str, Statistic] = {}
-
-
-def register_statistic(cls: type[Statistic]) -> type[Statistic]:
-    """Class decorator: make a statistic known by its ``kind`` (one kind, one class)."""
-    if not cls.kind or cls.kind in STATISTICS:
-        raise ValueError(f"statistic kind {cls.kind!r} is empty or already registered")
-    STATISTICS[cls.kind] = cls()
-    return cls
-
-
-def statistic(kind: str) -> Statistic:
-    try:
-        return STATISTICS[kind]
-    except KeyError:
-        raise ValueError(f"unknown statistic kind {kind!r}; known: {', '.join(STATISTICS)}") from None
-
-
-class _Mean(Statistic):
-    """A mean shift of ``mean_shift_sigma`` residual sigmas, on R (``raw_band``) or else on AJ, which carries a
-    residual mean 2^(J/2) times (its DC gain): the same information, later."""
-
-    group = "mean"
-
-    def rows(self, settings) -> tuple[str, ...]:
-        return ("R",) if settings.raw_band else (f"A{settings.level}",)
-
-    def reference_value(self, settings, band: str) -> float:
-        gain = 1.0 if band == "R" else 2.0 ** (0.5 * settings.level)
-        return 0.5 * settings.mean_shift_sigma * gain
-
-
-@register_statistic
-class MeanUp(_Mean):
-    kind = "mean_up"
-
-    def increments(self, u: np.ndarray, k: float) -> np.ndarray:
-        return u - k
-
-
-@register_statistic
-class MeanDown(_Mean):
-    kind = "mean_down"
-
-    def increments(self, u: np.ndarray, k: float) -> np.ndarray:
-        return -u - k
-
-
-@register_statistic
-class Energy(Statistic):
-    """Energy of every wavelet band: a variance increase by ``variance_ratio``."""
-
-    kind = group = "energy"
-
-    def rows(self, settings) -> tuple[str, ...]:
-        return tuple(settings.bands())
-
-    def reference_value(self, settings, band: str) -> float:
-        return energy_reference(settings.variance_ratio)
-
-    def increments(self, u: np.ndarray, k: float) -> np.ndarray:
-        return u * u - k
-
-
-KINDS = tuple(STATISTICS)
-
-
-def increments(kind: str, u: np.ndarray, k: float) -> np.ndarray:
-    return statistic(kind).increments(u, k)
 
 
 class CusumBank:

@@ -1,4 +1,4 @@
-"""Fixtures of the detector tests: simulated paper runs (cached per session) and the shipped calibration."""
+"""Fixtures of the detector tests: simulated paper runs (cached per session)."""
 
 from __future__ import annotations
 
@@ -6,14 +6,8 @@ import pytest
 
 from phfdi.loop import simulate
 from phfdi.scenario import load_scenario
-from wavelet_fdi.config import DetectorSettings, load_default_calibration
 
 _RUNS: dict = {}
-
-
-@pytest.fixture(scope="session")
-def calibration():
-    return load_default_calibration("paper", DetectorSettings())
 
 
 @pytest.fixture(scope="session")

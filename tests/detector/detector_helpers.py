@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from phfdi.scenario import load_scenario
-from wavelet_fdi.config import DetectorSettings
 
 PAPER_FAULTS = ("backlash", "friction", "deadzone", "saturation", "stiction", "probe_delay")
 
@@ -15,7 +14,3 @@ def short_spec(fault: str = "backlash", onset_s: float = 1000.0, duration_s: flo
     if fault == "healthy":
         return load_scenario("paper", fault="healthy", overrides=overrides)
     return load_scenario("paper", fault=fault, overrides=overrides, onset_s=onset_s)
-
-
-#: detector settings for the short runs: shorter warm-up and isolation delay (thresholds unchanged)
-SHORT = DetectorSettings(warmup_s=300.0, isolation_delays_s=(150.0,))

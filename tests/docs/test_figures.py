@@ -185,13 +185,13 @@ def _summary() -> dict:
 
 def test_evaluation_figures(tmp_path, rendered):
     from phfdi.study.detector_figures import plot_coefficient_residuals, plot_delays
-    from wavelet_fdi.config import DetectorSettings
+    from wavelet_fdi.reference_physics import design_settings
 
     plot_delays(_summary(), tmp_path / "delays.png")
     t = np.arange(2048.0)
     measured = 12.0 + 0.05 * np.sin(2 * np.pi * t / 64) * (t > 1024) + 0.01 * np.random.default_rng(1).normal(size=t.size)
     signals = {"time_s": t, "ph_measured": measured, "ph_predicted": np.full(t.size, 12.0)}
-    plot_coefficient_residuals(signals, DetectorSettings(), tmp_path / "coef.png", "Backlash at 1024 s", 1024.0)
+    plot_coefficient_residuals(signals, design_settings(), tmp_path / "coef.png", "Backlash at 1024 s", 1024.0)
     _check_all(rendered)
     delays, coef = rendered
     for ax in (a for a in delays.axes if _has_data(a)):

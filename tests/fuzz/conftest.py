@@ -1,5 +1,5 @@
 """Seed files for the fuzz tests: real measured records (../shared/data, cut short), a short run of the project
-written as CSV, Parquet and MCAP, and the shipped YAML files (scenarios, column maps, a calibration)."""
+written as CSV, Parquet and MCAP, and the shipped files (scenarios and column maps in YAML, the physics reference in JSON)."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def seeds(tmp_path_factory) -> dict[str, Path]:
              "run.mcap": write_run(run, out / "run.mcap")}
     for name, src in (("scenario.yaml", ROOT / "src/phfdi/scenarios/paper.yaml"),
                       ("map.yaml", ROOT / "src/phfdi/diagnosis/maps/ph_rig.yaml"),
-                      ("calibration.yaml", ROOT / "src/wavelet_fdi/calibrations/paper_sym4_L3.yaml")):
+                      ("reference.json", ROOT / "src/wavelet_fdi/calibrations/paper_physics.json")):
         files[name] = Path(shutil.copy(src, out / name))
     (out / "loopmap.yaml").write_text("columns: {time: timestamp, op: X.MV, pv: X.PV, sp: X.SV}\nloop_tag: X\n")
     files["loopmap.yaml"] = out / "loopmap.yaml"

@@ -198,15 +198,15 @@ def test_project_readers_raise_only_user_errors(seeds, data):
 @FUZZ
 @given(data=st.data())
 def test_yaml_files_raise_only_user_errors(seeds, data):
-    """Scenarios, column maps (both forms), a calibration."""
+    """Scenarios, column maps (both forms), a detector's reference file (the shipped physics reference)."""
     from phfdi.loopdiag.readers import parse_loop_columns
     from phfdi.records import ColumnMap
     from phfdi.scenario import load_scenario
-    from wavelet_fdi.config import Calibration
+    from wavelet_fdi.learned_detector import LearnedModel
 
-    path = _variant(data.draw, seeds, ["scenario.yaml", "map.yaml", "loopmap.yaml", "calibration.yaml"])
+    path = _variant(data.draw, seeds, ["scenario.yaml", "map.yaml", "loopmap.yaml", "reference.json"])
     loader = {"scenario.yaml": load_scenario, "map.yaml": ColumnMap.load, "loopmap.yaml": parse_loop_columns,
-              "calibration.yaml": Calibration.load}[path.name]
+              "reference.json": LearnedModel.load}[path.name]
     try:
         loader(str(path))
     except UserError as exc:

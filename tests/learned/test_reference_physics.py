@@ -137,19 +137,18 @@ def test_the_setpoint_hold_off_holds_the_residuals_after_each_setpoint_change_an
 
 
 def test_the_shipped_physics_reference_is_the_paper_loop_with_the_physics_detectors_design():
-    """paper_physics, shipped (phfdi calibrate --physics --scenario paper --out
+    """paper_physics, shipped (phfdi calibrate --scenario paper --out
     src/wavelet_fdi/calibrations/paper_physics.json; run that again if this fails): the paper scenario as it is now,
     the physics detector's design, a threshold for every statistic, measured on seeds no evaluation uses; taken by
     name wherever a reference file is (a file of that name, where one exists, comes first)."""
     from phfdi.study.evaluation import EvalConfig
-    from wavelet_fdi.config import DetectorSettings
     from wavelet_fdi.learned_detector import LearnedDetector, LearnedModel
     from wavelet_fdi.reference_physics import design_settings
 
     model = LearnedModel.load("paper_physics")
     healthy = PhysicsReference.from_spec(load_scenario("paper", fault="healthy"), watch_level=False)
     assert model.reference.to_dict() == healthy.to_dict()
-    assert model.settings == design_settings(DetectorSettings(), 1.0)
+    assert model.settings == design_settings(1.0)
     assert set(model.thresholds) == set(LearnedDetector(model).stat_names)
     seeds = {int(run.split()[1]) for run in model.source["runs"]}
     assert seeds == set(range(1001, 1017))
@@ -167,6 +166,19 @@ def test_a_reference_entry_that_is_not_a_scenario_is_one_clear_refusal():
         reference_from_dict({"kind": "physics"})
     with pytest.raises(UserError, match="warmup_s must be >= 0"):
         PhysicsReference(ref.scenario, warmup_s=-1.0)
+    with pytest.raises(UserError, match="naming_after_s must be > 0"):
+        PhysicsReference(ref.scenario, naming_after_s=0.0)
+
+
+def test_the_naming_delay_is_the_references_and_its_file_keeps_it():
+    """naming_after_s (the physics detector's isolation delay): the detector names that long after a detection; a
+    file written before it existed reads the default, 300 s."""
+    ref, _, _ = record(17)
+    short = PhysicsReference.from_spec(ref.spec, naming_after_s=150.0)
+    assert short.naming_after_samples == 150 and ref.naming_after_samples == 300
+    assert reference_from_dict(short.to_dict()) == short
+    old = {k: v for k, v in ref.to_dict().items() if k != "naming_after_s"}
+    assert reference_from_dict(old).naming_after_s == 300.0
 
 
 #: a plant the shipped reference was not calibrated on: the acid valve's capacity 45 mL/s instead of 40

@@ -34,9 +34,9 @@ EXAMPLES = """examples:
 Without --learn or --estimator, the scenario's healthy plant and valves are
 calibrated as the physics reference of the multichannel detector (docs/detector.md,
 "The paper's physics as a reference kind"), on the --seeds' healthy runs or on
---runs: the physics detector's design (--wavelet, --level, --arl0, --channels)
+--runs: the physics detector's design (wavelet sym4, level 3, ARL0 1e5, ...)
 carried over, the band noise and every threshold measured on the healthy runs
-for --arl0; any learned-detector option given sets that setting over the design.
+for --arl0; any detector option given sets that setting over the design.
 The seeds default to 1001-1016, disjoint from the evaluation's (1-99). The
 shipped one for the paper scenario is paper_physics (made with the defaults).
 Recorded runs are read under the reading policy of docs/records.md (--map,
@@ -64,11 +64,12 @@ ph_measured, so a --map is needed for other column names (ph_rig is shipped).
 phfdi replay RUN --map ph_rig --reference rig.json watches a run with it.
 
 Every detector setting is an option of its own, --NAME VALUE, derived from its
-one declaration (docs/detector.md, "Detector settings"): --level, --wavelet and
---arl0 set the detector being calibrated (physics, learned or estimator), each
-with its own default (the learned and estimator detectors' --arl0 is 0: their
-declared thresholds); --channels is the physics detector's, the others the
-learned and estimator detector's. The old form --learned KEY=VALUE is still read.
+one declaration (docs/detector.md, "Detector settings"); one detector runs every
+reference kind, and a setting not given keeps the design of the kind being
+calibrated: the physics reference's design or the detector's own defaults (each
+option's help shows both), or the estimator's (docs/detector.md). --channels is the physics reference's
+own option. The old form --learned KEY=VALUE is still read with --learn and
+--estimator.
 """
 
 
@@ -96,53 +97,58 @@ def _shown(value) -> str:
     return ",".join(value) if isinstance(value, tuple) else f"{value:g}" if isinstance(value, float) else str(value)
 
 
-def add_detector_args(p: argparse.ArgumentParser, learned: bool = False) -> None:
-    """The detector settings as options, derived from their one declaration (wavelet_fdi.config): the physics
-    detector's exposed ones, and with ``learned`` every learned (and estimator) detector setting, in the same form,
-    ``--NAME VALUE``; a setting both declare (``--level``, ``--wavelet``) is one option for the detector being
-    calibrated. No option has an argparse default: a setting not given keeps its detector's own default, and
-    :func:`given_settings` can tell what was given."""
+def physics_design_defaults() -> dict:
+    """The settings the physics reference's design (``reference_physics.design_settings``) sets otherwise than the
+    multichannel detector's own defaults: name -> its value there."""
+    from dataclasses import asdict
+
+    from wavelet_fdi.config import LearnedSettings
+    from wavelet_fdi.reference_physics import design_settings
+
+    plain, physics = asdict(LearnedSettings()), asdict(design_settings(1.0))
+    return {k: v for k, v in physics.items() if v != plain[k] and k != "sample_time_s"}
+
+
+def add_detector_args(p) -> None:
+    """Every setting of the multichannel detector (physics, learned and estimator references alike) as an option
+    ``--NAME VALUE`` of ``p`` (a parser or an argument group), from its one declaration
+    (``wavelet_fdi.config.LearnedSettings``), with no argparse default: a setting not given keeps its default (the
+    physics reference's design, or the detector's own, both in the help), and :func:`given_settings` can tell what
+    was given."""
     from wavelet_fdi.config import LearnedSettings, setting_specs
 
-    physics = {s.name: s for s in setting_specs(exposed_only=True)}
-    learned_specs = {s.name: s for s in setting_specs(of=LearnedSettings)} if learned else {}
-    for s in physics.values():
-        metavar = "A,B" if s.is_list else "SAMPLES" if s.name == "arl0_samples" else None
-        also = learned_specs.get(s.name)
-        default = f"default {_shown(s.default)}" + (f"; with --learn or --estimator {_shown(also.default)}"
-                                                    if also is not None and also.default != s.default else "")
-        p.add_argument(s.flag, dest=s.name, type=str if s.is_list else s.type, default=None, metavar=metavar,
-                       help=f"{s.help} ({default})")
-    if learned:
-        add_learned_args(p.add_argument_group(
-            "learned and estimator detector settings (with --learn or --estimator; --level and --wavelet above too; "
-            "the estimator's own design where it differs: docs/detector.md)"), skip=tuple(physics))
-
-
-def add_learned_args(p, skip: tuple[str, ...] = ()) -> None:
-    """Every learned (and estimator) detector setting not in ``skip`` as an option ``--NAME VALUE`` of ``p`` (a parser
-    or an argument group), from its one declaration, with no argparse default (see :func:`add_detector_args`)."""
-    from wavelet_fdi.config import LearnedSettings, setting_specs
-
+    physics = physics_design_defaults()
     for s in setting_specs(of=LearnedSettings):
-        if s.name not in skip:
-            p.add_argument(s.flag, dest=s.name, type=s.type, default=None, metavar=s.name.split("_")[-1].upper(),
-                           help=f"{s.help} (default {_shown(s.default)})")
+        default = f"default {_shown(s.default)}" + (f"; the physics reference's design: {_shown(physics[s.name])}"
+                                                    if s.name in physics else "")
+        metavar = "SAMPLES" if s.name == "arl0_samples" else s.name.split("_")[-1].upper()
+        p.add_argument(s.flag, dest=s.name, type=s.type, default=None, metavar=metavar, help=f"{s.help} ({default})")
 
 
-def given_settings(args: argparse.Namespace, of: type | None = None) -> dict:
-    """The settings of ``of`` (default: the physics detector's exposed ones) given as options."""
-    from wavelet_fdi.config import setting_specs
+def add_physics_args(p) -> None:
+    """The physics reference's own option: the residual channels it watches."""
+    p.add_argument("--channels", default=None, metavar="ph[,level]",
+                   help="residual channels the physics reference watches: ph, or ph,level (the level's too, where "
+                        "a controller holds it) (default ph)")
 
-    specs = setting_specs(exposed_only=True) if of is None else setting_specs(of=of)
-    return {s.name: getattr(args, s.name) for s in specs if getattr(args, s.name, None) is not None}
+
+def physics_watches_level(args: argparse.Namespace) -> bool:
+    """``--channels``: ph (default) or ph,level; anything else is one line."""
+    from phfdi_base.errors import UserError
+
+    given = getattr(args, "channels", None)
+    channels = tuple(c.strip() for c in (given or "ph").split(",") if c.strip())
+    if channels not in (("ph",), ("ph", "level"), ("level", "ph")):
+        raise UserError(f"--channels {given}: use ph, or ph,level")
+    return "level" in channels
 
 
-def settings_from_args(args: argparse.Namespace):
-    """The physics detector's settings: those given as options, the others their defaults."""
-    from wavelet_fdi.config import settings_from_values
+def given_settings(args: argparse.Namespace) -> dict:
+    """The multichannel detector's settings given as options (name -> value)."""
+    from wavelet_fdi.config import LearnedSettings, setting_specs
 
-    return settings_from_values(given_settings(args))
+    return {s.name: getattr(args, s.name) for s in setting_specs(of=LearnedSettings)
+            if getattr(args, s.name, None) is not None}
 
 
 def learned_settings_from_args(args: argparse.Namespace, base=None):
@@ -153,7 +159,7 @@ def learned_settings_from_args(args: argparse.Namespace, base=None):
     from phfdi_base.errors import UserError
     from wavelet_fdi.config import LearnedSettings
 
-    given = given_settings(args, LearnedSettings)
+    given = given_settings(args)
     pairs = getattr(args, "learned", None) or []
     if pairs:
         print("note: --learned KEY=VALUE is the old form of --KEY VALUE (e.g. --mean-h 8)", file=sys.stderr)
@@ -204,7 +210,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--runs", nargs="+", default=None, metavar="FILE",
                    help="calibrate on these recorded healthy runs (.csv, .parquet, .mcap) instead of simulating; "
                         "--scenario is then the plant's model")
-    add_detector_args(p, learned=True)
+    add_detector_args(p.add_argument_group(
+        "detector settings (every reference kind; the physics reference's design sets some otherwise, as shown)"))
     add_record_args(p)
     g = p.add_argument_group("learned reference (measured records, no plant model)")
     g.add_argument("--learn", default=None, metavar="RECORD",
@@ -228,6 +235,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--open-loop", action="store_true",
                    help="with --estimator: simulate the model from each run's first pH, never correct it")
     g = p.add_argument_group("physics reference kind (the scenario's model in the multichannel detector)")
+    add_physics_args(g)
     g.add_argument("--physics", action="store_true",
                    help="the default without --learn or --estimator (kept for the command lines that name it): the "
                         "scenario's healthy plant and valves as the physics reference, on the --seeds' healthy runs "
@@ -250,43 +258,33 @@ def run(args: argparse.Namespace) -> int:
 
 
 def check_settings_given(args: argparse.Namespace) -> None:
-    """Each detector setting given goes with the detector being calibrated (one line naming those that do not): the
-    physics reference takes the physics detector's design and any learned-detector setting over it; --learn and
-    --estimator take the learned detector's settings only."""
+    """--channels is the physics reference's own option, and --learned (the old KEY=VALUE form) is read by --learn
+    and --estimator only: one line when given with the other modes."""
     from phfdi_base.errors import UserError
-    from wavelet_fdi.config import LearnedSettings, setting_specs
 
     if not (args.learn or args.estimator):
         if args.learned:  # the old form is read by --learn and --estimator only
             raise UserError(f"--learned {args.learned[0]}: give a setting of the physics reference as its own "
                             f"option (--NAME VALUE; phfdi calibrate --help)")
         return
-    learned = {s.name for s in setting_specs(of=LearnedSettings)}
-    given = set(given_settings(args))
-    stray = [s.flag for s in setting_specs(exposed_only=True) if s.name in given and s.name not in learned]
-    if stray:
-        raise UserError(f"{', '.join(stray)} set the physics reference (phfdi calibrate without --learn or "
-                        f"--estimator)")
+    if args.channels is not None:
+        raise UserError("--channels sets the physics reference (phfdi calibrate without --learn or --estimator)")
 
 
 def physics_design(args: argparse.Namespace, sample_time_s: float):
     """The physics reference's options (``PhysicsReference.from_spec``) and the multichannel detector's settings
-    with the physics detector's design (``reference_physics.design_settings``), from the options given: the physics
-    detector's (``--warmup``, ``--channels``, ...) set the design, any learned-detector setting given is set over it."""
-    from wavelet_fdi.config import LearnedSettings
+    with the physics detector's design (``reference_physics.design_settings``), any setting given as an option set
+    over it."""
     from wavelet_fdi.reference_physics import design_settings
 
-    physics = settings_from_args(args)
-    options = dict(warmup_s=physics.warmup_s, watch_level="level" in physics.channels,
-                   command_timeout_s=physics.command_timeout_s, setpoint_holdoff_s=physics.setpoint_holdoff_s)
-    return options, design_settings(physics, sample_time_s, **given_settings(args, LearnedSettings))
+    options = dict(watch_level=physics_watches_level(args))
+    return options, design_settings(sample_time_s, **given_settings(args))
 
 
 def run_physics(args: argparse.Namespace) -> int:
     """The scenario's physics as a reference kind of the multichannel detector, calibrated on healthy runs."""
-    from phfdi.calibration import scenario_for_seed
     from phfdi.loop import simulate
-    from phfdi.replay import load_any
+    from phfdi.replay import load_any, scenario_for_seed
     from phfdi.scenario import load_scenario
     from phfdi_base.errors import UserError
     from wavelet_fdi.learned_detector import calibrate_bands
@@ -297,7 +295,7 @@ def run_physics(args: argparse.Namespace) -> int:
             if args.out.endswith((".yaml", ".yml")) else ""
         raise UserError(f"--out {args.out}: a physics reference is written as .json{old}")
     if args.rows is not None or args.exclude or args.start or args.end:
-        raise UserError("--rows, --from, --to and --exclude go with --learn (--physics calibrates on whole runs)")
+        raise UserError("--rows, --from, --to and --exclude go with --learn (a physics reference is calibrated on whole runs)")
     spec = load_scenario(args.scenario, fault="healthy", overrides=args.overrides)
     options, settings = physics_design(args, spec.sample_time_s)
     ref = PhysicsReference.from_spec(spec, **options)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .calibrate import add_detector_args, add_learned_args, parse_seeds, physics_design
+from .calibrate import add_detector_args, add_physics_args, parse_seeds, physics_design
 from .common import EPILOG_FORMAT, add_overwrite_arg
 
 EXAMPLES = """examples:
@@ -14,7 +14,7 @@ EXAMPLES = """examples:
   phfdi evaluate --out out/eval-level --channels ph,level   # watch the level's residual too
 
 Ours is the multichannel detector with the scenario's physics as its reference, as
-phfdi calibrate --physics makes it (the physics detector's design; any setting
+phfdi calibrate makes it (the physics detector's design; any setting
 below given over it), calibrated on the --calibration-seeds' healthy runs.
 Writes DIR/evaluation.md (tables), DIR/results.json (every run), DIR/reference.json
 (our calibrated detector: phfdi replay RUN --reference DIR/reference.json),
@@ -39,13 +39,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", default="1-3", help="noise seeds of the faulty runs (default 1-3)")
     p.add_argument("--healthy-seeds", default="1-8", help="noise seeds of the healthy runs (default 1-8)")
     p.add_argument("--calibration-seeds", default="1001-1016", help="seeds of the calibration runs (default 1001-1016)")
-    add_detector_args(p)
-    from wavelet_fdi.config import setting_specs
-
-    add_learned_args(p.add_argument_group(
+    add_physics_args(p)
+    add_detector_args(p.add_argument_group(
         "multichannel detector settings given over the physics design (the design sets the wavelet, level, "
-        "block, the mean and energy CUSUMs' designs and ARL0; the defaults shown are the detector's own)"),
-                     skip=tuple(s.name for s in setting_specs(exposed_only=True)))
+        "block, the mean and energy CUSUMs' designs and ARL0, as shown)"))
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--quick", action="store_true",
                    help="paper severities only, seed 1, healthy seed 1, four calibration runs (for tests)")

@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "for the scenario): publishes /fault_alarm and /diagnostics")
     p.add_argument("--detector-param", dest="detector_params", action="append", default=[], metavar="NAME=VALUE",
                    help="a parameter of the detector node, e.g. --detector-param reference=my_physics.json (a "
-                        "physics reference from phfdi calibrate --physics; see python -m wavelet_fdi.learned_node "
+                        "physics reference from phfdi calibrate; see python -m wavelet_fdi.learned_node "
                         "--help); implies --detector")
     p.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
                    help=f"serve the graph's signals (with --detector also its residuals, statistics and alarm state) live "

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 from phfdi.alarm_text import format_alarms
 from phfdi_base.topics import MEASURED_SAMPLE
 
-from .calibrate import add_detector_args, given_settings
 from .common import (
     EPILOG_FORMAT,
     add_record_args,
@@ -91,11 +90,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     retired = p.add_argument_group("retired with the physics detector on 2026-12-07 (refused with where they go "
                                    "now: phfdi calibrate writes a physics reference with them, --reference takes it)")
     retired.add_argument("--calibration", default=None, help="a physics detector calibration file")
-    add_detector_args(retired)
+    for flag, (what, kind) in RETIRED_SETTINGS.items():
+        retired.add_argument(flag, dest=flag[2:], type=kind, default=None, help=f"the physics detector's {what}")
     p.add_argument("--no-isolation", action="store_true", help="detect only: no fault named (any detector)")
     p.add_argument("--chunk", type=int, default=4096, help="samples per detector call (default 4096)")
     p.add_argument("--reference", default=None, metavar="REF.json|MODEL.yaml",
-                   help="a learned reference (phfdi calibrate --learn, --estimator, --physics; or "
+                   help="a learned reference (phfdi calibrate, with --learn or --estimator or neither; or "
                         "paper_physics, shipped): watch the record's channels with it; "
                         "or a scenario/model .yaml (phfdi diagnose's extended_model.yaml): the physics "
                         "reference built from it")
@@ -138,9 +138,14 @@ def run(args: argparse.Namespace) -> int:
     return replayed.status
 
 
+#: the physics detector's settings replay took until 2026-12-07 -> what each set, and its type then
+RETIRED_SETTINGS = {"--wavelet": ("wavelet", str), "--level": ("wavelet level", int),
+                    "--arl0": ("false-alarm target", float), "--channels": ("residual channels", str)}
+
+
 def _refuse_detector_options(args: argparse.Namespace) -> None:
     """--calibration or a detector setting (--level, ...): a reference carries its detector's settings, set when
-    phfdi calibrate makes it; the physics detector (StreamingDetector) took them here until it was retired on
+    phfdi calibrate makes it; the physics detector took them here until it was retired on
     2026-12-07 (issue 37: one detector). One line saying where they go now."""
     from phfdi_base.errors import UserError
 
@@ -148,9 +153,9 @@ def _refuse_detector_options(args: argparse.Namespace) -> None:
         raise UserError(f"--calibration {args.calibration}: the physics detector's calibration, retired with it on "
                         f"2026-12-07: make a physics reference with the options you calibrated with (phfdi calibrate "
                         f"... --out REF.json) and replay with --reference REF.json")
-    given = given_settings(args)
+    given = [flag for flag in RETIRED_SETTINGS if getattr(args, flag[2:]) is not None]
     if given:
-        flags = ", ".join(f"--{n.replace('_', '-')}" for n in given).replace("--arl0-samples", "--arl0")
+        flags = ", ".join(given)
         raise UserError(f"{flags}: a reference carries its detector's settings: give them to phfdi calibrate when "
                         f"you make it (--out REF.json) and replay with --reference REF.json (the physics detector "
                         f"that took them here was retired on 2026-12-07)")

@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from phfdi_base.outputs import save_figure
-from wavelet_fdi.config import DetectorSettings, LearnedSettings
+from wavelet_fdi.config import LearnedSettings
 from wavelet_fdi.filterbank import coefficient_residuals
 from wavelet_fdi.isolation import classes
 from wavelet_fdi.peers import DETECTORS, LABELS
@@ -158,7 +158,7 @@ def band_gain(band: str) -> float:
     return 2.0 ** (0.5 * int(band[1:]))
 
 
-def plot_coefficient_residuals(signals: dict, settings: DetectorSettings | LearnedSettings, path: Path, title: str,
+def plot_coefficient_residuals(signals: dict, settings: LearnedSettings, path: Path, title: str,
                                onset_s: float | None = None) -> Path:
     """Paper Figures 50-55: D1..DJ, AJ of the measured and predicted pH, and their differences, each band
     divided by its gain 2^(j/2) so that it reads in pH (A3 is then the local mean pH, not 2.8 times it)."""
@@ -193,7 +193,7 @@ def plot_coefficient_residuals(signals: dict, settings: DetectorSettings | Learn
 
 
 def plot_evaluation(summary: dict, records: list[dict], out: Path, signals: dict | None,
-                    settings: DetectorSettings | LearnedSettings) -> list[Path]:
+                    settings: LearnedSettings) -> list[Path]:
     paths = [plot_delays(summary, out / "delays.png"), plot_false_alarms(summary, out / "false_alarms.png"),
              plot_isolation(summary, out / "isolation.png"), plot_parameters(summary, out / "parameters.png")]
     if signals is not None:

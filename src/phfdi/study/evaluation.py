@@ -24,9 +24,9 @@ from typing import Callable
 
 import numpy as np
 
-from phfdi.calibration import scenario_for_seed
 from phfdi.faults import catalogue
 from phfdi.loop import build_parts, simulate
+from phfdi.replay import scenario_for_seed
 from phfdi.scenario import load_scenario
 from phfdi.study.detector_figures import plot_evaluation
 from phfdi_base.errors import UserError
