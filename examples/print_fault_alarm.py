@@ -6,15 +6,17 @@ DDS kept on this machine:
     .venv/bin/phfdi launch --fault backlash --detector --domain-id 42 --pace 50 &
     ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_DOMAIN_ID=42 .venv/bin/python examples/print_fault_alarm.py
 
-Prints one line per message: each state change and the detector's heartbeat (every 60 s of simulated
-time). From the two commands above (2026-11-28), among the heartbeats:
+Prints one line per message: each state change, the naming of a fault, and the detector's heartbeat (every
+60 s of simulated time). From the two commands above (2026-12-07, the default detector with the shipped physics
+reference), among the heartbeats:
 
-    [   660.0 s] OK ph: ok: worst statistic ph.R.mean_down 0.1 of threshold 11.7; 661 samples
-    [  7027.0 s] ALARM ph: fault detected by ph.R.mean_down (12.2 > 11.7); onset estimate 7020 s
-    [  7080.0 s] ALARM ph: alarm: worst statistic ph.R.mean_up 0.0 of threshold 11.7; 7081 samples
-    [  7327.0 s] ALARM ph backlash (confidence 1.00) since 7000 s, severity 0.699 % of span (width_pct): alarm 1: ...
+    [  7020.0 s] OK ph: OK: worst statistic ph_measured.R.mean_down 4.8 of threshold 11.9; 7021 samples
+    [  7027.0 s] ALARM ph: alarm 1: ph_measured.R.mean_down crossed its threshold; channels: ph_measured 100%
+    [  7080.0 s] ALARM ph: ALARM: worst statistic ph_measured.A3.aj_energy 6377.2 of threshold 162.7; 7081 samples
+    [  7326.0 s] ALARM ph backlash (confidence 1.00) since 7000 s, severity 0.698 % of span: alarm 1 named: ...
 
-(the first heartbeats, while the detector warms up, read "OK ph: warmup: ...").
+(the last line goes on "actuator fault, backlash (0.6984 % of span)"; the naming, 300 s after the detection, can
+arrive after heartbeats of later samples: the detector names at a block boundary).
 
 The QoS matches the graph's data topics (reliable, keep all), so no message is
 missed once the subscription has matched. Stop it with Ctrl-C.
