@@ -67,9 +67,9 @@ Every detector setting is an option of its own, --NAME VALUE, derived from its
 one declaration (docs/detector.md, "Detector settings"); one detector runs every
 reference kind, and a setting not given keeps the design of the kind being
 calibrated: the physics reference's design or the detector's own defaults (each
-option's help shows both), or the estimator's (docs/detector.md). --channels is the physics reference's
-own option. The old form --learned KEY=VALUE is still read with --learn and
---estimator.
+option's help shows both), or the estimator's (docs/detector.md). --channels is
+the physics reference's own option. The old form --learned KEY=VALUE is still
+read with --learn and --estimator.
 """
 
 
