@@ -141,7 +141,7 @@ class LearnedSettings:
 
     def check(self) -> "LearnedSettings":
         """Every value within its declared range, and the rules a range cannot say (an open end, an "off")."""
-        check_declared_ranges(self, "learned-detector setting")
+        check_declared_ranges(self, "detector setting")
         try:
             wavelet_filters(self.wavelet)
         except ValueError as exc:
@@ -179,7 +179,7 @@ class LearnedSettings:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
-            raise UserError(f"unknown learned-detector setting(s): {', '.join(unknown)}")
+            raise UserError(f"unknown detector setting(s): {', '.join(unknown)}")
         return cls(**d)  # checked when made
 
     def bands(self) -> list[str]:
@@ -212,7 +212,7 @@ def setting_specs(of: type = LearnedSettings) -> list[SettingSpec]:
 
 def check_declared_ranges(settings: Any, what: str) -> None:
     """Every value of ``settings`` (a settings dataclass) within its declared range; ``what`` names the settings in
-    the message ("learned-detector setting")."""
+    the message ("detector setting")."""
     for spec in setting_specs(of=type(settings)):
         _check_range(spec, getattr(settings, spec.name), what)
 

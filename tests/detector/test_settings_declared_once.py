@@ -32,7 +32,7 @@ def test_the_learned_detector_checks_its_declared_ranges():
     for spec in ranged:
         lo, hi = spec.range
         below = lo - 1 if spec.type is int else lo - abs(lo) * 0.5 - 1e-3
-        with pytest.raises(UserError, match=f"learned-detector setting {spec.name} must be a number in"):
+        with pytest.raises(UserError, match=f"detector setting {spec.name} must be a number in"):
             LearnedSettings(**{spec.name: below}).check()
         if hi != float("inf"):
             with pytest.raises(UserError, match=spec.name):
