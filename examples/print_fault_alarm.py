@@ -15,8 +15,7 @@ reference), among the heartbeats:
     [  7080.0 s] ALARM ph: ALARM: worst statistic ph_measured.A3.aj_energy 6377.2 of threshold 162.7; 7081 samples
     [  7326.0 s] ALARM ph backlash (confidence 1.00) since 7000 s, severity 0.698 % of span: alarm 1 named: ...
 
-(the last line goes on "actuator fault, backlash (0.6984 % of span)"; the naming, 300 s after the detection, can
-arrive after heartbeats of later samples: the detector names at a block boundary).
+(the last line goes on "actuator fault, backlash (0.6984 % of span)": the naming, 300 s after the detection).
 
 The QoS matches the graph's data topics (reliable, keep all), so no message is
 missed once the subscription has matched. Stop it with Ctrl-C.

@@ -464,6 +464,9 @@ class LearnedDetector:
         self._relook: list[dict] = []
         # a confirming reference (its namer says whether a fault explains an alarm): alarms start as deviations
         self.confirming = self.namer is not None and bool(getattr(model.reference, "confirm", None))
+        # names made at the row they are due (not at the next block boundary): see _naming_due
+        self._exact_naming = (self.namer is not None and not self.confirming
+                              and self._naming_after >= model.settings.block_samples)
         # a confirming reference's spikes (one innovation beyond spike_sigma, before the reference's limit) are each
         # judged once as a step of the reading (wavelet_fdi.spike_checks)
         self.spikes = SpikeChecks(model.settings.spike_sigma if self.confirming else 0.0, self._naming_after)
@@ -525,12 +528,16 @@ class LearnedDetector:
         pos = 0
         while pos < n:
             done = self.samples_processed + pos  # rows processed so far: blocks are aligned to them
-            if self.namer is not None and done % b == 0:
-                # alarms whose naming window ended by this block boundary are named (confirmed or not) before the
-                # block runs: at global indices, so that any chunking names them, and decides the announcement of
-                # a later deviation, in the same order
+            due = self._naming_due()
+            if self.namer is not None and (done % b == 0 or (due is not None and due <= done)):
+                # alarms whose naming window ended by this block boundary (or, see _naming_due, at this very row)
+                # are named (confirmed or not) before the rows after it run: at global indices, so that any
+                # chunking names them, and decides the announcement of a later deviation, in the same order
                 events += self._name_faults(done, final=False)
+                due = self._naming_due()
             end = min(n, pos + (b - done % b))
+            if due is not None and done < due < self.samples_processed + end:
+                end = due - self.samples_processed  # stop at the row the naming is due, not at the block's end
             ev = self._block(t, pos, end, chunk, states)
             events += ev
             pos = end
@@ -774,6 +781,21 @@ class LearnedDetector:
         return [LearnedEvent("outside_calibration", t_s, index, "WARN" if still_up else "OK",
                              f"deviation {a['alarm_id']} outside calibration: no fault hypothesis explains it by the "
                              f"calibrated margin, {why}", dict(a), announce=a.get("announced", True))]
+
+    def _naming_due(self) -> int | None:
+        """The global row index at which the next naming of a reference that names but does not confirm (the
+        physics kind) is due: its first naming or a naming made again. The detector names there, not at the next
+        block boundary, so that a live subscriber hears the name ``naming_after_samples`` after the detection, not
+        up to a block later. Only where the first naming waits at least a block: an alarm raised inside a block is
+        then due after that block's end, so every chunking stops at the same rows. None: no naming is waiting,
+        or names are made at block boundaries (a confirming reference, or one that names sooner than a block)."""
+        if not self._exact_naming:
+            return None
+        first = [a["detection_index"] + self._naming_after for a in self.alarms
+                 if a["alarm_id"] not in self._named]
+        again = [a["detection_index"] + self._looks[int(a["look"])] for a in self._relook
+                 if a.get("cleared_index") is None]
+        return min(first + again) if first or again else None
 
     def _named_ids(self) -> list[int]:
         return self._named + [a["alarm_id"] for a in self._to_name]
