@@ -118,7 +118,7 @@ class LearnedModel:
         if shipped is None and not Path(path).exists():
             names = sorted(f.stem for f in CALIBRATION_DIR.glob("*.json"))
             raise UserError(f"{path}: no such reference file (shipped, by name: {', '.join(names) or 'none'}; "
-                            f"make one with phfdi calibrate --learn, --estimator or --physics)")
+                            f"make one with phfdi calibrate: --learn, --estimator, or a physics reference without either)")
         d = load_json(shipped or path, FORMAT)
         return cls.from_dict(d, str(path))
 
@@ -141,7 +141,7 @@ class LearnedModel:
 
 def shipped_reference_path(name: str) -> Path | None:
     """The reference file shipped under this name (``wavelet_fdi/calibrations/<name>.json``), None if there is none.
-    Shipped: ``paper_physics`` (``phfdi calibrate --physics --scenario paper``: the paper loop's healthy plant and
+    Shipped: ``paper_physics`` (``phfdi calibrate --scenario paper``: the paper loop's healthy plant and
     valves, thresholds measured on the healthy runs of seeds 1001-1016 for the physics detector's design).
 
     >>> shipped_reference_path("paper_physics").name, shipped_reference_path("my_plant.json")

@@ -63,7 +63,7 @@ from .node_base import MONITOR_PARAMS, STATE_NAMES, DetectorNodeBase, next_multi
 from .reference_physics import follow_scenario
 
 PARAMS = (
-    ParamSpec("reference", "", "reference file (.json) from phfdi calibrate --learn, --estimator or --physics, or "
+    ParamSpec("reference", "", "reference file (.json) from phfdi calibrate (--learn, --estimator, or a physics reference), or "
                                "a shipped one by name (paper_physics: the paper loop's physics)"),
     ParamSpec("loop", "measured", "name of the monitored plant or loop in /fault_alarm"),
     ParamSpec("name_faults", True, "name the fault behind each alarm where the reference can (false: detection "
@@ -71,7 +71,7 @@ PARAMS = (
     ParamSpec("channel_map_file", "", "YAML channel map: each reference channel's topic, type and field "
               "('' = /measured/sample, or the loop graph's topics with loop_graph_topics; docs/ros_graph.md)"),
     ParamSpec("loop_graph_topics", False, "without a channel map: read the loop graph's own topics "
-              "(/plant/measurement, /controller/output) for a reference of its signals (phfdi calibrate --physics); "
+              "(/plant/measurement, /controller/output) for a reference of its signals (a physics reference: phfdi calibrate); "
               "phfdi launch sets it"),
     ParamSpec("silent_after_s", 10.0, "wall time after which a mapped topic that delivers nothing is reported",
               (0.1, 3600.0)),
@@ -114,7 +114,7 @@ class LearnedDetectorNode(DetectorNodeBase):
         path = self.param("reference")
         if not path:
             raise NodeStartError("parameter reference: give a reference file (phfdi calibrate --learn, --estimator "
-                                 "or --physics) or a shipped one by name (paper_physics)")
+                                 "or neither: a physics reference) or a shipped one by name (paper_physics)")
         try:
             self.model = LearnedModel.load(path)
         except UserError as exc:

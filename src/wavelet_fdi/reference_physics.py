@@ -57,11 +57,14 @@ SETPOINT = "ph_setpoint"
 WARMUP_GAIN = 0.5
 #: time after a detection at which the fault is named by default (the physics detector's isolation delay)
 NAMING_AFTER_S = 300.0
+#: the reference's own block: pH-solve guesses and the warm-up's pulls every this many samples (the detector's block
+#: in the design too)
+BLOCK_SAMPLES = 256
 #: the physics detector's design, which :func:`design_settings` carries over: its filter bank (wavelet, level), the
 #: residual mean shift its mean CUSUMs are designed for (residual sigmas), the variance ratio of its energy CUSUMs,
 #: its false-alarm target (samples) and block (samples)
 PHYSICS_DESIGN: dict[str, Any] = {"wavelet": "sym4", "level": 3, "mean_shift_sigma": 1.0, "variance_ratio": 4.0,
-                  "arl0_samples": 1e5, "block_samples": 256}
+                                  "arl0_samples": 1e5, "block_samples": BLOCK_SAMPLES}
 
 
 #: readings no plant gives (a pH off any pH scale, a level below the tank's bottom or absurdly high): a broken
@@ -140,7 +143,7 @@ class PhysicsReference:
 
     scenario: dict  # a validated scenario (phfdi_base.spec.ScenarioSpec), as its file holds it
     warmup_s: float = 600.0
-    block_samples: int = 256
+    block_samples: int = BLOCK_SAMPLES
     #: watch the level's residual too (where a controller holds the level); False: the pH alone, as the physics
     #: detector does by default (its ``channels``)
     watch_level: bool = True
@@ -175,7 +178,7 @@ class PhysicsReference:
             object.__setattr__(self, "spec", validate_scenario(self.scenario, "physics reference: scenario"))
 
     @classmethod
-    def from_spec(cls, spec: ScenarioSpec, warmup_s: float = 600.0, block_samples: int = 256,
+    def from_spec(cls, spec: ScenarioSpec, warmup_s: float = 600.0, block_samples: int = BLOCK_SAMPLES,
                   watch_level: bool = True, command_timeout_s: float = 10.0,
                   setpoint_holdoff_s: float = 0.0, naming_after_s: float = NAMING_AFTER_S) -> "PhysicsReference":
         """The reference of a validated scenario (its faults are dropped: the reference is the healthy loop)."""
@@ -256,7 +259,8 @@ class PhysicsReference:
     @classmethod
     def from_dict(cls, d: dict, where: str = "reference") -> "PhysicsReference":
         try:
-            return cls(dict(d["scenario"]), float(d.get("warmup_s", 600.0)), int(d.get("block_samples", 256)),
+            return cls(dict(d["scenario"]), float(d.get("warmup_s", 600.0)),
+                       int(d.get("block_samples", BLOCK_SAMPLES)),
                        bool(d.get("watch_level", True)), float(d.get("command_timeout_s", 10.0)),
                        float(d.get("setpoint_holdoff_s", 0.0)), None,
                        float(d.get("naming_after_s", NAMING_AFTER_S)))

@@ -47,7 +47,7 @@ def test_bad_parameters_are_refused_with_one_line(ros_env):
 @pytest.mark.parametrize("args, words", [
     (["launch", "--detector-param", "level"], ["--detector-param", "NAME=VALUE"]),
     (["launch", "--detector-param", "calibration=my.yaml"],
-     ["'calibration'", "retired", "phfdi calibrate --physics", "reference="]),
+     ["'calibration'", "retired", "phfdi calibrate --out REF.json", "reference="]),
     (["launch", "--detector-param", "foxglove_port=8765"], ["'foxglove_port'", "phfdi launch --foxglove"]),
     (["replay", "--live", "run.csv"], ["--live", ".mcap"]),
     (["replay", "--live", "missing.mcap"], ["no such file"]),

@@ -1,7 +1,7 @@
 """The paper loop's physics as a reference kind, live: a simulated run as a bag through the learned detector NODE
 over ROS gives the offline alarm and its name (issue 37: one detector core behind one node).
 
-``phfdi calibrate --physics`` on four short simulated healthy runs; a run with a sticky valve from 2000 s (``phfdi
+``phfdi calibrate`` (a physics reference) on four short simulated healthy runs; a run with a sticky valve from 2000 s (``phfdi
 simulate``) replayed offline (``phfdi replay RUN --reference``) and, as a bag (``phfdi bag from-csv``), played by
 ``phfdi replay --live`` into the node (real processes on a ROS domain reserved for them, loopback discovery only).
 """

@@ -220,8 +220,9 @@ def test_a_physics_reference_follows_the_plant_of_the_record_it_watches(tmp_path
 
 
 def test_calibrate_physics_writes_a_model_replay_watches_and_names_with(tmp_path, capsys):
-    """phfdi calibrate --physics: the scenario's physics calibrated on simulated healthy runs, written as a detector
-    model file; phfdi replay --reference then detects a sticky valve in a simulated run and names it."""
+    """phfdi calibrate (a physics reference, its default): the scenario's physics calibrated on simulated healthy
+    runs, written as a detector model file; phfdi replay --reference then detects a sticky valve in a simulated run
+    and names it."""
     from phfdi.cli import main
 
     short = [x for o in SHORT for x in ("--set", o)]

@@ -281,7 +281,7 @@ def test_a_rig_run_with_a_probe_bias_through_the_estimator_reference(shared_data
 
 
 def test_the_physics_kind_on_a_plants_own_topics_gives_the_offline_alarms_and_the_live_views_monitor(tmp_path):
-    """The multichannel detector's node with a physics reference (phfdi calibrate --physics) on a plant's own
+    """The multichannel detector's node with a physics reference (phfdi calibrate) on a plant's own
     Float64 topics, monitor_topic on: its alarms equal the core's offline run on the same rows, and
     /detector/monitor (what the live view plots) carries the pH residual in pH (the sensor's noise, 0.01 pH, while
     healthy), every statistic over its threshold, and the alarm's statistic at 1 or more by its detection."""

@@ -137,13 +137,13 @@ def loop_graph(scenario: str = "paper", fault: str | None = None, onset_s: float
 #: parameters of the physics detector's own node (wavelet_fdi.node, retired on 2026-12-07: one detector node, issue
 #: 37), and what does their work now
 RETIRED_NODE_PARAMS = {
-    "calibration": "a physics reference of your calibration: phfdi calibrate --physics --out REF.json, then "
+    "calibration": "a physics reference of your calibration: phfdi calibrate --out REF.json, then "
                    "reference=REF.json",
     "isolate": "the physics reference always names the fault",
-    "level": "a setting of phfdi calibrate --physics (its reference file carries it)",
-    "wavelet": "a setting of phfdi calibrate --physics (its reference file carries it)",
-    "arl0_samples": "a setting of phfdi calibrate --physics (its reference file carries it)",
-    "channels": "a reference of the channels you want (phfdi calibrate --physics) or channel_map_file",
+    "level": "a setting of phfdi calibrate (its reference file carries it)",
+    "wavelet": "a setting of phfdi calibrate (its reference file carries it)",
+    "arl0_samples": "a setting of phfdi calibrate (its reference file carries it)",
+    "channels": "a reference of the channels you want (phfdi calibrate) or channel_map_file",
     "pairing_window": "the channel map's align rule and max_wait_s (channel_map_file)",
     "pairing_timeout_s": "the channel map's align rule and max_wait_s (channel_map_file)",
     "foxglove_host": "phfdi launch --foxglove PORT --foxglove-host ADDRESS, or python -m phfdi.ros.live_bridge",

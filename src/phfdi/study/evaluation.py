@@ -477,7 +477,7 @@ def markdown(summary: dict, cfg: EvalConfig) -> str:
              f"ARL0 = {summary['arl0_samples']:g} samples for every detector (thresholds calibrated on healthy seeds "
              f"{cfg.calibration_seeds[0]}..{cfg.calibration_seeds[-1]}; evaluation seeds {list(cfg.eval_seeds)}, "
              f"healthy seeds {list(cfg.healthy_seeds)}). Ours: the multichannel detector with the scenario's physics "
-             f"as its reference (phfdi calibrate --physics; reference.json), {s.wavelet} level {s.level}, watching "
+             f"as its reference (phfdi calibrate; reference.json), {s.wavelet} level {s.level}, watching "
              f"{', '.join(summary['watched'])}. Residual noise sigma = {summary['sigma_ph']:.4f} pH.", "",
              "## Detection delay (s after the onset; mean over the seeds that detected; +N missed)", "",
              "| fault | parameter | " + " | ".join(LABELS[d] for d in DETECTORS) + " | bound | delta |",
