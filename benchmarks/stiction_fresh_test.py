@@ -2,6 +2,8 @@
 
     .venv/bin/python benchmarks/stiction_fresh_test.py                      # 40 loops per class, seed 1013 (Dask)
     .venv/bin/python benchmarks/stiction_fresh_test.py --from-rows benchmarks/results/stiction_fresh_test.json
+    .venv/bin/python benchmarks/stiction_fresh_test.py --classes healthy_load_steps,stiction --per-class 1000 \
+        --seed 2028 --out OUT.json          # a larger draw of two classes
 
 The classifier is trained and calibrated on phfdi.loopdiag.domain's loops (seeds 35001, 35002). This test draws
 from a different randomisation, phfdi.loopdiag.training's per-class generator (its own process, tuning,
@@ -14,7 +16,12 @@ screen flags, the one verdict with its reconciliation) on Dask, and the verdicts
 * precision of the "stiction" calls, recall, false calls on the loops without stiction, the undetermined share;
 * accuracy two ways: undetermined counted as not calling stiction, and over the confident calls only;
 * the calls per class. Backlash (a dead-band is Kano's model with J = 0: neither label is right) is reported
-  apart and not scored.
+  apart and not scored;
+* the sticky loops' calls by the valve's size (Kano's S or He's fs, % of travel) and by how often the simulated
+  stem broke away (:func:`phfdi.loopdiag.domain.slips`): which sticky valves the verdict finds, not only how many.
+
+``--classes`` draws a subset of the classes (a larger draw of the ones whose rate is in question); the metrics
+over a subset are those of that subset's mix, not of the test's.
 """
 
 from __future__ import annotations
@@ -84,6 +91,43 @@ def class_table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+#: bands of a sticky valve's size, S (Kano) or fs (He), % of travel
+SIZE_BANDS_PCT = (0.0, 0.6, 1.2, 2.5, 5.0, float("inf"))
+#: bands of the simulated stem's break-aways in the record
+SLIP_BANDS = (0, 3, 10, 30, float("inf"))
+
+
+def _band_rows(rows: list[dict], values: list[float], edges: tuple, unit: str) -> list[str]:
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        idx = [r for r, v in zip(rows, values) if lo <= v < hi]
+        if not idx:
+            continue
+        k = [sum(r["verdict"] == v for r in idx) for v in CALLS]
+        name = f">= {lo:g}{unit}" if hi == float("inf") else f"{lo:g}-{hi:g}{unit}"
+        out.append(f"| {name} | {len(idx)} | " + " | ".join(f"{v} ({v / len(idx):.0%})" for v in k) + " |")
+    return out
+
+
+def valve_size_pct(valve) -> float:
+    """A sticky valve's S (Kano's model) or fs (He's), % of travel."""
+    params = valve[1]
+    return float(params.get("s_pct", params.get("fs_pct", float("nan"))))
+
+
+def size_tables(rows: list[dict]) -> str:
+    """The sticky loops' calls by the valve's size and by the stem's break-aways."""
+    sticky = [r for r in rows if r["stiction"] and r["loop_class"] not in UNSCORED]
+    if not sticky:
+        return ""
+    head = ["| {} | sticky loops | stiction | undetermined | no stiction |", "|---|---|---|---|---|"]
+    out = [head[0].format("S or fs, % of travel"), head[1]]
+    out += _band_rows(sticky, [valve_size_pct(r["valve"]) for r in sticky], SIZE_BANDS_PCT, " %")
+    out += ["", head[0].format("break-aways of the simulated stem"), head[1]]
+    out += _band_rows(sticky, [float(r["slips"]) for r in sticky], SLIP_BANDS, "")
+    return "\n".join(out)
+
+
 def print_report(rows: list[dict], label: str) -> dict:
     m = metrics(rows)
     print(f"{label}: {m['loops']} scored loops ({m['stiction_loops']} sticky)")
@@ -94,6 +138,10 @@ def print_report(rows: list[dict], label: str) -> dict:
           f"{m['accuracy_confident']:.3f} over the confident calls; {m['demoted_by_valve_model']} stiction calls "
           "made undetermined by the valve-model fit")
     print(class_table(rows))
+    sizes = size_tables(rows)
+    if sizes:
+        print("\nsticky loops by the valve's size and by the stem's break-aways:")
+        print(sizes)
     return m
 
 
@@ -106,12 +154,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scheduler", default=None)
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--json", type=Path, default=None, help="also write the metrics here")
+    p.add_argument("--classes", default=",".join(LOOP_CLASSES),
+                   help=f"comma-separated classes to draw (default all: {','.join(LOOP_CLASSES)})")
     args = p.parse_args(argv)
+    classes = [c.strip() for c in args.classes.split(",") if c.strip()]
+    unknown = [c for c in classes if c not in LOOP_CLASSES]
+    if unknown or not classes:
+        p.error(f"--classes: unknown class {', '.join(unknown) or '(none given)'}; one of {', '.join(LOOP_CLASSES)}")
     if args.from_rows:
         rows = json.loads(args.from_rows.read_text())["rows"]
     else:
         t0 = time.perf_counter()
-        loops = [d for d, _ in draw_class_loops(class_round_robin(args.per_class), args.seed, "TEST")]
+        sequence = [c for c in class_round_robin(args.per_class) if c in classes]
+        loops = [d for d, _ in draw_class_loops(sequence, args.seed, "TEST")]
 
         def show(done, total):
             if done % 24 == 0 or done == total:
@@ -121,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
             rows = map_ordered(client, verdict_row, loops, show, chunk=4)
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"seed": args.seed, "generator": "phfdi.loopdiag.training.draw_class_loops",
-                                        "rows": rows}, indent=0))
+                                        "classes": classes, "rows": rows}, indent=0))
         print(f"{len(rows)} loops in {time.perf_counter() - t0:.0f} s -> {args.out}", file=sys.stderr)
     m = print_report(rows, f"fresh simulated loops (seed {args.seed}, the per-class generator)")
     if args.json:
