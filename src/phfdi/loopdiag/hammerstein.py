@@ -308,7 +308,9 @@ def fit_quantization(p: Problem) -> CauseFit:
     step = float(qs[1] - qs[0])
     bs = np.quantile(p.op_train, np.linspace(0.05, 0.95, 13))
     b_step = float(np.median(np.diff(bs))) if len(bs) > 1 else 0.1
-    if not b_step > 0:  # OP held at one value most of the time (a compressed record): a zero step makes no grid
+    # OP held at one value most of the time (a compressed record) makes the step zero, or a rounding error of the
+    # quantiles (1e-15): either makes a grid whose points all round to one value, which brute cannot search
+    if not b_step > 1e-9 * max(1.0, float(np.max(np.abs(bs)))):
         b_step = max(float(np.ptp(p.op_train)) / 12.0, 1e-6)
     at = lambda z: _quantizer(z[0], z[1])  # noqa: E731
     points = [(lq, b) for lq in qs for b in bs]
