@@ -9,9 +9,11 @@ From benchmarks/results/stiction_dataset.json (phfdi.loopdiag.domain's loops, tw
 * the L2 strength by 5-fold cross-validated log-loss on the ``train`` loops, then the weights on all of them
   (each held to the sign its paper reads as stiction);
 * Platt's calibration on the ``calibration`` loops (half sticky: the probability is at even prior odds);
-* the operating point: "stiction" from the lowest calibrated p that at most 2 % of the calibration loops without
-  stiction, and 2 % of its hard negatives (loops tuned too tight, external oscillations), reach; "no stiction"
-  below 0.5; undetermined between;
+* the operating point: "stiction" from the lowest calibrated p at which at most 2 % of the calibration loops
+  without stiction, and 2 % of its hard negatives (loops tuned too tight, external oscillations), are called
+  stiction by the verdict: p at the cut, unless the valve-model fit takes the call back, or p undetermined and
+  the fit decides for stiction (the rows' ``valve_fit``, phfdi.loopdiag.verdict); "no stiction" below 0.5;
+  undetermined between;
 * the calls on the calibration loops per class, the weights, and writes
   src/phfdi/loopdiag/models/stiction_classifier.json.
 
@@ -29,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from phfdi.loopdiag.classifier import call_rates
+from phfdi.loopdiag.classifier import call_rates, final_calls
 from phfdi.loopdiag.dataset import simulated_data, train_from_rows
 from phfdi.loopdiag.features import FEATURE_NAMES
 
@@ -49,10 +51,24 @@ def clean(o):
     return o
 
 
-def class_table(model, rows: list[dict]) -> str:
-    """Calls of the calibration loops per class."""
+def verdicts(model, rows: list[dict]) -> np.ndarray:
+    """The verdict's calls on calibration rows: the screen's banded call, then the valve-model fit's decision or
+    taking back where the rows carry it (phfdi.loopdiag.verdict)."""
     d = simulated_data(rows)
-    calls = model.call(model.calibrated(d.x))
+    p = model.calibrated(d.x)
+    calls = model.call(p).astype(object)
+    if rows and all("valve_fit" in r for r in rows):
+        decides = np.array([r["valve_fit"]["decides"] for r in rows], bool)
+        back = np.array([r["valve_fit"]["takes_back"] for r in rows], bool)
+        called = final_calls(p, model.band[1], decides, back, model.band[0])
+        calls[(calls == "stiction") & ~called] = "undetermined"
+        calls[(calls == "undetermined") & called] = "stiction"
+    return calls
+
+
+def class_table(model, rows: list[dict]) -> str:
+    """The verdict's calls of the calibration loops per class."""
+    calls = verdicts(model, rows)
     out = ["| class | loops | stiction | undetermined | no stiction |", "|---|---|---|---|---|"]
     for c in sorted({r["loop_class"] for r in rows}, key=lambda c: (c != "stiction", c)):
         idx = [i for i, r in enumerate(rows) if r["loop_class"] == c]
@@ -99,9 +115,12 @@ def main(argv: list[str] | None = None) -> int:
           f"below {model.band[0]:.2f}, stiction from {model.band[1]:.3f} (calibration loops: false calls "
           f"{op['false_call_rate']:.1%}, hard negatives {op['hard_false_call_rate']:.1%}, recall {op['recall']:.1%})")
     d_cal = simulated_data(cal_rows)
-    r = call_rates(model.call(model.calibrated(d_cal.x)), d_cal.y)
-    print(f"calibration loops: precision {r['precision']:.3f}, recall {r['recall']:.3f}, false calls "
-          f"{r['false_stiction_rate']:.1%}, undetermined {r['undetermined_share']:.1%}\n")
+    for label, calls in (("screen's calls", model.call(model.calibrated(d_cal.x))),
+                         ("the verdict (with the valve-model fit)", verdicts(model, cal_rows))):
+        r = call_rates(np.asarray(calls, str), d_cal.y)
+        print(f"calibration loops, {label}: precision {r['precision']:.3f}, recall {r['recall']:.3f}, false calls "
+              f"{r['false_stiction_rate']:.1%}, undetermined {r['undetermined_share']:.1%}")
+    print()
     print(class_table(model, cal_rows))
     print("\n| feature | mean | scale | weight (log-odds per standard deviation) |\n|---|---|---|---|")
     for f, mu, sc, w in sorted(zip(model.features, model.mean, model.scale, model.weights), key=lambda t: -abs(t[3])):

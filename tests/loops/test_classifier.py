@@ -128,3 +128,31 @@ def test_operating_point_bounds_false_calls_on_all_negatives_and_on_the_hard_one
     assert op["recall"] == pytest.approx(np.mean(pos >= op["cut"]))
     # one fewer allowed false call would have been possible only with a higher cut: the cut is the lowest
     assert np.sum(hard_p >= np.nextafter(op["cut"], 0.0)) > np.floor(SIM_FALSE_CALL * 200)
+
+
+def test_operating_point_counts_the_final_calls_when_the_valve_model_fit_decides_or_takes_back():
+    """With the valve-model fit's outcomes, the rate bounded is that of the verdict's final calls: loops the fit
+    decides for stiction are called from p 0.5 whatever the cut, so the cut rises to make room for them; loops it
+    takes back are never called, so they do not count. The cut is still the lowest that keeps the bound."""
+    from phfdi.loopdiag.classifier import SIM_FALSE_CALL, final_calls, operating_point
+
+    rng = np.random.default_rng(8)
+    p = np.concatenate([rng.uniform(0.0, 0.95, 1000), rng.uniform(0.4, 1.0, 500)])
+    y = np.concatenate([np.zeros(1000, bool), np.ones(500, bool)])
+    hard = np.zeros(1500, bool)
+    plain = operating_point(p, y, hard)
+    decides = np.zeros(1500, bool)
+    decides[np.flatnonzero(~y & (p >= 0.5) & (p < 0.6))[:10]] = True  # 10 negatives the fit calls (1 %)
+    decides[np.flatnonzero(y & (p >= 0.5))[:100]] = True
+    op = operating_point(p, y, hard, decides=decides)
+    called = final_calls(p, op["cut"], decides)
+    assert op["with_valve_model_fit"] and not plain["with_valve_model_fit"]
+    assert np.sum(called[~y]) <= np.floor(SIM_FALSE_CALL * 1000) and op["false_call_rate"] == np.mean(called[~y])
+    assert op["cut"] > plain["cut"]  # room made for the fit's 10
+    below = np.nextafter(op["cut"], 0.0)
+    assert np.sum(final_calls(p, below, decides)[~y]) > np.floor(SIM_FALSE_CALL * 1000)  # the lowest cut
+    # taken back: the highest-scoring negatives do not count, so the cut falls below the plain one
+    back = ~y & (p >= plain["cut"])
+    assert operating_point(p, y, hard, takes_back=back)["cut"] < plain["cut"]
+    # without outcomes: the same cut as p alone
+    assert operating_point(p, y, hard, decides=None, takes_back=None)["cut"] == plain["cut"]

@@ -62,7 +62,8 @@ def test_a_long_record_is_screened_in_windows_and_says_so(tmp_path):
     w = rep["windows"]
     assert rep["samples"] == len(run) and w["windows"] == 4 and w["scored"] == 4
     assert w[STICTION] + w[UNDETERMINED] + w[NO_STICTION] == 4
-    assert rep["loop_verdict"]["verdict"] == w["call"] or rep["loop_verdict"]["contradiction"]
+    lv = rep["loop_verdict"]  # the windows' call, unless the valve-model fit took it back or decided it
+    assert lv["verdict"] == w["call"] or lv["contradiction"] or lv["decided_by_valve_model"]
     assert any("4 windows of up to 751 samples screened" in n for n in rep["notes"])
     assert (tmp_path / Path(rep["figure"]).name).is_file()
 

@@ -186,7 +186,8 @@ def test_nested_band_is_chosen_without_the_held_out_loop(monkeypatch):
     ("none", "none", "stiction", "disagrees", "stiction"),  # no valve model found: the indicators still stand
     ("external_disturbance", "loop", "no_stiction", "agrees", "no_stiction"),
     ("deadzone", "actuator", "stiction", "neither", "undetermined"),  # another nonlinearity named: not stiction
-    ("backlash", "actuator", "undetermined", "neither", "undetermined"),
+    ("backlash", "actuator", "undetermined", "neither", "stiction"),  # the indicators undecided: the fit decides
+    ("quantization", "actuator", "undetermined", "neither", "undetermined"),
 ])
 def test_valve_model_fit_is_evidence_of_the_one_verdict(cause, family, verdict, agreement, final):
     rep = {"cause": cause, "family": family, "gain_percent": 20.0 if family == "actuator" else 3.0,
@@ -196,9 +197,38 @@ def test_valve_model_fit_is_evidence_of_the_one_verdict(cause, family, verdict, 
     assert valve_model_evidence(rep, verdict)["agreement"] == agreement
     lv = loop_verdict(check_loop(*_coupled_pair()), rep)
     assert lv["verdict"] == final
-    if final != verdict:  # taken back: the summary says why, and the first piece of evidence in full
+    if verdict == "stiction" != final:  # taken back: the summary says why, and the first piece of evidence in full
         assert "not friction" in lv["summary"] and lv["evidence"][0].startswith("undetermined because")
+    if verdict == "undetermined" != final:  # decided by the fit: said the same way
+        assert lv["summary"].endswith("the valve-model fit does")
+        assert lv["evidence"][0].startswith(f"stiction because the valve-model fit names {cause}")
+        assert lv["decided_by_valve_model"] is not None
+    else:
+        assert lv["decided_by_valve_model"] is None
     assert any(e.startswith("valve-model fit:") for e in lv["evidence"])
+
+
+def test_the_fit_decides_an_undetermined_screen_only_when_it_names_friction_above_op_noise():
+    """An undetermined screen becomes stiction when the valve-model fit explains the loop by friction and Kano's S
+    is above 3 noise levels of OP: the two tests that take a stiction call away, passed. Each failing one keeps it
+    undetermined."""
+    def rep(screen: str = "undetermined", kano_s_pct: float | None = 3.1 * 0.01, **fit) -> dict:
+        st = {"verdict": screen, "probability": 0.7, "band": [0.5, 0.8], "evidence": [], "kano_s_pct": kano_s_pct,
+              "op_noise": 0.01}
+        return {"cause": "stiction", "family": "actuator", "gain_percent": 12.0, "verdict": "explained",
+                "valve_models": "fitted", "stiction": st, **fit}
+
+    pair = check_loop(*_coupled_pair())
+    assert loop_verdict(pair, rep())["verdict"] == "stiction"
+    for change in ({"kano_s_pct": 2.9 * 0.01},  # Kano's S within OP's noise
+                   {"kano_s_pct": None},  # no Kano fit
+                   {"verdict": "not_explained", "gain_percent": 8.0},  # friction under the gain threshold
+                   {"cause": "deadzone"},  # another nonlinearity named
+                   {"family": "loop", "cause": "external_disturbance"},
+                   {"valve_models": "not fitted"}):
+        assert loop_verdict(pair, rep(**change))["verdict"] == "undetermined", change
+    # the fit never turns a "no stiction found" into stiction: it runs only where the screen flags
+    assert loop_verdict(pair, rep(screen="no_stiction"))["verdict"] == "no_stiction"
 
 
 def test_a_kano_s_within_op_noise_contradicts_a_stiction_call():

@@ -469,29 +469,50 @@ def cv_log_loss(d: Data, l2: float, folds: int = SYNTHETIC_FOLDS) -> float:
     return loss / len(d.y)
 
 
+def final_calls(p_calibrated: np.ndarray, cut: float, decides: np.ndarray | None = None,
+                takes_back: np.ndarray | None = None, low: float = NO_STICTION_BELOW) -> np.ndarray:
+    """Which loops the verdict calls "stiction" at ``cut``: the calibrated p reaches it and the valve-model fit does
+    not take the call back, or p is in the undetermined band and the fit decides for stiction
+    (:mod:`.verdict`). Without the fit's outcomes, p reaching the cut."""
+    p = np.asarray(p_calibrated, float)
+    n = len(p)
+    back = np.zeros(n, bool) if takes_back is None else np.asarray(takes_back, bool)
+    dec = np.zeros(n, bool) if decides is None else np.asarray(decides, bool)
+    return ((p >= cut) & ~back) | ((p >= low) & (p < cut) & dec)
+
+
 def operating_point(p_calibrated: np.ndarray, y: np.ndarray, hard: np.ndarray,
-                    max_false: float = SIM_FALSE_CALL) -> dict:
+                    max_false: float = SIM_FALSE_CALL, decides: np.ndarray | None = None,
+                    takes_back: np.ndarray | None = None) -> dict:
     """The lowest cut on the calibrated p at which at most ``max_false`` of the loops without stiction, and of the
-    hard negatives among them, reach it; with the recall it keeps."""
+    hard negatives among them, are called stiction (:func:`final_calls`: with the valve-model fit's outcomes when
+    given, so that the rate is that of the verdict's final calls); with the recall it keeps. A loop the fit decides
+    for stiction is called whatever the cut, so the rate falls as the cut rises, and the search is over the
+    negatives' own p values."""
     p, y, hard = np.asarray(p_calibrated, float), np.asarray(y, bool), np.asarray(hard, bool)
-    cut = 0.5
-    for group in (~y, ~y & hard):
-        if group.any():
-            neg = np.sort(p[group])
-            allowed = int(math.floor(max_false * len(neg)))  # this many may reach the cut
-            k = len(neg) - allowed - 1  # the highest negative that must stay below
-            cut = max(cut, float(np.nextafter(neg[k], 1.0)) if k >= 0 else cut)
-    return {"cut": cut, "false_call_rate": float(np.mean(p[~y] >= cut)) if (~y).any() else math.nan,
-            "hard_false_call_rate": float(np.mean(p[~y & hard] >= cut)) if (~y & hard).any() else math.nan,
-            "recall": float(np.mean(p[y] >= cut)) if y.any() else math.nan}
+    groups = [g for g in (~y, ~y & hard) if g.any()]
+
+    def within(cut: float) -> bool:
+        called = final_calls(p, cut, decides, takes_back)
+        return all(int(np.sum(called[g])) <= int(math.floor(max_false * int(g.sum()))) for g in groups)
+
+    candidates = [0.5] + sorted({float(np.nextafter(v, 1.0)) for v in p[~y] if v >= 0.5})
+    cut = next((c for c in candidates if within(c)), float(np.nextafter(1.0, 2.0)))
+    called = final_calls(p, cut, decides, takes_back)
+    return {"cut": cut, "false_call_rate": float(np.mean(called[~y])) if (~y).any() else math.nan,
+            "hard_false_call_rate": float(np.mean(called[~y & hard])) if (~y & hard).any() else math.nan,
+            "recall": float(np.mean(called[y])) if y.any() else math.nan,
+            "with_valve_model_fit": decides is not None or takes_back is not None}
 
 
-def train_simulated(train_set: Data, calibration_set: Data, hard: np.ndarray) -> LogisticModel:
+def train_simulated(train_set: Data, calibration_set: Data, hard: np.ndarray, decides: np.ndarray | None = None,
+                    takes_back: np.ndarray | None = None) -> LogisticModel:
     """The shipped model, from simulated loops only: the L2 strength of :data:`L2_GRID` with the least
     cross-validated log-loss on ``train_set``, weights fitted on all of it; Platt's calibration on
     ``calibration_set`` (:func:`fit_platt`), and the undetermined band from it: "no stiction" below
     :data:`NO_STICTION_BELOW`, "stiction" from the operating point of :func:`operating_point` (``hard`` marks
-    the calibration set's hard negatives)."""
+    the calibration set's hard negatives; ``decides`` and ``takes_back``: the valve-model fit's outcomes on the
+    calibration loops, so that the rate holds for the final calls)."""
     losses = {l2: cv_log_loss(train_set, l2) for l2 in L2_GRID}
     l2 = min(losses, key=lambda v: (round(losses[v], 9), -v))
     model = fit_logistic(train_set.x, train_set.y, np.ones(len(train_set.y)), l2, train_set.features,
@@ -499,7 +520,7 @@ def train_simulated(train_set: Data, calibration_set: Data, hard: np.ndarray) ->
     model.synthetic_ratio = 1.0
     model.calibration = fit_platt(model.probability(calibration_set.x), calibration_set.y)
     p_cal = model.calibrated(calibration_set.x)
-    op = operating_point(p_cal, calibration_set.y, hard)
+    op = operating_point(p_cal, calibration_set.y, hard, decides=decides, takes_back=takes_back)
     model.band = (NO_STICTION_BELOW, max(op["cut"], NO_STICTION_BELOW))
     model.threshold = 0.5
     model.info.update({"trained_on": "simulated loops only (phfdi.loopdiag.domain)", "cv_log_loss": losses,

@@ -51,4 +51,32 @@ def train_from_rows(rows: list[dict]) -> LogisticModel:
     train_rows = [r for r in rows if r["source"] == "train" and not r.get("error")]
     cal_rows = [r for r in rows if r["source"] == "calibration" and not r.get("error")]
     hard = np.array([r["loop_class"] in HARD_NEGATIVES for r in cal_rows])
-    return train_simulated(simulated_data(train_rows), simulated_data(cal_rows), hard)
+    fitted = ["valve_fit" in r for r in cal_rows]
+    if any(fitted) and not all(fitted):
+        raise ValueError("some calibration rows have the valve-model fit's outcome and some do not: run "
+                         "benchmarks/stiction_dataset.py --add-valve-fits on the data set")
+    decides = takes_back = None
+    if cal_rows and all(fitted):
+        decides = np.array([r["valve_fit"]["decides"] for r in cal_rows], bool)
+        takes_back = np.array([r["valve_fit"]["takes_back"] for r in cal_rows], bool)
+    return train_simulated(simulated_data(train_rows), simulated_data(cal_rows), hard, decides, takes_back)
+
+
+def valve_fit_row(loop: DrawnLoop) -> dict:
+    """What the valve-model fit says of one simulated loop, run whatever the screen's call (``fits="all"``):
+    whether it would decide an undetermined screen for stiction, and whether it would take a stiction call back
+    (:func:`.verdict.friction_decides`, :func:`.verdict.contradiction`). The operating point is set on the
+    final calls with these (:func:`.classifier.operating_point`)."""
+    from .diagnose import Settings
+    from .single import diagnose_run
+    from .verdict import contradiction, friction_decides
+
+    run = simulate_loop(loop.spec)
+    run.metadata["process_type"] = loop.process_type
+    rep = diagnose_run(run, Settings(baselines=False, fits="all"))
+    if rep.get("error") or rep.get("stiction") is None:  # not diagnosed, or not a closed loop: never called
+        return {"name": loop.group, "decides": False, "takes_back": True, "cause": None,
+                "why": rep.get("error") or "not scored as a closed loop"}
+    return {"name": loop.group, "decides": friction_decides(rep) is not None,
+            "takes_back": contradiction(rep) is not None, "cause": rep.get("cause"),
+            "gain_percent": rep.get("gain_percent")}

@@ -19,8 +19,15 @@ call whose valve-model evidence contradicts it becomes ``undetermined``, with th
   the valve while OP travels, so the indicators must be reading something else.
 
 A fit that finds no valve nonlinearity at all does not overrule the indicators: on simulated sticky loops the
-fit beats the linear model by 10 % on only about a third of them (docs/loop_diagnosis.md). There is one verdict,
-never two.
+fit beats the linear model by 10 % on only about a third of them (docs/loop_diagnosis.md).
+
+Where the indicators do not decide, the fit does when it is sure: an ``undetermined`` screen becomes ``stiction``
+when the fit explains the loop by friction (the cause it names is Kano's stiction or a backlash dead-band, which
+beats the linear model by the gain threshold on held-out data) and Kano's S is not within OP's noise: the same two
+tests that take a stiction call away, passed rather than failed (:func:`friction_decides`). The classifier's
+operating point is set on simulated loops with this rule applied (benchmarks/train_stiction_classifier.py), so the
+verdict's false-call rate there is that of the final calls.
+There is one verdict, never two.
 """
 
 from __future__ import annotations
@@ -50,6 +57,23 @@ def contradiction(rep: dict) -> tuple[str, str] | None:
                 f"Kano's S from the valve-model fit, {s:.3g}, is below {KANO_S_NOISE:g} times OP's noise level "
                 f"({noise:.3g}): a stiction that small cannot hold the valve while OP travels")
     return None
+
+
+def friction_decides(rep: dict) -> str | None:
+    """Why the valve-model fit decides an undetermined screen for stiction (module docstring), or None: it names
+    friction (Kano's stiction or backlash) as what explains the loop, and Kano's S is above :data:`KANO_S_NOISE`
+    times OP's noise level."""
+    if rep.get("valve_models") != "fitted":
+        return None
+    cause, gain = rep.get("cause"), rep.get("gain_percent")
+    if rep.get("family") != "actuator" or rep.get("verdict") != "explained" or cause not in FRICTION_CAUSES:
+        return None
+    st = rep.get("stiction") or {}
+    s, noise = st.get("kano_s_pct"), st.get("op_noise")
+    if s is None or not noise or s < KANO_S_NOISE * noise:
+        return None
+    return (f"the valve-model fit names {cause}: it cuts the held-out error by {gain:.0f} %, and Kano's S ({s:.3g}) "
+            f"is {s / noise:.0f} times OP's noise level")
 
 
 def valve_model_evidence(rep: dict, verdict: str) -> dict | None:
@@ -83,9 +107,14 @@ def loop_verdict(check: LoopCheck, rep: dict) -> dict:
     verdict, p = st["verdict"], st["probability"]
     low, high = st["band"]
     why = contradiction(rep) if verdict == STICTION else None
+    decided = friction_decides(rep) if verdict == UNDETERMINED else None
     if why is not None:
         verdict = UNDETERMINED
         summary = f"undetermined, p = {p:.2f}: the indicators say stiction, but {why[0]}"
+    elif decided is not None:
+        verdict = STICTION
+        summary = (f"stiction, p = {p:.2f}: the indicators do not decide (between {low:.2f} and {high:.2f}), the "
+                   f"valve-model fit does")
     elif verdict == STICTION:
         summary = f"stiction, p = {p:.2f} (confident from {high:.2f})"
     elif verdict == NO_STICTION:
@@ -100,6 +129,9 @@ def loop_verdict(check: LoopCheck, rep: dict) -> dict:
         evidence.append(f"valve-model fit: {valve['says']} ({valve['agreement']})")
     if why is not None:
         evidence.insert(0, f"undetermined because {why[1]}")
+    if decided is not None:
+        evidence.insert(0, f"stiction because {decided}")
     evidence += list(check.reasons)
     return {"verdict": verdict, "summary": summary, "probability": p, "band": [low, high], "evidence": evidence,
-            "valve_model": valve, "contradiction": None if why is None else why[1], "structure": check.to_dict()}
+            "valve_model": valve, "contradiction": None if why is None else why[1],
+            "decided_by_valve_model": decided, "structure": check.to_dict()}
