@@ -49,16 +49,22 @@ def verdict_row(loop) -> dict:
     from phfdi.loopdiag.diagnose import Settings
     from phfdi.loopdiag.single import diagnose_run
     from phfdi.loopdiag.synthetic import simulate_loop
+    from phfdi.loopdiag.verdict import contradiction, friction_decides
 
     run = simulate_loop(loop.spec)
     run.metadata["process_type"] = loop.process_type
     rep = diagnose_run(run, Settings(baselines=False))
     lv = rep.get("loop_verdict") or {}
+    fitted = rep.get("valve_models") == "fitted" and bool(rep.get("stiction"))
     return {"name": loop.group, "loop_class": loop.loop_class, "stiction": bool(loop.stiction),
             "conditions": list(loop.conditions), "valve": loop.spec.valve,
             "slips": slips(run["stem_pct"], run["op_pct"]), "verdict": lv.get("verdict", "error"),
             "probability": lv.get("probability"), "contradiction": lv.get("contradiction"),
-            "screen_call": (rep.get("stiction") or {}).get("verdict"), "error": rep.get("error")}
+            "screen_call": (rep.get("stiction") or {}).get("verdict"), "error": rep.get("error"),
+            # what the valve-model fit says where it ran, whatever the screen's call: the verdict's rules
+            # (phfdi.loopdiag.verdict) applied under another operating point can be counted from these
+            "fit_decides": fitted and friction_decides(rep) is not None,
+            "fit_takes_back": fitted and contradiction(rep) is not None}
 
 
 def metrics(rows: list[dict]) -> dict:
