@@ -1,6 +1,6 @@
 """Should the valve-model fit decide where the screen does not? Development loops, before and after the rule.
 
-    .venv/bin/python benchmarks/stiction_fit_decides.py                 # 2000 loops a generator (about 14 min, Dask)
+    .venv/bin/python benchmarks/stiction_fit_decides.py                 # 2000 loops a generator (about 7 min, Dask)
     .venv/bin/python benchmarks/stiction_fit_decides.py --loops 400 --out OUT.json
 
 The verdict's screen (indicators and the dead-band screen, a logistic model) leaves a loop ``undetermined`` when
