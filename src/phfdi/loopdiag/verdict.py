@@ -66,7 +66,8 @@ def friction_decides(rep: dict) -> str | None:
     if rep.get("valve_models") != "fitted":
         return None
     cause, gain = rep.get("cause"), rep.get("gain_percent")
-    if rep.get("family") != "actuator" or rep.get("verdict") != "explained" or cause not in FRICTION_CAUSES:
+    if rep.get("family") != "actuator" or rep.get("verdict") != "explained" or cause not in FRICTION_CAUSES \
+            or gain is None:
         return None
     st = rep.get("stiction") or {}
     s, noise = st.get("kano_s_pct"), st.get("op_noise")
