@@ -60,16 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     jobs = [(d, "train") for d, _ in train] + [(d, "calibration") for d, _ in cal]
     print(f"{len(jobs)} loops drawn in {time.perf_counter() - t0:.0f} s (redrawn: train {red_t}, calibration "
           f"{red_c})", file=sys.stderr, flush=True)
-    step = max(1, len(jobs) // 20)
-    shown = [0]
-
-    def show(done: int, total: int) -> None:
-        if done // step > shown[0] or done == total:
-            shown[0] = done // step
-            print(f"{done}/{total} loops, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-
     with dask_client(args.scheduler, args.workers) as client:
-        rows = map_ordered(client, _row, jobs, show, chunk=16)
+        rows = map_ordered(client, _row, jobs, _progress(t0, len(jobs)), chunk=16)
         print("the valve-model fit on the calibration loops", file=sys.stderr, flush=True)
         fits = map_ordered(client, valve_fit_row, [d for d, _ in cal], _progress(t0, len(cal)), chunk=4)
     _merge_fits(rows, fits)
@@ -82,10 +74,13 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _progress(t0: float, total: int):
+    """A progress callback for map_ordered: a line on stderr each twentieth of ``total`` loops done."""
     step = max(1, total // 20)
+    shown = [0]
 
     def show(done: int, _total: int) -> None:
-        if done % step == 0 or done == total:
+        if done // step > shown[0] or done == total:
+            shown[0] = done // step
             print(f"{done}/{total} loops, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     return show
 

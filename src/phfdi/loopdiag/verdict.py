@@ -41,18 +41,35 @@ VERDICTS = (STICTION, NO_STICTION, UNDETERMINED, PV_FROZEN, NOT_A_CLOSED_LOOP)
 KANO_S_NOISE = 3.0
 
 
+def _fitted_cause(rep: dict) -> tuple[str, float] | None:
+    """The valve nonlinearity the fit names as what explains the loop, with its held-out gain (%), or None (no
+    fit, or no valve nonlinearity beats the linear model by the gain threshold)."""
+    if rep.get("valve_models") != "fitted" or rep.get("family") != "actuator" or rep.get("verdict") != "explained":
+        return None
+    cause, gain = rep.get("cause"), rep.get("gain_percent")
+    return None if gain is None else (str(cause), float(gain))
+
+
+def _kano_s(rep: dict) -> tuple[float, float] | None:
+    """Kano's S of the fit and OP's noise level, or None when either is missing."""
+    st = rep.get("stiction") or {}
+    s, noise = st.get("kano_s_pct"), st.get("op_noise")
+    return None if s is None or not noise else (float(s), float(noise))
+
+
 def contradiction(rep: dict) -> tuple[str, str] | None:
     """Why the valve-model fit contradicts a stiction call (module docstring), short and in full, or None."""
     if rep.get("valve_models") != "fitted":
         return None
-    cause, gain = rep.get("cause"), rep.get("gain_percent")
-    if rep.get("family") == "actuator" and rep.get("verdict") == "explained" and cause not in FRICTION_CAUSES:
+    named = _fitted_cause(rep)
+    if named is not None and named[0] not in FRICTION_CAUSES:
+        cause, gain = named
         return (f"the valve-model fit names {cause}, not friction",
                 f"the valve-model fit names {cause}, not friction: it cuts the held-out error by {gain:.0f} % and "
                 "neither Kano's stiction nor a backlash comes as close")
-    st = rep.get("stiction") or {}
-    s, noise = st.get("kano_s_pct"), st.get("op_noise")
-    if s is not None and noise and s < KANO_S_NOISE * noise:
+    kano = _kano_s(rep)
+    if kano is not None and kano[0] < KANO_S_NOISE * kano[1]:
+        s, noise = kano
         return (f"Kano's S ({s:.3g}) is within OP's noise",
                 f"Kano's S from the valve-model fit, {s:.3g}, is below {KANO_S_NOISE:g} times OP's noise level "
                 f"({noise:.3g}): a stiction that small cannot hold the valve while OP travels")
@@ -62,17 +79,11 @@ def contradiction(rep: dict) -> tuple[str, str] | None:
 def friction_decides(rep: dict) -> str | None:
     """Why the valve-model fit decides an undetermined screen for stiction (module docstring), or None: it names
     friction (Kano's stiction or backlash) as what explains the loop, and Kano's S is above :data:`KANO_S_NOISE`
-    times OP's noise level."""
-    if rep.get("valve_models") != "fitted":
+    times OP's noise level: :func:`contradiction`'s two tests, passed."""
+    named, kano = _fitted_cause(rep), _kano_s(rep)
+    if named is None or named[0] not in FRICTION_CAUSES or kano is None or kano[0] < KANO_S_NOISE * kano[1]:
         return None
-    cause, gain = rep.get("cause"), rep.get("gain_percent")
-    if rep.get("family") != "actuator" or rep.get("verdict") != "explained" or cause not in FRICTION_CAUSES \
-            or gain is None:
-        return None
-    st = rep.get("stiction") or {}
-    s, noise = st.get("kano_s_pct"), st.get("op_noise")
-    if s is None or not noise or s < KANO_S_NOISE * noise:
-        return None
+    (cause, gain), (s, noise) = named, kano
     return (f"the valve-model fit names {cause}: it cuts the held-out error by {gain:.0f} %, and Kano's S ({s:.3g}) "
             f"is {s / noise:.0f} times OP's noise level")
 
