@@ -72,6 +72,17 @@ def noise_level(x: np.ndarray) -> float:
     return 1.4826 * float(np.median(np.abs(d1 - np.median(d1)))) / math.sqrt(2.0)
 
 
+def ramp_noise_level(x: np.ndarray) -> float:
+    """Standard deviation of white measurement noise, from the MAD of second differences (sd of white noise's
+    second difference: sqrt 6 times its own). A straight ramp adds nothing to it: OP integrating a steady error
+    while a valve sticks ramps, and a limit cycle's ramps made first differences (:func:`noise_level`) read the
+    cycle's slope as noise, so a sticky valve's Kano S looked "within OP's noise" (docs/loop_diagnosis.md)."""
+    d2 = np.diff(np.asarray(x, float), 2)
+    if len(d2) == 0:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+
+
 def dominant_period(x: np.ndarray, dt_s: float, min_samples: float = 4.0) -> float:
     """Period (s) of the largest peak of the periodogram of detrended x, between 4 samples and a
     third of the record (the oscillation test's period when it finds one is preferred)."""

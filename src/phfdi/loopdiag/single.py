@@ -12,7 +12,7 @@ from phfdi_base.errors import UserError
 from .classifier import NO_STICTION, STICTION, UNDETERMINED
 from .diagnose import Evidence, Settings, gather_evidence, report
 from .features import ScreenEvidence, _r4, baselines_of, kano_fit, screen_evidence, stiction_verdict
-from .indicators import noise_level
+from .indicators import ramp_noise_level
 from .loopcheck import PV_FROZEN, LoopCheck, check_loop
 from .oscillation import detect_oscillation
 from .readers import check_loop_run, read_loop, read_loop_segments
@@ -137,7 +137,7 @@ def screened_report(run, settings: Settings) -> tuple[dict, ScreenEvidence, Evid
         rep = unfitted_report(run, scr, settings, st)
     if not settings.baselines:
         rep["baselines"] = {}
-    st["op_noise"] = _r4(noise_level(run["op_pct"]))
+    st["op_noise"] = _r4(ramp_noise_level(run["op_pct"]))
     rep["stiction"] = st
     rep["indicators"] = {k: v.to_dict() for k, v in scr.indicators.items()}
     return rep, scr, ev

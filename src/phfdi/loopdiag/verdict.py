@@ -37,7 +37,8 @@ from .loopcheck import NOT_A_CLOSED_LOOP, PV_FROZEN, LoopCheck
 from .vocabulary import FRICTION_CAUSES
 
 VERDICTS = (STICTION, NO_STICTION, UNDETERMINED, PV_FROZEN, NOT_A_CLOSED_LOOP)
-#: Kano's S below this many OP noise levels (MAD of OP's changes / sqrt 2) contradicts a stiction call
+#: Kano's S below this many OP noise levels (:func:`.indicators.ramp_noise_level`: from OP's second differences,
+#: so that OP's ramps while the valve sticks are not read as noise) contradicts a stiction call
 KANO_S_NOISE = 3.0
 
 
