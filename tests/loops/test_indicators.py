@@ -160,8 +160,8 @@ def test_deadband_screen_finds_a_sticking_stem_and_not_a_linear_valve():
 @given(period=st.integers(40, 400), cycle_in_sigmas=st.floats(0.0, 200.0), sigma=st.floats(1e-3, 1.0),
        seed=st.integers(0, 2**31 - 1))
 def test_ramp_noise_level_reads_white_noise_not_a_limit_cycles_ramps(period, cycle_in_sigmas, sigma, seed):
-    """OP as a sticky valve's limit cycle makes it (a triangle wave: ramps while the valve sticks) plus white
-    noise: the noise level behind the Kano-S-within-noise test is the noise's, whatever the cycle's size. 3000
+    """OP of a sticky valve's limit cycle (a triangle wave: it ramps while the valve sticks) plus white noise:
+    the noise level behind the Kano-S-within-noise test is the noise's, whatever the cycle's size. 3000
     samples: measured over 20 000 draws of this strategy the ratio to the true sd stayed within -10 % and +18 %
     (sd 3 %); at the worst corner (period 40, cycle 200 sd) it is +6 % with sd 2.7 %, so the 25 % band is 7 sd
     away: a draw leaves it by chance far less often than once in a million runs."""
