@@ -34,6 +34,7 @@ from .baselines import run_baselines
 from .controller import ControllerEstimate, estimate_pi
 from .hammerstein import CauseFit, Problem, fit_causes
 from .identify import LinearModel, Split, fit_linear, increments
+from .indicators import noise_level
 from .oscillation import Oscillation, detect_oscillation, period_regularity
 from .vocabulary import ACTUATOR_CAUSES
 
@@ -173,8 +174,7 @@ def symptoms(op: np.ndarray, pv: np.ndarray, nominal: LinearModel, osc: Oscillat
                               and abs(per - osc.period_s) <= 0.3 * osc.period_s)
     d4 = increments(pv, (4,)) - increments(y_model, (4,))
     out["asymmetry"] = _f(float(skew(d4))) if np.std(d4) > 0 else 0.0
-    d1 = np.diff(pv)
-    noise = 1.4826 * float(np.median(np.abs(d1 - np.median(d1)))) / math.sqrt(2.0)
+    noise = noise_level(pv)
     if noise > 0:
         dpv = np.abs(pv[3:] - pv[:-3])
         dmod = np.abs(y_model[3:] - y_model[:-3])
@@ -207,8 +207,7 @@ def setpoint_response(pv: np.ndarray, sp: np.ndarray | None, dt_s: float) -> dic
     """
     if sp is None:
         return {}
-    d1 = np.diff(pv)
-    noise = 1.4826 * float(np.median(np.abs(d1 - np.median(d1)))) / math.sqrt(2.0)
+    noise = noise_level(pv)
     if np.ptp(sp) <= 3 * max(noise, 1e-12):
         return {}
     n = len(pv)

@@ -66,21 +66,24 @@ def not_applicable(name: str, reason: str, reference: str) -> Indicator:
 
 
 # ---- shared helpers -------------------------------------------------------------------------
+def _difference_noise_level(x: np.ndarray, order: int) -> float:
+    """Standard deviation of white measurement noise from the MAD of x's ``order``-th differences (white noise's
+    k-th difference has sd sqrt(C(2k, k)) times its own: sqrt 2 for the first, sqrt 6 for the second)."""
+    d = np.diff(np.asarray(x, float), order)
+    return 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(math.comb(2 * order, order))
+
+
 def noise_level(x: np.ndarray) -> float:
     """Standard deviation of white measurement noise, from the MAD of first differences."""
-    d1 = np.diff(np.asarray(x, float))
-    return 1.4826 * float(np.median(np.abs(d1 - np.median(d1)))) / math.sqrt(2.0)
+    return _difference_noise_level(x, 1)
 
 
 def ramp_noise_level(x: np.ndarray) -> float:
-    """Standard deviation of white measurement noise, from the MAD of second differences (sd of white noise's
-    second difference: sqrt 6 times its own). A straight ramp adds nothing to it: OP integrating a steady error
-    while a valve sticks ramps, and a limit cycle's ramps made first differences (:func:`noise_level`) read the
-    cycle's slope as noise, so a sticky valve's Kano S looked "within OP's noise" (docs/loop_diagnosis.md)."""
-    d2 = np.diff(np.asarray(x, float), 2)
-    if len(d2) == 0:
-        return 0.0
-    return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+    """Standard deviation of white measurement noise, from the MAD of second differences. A straight ramp adds
+    nothing to it: OP integrating a steady error while a valve sticks ramps, and a limit cycle's ramps made first
+    differences (:func:`noise_level`) read the cycle's slope as noise, so a sticky valve's Kano S looked "within
+    OP's noise" (docs/loop_diagnosis.md). 0 when x has fewer than 3 samples."""
+    return 0.0 if len(x) < 3 else _difference_noise_level(x, 2)
 
 
 def dominant_period(x: np.ndarray, dt_s: float, min_samples: float = 4.0) -> float:
