@@ -24,7 +24,7 @@ these left at their defaults the record is the one the earlier simulator gave, s
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.signal import lfilter
@@ -78,6 +78,11 @@ class SyntheticLoop:
     op_quantum: float = 0.0  # OP as the historian stores it: rounded to this step (%; 0: not rounded)
     sp_ar_std: float = 0.0  # a setpoint wandering like a cascade master's output: AR(1) stationary std
     sp_ar_pole: float = 0.99  # its pole (per sample)
+    #: the PI controller's scan (s); 0: every record sample (``dt_s``). A DCS scans its loops in a second or
+    #: less while a historian keeps a value every 10 s or so: with ``scan_s`` below ``dt_s`` the loop runs at
+    #: the scan and the record keeps every (dt_s / scan_s)-th value (a whole number). The per-sample figures above
+    #: (load_walk_std, the poles) stay per record sample: they are converted to the scan
+    scan_s: float = 0.0
     seed: int = 1
     loop_tag: str = "SYN"
 
@@ -111,6 +116,9 @@ def simulate_loop(spec: SyntheticLoop) -> Record:
     >>> len(run), run.metadata["loop_tag"]
     (300, 'SYN')
     """
+    ratio = scans_per_sample(spec)
+    if ratio > 1:
+        return _snapshots(simulate_loop(_per_scan(spec, ratio)), ratio, spec)
     rng = np.random.default_rng(spec.seed)
     n = int(round(spec.duration_s / spec.dt_s))
     d = int(round(spec.dead_time_s / spec.dt_s))
@@ -173,6 +181,44 @@ def simulate_loop(spec: SyntheticLoop) -> Record:
             "process_type": "integrating" if spec.process == "integrating" else "self_regulating",
             "synthetic": {"valve": spec.valve, "kp": spec.kp, "ti_s": spec.ti_s}, "notes": []}
     return Record.of(out, meta)
+
+
+def scans_per_sample(spec: SyntheticLoop) -> int:
+    """How many controller scans one record sample spans (1 when ``scan_s`` is 0 or ``dt_s``).
+
+    Raises
+    ------
+    ValueError
+        ``scan_s`` negative, longer than ``dt_s``, or not a whole fraction of it.
+    """
+    if spec.scan_s == 0.0 or spec.scan_s == spec.dt_s:
+        return 1
+    ratio = spec.dt_s / spec.scan_s if spec.scan_s > 0 else -1.0
+    if ratio < 1.0 or abs(ratio - round(ratio)) > 1e-6 * ratio:
+        raise ValueError(f"scan_s {spec.scan_s} s must divide the sample time dt_s {spec.dt_s} s a whole number "
+                         "of times (0: scan at every sample)")
+    return int(round(ratio))
+
+
+def _per_scan(spec: SyntheticLoop, ratio: int) -> SyntheticLoop:
+    """The same loop stepped at its scan: the per-sample random walk and poles converted so that, per record
+    sample, the load's variance growth and the correlations stay those of ``spec``."""
+    def pole(p: float) -> float:
+        return float(p) ** (1.0 / ratio) if p > 0 else float(p)
+
+    return replace(spec, dt_s=spec.dt_s / ratio, scan_s=0.0, load_walk_std=spec.load_walk_std / math.sqrt(ratio),
+                   load_ar_pole=pole(spec.load_ar_pole), sp_ar_pole=pole(spec.sp_ar_pole),
+                   noise_pole=pole(spec.noise_pole))
+
+
+def _snapshots(fine: Record, ratio: int, spec: SyntheticLoop) -> Record:
+    """Every ``ratio``-th scan of a loop run at its scan: the historian's record at ``spec.dt_s``."""
+    cols = {k: np.asarray(fine[k])[::ratio] for k in ("op_pct", "pv", "sp", "stem_pct")}
+    cols["time_s"] = np.asarray(fine.time_s)[::ratio]
+    meta = dict(fine.metadata)
+    meta["sample_time_s"] = spec.dt_s
+    meta["synthetic"] = dict(meta["synthetic"], scan_s=spec.scan_s)
+    return Record.of(cols, meta)
 
 
 class _Extras:
