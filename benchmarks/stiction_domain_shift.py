@@ -1,7 +1,7 @@
 """Where the simulator's loops and the refinery's records differ, without reading a label.
 
-    .venv/bin/python benchmarks/stiction_domain_shift.py              # 400 loops a generator (about 4 min here)
-    .venv/bin/python benchmarks/stiction_domain_shift.py --loops 1000
+    .venv/bin/python benchmarks/stiction_domain_shift.py              # 400 loops a generator (about 1 min here)
+    .venv/bin/python benchmarks/stiction_domain_shift.py --loops 1000  # the figures of docs/loop_diagnosis.md, 2.3 min
 
 The stiction verdict is trained on simulated loops only and finds 3 of the 30 sticky refinery records. Its
 strongest input is the dead-band screen (``phfdi.loopdiag.deadband``). This script compares, as pools, what the
