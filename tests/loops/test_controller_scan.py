@@ -57,7 +57,7 @@ def test_a_random_walk_load_keeps_its_growth_per_record_sample():
     assert 4 * per_scan.load_walk_std ** 2 == pytest.approx(0.3 ** 2)
 
 
-@pytest.mark.parametrize("scan_s", [-1.0, 3.0, 20.0])
+@pytest.mark.parametrize("scan_s", [-1.0, 3.0, 20.0, float("nan")])
 def test_a_scan_that_does_not_divide_the_sample_time_is_refused(scan_s):
     with pytest.raises(ValueError, match="scan_s"):
         simulate_loop(replace(STICKY, scan_s=scan_s))

@@ -193,7 +193,7 @@ def scans_per_sample(spec: SyntheticLoop) -> int:
     """
     if spec.scan_s == 0.0 or spec.scan_s == spec.dt_s:
         return 1
-    ratio = spec.dt_s / spec.scan_s if spec.scan_s > 0 else -1.0
+    ratio = spec.dt_s / spec.scan_s if math.isfinite(spec.scan_s) and spec.scan_s > 0 else -1.0
     if ratio < 1.0 or abs(ratio - round(ratio)) > 1e-6 * ratio:
         raise ValueError(f"scan_s {spec.scan_s} s must divide the sample time dt_s {spec.dt_s} s a whole number "
                          "of times (0: scan at every sample)")
