@@ -140,6 +140,10 @@ def main(argv: list[str] | None = None) -> int:
     k = len(names)
     t0 = time.perf_counter()
     real = real_pool()
+    if len(real) == 0:
+        print(f"stiction_domain_shift: no usable loop record under {DATA} (set PHFDI_SHARED_DATA to the folder that "
+              "holds plant_loops/)", file=sys.stderr)
+        return 2
     print(f"real pool: {len(real)} records ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
     sims = {}
     with dask_client(None, None) as client:
