@@ -14,9 +14,9 @@ training set, test or earlier bound uses; their labels are the simulator's own):
   controller's proportional answer to PV's changes in the same sample (PV's noise relayed to OP), low when
   OP's changes come from elsewhere (integral action, set-point moves); and the dead-band gain of the simulator's
   sticky loops in bands of |r0|;
-* the same simulated loops with the PI controller scanning ten times per record sample
-  (``SyntheticLoop.scan_s``), as a DCS does under a 10 s historian, against the simulator's scan at every
-  record sample; and the shipped model's screen calls on both.
+* the same simulated loops with the PI controller scanning ten times per record sample (``SyntheticLoop.scan_s``),
+  as a DCS does under a 10 s historian, against the simulator's scan at every record sample; and the shipped
+  model's screen calls on both. The loops are drawn as benchmarks/stiction_information_bound.py draws them.
 
 Why the pool is enough: PROVENANCE.md says 30 of the 59 records are sticky, so if at most 10 % of the pool lies
 above some value, at least 24 of the 30 sticky records lie below it, whatever each record's label. Prints
@@ -35,6 +35,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from stiction_information_bound import HARD, draw
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("PHFDI_SHARED_DATA", ROOT.parent / "shared" / "data")) / "plant_loops"
@@ -45,8 +46,6 @@ SEEDS = {"domain": 35109, "training": 4250}
 SCANS = 10
 QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
 R0_BANDS = ((0.0, 0.44), (0.44, 0.7), (0.7, 0.9), (0.9, 1.0))
-#: the hard negatives of each generator (loops that cycle without a sticky valve)
-HARD = {"tight_tuning", "external_oscillation", "healthy_oscillatory_tuning"}
 
 
 def lag0_correlation(op: np.ndarray, pv: np.ndarray) -> float:
@@ -95,19 +94,6 @@ def simulated_row(loop) -> list[float]:
     return out
 
 
-def draw(generator: str, n: int, seed: int) -> list:
-    """Half sticky loops, half others, of one generator."""
-    if generator == "domain":
-        from phfdi.loopdiag.domain import draw_domain_loops
-
-        return [lp for lp, _ in draw_domain_loops(n, seed, "SHIFT")[0]]
-    from phfdi.loopdiag.training import LOOP_CLASSES, draw_class_loops
-
-    others = [c for c in LOOP_CLASSES if c not in ("stiction", "backlash")]
-    seq = ["stiction"] * (n // 2) + [others[k % len(others)] for k in range(n - n // 2)]
-    return [lp for lp, _ in draw_class_loops(seq, seed, "SHIFT")]
-
-
 def q(v: np.ndarray) -> str:
     return " / ".join(f"{x:.3f}" for x in np.quantile(v, QUANTILES)) if len(v) else "-"
 
@@ -148,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     sims = {}
     with dask_client(None, None) as client:
         for generator, seed in SEEDS.items():
-            loops = draw(generator, args.loops, seed)
+            loops = [loop for loop, _ in draw(generator, args.loops, seed)]
             rows = map_ordered(client, simulated_row, loops,
                                lambda d, n, g=generator: print(f"{g}: {d}/{n} loops ({time.perf_counter() - t0:.0f} s)",
                                                                file=sys.stderr) if d % 100 == 0 or d == n else None,
