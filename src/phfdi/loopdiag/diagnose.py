@@ -143,8 +143,11 @@ def gather_evidence(run: Record, settings: Settings | None = None) -> Evidence:
     problem = Problem(op, pv, dt, split, integrating, op_in_percent, ctrl.gain_sign)
     problem.centre_on(next(m for m in linear if m.structure != "arx"))
     causes = fit_causes(problem, settings.causes)
+    y_nominal = linear[0].y_model
+    if y_nominal is None:
+        raise TypeError(f"the {linear[0].structure} model has no y_model")
     ev = Evidence(osc, ctrl, linear, causes, {}, {}, baselines, notes,
-                  n_eff=effective_samples(pv, linear[0].y_model, split))
+                  n_eff=effective_samples(pv, y_nominal, split))
     ev.symptoms = symptoms(op, pv, linear[0], osc, dt, ev.chosen())
     ev.setpoint_response = setpoint_response(pv, sp, dt) if osc.oscillating else {}
     return ev
@@ -165,6 +168,8 @@ def symptoms(op: np.ndarray, pv: np.ndarray, nominal: LinearModel, osc: Oscillat
       rest while OP moves.
     """
     y_model = nominal.y_model
+    if y_model is None:
+        raise TypeError(f"symptoms: the nominal {nominal.structure} model has no y_model")
     residual = pv - y_model
     out: dict = {}
     per, reg = period_regularity(residual - np.mean(residual), dt_s)

@@ -90,14 +90,18 @@ def feature_vector(indicators: dict[str, Indicator], oscillation: Oscillation) -
     (False: neutral value used)."""
     values, measured = [], {}
     for f in FEATURES:
+        v: float | None
         if f.source == "oscillation":
             r = oscillation.regularity
             v = math.log1p(min(r, 10.0)) if math.isfinite(r) else math.log1p(10.0)
         else:
             v = indicators[f.source].value
-        ok = v is not None and math.isfinite(v)
-        measured[f.name] = bool(ok)
-        values.append(_clip(v, f) if ok else f.neutral)
+        if v is not None and math.isfinite(v):
+            measured[f.name] = True
+            values.append(_clip(v, f))
+        else:
+            measured[f.name] = False
+            values.append(f.neutral)
     return np.array(values), measured
 
 

@@ -253,7 +253,10 @@ def fit_deadzone(p: Problem) -> CauseFit | None:
         lw = lw[lw <= math.log10(w_max)] if w_max > 0 else lw[:0]
         if len(lw) < 2:
             continue
-        z = _grid_1d(p, lambda w, c=c: DeadZone(width_pct=w, center_pct=c), lw)
+        def dead_zone(w: float, c: float = c) -> DeadZone:
+            return DeadZone(width_pct=w, center_pct=c)
+
+        z = _grid_1d(p, dead_zone, lw)
         z = min(z, math.log10(w_max))
         sse = p.sse(DeadZone(width_pct=10.0 ** z, center_pct=c))
         if best is None or sse < best[0]:

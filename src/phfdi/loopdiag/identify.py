@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Literal, overload
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
@@ -143,8 +144,11 @@ def _round(v, digits: int = 6):
 def score(model: LinearModel, y: np.ndarray, split: Split) -> LinearModel:
     """Fill in the training and validation NRMSE of a model whose ``y_model`` is set."""
     tr, va = split.train, split.validation
-    model.nrmse_train = prediction_nrmse(y[tr], model.y_model[tr], split.horizons)
-    model.nrmse_validation = prediction_nrmse(y[va], model.y_model[va], split.horizons)
+    y_model = model.y_model
+    if y_model is None:
+        raise TypeError(f"score: the {model.structure} model has no y_model")
+    model.nrmse_train = prediction_nrmse(y[tr], y_model[tr], split.horizons)
+    model.nrmse_validation = prediction_nrmse(y[va], y_model[va], split.horizons)
     return model
 
 
@@ -287,6 +291,21 @@ def lag_criteria(u: np.ndarray, targets: LagTargets, gain_sign: int = 0,
     return np.where(best > targets.syy, targets.syy, best)
 
 
+@overload
+def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
+                  gain_sign: int = 0, delays: np.ndarray = DELAYS,
+                  tau_factors: np.ndarray = TAU_FACTORS, sse_only: Literal[False] = False,
+                  targets: LagTargets | None = None) -> LinearModel: ...
+@overload
+def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
+                  gain_sign: int = 0, delays: np.ndarray = DELAYS,
+                  tau_factors: np.ndarray = TAU_FACTORS, *, sse_only: Literal[True],
+                  targets: LagTargets | None = None) -> float: ...
+@overload
+def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
+                  gain_sign: int = 0, delays: np.ndarray = DELAYS,
+                  tau_factors: np.ndarray = TAU_FACTORS, sse_only: bool = False,
+                  targets: LagTargets | None = None) -> LinearModel | float: ...
 def fit_lag_model(u: np.ndarray, y: np.ndarray, dt_s: float, split: Split, integrating: bool,
                   gain_sign: int = 0, delays: np.ndarray = DELAYS,
                   tau_factors: np.ndarray = TAU_FACTORS, sse_only: bool = False,

@@ -19,7 +19,7 @@ import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from phfdi import records
 from phfdi.records.formats import firsts, historian_suffixes, is_format
@@ -159,7 +159,7 @@ COLUMNS = ("file", "loop_tag", "lines", "samples", "sample_time_s", "process_typ
 
 def table_row(rep: dict) -> dict:
     """One flat row of the plant-wide table."""
-    row = {c: None for c in COLUMNS}
+    row: dict[str, Any] = {c: None for c in COLUMNS}
     row["file"] = rep.get("file")
     row["loop_tag"] = rep.get("loop_tag")
     if rep.get("lines"):

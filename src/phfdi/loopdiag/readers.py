@@ -87,13 +87,13 @@ def parse_loop_columns(text: str) -> records.ColumnMap:
         items = dict(data.get("columns") or {})
         items.update({k: data[k] for k in LOOP_OPTIONS if k in data})
         return _from_items(items, str(path))
-    items: dict[str, str] = {}
+    pairs: dict[str, str] = {}
     for part in filter(None, (p.strip() for p in text.split(","))):
         key, sep, value = part.partition("=")
         if not sep or not value:
             raise UserError(f"column mapping {part!r}: expected KEY=COLUMN (keys: op, pv, sp, time)")
-        items[key.strip()] = value.strip()
-    return _from_items(items, f"--columns {text!r}")
+        pairs[key.strip()] = value.strip()
+    return _from_items(pairs, f"--columns {text!r}")
 
 
 def _from_items(items: dict, where: str) -> records.ColumnMap:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import overload
 
 import numpy as np
 from scipy.signal import lfilter
@@ -91,6 +92,10 @@ class SyntheticLoop:
 WAVEFORMS = ("sine", "square", "triangle", "sawtooth")
 
 
+@overload
+def waveform(name: str, phase: np.ndarray) -> np.ndarray: ...
+@overload
+def waveform(name: str, phase: float) -> float: ...
 def waveform(name: str, phase: np.ndarray | float) -> np.ndarray | float:
     """A periodic waveform of period 2 pi and peak 1: a sine, a square wave with soft edges (an upstream
     sticky valve's slips seen through a lag), a triangle or a sawtooth."""
@@ -234,7 +239,7 @@ class _Extras:
         self.pole = float(spec.noise_pole)
         self.colour: float | None = None
         k = np.arange(n) * spec.dt_s
-        self.osc = np.zeros(n)
+        self.osc: np.ndarray = np.zeros(n)
         if spec.input_oscillation:
             amp, period_s, wave, phase = spec.input_oscillation
             self.osc = amp * waveform(wave, 2 * math.pi * k / period_s + phase)

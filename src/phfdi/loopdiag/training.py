@@ -138,7 +138,7 @@ def _at_limits(run: Record) -> float:
 def draw_loops(n: int, seed: int, prefix: str = "SYN") -> list[tuple[DrawnLoop, Record]]:
     """n loops, half with stiction (alternating), each simulated; unusable draws are redrawn."""
     rng = np.random.default_rng(seed)
-    out = []
+    out: list[tuple[DrawnLoop, Record]] = []
     i = 0
     while len(out) < n:
         stiction = len(out) % 2 == 0

@@ -91,9 +91,9 @@ def friction_decides(rep: dict) -> str | None:
 
 def valve_model_evidence(rep: dict, verdict: str) -> dict | None:
     """What the valve-model fit says and whether it agrees with ``verdict`` (None when it did not run)."""
-    if rep.get("valve_models") == "not fitted" or rep.get("family") is None or rep.get("gain_percent") is None:
-        return None
     cause, family, gain = rep.get("cause"), rep.get("family"), rep.get("gain_percent")
+    if rep.get("valve_models") == "not fitted" or family is None or gain is None:
+        return None
     if family == "actuator" and cause in FRICTION_CAUSES:
         says, points_to_stiction = f"{cause} (a friction dead-band) cuts the held-out error by {gain:.0f} %", True
     elif family == "actuator":
