@@ -17,8 +17,10 @@ screen flags, the one verdict with its reconciliation) on Dask, and the verdicts
 * accuracy two ways: undetermined counted as not calling stiction, and over the confident calls only;
 * the calls per class. Backlash (a dead-band is Kano's model with J = 0: neither label is right) is reported
   apart and not scored;
-* the sticky loops' calls by the valve's size (Kano's S or He's fs, % of travel) and by how often the simulated
-  stem broke away (:func:`phfdi.loopdiag.domain.slips`): which sticky valves the verdict finds, not only how many.
+* the sticky loops' calls by the valve's size (Kano's S or He's fs, % of travel), by how often the simulated
+  stem broke away (:func:`phfdi.loopdiag.domain.slips`) and by how far the valve moves PV, in noise levels, against
+  the same loop with a linear valve (:func:`phfdi.loopdiag.domain.valve_effect_on_pv`): which sticky valves the
+  verdict finds, not only how many.
 
 ``--classes`` draws a subset of the classes (a larger draw of the ones whose rate is in question); the metrics
 over a subset are those of that subset's mix, not of the test's.
@@ -33,7 +35,7 @@ import time
 from pathlib import Path
 
 from phfdi.loopdiag.dask_run import dask_client, map_ordered
-from phfdi.loopdiag.domain import slips
+from phfdi.loopdiag.domain import slips, valve_effect_on_pv
 from phfdi.loopdiag.training import LOOP_CLASSES, class_round_robin, draw_class_loops
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,6 +61,8 @@ def verdict_row(loop) -> dict:
     return {"name": loop.group, "loop_class": loop.loop_class, "stiction": bool(loop.stiction),
             "conditions": list(loop.conditions), "valve": loop.spec.valve,
             "slips": slips(run["stem_pct"], run["op_pct"]), "verdict": lv.get("verdict", "error"),
+            # how far a sticky valve moves PV, in noise levels (against the same loop with a linear valve)
+            "valve_effect": valve_effect_on_pv(loop.spec, run) if loop.stiction else None,
             "probability": lv.get("probability"), "contradiction": lv.get("contradiction"),
             "screen_call": (rep.get("stiction") or {}).get("verdict"), "error": rep.get("error"),
             # what the valve-model fit says where it ran, whatever the screen's call: the verdict's rules
@@ -101,6 +105,8 @@ def class_table(rows: list[dict]) -> str:
 SIZE_BANDS_PCT = (0.0, 0.6, 1.2, 2.5, 5.0, float("inf"))
 #: bands of the simulated stem's break-aways in the record
 SLIP_BANDS = (0, 3, 10, 30, float("inf"))
+#: bands of how far a sticky valve moves PV (:func:`phfdi.loopdiag.domain.valve_effect_on_pv`), noise levels
+EFFECT_BANDS = (0.0, 1.0, 2.0, 4.0, 8.0, float("inf"))
 
 
 def _band_rows(rows: list[dict], values: list[float], edges: tuple, unit: str) -> list[str]:
@@ -122,7 +128,8 @@ def valve_size_pct(valve) -> float:
 
 
 def size_tables(rows: list[dict]) -> str:
-    """The sticky loops' calls by the valve's size and by the stem's break-aways."""
+    """The sticky loops' calls by the valve's size, by the stem's break-aways and (rows that carry it) by how far
+    the valve moves PV."""
     sticky = [r for r in rows if r["stiction"] and r["loop_class"] not in UNSCORED]
     if not sticky:
         return ""
@@ -131,6 +138,10 @@ def size_tables(rows: list[dict]) -> str:
     out += _band_rows(sticky, [valve_size_pct(r["valve"]) for r in sticky], SIZE_BANDS_PCT, " %")
     out += ["", head[0].format("break-aways of the simulated stem"), head[1]]
     out += _band_rows(sticky, [float(r["slips"]) for r in sticky], SLIP_BANDS, "")
+    if all(r.get("valve_effect") is not None for r in sticky):  # rows written before 2026-12-08 do not
+        out += ["", head[0].format("how far the valve moves PV: std of PV less the same loop's with a linear valve, "
+                                   "noise levels"), head[1]]
+        out += _band_rows(sticky, [float(r["valve_effect"]) for r in sticky], EFFECT_BANDS, "")
     return "\n".join(out)
 
 
@@ -146,7 +157,7 @@ def print_report(rows: list[dict], label: str) -> dict:
     print(class_table(rows))
     sizes = size_tables(rows)
     if sizes:
-        print("\nsticky loops by the valve's size and by the stem's break-aways:")
+        print("\nsticky loops by the valve's size, by the stem's break-aways and by how far the valve moves PV:")
         print(sizes)
     return m
 

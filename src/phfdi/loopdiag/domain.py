@@ -38,7 +38,7 @@ step, then one slip: a pattern of plant records); the others are redrawn and cou
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -287,6 +287,23 @@ def sticking_shows(stem: np.ndarray, op: np.ndarray) -> bool:
     :data:`LONG_STAND` samples or more (a detuned loop's OP creeping through the dead-band, then a slip)."""
     st = stands(stem, op)
     return len(st) >= MIN_SLIPS or (len(st) >= 1 and max(st) >= LONG_STAND)
+
+
+def valve_effect_on_pv(spec: SyntheticLoop, run: Record | None = None) -> float:
+    """How far the loop's valve moves PV, in units of PV's measurement noise: the standard deviation of PV's
+    difference from the same loop with a linear valve (the same loads, setpoint moves and noise draws, so the
+    difference is the valve's doing, through the loop's dynamics and its controller), divided by
+    ``spec.noise_std``. 0 for a linear valve; inf for a noiseless loop whose valve moves PV at all. Which
+    stiction a diagnosis can find depends on this more than on the valve's size (docs/loop_diagnosis.md).
+    ``run``: the loop's simulated record, when already at hand."""
+    if spec.valve is None:
+        return 0.0
+    with_valve = simulate_loop(spec) if run is None else run
+    linear = simulate_loop(replace(spec, valve=None))
+    effect = float(np.std(np.asarray(with_valve["pv"], float) - np.asarray(linear["pv"], float)))
+    if spec.noise_std > 0:
+        return effect / spec.noise_std
+    return 0.0 if effect == 0.0 else math.inf
 
 
 def usable(run: Record) -> bool:
