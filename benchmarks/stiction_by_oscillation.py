@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,9 @@ def recall_at_rule(p: np.ndarray, y: np.ndarray, hard: np.ndarray) -> tuple[floa
 
 
 def main() -> int:
+    if not DATASET.is_file():
+        print(f"stiction_by_oscillation: {DATASET} not found; run benchmarks/stiction_dataset.py first", file=sys.stderr)
+        return 2
     rows = json.loads(DATASET.read_text())["rows"]
     xt, yt, ot, _ = arrays(rows, "train")
     xc, yc, oc, hc = arrays(rows, "calibration")

@@ -4,8 +4,9 @@
 
 Issue 35 allows unlabelled real records for domain adaptation, as Deep CORAL does (Sun & Saenko 2016). For the
 verdict's linear model, CORAL (Sun, Feng & Saenko 2016) is a map of the target's screen features onto the first two
-moments of the training loops' features: x' = mu_s + (x - mu_t) C_t^(-1/2) C_s^(1/2) (in the training loops'
-standardised units, each covariance with eps on its diagonal), or, in the diagonal form, each feature's mean and
+moments of the simulated data set's features (benchmarks/results/stiction_dataset.json: its training and
+calibration loops): x' = mu_s + (x - mu_t) C_t^(-1/2) C_s^(1/2) (in those loops' standardised units, each
+covariance with eps on its diagonal), or, in the diagonal form, each feature's mean and
 standard deviation alone. The model, its calibration and cut stay as shipped.
 
 Measured where the truth is known: the "plant" is the simulator's own loops with the controller scanning ten
@@ -13,8 +14,9 @@ times per record sample (``SyntheticLoop.scan_s``, the shift measured by benchma
 half of them sticky (development seeds no training set, test or earlier draw uses). One half gives unlabelled
 pools of 59 loops (as many as the refinery records), 100 pools drawn at random, and the whole half as one pool;
 the other half is scored with the shipped model's screen calls (p at or above the cut; no valve-model fit):
-recall, false calls, hard negatives called and the undetermined share, without and with the map. No refinery
-record is read. Prints figures, no pass/fail; changes nothing.
+recall, false calls, hard negatives called and the undetermined share, without and with the map, and the rank
+AUC of p (sticky against the other loops): whether the map separates better, or only moves the loops' p. No
+refinery record is read. Prints figures, no pass/fail; changes nothing.
 """
 
 from __future__ import annotations
@@ -66,19 +68,33 @@ def loop_row(loop) -> list[float]:
     return [float(loop.stiction), float(loop.loop_class in HARD)] + screen_row(run, loop.process_type)["features"]
 
 
+def rank_auc(v: np.ndarray, y: np.ndarray) -> float:
+    from scipy.stats import rankdata
+
+    r = rankdata(v)
+    n1, n0 = int(y.sum()), int((~y).sum())
+    return float((r[y].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
+
+
 def rates(model, x: np.ndarray, sticky: np.ndarray, hard: np.ndarray) -> np.ndarray:
-    """Recall, false calls, hard negatives called, undetermined share of the screen's calls."""
+    """Recall, false calls, hard negatives called, undetermined share of the screen's calls, rank AUC of p."""
     p = model.calibrated(x)
     low, cut = model.cuts()
     called = p >= cut
     return np.array([called[sticky].mean(), called[~sticky].mean(), called[~sticky & hard].mean(),
-                     ((p >= low) & ~called).mean()])
+                     ((p >= low) & ~called).mean(), rank_auc(p, sticky)])
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--loops", type=int, default=1000, help="simulated loops per generator, half sticky (default 1000)")
     args = ap.parse_args(argv)
+    if args.loops < 4 * POOL:
+        ap.error(f"--loops {args.loops}: at least {4 * POOL}, so that half of them holds a pool of {POOL} with both "
+                 "classes")
+    if not DATASET.is_file():
+        print(f"stiction_coral: {DATASET} not found; run benchmarks/stiction_dataset.py first", file=sys.stderr)
+        return 2
     from phfdi.loopdiag.classifier import load_model
     from phfdi.loopdiag.dask_run import dask_client, map_ordered
 
@@ -88,8 +104,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     print(f"shipped model's screen calls (p >= {model.cuts()[1]:.3f}) on loops with {SCANS} scans a sample; "
           f"pools of {POOL} unlabelled loops ({POOLS} of them: mean and 5-95 %), or the whole half")
-    print("| generator | map | pool | recall | false calls | hard negatives called | undetermined |")
-    print("|---|---|---|---|---|---|---|")
+    print("| generator | map | pool | recall | false calls | hard negatives called | undetermined | rank AUC of p |")
+    print("|---|---|---|---|---|---|---|---|")
     with dask_client(None, None) as client:
         for generator, seed in SEEDS.items():
             loops = [loop for loop, _ in draw(generator, args.loops, seed)]
@@ -100,17 +116,19 @@ def main(argv: list[str] | None = None) -> int:
             order = rng.permutation(len(a))
             pools, test = order[:len(a) // 2], order[len(a) // 2:]
             r = rates(model, x[test], sticky[test], hard[test])
-            print(f"| {generator} (seed {seed}) | none | - | {r[0]:.3f} | {r[1]:.1%} | {r[2]:.1%} | {r[3]:.1%} |")
+            print(f"| {generator} (seed {seed}) | none | - | {r[0]:.3f} | {r[1]:.1%} | {r[2]:.1%} | {r[3]:.1%} | "
+                  f"{r[4]:.3f} |")
             for label, diagonal, eps in MAPS:
                 whole = coral_map(source, x[pools], diagonal, eps)
                 r = rates(model, whole(x[test]), sticky[test], hard[test])
-                print(f"| | {label} | whole half | {r[0]:.3f} | {r[1]:.1%} | {r[2]:.1%} | {r[3]:.1%} |")
+                print(f"| | {label} | whole half | {r[0]:.3f} | {r[1]:.1%} | {r[2]:.1%} | {r[3]:.1%} | {r[4]:.3f} |")
                 rs = np.array([rates(model, coral_map(source, x[rng.choice(pools, POOL, replace=False)], diagonal,
                                                       eps)(x[test]), sticky[test], hard[test]) for _ in range(POOLS)])
                 lo, hi = np.quantile(rs, [0.05, 0.95], axis=0)
                 m = rs.mean(0)
                 print(f"| | {label} | {POOL} loops | {m[0]:.3f} ({lo[0]:.3f}-{hi[0]:.3f}) | {m[1]:.1%} ({lo[1]:.1%}-"
-                      f"{hi[1]:.1%}) | {m[2]:.1%} ({lo[2]:.1%}-{hi[2]:.1%}) | {m[3]:.1%} |")
+                      f"{hi[1]:.1%}) | {m[2]:.1%} ({lo[2]:.1%}-{hi[2]:.1%}) | {m[3]:.1%} | {m[4]:.3f} ({lo[4]:.3f}-"
+                      f"{hi[4]:.3f}) |")
     print(f"\n{time.perf_counter() - t0:.0f} s", file=sys.stderr)
     return 0
 

@@ -62,7 +62,7 @@ def verdict_row(loop) -> dict:
             "conditions": list(loop.conditions), "valve": loop.spec.valve,
             "slips": slips(run["stem_pct"], run["op_pct"]), "verdict": lv.get("verdict", "error"),
             # how far a sticky valve moves PV, in noise levels (against the same loop with a linear valve)
-            "valve_effect": valve_effect_on_pv(loop.spec, run) if loop.stiction else None,
+            "valve_effect_noise_levels": valve_effect_on_pv(loop.spec, run) if loop.stiction else None,
             "probability": lv.get("probability"), "contradiction": lv.get("contradiction"),
             "screen_call": (rep.get("stiction") or {}).get("verdict"), "error": rep.get("error"),
             # what the valve-model fit says where it ran, whatever the screen's call: the verdict's rules
@@ -112,7 +112,8 @@ EFFECT_BANDS = (0.0, 1.0, 2.0, 4.0, 8.0, float("inf"))
 def _band_rows(rows: list[dict], values: list[float], edges: tuple, unit: str) -> list[str]:
     out = []
     for lo, hi in zip(edges[:-1], edges[1:]):
-        idx = [r for r, v in zip(rows, values) if lo <= v < hi]
+        # the last band is open above: it takes inf (a noiseless loop's valve effect) too
+        idx = [r for r, v in zip(rows, values) if lo <= v < hi or (hi == float("inf") and v == hi)]
         if not idx:
             continue
         k = [sum(r["verdict"] == v for r in idx) for v in CALLS]
@@ -138,10 +139,10 @@ def size_tables(rows: list[dict]) -> str:
     out += _band_rows(sticky, [valve_size_pct(r["valve"]) for r in sticky], SIZE_BANDS_PCT, " %")
     out += ["", head[0].format("break-aways of the simulated stem"), head[1]]
     out += _band_rows(sticky, [float(r["slips"]) for r in sticky], SLIP_BANDS, "")
-    if all(r.get("valve_effect") is not None for r in sticky):  # rows written before 2026-12-08 do not
+    if all(r.get("valve_effect_noise_levels") is not None for r in sticky):  # rows written before 2026-12-08 do not
         out += ["", head[0].format("how far the valve moves PV: std of PV less the same loop's with a linear valve, "
                                    "noise levels"), head[1]]
-        out += _band_rows(sticky, [float(r["valve_effect"]) for r in sticky], EFFECT_BANDS, "")
+        out += _band_rows(sticky, [float(r["valve_effect_noise_levels"]) for r in sticky], EFFECT_BANDS, "")
     return "\n".join(out)
 
 

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import valve_actuator.blocks  # noqa: F401  (registers the valve blocks)
 from phfdi.loopdiag.deadband import deadband_evidence
-from phfdi.loopdiag.synthetic import acceptance_cases, simulate_loop
+from phfdi.loopdiag.synthetic import SyntheticLoop, acceptance_cases, simulate_loop
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -35,6 +36,16 @@ def test_the_shipped_variant_is_the_screens_index(case):
     assert shipped == pytest.approx(deadband_evidence(run["op_pct"], run["pv"], "self_regulating").value, abs=1e-12)
 
 
+def test_a_same_interval_model_that_fits_the_controller_exactly_is_undefined():
+    # a PI controller acting once per record sample, no rounding: OP's changes at lags 0 and 1 with PV's give PV's
+    # change exactly (the controller's equation), so the lag-0 variants have no index; the shipped one has
+    bench = _load("stiction_same_interval")
+    run = simulate_loop(SyntheticLoop(valve=("stiction", {"s_pct": 2.0, "j_pct": 2.0}), load_walk_std=0.3, seed=3))
+    shipped, lag0, nuisance = bench.indices(run["op_pct"], run["pv"], "self_regulating")
+    assert np.isfinite(shipped) and shipped > 0.0
+    assert np.isinf(lag0) and np.isinf(nuisance)
+
+
 def test_coral_moves_the_pool_onto_the_sources_mean_and_covariance():
     bench = _load("stiction_coral")
     rng = np.random.default_rng(5)
@@ -45,3 +56,7 @@ def test_coral_moves_the_pool_onto_the_sources_mean_and_covariance():
     assert np.allclose(np.cov(moved, rowvar=False), np.cov(source, rowvar=False), rtol=1e-6)
     diag = bench.coral_map(source, pool, diagonal=True, eps=0.0)(pool)
     assert np.allclose(diag.mean(0), source.mean(0)) and np.allclose(diag.std(0), source.std(0))
+    # a large eps on both diagonals leaves the covariance alone: the map only moves the pool's mean
+    shift = bench.coral_map(source, pool, diagonal=False, eps=1e9)(pool)
+    assert np.allclose(shift.mean(0), source.mean(0))
+    assert np.allclose(np.cov(shift, rowvar=False), np.cov(pool, rowvar=False), rtol=1e-3, atol=1e-6)

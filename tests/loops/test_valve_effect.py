@@ -17,10 +17,6 @@ def sticky(s_pct: float) -> SyntheticLoop:
     return replace(LOOP, valve=("stiction", {"s_pct": s_pct, "j_pct": s_pct}))
 
 
-def test_a_linear_valve_moves_pv_by_nothing():
-    assert valve_effect_on_pv(LOOP) == 0.0
-
-
 def test_a_vanishing_dead_band_moves_pv_by_nothing():
     # the difference is the valve's alone: the loads and noise draws are the same in both loops
     assert valve_effect_on_pv(sticky(1e-9)) == pytest.approx(0.0, abs=1e-9)
