@@ -14,13 +14,13 @@ negatives, reach the cut; no valve-model fit). Simulated loops only; prints figu
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 
 import numpy as np
+from stiction_information_bound import false_call_cut, rank_auc
 
-from phfdi.loopdiag.classifier import HARD_NEGATIVES, SIM_FALSE_CALL, fit_logistic, load_model
+from phfdi.loopdiag.classifier import HARD_NEGATIVES, fit_logistic, load_model
 from phfdi.loopdiag.features import FEATURE_NAMES, FEATURE_SIGNS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,21 +33,10 @@ def arrays(rows: list[dict], source: str):
             np.array([r["oscillating"] for r in rs], bool), np.array([r["loop_class"] in HARD_NEGATIVES for r in rs]))
 
 
-def rank_auc(v: np.ndarray, y: np.ndarray) -> float:
-    from scipy.stats import rankdata
-
-    r = rankdata(v)
-    n1, n0 = int(y.sum()), int((~y).sum())
-    return float((r[y].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
-
-
 def recall_at_rule(p: np.ndarray, y: np.ndarray, hard: np.ndarray) -> tuple[float, float]:
-    """Recall and false calls at the lowest cut that at most SIM_FALSE_CALL of the negatives, and of the hard
-    negatives, reach."""
-    cut = -math.inf
-    for group in (~y, ~y & hard):
-        neg = np.sort(p[group])
-        cut = max(cut, float(np.nextafter(neg[len(neg) - int(math.floor(SIM_FALSE_CALL * len(neg))) - 1], math.inf)))
+    """Recall and false calls at the lowest cut that at most 2 % of the negatives, and of the hard negatives,
+    reach (the verdict's rule, ``false_call_cut``)."""
+    cut = false_call_cut(p, [~y, ~y & hard])
     return float(np.mean(p[y] >= cut)), float(np.mean(p[~y] >= cut))
 
 

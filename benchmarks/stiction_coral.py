@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.linalg import sqrtm
-from stiction_information_bound import HARD, draw
+from stiction_information_bound import HARD, draw, rank_auc
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT / "benchmarks" / "results" / "stiction_dataset.json"
@@ -66,14 +66,6 @@ def loop_row(loop) -> list[float]:
     run = simulate_loop(replace(loop.spec, scan_s=loop.spec.dt_s / SCANS))
     run.metadata["process_type"] = loop.process_type
     return [float(loop.stiction), float(loop.loop_class in HARD)] + screen_row(run, loop.process_type)["features"]
-
-
-def rank_auc(v: np.ndarray, y: np.ndarray) -> float:
-    from scipy.stats import rankdata
-
-    r = rankdata(v)
-    n1, n0 = int(y.sum()), int((~y).sum())
-    return float((r[y].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
 
 
 def rates(model, x: np.ndarray, sticky: np.ndarray, hard: np.ndarray) -> np.ndarray:

@@ -64,19 +64,24 @@ def measures(op: np.ndarray, pv: np.ndarray, sp: np.ndarray | None, dt_s: float,
     return [float(v) for v in s.features] + [lag0_correlation(op, pv)]
 
 
-def real_pool() -> np.ndarray:
-    """The measures of every usable record, in a shuffled order (no file name or label kept)."""
+def real_records():
+    """Every usable record of the pool, read in a shuffled order (no file name or label kept)."""
     from phfdi.loopdiag.readers import read_loop
     from phfdi_base.errors import UserError
 
     files = sorted(DATA.glob("*/*.txt"))
     random.Random(0).shuffle(files)
-    rows = []
     for f in files:
         try:
-            run = read_loop(f)
+            yield read_loop(f)
         except UserError:
             continue
+
+
+def real_pool() -> np.ndarray:
+    """The measures of every usable record, in a shuffled order (no file name or label kept)."""
+    rows = []
+    for run in real_records():
         sp = run["sp"] if "sp" in run else None
         rows.append(measures(run["op_pct"], run["pv"], sp, run.dt_s,
                              run.metadata.get("process_type", "self_regulating")))

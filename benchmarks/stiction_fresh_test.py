@@ -113,7 +113,7 @@ def _band_rows(rows: list[dict], values: list[float], edges: tuple, unit: str) -
     out = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         # the last band is open above: it takes inf (a noiseless loop's valve effect) too
-        idx = [r for r, v in zip(rows, values) if lo <= v < hi or (hi == float("inf") and v == hi)]
+        idx = [r for r, v in zip(rows, values) if lo <= v and (v < hi or hi == float("inf"))]
         if not idx:
             continue
         k = [sum(r["verdict"] == v for r in idx) for v in CALLS]

@@ -77,6 +77,15 @@ def draw(generator: str, n: int, seed: int) -> list:
 HARD = {"tight_tuning", "external_oscillation", "healthy_oscillatory_tuning"}
 
 
+def rank_auc(v: np.ndarray, y: np.ndarray) -> float:
+    """Rank AUC (Mann-Whitney) of index ``v`` for the loops ``y`` marks against the others, ties at half."""
+    from scipy.stats import rankdata
+
+    r = rankdata(v)
+    n1, n0 = int(y.sum()), int((~y).sum())
+    return float((r[y].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
+
+
 def false_call_cut(values: np.ndarray, groups: list[np.ndarray]) -> float:
     """The lowest cut that at most :data:`FALSE_CALLS` of each group reaches (the rule of
     ``classifier.operating_point``, on an index instead of a probability)."""

@@ -32,18 +32,14 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import random
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
-from stiction_information_bound import HARD, draw, false_call_cut
+from stiction_domain_shift import DATA, real_records
+from stiction_information_bound import HARD, draw, false_call_cut, rank_auc
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("PHFDI_SHARED_DATA", ROOT.parent / "shared" / "data")) / "plant_loops"
 #: development seeds: neither training (35001, 35002), the fresh tests (1013, 2026-2032), the bounds nor the
 #: earlier development draws (35101-35111, 4242-4253) use them
 SEEDS = {"domain": 35112, "training": 4254}
@@ -118,27 +114,9 @@ def loop_row(loop) -> list[float]:
 
 def real_pool() -> np.ndarray:
     """Every variant's index on the usable records, in a shuffled order (no file name or label kept)."""
-    from phfdi.loopdiag.readers import read_loop
-    from phfdi_base.errors import UserError
-
-    files = sorted(DATA.glob("*/*.txt"))
-    random.Random(0).shuffle(files)
-    rows = []
-    for f in files:
-        try:
-            run = read_loop(f)
-        except UserError:
-            continue
-        rows.append(indices(run["op_pct"], run["pv"], run.metadata.get("process_type", "self_regulating")))
+    rows = [indices(run["op_pct"], run["pv"], run.metadata.get("process_type", "self_regulating"))
+            for run in real_records()]
     return np.array(rows).reshape(-1, len(VARIANTS))
-
-
-def rank_auc(v: np.ndarray, y: np.ndarray) -> float:
-    from scipy.stats import rankdata
-
-    r = rankdata(v)
-    n1, n0 = int(y.sum()), int((~y).sum())
-    return float((r[y].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
 
 
 def main(argv: list[str] | None = None) -> int:
