@@ -65,10 +65,10 @@ def main(argv: list[str] | None = None) -> int:
         print("the valve-model fit on the calibration loops", file=sys.stderr, flush=True)
         fits = map_ordered(client, valve_fit_row, [d for d, _ in cal], _progress(t0, len(cal)), chunk=4)
     _merge_fits(rows, fits)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"features": list(FEATURE_NAMES), "generator": "phfdi.loopdiag.domain",
-                                    "seeds": {"train": TRAIN_SEED, "calibration": CALIBRATION_SEED},
-                                    "redrawn": {"train": red_t, "calibration": red_c}, "rows": rows}, indent=0))
+    write_text(args.out, json.dumps({"features": list(FEATURE_NAMES), "generator": "phfdi.loopdiag.domain",
+                                     "seeds": {"train": TRAIN_SEED, "calibration": CALIBRATION_SEED},
+                                     "redrawn": {"train": red_t, "calibration": red_c}, "rows": rows}, indent=0),
+               overwrite=True)
     print(f"{len(rows)} rows in {time.perf_counter() - t0:.0f} s -> {args.out}")
     return 0
 

@@ -37,6 +37,8 @@ from pathlib import Path
 from phfdi.loopdiag.dask_run import dask_client, map_ordered
 from phfdi.loopdiag.domain import slips, valve_effect_on_pv
 from phfdi.loopdiag.training import LOOP_CLASSES, class_round_robin, draw_class_loops
+from phfdi_base.errors import UserError
+from phfdi_base.outputs import check_writable_folder, write_text
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmarks" / "results" / "stiction_fresh_test.json"
@@ -164,6 +166,14 @@ def print_report(rows: list[dict], label: str) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    try:
+        return run(argv)
+    except UserError as exc:  # an output that cannot be written: one line, the earlier file left as it was
+        print(f"stiction_fresh_test: {exc}", file=sys.stderr)
+        return 2
+
+
+def run(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--per-class", type=int, default=40)
     p.add_argument("--seed", type=int, default=TEST_SEED)
@@ -179,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [c for c in classes if c not in LOOP_CLASSES]
     if unknown or not classes:
         p.error(f"--classes: unknown class {', '.join(unknown) or '(none given)'}; one of {', '.join(LOOP_CLASSES)}")
+    for target in ([] if args.from_rows else [args.out]) + ([args.json] if args.json else []):
+        check_writable_folder(target.parent)  # before minutes of simulation, not after
     if args.from_rows:
         rows = json.loads(args.from_rows.read_text())["rows"]
     else:
@@ -192,13 +204,12 @@ def main(argv: list[str] | None = None) -> int:
 
         with dask_client(args.scheduler, args.workers) as client:
             rows = map_ordered(client, verdict_row, loops, show, chunk=4)
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"seed": args.seed, "generator": "phfdi.loopdiag.training.draw_class_loops",
-                                        "classes": classes, "rows": rows}, indent=0))
+        write_text(args.out, json.dumps({"seed": args.seed, "generator": "phfdi.loopdiag.training.draw_class_loops",
+                                         "classes": classes, "rows": rows}, indent=0), overwrite=True)
         print(f"{len(rows)} loops in {time.perf_counter() - t0:.0f} s -> {args.out}", file=sys.stderr)
     m = print_report(rows, f"fresh simulated loops (seed {args.seed}, the per-class generator)")
     if args.json:
-        args.json.write_text(json.dumps(m, indent=1))
+        write_text(args.json, json.dumps(m, indent=1), overwrite=True)
     return 0
 
 
